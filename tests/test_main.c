@@ -1,0 +1,24 @@
+/* The one test binary: every unit, property and driver test of plastinet.
+   Build: cc -std=c99 -O2 -Wall -Wextra -pedantic tests/test_main.c -lm -o build/test_main
+   Run:   build/test_main [name-filter]          last line: N passed, N failed */
+#define PLASTINET_IMPLEMENTATION
+#include "../plastinet.h"
+#include "pn_test.h"
+
+#include "test_linalg.c"  /* pn_tests_linalg: SVD, polar, Hencky, eigen, PSD projection  */
+#include "test_energy.c"  /* pn_tests_energy: finite differences of every energy        */
+#include "test_return.c"  /* pn_tests_return: return-mapping invariants, bad input      */
+#include "test_driver.c"  /* pn_tests_driver: the material-point driver end to end      */
+
+#define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
+
+int main(int argc, char **argv) {
+    const char *filter = argc > 1 ? argv[1] : NULL;
+    int passed = 0, failed = 0;
+    pn_test_run(pn_tests_linalg, PN_COUNT(pn_tests_linalg), filter, &passed, &failed);
+    pn_test_run(pn_tests_energy, PN_COUNT(pn_tests_energy), filter, &passed, &failed);
+    pn_test_run(pn_tests_return, PN_COUNT(pn_tests_return), filter, &passed, &failed);
+    pn_test_run(pn_tests_driver, PN_COUNT(pn_tests_driver), filter, &passed, &failed);
+    printf("%d passed, %d failed\n", passed, failed);
+    return failed ? 1 : 0;
+}
