@@ -308,3 +308,1399 @@ PN_API pn_result pn_lagged_energy(const pn_material *m, int dim, const pn_real *
 }
 #endif
 #endif /* PLASTINET_H */
+
+/* ======================================================================================
+   IMPLEMENTATION
+   ====================================================================================== */
+#if defined(PLASTINET_IMPLEMENTATION) && !defined(PLASTINET_IMPLEMENTATION_DONE)
+#define PLASTINET_IMPLEMENTATION_DONE
+
+/* >>config: every option resolved in one place. */
+#include <float.h>
+#include <math.h>
+#include <string.h>
+#ifndef PN_ASSERT
+#include <assert.h>
+#define PN_ASSERT(x) assert(x)
+#endif
+#if !defined(PN_MALLOC) || !defined(PN_FREE)
+#include <stdlib.h>
+#undef PN_MALLOC
+#undef PN_FREE
+#define PN_MALLOC(sz, u) ((void)(u), malloc(sz))
+#define PN_FREE(p, u) ((void)(u), free(p))
+#endif
+#ifndef PN_NO_STDIO
+#include <stdio.h>
+#endif
+
+#ifdef PLASTINET_STATIC
+#define PN__DEF static
+#else
+#define PN__DEF
+#endif
+
+/* Math in double whatever pn_real is: float builds gain accuracy and need no f-suffixed calls. */
+#define PN__SQRT(x) ((pn_real)sqrt((double)(x)))
+#define PN__LOG(x) ((pn_real)log((double)(x)))
+#define PN__LOG1P(x) ((pn_real)log1p((double)(x)))
+#define PN__EXP(x) ((pn_real)exp((double)(x)))
+#define PN__POW(x, y) ((pn_real)pow((double)(x), (double)(y)))
+#define PN__SIN(x) ((pn_real)sin((double)(x)))
+#define PN__SINH(x) ((pn_real)sinh((double)(x)))
+#define PN__FABS(x) ((pn_real)fabs((double)(x)))
+#define PN__EPS ((pn_real)(sizeof(pn_real) < sizeof(double) ? FLT_EPSILON : DBL_EPSILON))
+#define PN__PI ((pn_real)3.14159265358979323846)
+#define PN__MAX(a, b) ((a) > (b) ? (a) : (b))
+#define PN__MIN(a, b) ((a) < (b) ? (a) : (b))
+
+static int pn__finite(pn_real x) { return x == x && x - x == 0; }
+
+static int pn__all_finite(int n, const pn_real *a) {
+    int i;
+    for (i = 0; i < n; ++i)
+        if (!pn__finite(a[i])) return 0;
+    return 1;
+}
+
+static int pn__dim_ok(int d) {
+#ifndef PN_NO_2D
+    if (d == 2) return 1;
+#endif
+#ifndef PN_NO_3D
+    if (d == 3) return 1;
+#endif
+    return 0;
+}
+
+PN__DEF const char *pn_result_string(pn_result r) {
+    switch (r) {
+    case PN_OK: return "ok";
+    case PN_ERROR_INVALID_ARGUMENT: return "invalid argument (dimension, state or option out of range)";
+    case PN_ERROR_INVALID_PARAMETER: return "invalid material parameter";
+    case PN_ERROR_NONFINITE: return "NaN or infinity in an input";
+    case PN_ERROR_INVERTED: return "inverted or singular deformation (det F <= 0) where the model is undefined";
+    case PN_ERROR_UNSUPPORTED: return "unsupported combination of elastic and plastic models";
+    case PN_ERROR_NOT_CONVERGED: return "an iterative solve did not converge";
+    case PN_ERROR_OUT_OF_MEMORY: return "out of memory";
+    case PN_ERROR_DIMENSION: return "unsupported dimension (not 2 or 3, compiled out, or a model of another dimension)";
+    case PN_ERROR_FORMAT: return "unknown model format version";
+    case PN_RESULT_COUNT: break;
+    }
+    return "unknown pn_result";
+}
+
+PN__DEF void *pn_alloc(const pn_allocator *a, size_t size_bytes) {
+    if (a && a->alloc) return a->alloc(size_bytes, a->user);
+    return PN_MALLOC(size_bytes, a ? a->user : NULL);
+}
+
+PN__DEF void pn_free(const pn_allocator *a, void *ptr) {
+    if (!ptr) return;
+    if (a && a->free) {
+        a->free(ptr, a->user);
+        return;
+    }
+    PN_FREE(ptr, a ? a->user : NULL);
+}
+
+/* ======================================================================================
+   >>matrix: dense dim x dim helpers (row-major)
+   ====================================================================================== */
+
+PN__DEF pn_real pn_mat_det(int d, const pn_real *A) {
+    if (d == 2) return A[0] * A[3] - A[1] * A[2];
+    return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
+           A[2] * (A[3] * A[7] - A[4] * A[6]);
+}
+
+PN__DEF pn_result pn_mat_inverse(int d, const pn_real *A, pn_real *Ai) {
+    pn_real det, c[9];
+    int i;
+    if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
+    if (!pn__all_finite(d * d, A)) return PN_ERROR_NONFINITE;
+    det = pn_mat_det(d, A);
+    if (det == 0 || !pn__finite(det)) return PN_ERROR_INVERTED;
+    if (d == 2) {
+        c[0] = A[3]; c[1] = -A[1]; c[2] = -A[2]; c[3] = A[0];
+    } else { /* adjugate = transposed cofactors */
+        c[0] = A[4] * A[8] - A[5] * A[7]; c[1] = A[2] * A[7] - A[1] * A[8]; c[2] = A[1] * A[5] - A[2] * A[4];
+        c[3] = A[5] * A[6] - A[3] * A[8]; c[4] = A[0] * A[8] - A[2] * A[6]; c[5] = A[2] * A[3] - A[0] * A[5];
+        c[6] = A[3] * A[7] - A[4] * A[6]; c[7] = A[1] * A[6] - A[0] * A[7]; c[8] = A[0] * A[4] - A[1] * A[3];
+    }
+    for (i = 0; i < d * d; ++i) c[i] /= det;
+    if (!pn__all_finite(d * d, c)) return PN_ERROR_INVERTED;
+    memcpy(Ai, c, sizeof(pn_real) * (size_t)(d * d));
+    return PN_OK;
+}
+
+PN__DEF void pn_mat_mul(int d, const pn_real *A, const pn_real *B, pn_real *C) {
+    int i, j, k;
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j) {
+            pn_real acc = 0;
+            for (k = 0; k < d; ++k) acc += A[i * d + k] * B[k * d + j];
+            C[i * d + j] = acc;
+        }
+}
+
+/* out = U diag(w) V^T */
+static void pn__udvt(int d, const pn_real *U, const pn_real *w, const pn_real *V, pn_real *out) {
+    int i, j, k;
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j) {
+            pn_real acc = 0;
+            for (k = 0; k < d; ++k) acc += U[i * d + k] * w[k] * V[j * d + k];
+            out[i * d + j] = acc;
+        }
+}
+
+static void pn__identity(int d, pn_real *A) {
+    int i;
+    for (i = 0; i < d * d; ++i) A[i] = 0;
+    for (i = 0; i < d; ++i) A[i * d + i] = 1;
+}
+
+/* ======================================================================================
+   >>svd: one-sided (Hestenes) Jacobi on the columns of F.
+   Rotating columns of B = F V until they are mutually orthogonal gives singular values with
+   high relative accuracy even when they differ by many orders of magnitude, and U columns
+   b_i / |b_i| orthogonal to working precision (the convergence test is relative to the
+   column norms). F is scaled by its largest entry first so squares never overflow.
+   ====================================================================================== */
+
+static void pn__swap_cols(int d, pn_real *A, int p, int q) {
+    int i;
+    for (i = 0; i < d; ++i) {
+        pn_real t = A[i * d + p];
+        A[i * d + p] = A[i * d + q];
+        A[i * d + q] = t;
+    }
+}
+
+static void pn__svd(int d, const pn_real *F, pn_real *U, pn_real *s, pn_real *V) {
+    pn_real B[9], scale = 0, eps = PN__EPS, tiny;
+    int i, j, p, q, sweep;
+    for (i = 0; i < d * d; ++i) scale = PN__MAX(scale, PN__FABS(F[i]));
+    pn__identity(d, V);
+    if (scale == 0) {
+        pn__identity(d, U);
+        for (i = 0; i < d; ++i) s[i] = 0;
+        return;
+    }
+    for (i = 0; i < d * d; ++i) B[i] = F[i] / scale;
+    for (sweep = 0; sweep < 40; ++sweep) {
+        int rotated = 0;
+        for (p = 0; p < d - 1; ++p)
+            for (q = p + 1; q < d; ++q) {
+                pn_real alpha = 0, beta = 0, gamma = 0, zeta, t, c, sn;
+                for (i = 0; i < d; ++i) {
+                    alpha += B[i * d + p] * B[i * d + p];
+                    beta += B[i * d + q] * B[i * d + q];
+                    gamma += B[i * d + p] * B[i * d + q];
+                }
+                if (PN__FABS(gamma) <= eps * PN__SQRT(alpha * beta)) continue;
+                rotated = 1;
+                /* t = tan of the angle that zeroes b_p . b_q: root of t^2 + 2 zeta t - 1 = 0 */
+                zeta = (beta - alpha) / (2 * gamma);
+                if (PN__FABS(zeta) > 1 / eps)
+                    t = 1 / (2 * zeta);
+                else
+                    t = (zeta >= 0 ? 1 : -1) / (PN__FABS(zeta) + PN__SQRT(1 + zeta * zeta));
+                c = 1 / PN__SQRT(1 + t * t);
+                sn = c * t;
+                for (i = 0; i < d; ++i) {
+                    pn_real bp = B[i * d + p], bq = B[i * d + q];
+                    pn_real vp = V[i * d + p], vq = V[i * d + q];
+                    B[i * d + p] = c * bp - sn * bq;
+                    B[i * d + q] = sn * bp + c * bq;
+                    V[i * d + p] = c * vp - sn * vq;
+                    V[i * d + q] = sn * vp + c * vq;
+                }
+            }
+        if (!rotated) break;
+    }
+    for (j = 0; j < d; ++j) {
+        pn_real n2 = 0;
+        for (i = 0; i < d; ++i) n2 += B[i * d + j] * B[i * d + j];
+        s[j] = PN__SQRT(n2);
+    }
+    /* sort descending; a swap of two columns is a reflection, so negate one to keep det V */
+    for (p = 0; p < d - 1; ++p)
+        for (q = 0; q < d - 1 - p; ++q)
+            if (s[q] < s[q + 1]) {
+                pn_real t = s[q];
+                s[q] = s[q + 1];
+                s[q + 1] = t;
+                pn__swap_cols(d, B, q, q + 1);
+                pn__swap_cols(d, V, q, q + 1);
+                for (i = 0; i < d; ++i) {
+                    B[i * d + q] = -B[i * d + q];
+                    V[i * d + q] = -V[i * d + q];
+                }
+            }
+    /* U: normalized columns; columns negligible against s_0 (zero, or below eps^2 s_0 where
+       their direction is noise) are completed to a rotation instead */
+    tiny = s[0] * eps * eps;
+    for (j = 0; j < d; ++j) {
+        if (s[j] > tiny)
+            for (i = 0; i < d; ++i) U[i * d + j] = B[i * d + j] / s[j];
+    }
+    if (d == 2) {
+        if (!(s[1] > tiny)) {
+            U[1] = -U[2];
+            U[3] = U[0];
+        }
+    } else {
+        if (!(s[1] > tiny)) { /* any unit vector orthogonal to u0 */
+            pn_real a = U[0], b = U[3], c = U[6], n;
+            if (PN__FABS(a) <= PN__FABS(b) && PN__FABS(a) <= PN__FABS(c)) {
+                U[1] = 0; U[4] = -c; U[7] = b;
+            } else if (PN__FABS(b) <= PN__FABS(c)) {
+                U[1] = -c; U[4] = 0; U[7] = a;
+            } else {
+                U[1] = -b; U[4] = a; U[7] = 0;
+            }
+            n = PN__SQRT(U[1] * U[1] + U[4] * U[4] + U[7] * U[7]);
+            U[1] /= n; U[4] /= n; U[7] /= n;
+        }
+        if (!(s[2] > tiny)) { /* u2 = u0 x u1 */
+            U[2] = U[3] * U[7] - U[6] * U[4];
+            U[5] = U[6] * U[1] - U[0] * U[7];
+            U[8] = U[0] * U[4] - U[3] * U[1];
+        }
+    }
+    /* rotations only: V is a product of rotations and sign-fixed swaps (det +1); a reflection
+       left in U means det F < 0, carried by the smallest singular value */
+    if (pn_mat_det(d, U) < 0) {
+        for (i = 0; i < d; ++i) U[i * d + d - 1] = -U[i * d + d - 1];
+        s[d - 1] = -s[d - 1];
+    }
+    for (i = 0; i < d; ++i) s[i] *= scale;
+}
+
+PN__DEF pn_result pn_svd(int d, const pn_real *F, pn_real *U, pn_real *s, pn_real *V) {
+    pn_real u[9], w[3], v[9];
+    if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
+    if (!pn__all_finite(d * d, F)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, u, w, v);
+    memcpy(U, u, sizeof(pn_real) * (size_t)(d * d));
+    memcpy(s, w, sizeof(pn_real) * (size_t)d);
+    memcpy(V, v, sizeof(pn_real) * (size_t)(d * d));
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_polar(int d, const pn_real *F, pn_real *R, pn_real *S) {
+    pn_real U[9], s[3], V[9], one[3] = {1, 1, 1}, r[9], st[9];
+    if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
+    if (!pn__all_finite(d * d, F)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, U, s, V);
+    pn__udvt(d, U, one, V, r);
+    pn__udvt(d, V, s, V, st);
+    memcpy(R, r, sizeof(pn_real) * (size_t)(d * d));
+    memcpy(S, st, sizeof(pn_real) * (size_t)(d * d));
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_hencky_strain(int d, const pn_real *F, pn_real *eps) {
+    pn_real U[9], s[3], V[9], e[3], out[9];
+    int i;
+    if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
+    if (!pn__all_finite(d * d, F)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, U, s, V);
+    if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    for (i = 0; i < d; ++i) e[i] = PN__LOG(s[i]);
+    pn__udvt(d, U, e, U, out);
+    memcpy(eps, out, sizeof(pn_real) * (size_t)(d * d));
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>eigen: cyclic Jacobi for small symmetric matrices, and the PSD projection
+   ====================================================================================== */
+
+/* A (n x n, overwritten) = Q diag(w) Q^T, w ascending. */
+static void pn__jacobi_eigen(int n, pn_real *A, pn_real *Q, pn_real *w) {
+    pn_real norm = 0;
+    int i, j, p, q, k, sweep;
+    for (i = 0; i < n * n; ++i) norm += A[i] * A[i];
+    norm = PN__SQRT(norm);
+    for (i = 0; i < n * n; ++i) Q[i] = 0;
+    for (i = 0; i < n; ++i) Q[i * n + i] = 1;
+    for (sweep = 0; sweep < 60 && norm > 0; ++sweep) {
+        int rotated = 0;
+        for (p = 0; p < n - 1; ++p)
+            for (q = p + 1; q < n; ++q) {
+                pn_real apq = A[p * n + q], theta, t, c, s;
+                if (PN__FABS(apq) <= PN__EPS * 1e-2 * norm) {
+                    A[p * n + q] = A[q * n + p] = 0;
+                    continue;
+                }
+                rotated = 1;
+                /* J^T A J zeroes A_pq when t = tan satisfies t^2 + 2 theta t - 1 = 0 */
+                theta = (A[q * n + q] - A[p * n + p]) / (2 * apq);
+                if (PN__FABS(theta) > 1 / PN__EPS)
+                    t = 1 / (2 * theta);
+                else
+                    t = (theta >= 0 ? 1 : -1) / (PN__FABS(theta) + PN__SQRT(theta * theta + 1));
+                c = 1 / PN__SQRT(t * t + 1);
+                s = t * c;
+                for (k = 0; k < n; ++k) { /* A J */
+                    pn_real akp = A[k * n + p], akq = A[k * n + q];
+                    A[k * n + p] = c * akp - s * akq;
+                    A[k * n + q] = s * akp + c * akq;
+                }
+                for (k = 0; k < n; ++k) { /* J^T (A J) */
+                    pn_real apk = A[p * n + k], aqk = A[q * n + k];
+                    A[p * n + k] = c * apk - s * aqk;
+                    A[q * n + k] = s * apk + c * aqk;
+                }
+                A[p * n + q] = A[q * n + p] = 0;
+                for (k = 0; k < n; ++k) { /* Q J */
+                    pn_real qkp = Q[k * n + p], qkq = Q[k * n + q];
+                    Q[k * n + p] = c * qkp - s * qkq;
+                    Q[k * n + q] = s * qkp + c * qkq;
+                }
+            }
+        if (!rotated) break;
+    }
+    for (i = 0; i < n; ++i) w[i] = A[i * n + i];
+    for (i = 0; i < n - 1; ++i) /* selection sort, ascending */
+        for (j = i + 1; j < n; ++j)
+            if (w[j] < w[i]) {
+                pn_real t = w[i];
+                w[i] = w[j];
+                w[j] = t;
+                for (k = 0; k < n; ++k) {
+                    t = Q[k * n + i];
+                    Q[k * n + i] = Q[k * n + j];
+                    Q[k * n + j] = t;
+                }
+            }
+}
+
+PN__DEF pn_result pn_sym_eigen(int n, const pn_real *A, pn_real *Q, pn_real *w) {
+    pn_real a[81], q[81], ww[9];
+    int i, j;
+    if (n < 1 || n > 9) return PN_ERROR_INVALID_ARGUMENT;
+    for (i = 0; i < n; ++i)
+        for (j = i; j < n; ++j) {
+            if (!pn__finite(A[i * n + j])) return PN_ERROR_NONFINITE;
+            a[i * n + j] = a[j * n + i] = A[i * n + j];
+        }
+    pn__jacobi_eigen(n, a, q, ww);
+    memcpy(Q, q, sizeof(pn_real) * (size_t)(n * n));
+    memcpy(w, ww, sizeof(pn_real) * (size_t)n);
+    return PN_OK;
+}
+
+/* A <- Q max(w, 0) Q^T (only the upper part of A is read) */
+static void pn__project_psd(int n, pn_real *A) {
+    pn_real a[81], q[81], w[9];
+    int i, j, k;
+    for (i = 0; i < n; ++i)
+        for (j = i; j < n; ++j) a[i * n + j] = a[j * n + i] = A[i * n + j];
+    pn__jacobi_eigen(n, a, q, w);
+    for (i = 0; i < n; ++i)
+        for (j = i; j < n; ++j) {
+            pn_real acc = 0;
+            for (k = 0; k < n; ++k)
+                if (w[k] > 0) acc += q[i * n + k] * w[k] * q[j * n + k];
+            A[i * n + j] = A[j * n + i] = acc;
+        }
+}
+
+PN__DEF pn_result pn_sym_project_psd(int n, pn_real *A) {
+    int i, j;
+    if (n < 1 || n > 9) return PN_ERROR_INVALID_ARGUMENT;
+    for (i = 0; i < n; ++i)
+        for (j = i; j < n; ++j)
+            if (!pn__finite(A[i * n + j])) return PN_ERROR_NONFINITE;
+    pn__project_psd(n, A);
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>material: validation and derived constants
+   ====================================================================================== */
+
+PN__DEF pn_result pn_lame(pn_real E, pn_real nu, pn_real *mu, pn_real *lambda) {
+    if (!pn__finite(E) || !pn__finite(nu)) return PN_ERROR_NONFINITE;
+    if (!(E > 0) || !(nu > -1) || !(nu < (pn_real)0.5)) return PN_ERROR_INVALID_PARAMETER;
+    *mu = E / (2 * (1 + nu));
+    *lambda = E * nu / ((1 + nu) * (1 - 2 * nu));
+    return PN_OK;
+}
+
+static const char *const pn__elastic_names[] = {"default", "fixed_corotated", "stvk_hencky",
+                                                "neo_hookean", "neo_hookean_snow"};
+static const char *const pn__plastic_names[] = {"none", "drucker_prager", "von_mises", "cam_clay",
+                                                "snow_stomakhin"};
+
+PN__DEF const char *pn_elastic_model_name(pn_elastic_model e) {
+    return ((int)e >= 0 && e < PN_ELASTIC_MODEL_COUNT) ? pn__elastic_names[e] : "unknown";
+}
+PN__DEF const char *pn_plastic_model_name(pn_plastic_model p) {
+    return ((int)p >= 0 && p < PN_PLASTIC_MODEL_COUNT) ? pn__plastic_names[p] : "unknown";
+}
+PN__DEF int pn_elastic_model_from_name(const char *name) {
+    int i;
+    for (i = 0; name && i < (int)PN_ELASTIC_MODEL_COUNT; ++i)
+        if (!strcmp(name, pn__elastic_names[i])) return i;
+    return -1;
+}
+PN__DEF int pn_plastic_model_from_name(const char *name) {
+    int i;
+    for (i = 0; name && i < (int)PN_PLASTIC_MODEL_COUNT; ++i)
+        if (!strcmp(name, pn__plastic_names[i])) return i;
+    return -1;
+}
+
+#define PN__FAIL(code, msg)                                                                 \
+    do {                                                                                    \
+        if (why) *why = msg;                                                                \
+        return code;                                                                        \
+    } while (0)
+
+PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *desc,
+                                   const char **why) {
+    pn_material m;
+    const pn_material_desc *dd = desc;
+    PN_ASSERT(out && desc);
+    memset(&m, 0, sizeof m);
+    if ((int)dd->plastic < 0 || dd->plastic >= PN_PLASTIC_MODEL_COUNT)
+        PN__FAIL(PN_ERROR_INVALID_ARGUMENT, "plastic: unknown plastic model");
+    if ((int)dd->elastic < 0 || dd->elastic >= PN_ELASTIC_MODEL_COUNT)
+        PN__FAIL(PN_ERROR_INVALID_ARGUMENT, "elastic: unknown elastic model");
+    m.plastic = dd->plastic;
+    m.elastic = dd->elastic;
+    if (m.elastic == PN_ELASTIC_DEFAULT) {
+        switch (m.plastic) {
+        case PN_PLASTIC_DRUCKER_PRAGER:
+        case PN_PLASTIC_VON_MISES: m.elastic = PN_ELASTIC_STVK_HENCKY; break;
+        case PN_PLASTIC_CAM_CLAY: m.elastic = PN_ELASTIC_NEO_HOOKEAN_SNOW; break;
+        default: m.elastic = PN_ELASTIC_FIXED_COROTATED; break;
+        }
+    }
+    if (!pn__finite(dd->youngs_modulus_pa) || !(dd->youngs_modulus_pa > 0))
+        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "youngs_modulus_pa must be finite and > 0");
+    if (!pn__finite(dd->poisson_ratio) || !(dd->poisson_ratio > -1) ||
+        !(dd->poisson_ratio < (pn_real)0.5))
+        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "poisson_ratio must be in (-1, 0.5)");
+    m.E = dd->youngs_modulus_pa;
+    m.nu = dd->poisson_ratio;
+    pn_lame(m.E, m.nu, &m.mu, &m.lambda);
+    switch (m.plastic) {
+    case PN_PLASTIC_NONE: break;
+    case PN_PLASTIC_DRUCKER_PRAGER:
+        if (m.elastic != PN_ELASTIC_STVK_HENCKY)
+            PN__FAIL(PN_ERROR_UNSUPPORTED, "drucker_prager needs stvk_hencky elasticity");
+        if (!pn__finite(dd->friction_angle_deg) || !(dd->friction_angle_deg >= 0) ||
+            !(dd->friction_angle_deg < 90))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "friction_angle_deg must be in [0, 90)");
+        if (!pn__finite(dd->cohesion_strain) || !(dd->cohesion_strain >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "cohesion_strain must be finite and >= 0");
+        m.sin_phi = PN__SIN(dd->friction_angle_deg * PN__PI / 180);
+        m.cohesion_strain = dd->cohesion_strain;
+        m.volume_correction = dd->volume_correction != 0;
+        break;
+    case PN_PLASTIC_VON_MISES:
+        if (!pn__finite(dd->yield_stress_pa) || !(dd->yield_stress_pa > 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "yield_stress_pa must be finite and > 0");
+        if (!pn__finite(dd->hardening_modulus_pa) || !(dd->hardening_modulus_pa >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "hardening_modulus_pa must be finite and >= 0");
+        m.yield_stress = dd->yield_stress_pa;
+        m.hardening_modulus = dd->hardening_modulus_pa;
+        break;
+    case PN_PLASTIC_CAM_CLAY:
+        if (m.elastic != PN_ELASTIC_NEO_HOOKEAN_SNOW)
+            PN__FAIL(PN_ERROR_UNSUPPORTED, "cam_clay needs neo_hookean_snow elasticity");
+        if (!pn__finite(dd->friction_angle_deg) || !(dd->friction_angle_deg > 0) ||
+            !(dd->friction_angle_deg < 90))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "friction_angle_deg must be in (0, 90) for cam_clay");
+        if (!pn__finite(dd->camclay_beta) || !(dd->camclay_beta >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "camclay_beta must be finite and >= 0");
+        if (!pn__finite(dd->camclay_xi) || !(dd->camclay_xi >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "camclay_xi must be finite and >= 0");
+        m.sin_phi = PN__SIN(dd->friction_angle_deg * PN__PI / 180);
+        m.beta = dd->camclay_beta;
+        m.xi = dd->camclay_xi;
+        m.camclay_hardening = !dd->camclay_no_hardening;
+        break;
+    case PN_PLASTIC_SNOW_STOMAKHIN:
+        if (!pn__finite(dd->snow_theta_c) || !(dd->snow_theta_c > 0) || !(dd->snow_theta_c < 1))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_theta_c must be in (0, 1)");
+        if (!pn__finite(dd->snow_theta_s) || !(dd->snow_theta_s >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_theta_s must be finite and >= 0");
+        if (!pn__finite(dd->snow_xi) || !(dd->snow_xi >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_xi must be finite and >= 0");
+        m.theta_c = dd->snow_theta_c;
+        m.theta_s = dd->snow_theta_s;
+        m.snow_xi = dd->snow_xi;
+        break;
+    default: break;
+    }
+    *out = m;
+    return PN_OK;
+}
+#undef PN__FAIL
+
+#ifndef PN_NO_STDIO
+PN__DEF int pn_material_describe(const pn_material *m, char *buf, size_t cap) {
+    char extra[160];
+    extra[0] = 0;
+    switch (m->plastic) {
+    case PN_PLASTIC_DRUCKER_PRAGER:
+        snprintf(extra, sizeof extra, " friction_deg=%g cohesion_strain=%g volume_correction=%d",
+                 (double)(asin((double)m->sin_phi) * 180 / 3.14159265358979323846),
+                 (double)m->cohesion_strain, m->volume_correction);
+        break;
+    case PN_PLASTIC_VON_MISES:
+        snprintf(extra, sizeof extra, " yield_stress_pa=%g hardening_modulus_pa=%g",
+                 (double)m->yield_stress, (double)m->hardening_modulus);
+        break;
+    case PN_PLASTIC_CAM_CLAY:
+        snprintf(extra, sizeof extra, " friction_deg=%g beta=%g xi=%g hardening=%d",
+                 (double)(asin((double)m->sin_phi) * 180 / 3.14159265358979323846),
+                 (double)m->beta, (double)m->xi, m->camclay_hardening);
+        break;
+    case PN_PLASTIC_SNOW_STOMAKHIN:
+        snprintf(extra, sizeof extra, " theta_c=%g theta_s=%g xi=%g", (double)m->theta_c,
+                 (double)m->theta_s, (double)m->snow_xi);
+        break;
+    default: break;
+    }
+    return snprintf(buf, cap, "elastic=%s plastic=%s E=%g nu=%g mu=%g lambda=%g%s",
+                    pn_elastic_model_name(m->elastic), pn_plastic_model_name(m->plastic),
+                    (double)m->E, (double)m->nu, (double)m->mu, (double)m->lambda, extra);
+}
+#endif
+
+/* ======================================================================================
+   >>elastic: isotropic energies in principal stretches.
+   For psi(s) with derivatives g_i = dpsi/ds_i and Hs_ij = d2psi/ds_i ds_j, in the frame of
+   the SVD the Hessian dP/dF is block diagonal (Teran et al. 2005; Smith et al. 2019): the
+   d x d block Hs on the diagonal entries, and for each pair a < b two modes
+   (u_a v_b^T +- u_b v_a^T)/sqrt(2) with eigenvalues
+       dminus = (g_a - g_b)/(s_a - s_b),   dplus = (g_a + g_b)/(s_a + s_b).
+   Each model writes these quotients in a form without cancellation at s_a = s_b, so the
+   Hessian stays accurate for repeated singular values; the same structure makes the PSD
+   projection exact and cheap (clamp the mode eigenvalues).
+   ====================================================================================== */
+
+typedef struct pn__principal {
+    pn_real psi;
+    pn_real g[3];     /* dpsi/ds_i                                   */
+    pn_real H[9];     /* d2psi/ds_i ds_j, stride 3                  */
+    pn_real dm[3];    /* dminus for pairs (0,1), (0,2), (1,2)       */
+    pn_real dp[3];    /* dplus                                       */
+} pn__principal;
+
+static const int pn__pair_a[3] = {0, 0, 1};
+static const int pn__pair_b[3] = {1, 2, 2};
+
+static int pn__npairs(int d) { return d == 2 ? 1 : 3; }
+
+/* (log a - log b)/(a - b) for a, b > 0, accurate as a -> b */
+static pn_real pn__log_quotient(pn_real a, pn_real b) {
+    pn_real x = (a - b) / b;
+    if (x == 0) return 1 / b;
+    if (PN__FABS(x) < (pn_real)0.5) return PN__LOG1P(x) / (x * b);
+    return (PN__LOG(a) - PN__LOG(b)) / (a - b);
+}
+
+/* Energies of Hencky strain e = log s: given dpsi/de (ge), d2psi/de2 (Ae, stride 3) and the
+   shear coefficient c with ge_a - ge_b = c (e_a - e_b), fill g, H, dminus, dplus. */
+static void pn__hencky_to_s(int d, const pn_real *s, const pn_real *ge, const pn_real *Ae, pn_real c,
+                            pn__principal *pr) {
+    int i, j, k;
+    for (i = 0; i < d; ++i) pr->g[i] = ge[i] / s[i];
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j)
+            pr->H[i * 3 + j] = Ae[i * 3 + j] / (s[i] * s[j]) - (i == j ? ge[i] / (s[i] * s[i]) : 0);
+    for (k = 0; k < pn__npairs(d); ++k) {
+        int a = pn__pair_a[k], b = pn__pair_b[k];
+        /* g_a - g_b = (ge_a - ge_b)/s_a + ge_b (1/s_a - 1/s_b) */
+        pr->dm[k] = c * pn__log_quotient(s[a], s[b]) / s[a] - ge[b] / (s[a] * s[b]);
+        pr->dp[k] = (pr->g[a] + pr->g[b]) / (s[a] + s[b]);
+    }
+}
+
+/* Energies whose gradient has the form g_i = c s_i + q / s_i with c, q symmetric functions
+   (Neo-Hookean and its snow variant): dminus = c - q/(s_a s_b), dplus = c + q/(s_a s_b). */
+static void pn__cq_pairs(int d, const pn_real *s, pn_real c, pn_real q, pn__principal *pr) {
+    int k;
+    for (k = 0; k < pn__npairs(d); ++k) {
+        int a = pn__pair_a[k], b = pn__pair_b[k];
+        pr->dm[k] = c - q / (s[a] * s[b]);
+        pr->dp[k] = c + q / (s[a] * s[b]);
+    }
+}
+
+/* Fill pr for elastic model `model` with Lame constants mu, la at stretches s. Hencky and
+   Neo-Hookean models need s > 0 (checked by the callers). */
+static void pn__elastic_principal(pn_elastic_model model, pn_real mu, pn_real la, int d,
+                                  const pn_real *s, pn__principal *pr) {
+    pn_real J = 1;
+    int i, j, k;
+    for (i = 0; i < d; ++i) J *= s[i];
+    memset(pr, 0, sizeof *pr);
+    switch (model) {
+    case PN_ELASTIC_FIXED_COROTATED: {
+        /* psi = mu sum (s_i - 1)^2 + la/2 (J - 1)^2; Jh_i = J / s_i and Jh_ab = J/(s_a s_b)
+           as products of the other stretches, so s_i = 0 is fine */
+        pn_real Jh[3];
+        for (i = 0; i < d; ++i) {
+            Jh[i] = 1;
+            for (j = 0; j < d; ++j)
+                if (j != i) Jh[i] *= s[j];
+        }
+        for (i = 0; i < d; ++i) pr->psi += mu * (s[i] - 1) * (s[i] - 1);
+        pr->psi += la / 2 * (J - 1) * (J - 1);
+        for (i = 0; i < d; ++i) pr->g[i] = 2 * mu * (s[i] - 1) + la * (J - 1) * Jh[i];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) {
+                pn_real Jab = 1;
+                for (k = 0; k < d; ++k)
+                    if (k != i && k != j) Jab *= s[k];
+                pr->H[i * 3 + j] =
+                    i == j ? 2 * mu + la * Jh[i] * Jh[i] : la * (Jh[i] * Jh[j] + (J - 1) * Jab);
+            }
+        for (k = 0; k < pn__npairs(d); ++k) {
+            int a = pn__pair_a[k], b = pn__pair_b[k];
+            pn_real Jab = d == 2 ? 1 : s[3 - a - b], sum = s[a] + s[b];
+            pr->dm[k] = 2 * mu - la * (J - 1) * Jab;
+            /* singular where s_a + s_b = 0 (the rotation of F is undefined there) */
+            if (PN__FABS(sum) < PN__EPS) sum = sum < 0 ? -PN__EPS : PN__EPS;
+            pr->dp[k] = 2 * mu - 4 * mu / sum + la * (J - 1) * Jab;
+        }
+        break;
+    }
+    case PN_ELASTIC_STVK_HENCKY: {
+        pn_real e[3], tr = 0, ge[3], Ae[9];
+        for (i = 0; i < d; ++i) {
+            e[i] = PN__LOG(s[i]);
+            tr += e[i];
+        }
+        for (i = 0; i < d; ++i) pr->psi += mu * e[i] * e[i];
+        pr->psi += la / 2 * tr * tr;
+        for (i = 0; i < d; ++i) ge[i] = 2 * mu * e[i] + la * tr;
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) Ae[i * 3 + j] = la + (i == j ? 2 * mu : 0);
+        pn__hencky_to_s(d, s, ge, Ae, 2 * mu, pr);
+        break;
+    }
+    case PN_ELASTIC_NEO_HOOKEAN: {
+        /* g_i = mu s_i + q / s_i, q = -mu + la log J */
+        pn_real lj = PN__LOG(J), q = -mu + la * lj;
+        for (i = 0; i < d; ++i) pr->psi += mu / 2 * s[i] * s[i];
+        pr->psi += -mu / 2 * d - mu * lj + la / 2 * lj * lj;
+        for (i = 0; i < d; ++i) pr->g[i] = mu * s[i] + q / s[i];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j)
+                pr->H[i * 3 + j] = la / (s[i] * s[j]) + (i == j ? mu - q / (s[i] * s[i]) : 0);
+        pn__cq_pairs(d, s, mu, q, pr);
+        break;
+    }
+    case PN_ELASTIC_NEO_HOOKEAN_SNOW: {
+        /* psi = mu/2 (J^(-2/d) S - d) + kappa/2 ((J^2 - 1)/2 - log J), S = sum s^2;
+           g_i = c s_i + q / s_i with c = mu J^(-2/d), q = -c S/d + kappa/2 (J^2 - 1) */
+        pn_real kappa = la + 2 * mu / d, S = 0, c, q, dd = (pn_real)d;
+        for (i = 0; i < d; ++i) S += s[i] * s[i];
+        c = mu * PN__POW(J, -2 / dd);
+        q = -c * S / dd + kappa / 2 * (J * J - 1);
+        pr->psi = mu / 2 * (c / mu * S - dd) + kappa / 2 * ((J * J - 1) / 2 - PN__LOG(J));
+        for (i = 0; i < d; ++i) pr->g[i] = c * s[i] + q / s[i];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j)
+                pr->H[i * 3 + j] = (i == j ? c - q / (s[i] * s[i]) : 0) - 2 / dd * c * s[i] / s[j] -
+                                   2 / dd * c * s[j] / s[i] +
+                                   (2 / (dd * dd) * c * S + kappa * J * J) / (s[i] * s[j]);
+        pn__cq_pairs(d, s, c, q, pr);
+        break;
+    }
+    default: break;
+    }
+}
+
+/* Modes of dP/dF: vec(M) for M = U B V^T is the d*d matrix sum U_ia B_ab V_jb */
+static void pn__mode(int d, const pn_real *U, const pn_real *V, int a, int b, pn_real sign,
+                     pn_real *m) {
+    /* (u_a v_b^T + sign u_b v_a^T) / sqrt(2) for a != b, u_a v_a^T for a == b */
+    int i, j;
+    pn_real w = a == b ? 1 : (pn_real)0.70710678118654752440;
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j)
+            m[i * d + j] = w * (U[i * d + a] * V[j * d + b] +
+                                (a == b ? 0 : sign * U[i * d + b] * V[j * d + a]));
+}
+
+static void pn__add_outer(int n, pn_real w, const pn_real *x, const pn_real *y, pn_real *A) {
+    int i, j;
+    if (w == 0) return;
+    for (i = 0; i < n; ++i)
+        for (j = 0; j < n; ++j) A[i * n + j] += w * x[i] * y[j];
+}
+
+/* P = U diag(g) V^T and dP/dF from the principal data (PSD-projected if psd). */
+static void pn__assemble(int d, const pn_real *U, const pn_real *V, const pn__principal *pr,
+                         pn_real *P, pn_real *dPdF, int psd) {
+    int n = d * d, i, j, k;
+    pn_real D[3][9], m[9];
+    if (P) pn__udvt(d, U, pr->g, V, P);
+    if (!dPdF) return;
+    for (i = 0; i < n * n; ++i) dPdF[i] = 0;
+    for (i = 0; i < d; ++i) pn__mode(d, U, V, i, i, 0, D[i]);
+    if (psd) {
+        pn_real A[9], Q[9], w[3], x[9];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) A[i * d + j] = pr->H[i * 3 + j];
+        pn__jacobi_eigen(d, A, Q, w);
+        for (k = 0; k < d; ++k) {
+            if (!(w[k] > 0)) continue;
+            for (i = 0; i < n; ++i) {
+                x[i] = 0;
+                for (j = 0; j < d; ++j) x[i] += Q[j * d + k] * D[j][i];
+            }
+            pn__add_outer(n, w[k], x, x, dPdF);
+        }
+    } else {
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) pn__add_outer(n, pr->H[i * 3 + j], D[i], D[j], dPdF);
+    }
+    for (k = 0; k < pn__npairs(d); ++k) {
+        pn_real lm = pr->dm[k], lp = pr->dp[k];
+        if (psd) {
+            lm = PN__MAX(lm, 0);
+            lp = PN__MAX(lp, 0);
+        }
+        pn__mode(d, U, V, pn__pair_a[k], pn__pair_b[k], 1, m);
+        pn__add_outer(n, lm, m, m, dPdF);
+        pn__mode(d, U, V, pn__pair_a[k], pn__pair_b[k], -1, m);
+        pn__add_outer(n, lp, m, m, dPdF);
+    }
+}
+
+/* Lame constants at plastic state h (Stomakhin snow hardens them; others ignore h). */
+static void pn__lame_at(const pn_material *m, pn_real h, pn_real *mu, pn_real *la) {
+    pn_real f = 1;
+    if (m->plastic == PN_PLASTIC_SNOW_STOMAKHIN) f = PN__EXP(m->snow_xi * (1 - PN__EXP(h)));
+    *mu = m->mu * f;
+    *la = m->lambda * f;
+}
+
+static int pn__needs_positive(pn_elastic_model e) { return e != PN_ELASTIC_FIXED_COROTATED; }
+
+static pn_result pn__check_F(int d, const pn_real *F) {
+    if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
+    if (!pn__all_finite(d * d, F)) return PN_ERROR_NONFINITE;
+    return PN_OK;
+}
+
+/* Common path of the energy evaluators: outputs written only when everything is finite. */
+static pn_result pn__energy_out(int d, const pn_real *U, const pn_real *V, const pn__principal *pr,
+                                pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
+    pn_real p[9], h[81];
+    int n = d * d;
+    pn__assemble(d, U, V, pr, p, dPdF ? h : NULL, (flags & PN_EVAL_PROJECT_PSD) != 0);
+    if (!pn__finite(pr->psi) || !pn__all_finite(n, p) || (dPdF && !pn__all_finite(n * n, h)))
+        return PN_ERROR_NONFINITE;
+    if (psi) *psi = pr->psi;
+    if (P) memcpy(P, p, sizeof(pn_real) * (size_t)n);
+    if (dPdF) memcpy(dPdF, h, sizeof(pn_real) * (size_t)(n * n));
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_elastic_energy(const pn_material *m, int d, const pn_real *F, pn_real h,
+                                    pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
+    pn_real U[9], s[3], V[9], mu, la;
+    pn__principal pr;
+    pn_result r = pn__check_F(d, F);
+    PN_ASSERT(m && F);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, U, s, V);
+    if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    pn__lame_at(m, h, &mu, &la);
+    pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
+    return pn__energy_out(d, U, V, &pr, psi, P, dPdF, flags);
+}
+
+PN__DEF pn_result pn_kirchhoff_stress(const pn_material *m, int d, const pn_real *F, pn_real h,
+                                      pn_real *tau) {
+    pn_real U[9], s[3], V[9], t[3], out[9], mu, la;
+    pn__principal pr;
+    int i;
+    pn_result r = pn__check_F(d, F);
+    PN_ASSERT(m && F && tau);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, U, s, V);
+    if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    pn__lame_at(m, h, &mu, &la);
+    pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
+    for (i = 0; i < d; ++i) t[i] = s[i] * pr.g[i]; /* tau = P F^T = U diag(s g) U^T */
+    pn__udvt(d, U, t, U, out);
+    if (!pn__all_finite(d * d, out)) return PN_ERROR_NONFINITE;
+    memcpy(tau, out, sizeof(pn_real) * (size_t)(d * d));
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>return-mapping: all models act on the singular values, Z(F) = U diag(z) V^T.
+   ====================================================================================== */
+
+/* Drucker-Prager friction coefficient alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)) */
+static pn_real pn__dp_alpha(pn_real sin_phi) {
+    return PN__SQRT((pn_real)2 / 3) * 2 * sin_phi / (3 - sin_phi);
+}
+
+static pn_real pn__vm_tau_y(const pn_material *m, pn_real a) {
+    return PN__SQRT((pn_real)2 / 3) * (m->yield_stress + m->hardening_modulus * a);
+}
+
+/* Cam-Clay quantities at stretches s (Gaume et al. 2018, Wolper et al. 2019) */
+typedef struct pn__camclay {
+    pn_real kappa, J, p, p0, M, q2, shat[3], shat_norm, y, yscale;
+} pn__camclay;
+
+static void pn__camclay_eval(const pn_material *m, int d, const pn_real *s, pn_real h,
+                             pn__camclay *c) {
+    pn_real dd = (pn_real)d, trb = 0, alpha = pn__dp_alpha(m->sin_phi), jm, n2 = 0, a, b;
+    int i;
+    c->kappa = m->lambda + 2 * m->mu / dd;
+    c->J = 1;
+    for (i = 0; i < d; ++i) {
+        c->J *= s[i];
+        trb += s[i] * s[i];
+    }
+    c->p = -c->kappa / 2 * (c->J * c->J - 1);
+    c->p0 = c->kappa * ((pn_real)1e-5 + PN__SINH(m->xi * PN__MAX(-h, 0)));
+    c->M = alpha * dd / PN__SQRT(2 / (6 - dd));
+    jm = m->mu * PN__POW(c->J, -2 / dd);
+    for (i = 0; i < d; ++i) {
+        c->shat[i] = jm * (s[i] * s[i] - trb / dd);
+        n2 += c->shat[i] * c->shat[i];
+    }
+    c->shat_norm = PN__SQRT(n2);
+    c->q2 = (6 - dd) / 2 * n2;
+    a = (1 + 2 * m->beta) * c->q2;
+    b = c->M * c->M * (c->p + m->beta * c->p0) * (c->p - c->p0);
+    c->y = a + b;
+    c->yscale = a + PN__FABS(b);
+}
+
+/* Principal Kirchhoff stresses tau_i = s_i dpsi/ds_i of the elastic model. */
+static void pn__tau_principal(const pn_material *m, pn_real h, int d, const pn_real *s,
+                              pn_real *tau) {
+    pn__principal pr;
+    pn_real mu, la;
+    int i;
+    pn__lame_at(m, h, &mu, &la);
+    pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
+    for (i = 0; i < d; ++i) tau[i] = s[i] * pr.g[i];
+}
+
+static pn_real pn__dev_norm(int d, const pn_real *t) {
+    pn_real mean = 0, n2 = 0;
+    int i;
+    for (i = 0; i < d; ++i) mean += t[i];
+    mean /= d;
+    for (i = 0; i < d; ++i) n2 += (t[i] - mean) * (t[i] - mean);
+    return PN__SQRT(n2);
+}
+
+/* Yield function in principal stretches; see pn_yield_function for units. */
+static void pn__yield_principal(const pn_material *m, int d, const pn_real *s, pn_real h, pn_real *y,
+                                pn_real *scale) {
+    pn_real e[3], tr = 0, dev2 = 0, full2 = 0, mu2 = 2 * m->mu;
+    int i;
+    switch (m->plastic) {
+    case PN_PLASTIC_DRUCKER_PRAGER: {
+        /* cone in stress: |dev tau| + alpha tr tau <= 0 with tau of the cohesion-shifted strain;
+           the volume-correction credit h is not part of the stress state */
+        pn_real bulk = d * m->lambda + mu2, alpha = pn__dp_alpha(m->sin_phi);
+        for (i = 0; i < d; ++i) {
+            e[i] = PN__LOG(s[i]) - m->cohesion_strain;
+            tr += e[i];
+        }
+        for (i = 0; i < d; ++i) {
+            dev2 += (e[i] - tr / d) * (e[i] - tr / d);
+            full2 += e[i] * e[i];
+        }
+        *y = mu2 * PN__SQRT(dev2) + alpha * bulk * tr;
+        *scale = mu2 * PN__SQRT(full2) + alpha * bulk * PN__FABS(tr);
+        break;
+    }
+    case PN_PLASTIC_VON_MISES: {
+        pn_real tau[3];
+        pn__tau_principal(m, h, d, s, tau);
+        *scale = pn__vm_tau_y(m, h);
+        *y = pn__dev_norm(d, tau) - *scale;
+        break;
+    }
+    case PN_PLASTIC_CAM_CLAY: {
+        pn__camclay c;
+        pn__camclay_eval(m, d, s, h, &c);
+        *y = c.y;
+        *scale = c.yscale;
+        break;
+    }
+    case PN_PLASTIC_SNOW_STOMAKHIN: {
+        pn_real worst = -(pn_real)1e30;
+        for (i = 0; i < d; ++i) {
+            worst = PN__MAX(worst, s[i] - (1 + m->theta_s));
+            worst = PN__MAX(worst, (1 - m->theta_c) - s[i]);
+        }
+        *y = worst;
+        *scale = 1;
+        break;
+    }
+    default:
+        *y = -1;
+        *scale = 1;
+        break;
+    }
+}
+
+/* von Mises for any elasticity: the volume-preserving return H = e - dgamma n in Hencky space
+   with |dev tau(exp H)| = sqrt(2/3) sigma_Y(a + sqrt(2/3) dgamma), by Newton safeguarded with
+   the bracket [0, |e_hat|] (f > 0 at 0 since the trial point is outside, f < 0 at |e_hat|
+   where the stress is hydrostatic). */
+static pn_result pn__vm_rootfind(const pn_material *m, int d, const pn_real *s, pn_real h,
+                                 pn_real *z, pn_real *h_new) {
+    pn_real e[3], n[3], tr = 0, r = 0, lo, hi, g, f = 0, fp, tauy0, k23, sq23 = PN__SQRT((pn_real)2 / 3);
+    int i, j, it, ok = 0;
+    for (i = 0; i < d; ++i) {
+        e[i] = PN__LOG(s[i]);
+        tr += e[i];
+    }
+    for (i = 0; i < d; ++i) {
+        n[i] = e[i] - tr / d;
+        r += n[i] * n[i];
+    }
+    r = PN__SQRT(r);
+    for (i = 0; i < d; ++i) n[i] /= r;
+    tauy0 = pn__vm_tau_y(m, h);
+    k23 = 2 * m->hardening_modulus / 3;
+    lo = 0;
+    hi = r;
+    g = 0;
+    for (it = 0; it < 200; ++it) {
+        pn_real zz[3], tau[3], dev[3], mean = 0, dn, dtau[3];
+        pn__principal pr;
+        for (i = 0; i < d; ++i) zz[i] = PN__EXP(e[i] - g * n[i]);
+        pn__elastic_principal(m->elastic, m->mu, m->lambda, d, zz, &pr);
+        for (i = 0; i < d; ++i) {
+            tau[i] = zz[i] * pr.g[i];
+            mean += tau[i] / d;
+        }
+        for (i = 0; i < d; ++i) dev[i] = tau[i] - mean;
+        dn = pn__dev_norm(d, tau);
+        f = dn - tauy0 - k23 * g;
+        if (f > 0) lo = g; else hi = g;
+        /* d tau_i / d gamma = -sum_j (d tau_i / d e_j) n_j, d tau_i/d e_j = (delta_ij g_i + z_i H_ij) z_j */
+        for (i = 0; i < d; ++i) {
+            dtau[i] = 0;
+            for (j = 0; j < d; ++j)
+                dtau[i] -= ((i == j ? pr.g[i] : 0) + zz[i] * pr.H[i * 3 + j]) * zz[j] * n[j];
+        }
+        fp = -k23;
+        if (dn > 0)
+            for (i = 0; i < d; ++i) fp += dev[i] * dtau[i] / dn;
+        if (PN__FABS(f) <= 4 * PN__EPS * tauy0 || hi - lo <= 4 * PN__EPS * r) {
+            ok = 1;
+            break;
+        }
+        {
+            pn_real gn = fp < 0 ? g - f / fp : -1;
+            if (!(gn > lo && gn < hi)) gn = (lo + hi) / 2;
+            g = gn;
+        }
+    }
+    if (!ok) return PN_ERROR_NOT_CONVERGED;
+    for (i = 0; i < d; ++i) z[i] = PN__EXP(e[i] - g * n[i]);
+    *h_new = h + sq23 * g;
+    return PN_OK;
+}
+
+/* Exact projection of Cam-Clay's shear case: keep p (so J) and the direction of dev b, scale
+   |dev b| onto the surface. b_new = c n + m 1 with det b_new = J^2 solved for m exactly
+   (closed form in 2D, monotone Newton from the trial mean in 3D), so p is kept to rounding
+   and the result lies on the surface (the usual m = tr b / d changes J slightly). */
+static void pn__camclay_shear(int d, const pn_real *s, pn_real J, pn_real c, pn_real *z) {
+    pn_real b[3], trb = 0, n[3], nn = 0, mm;
+    int i, it;
+    for (i = 0; i < d; ++i) {
+        b[i] = s[i] * s[i];
+        trb += b[i];
+    }
+    for (i = 0; i < d; ++i) {
+        n[i] = b[i] - trb / d;
+        nn += n[i] * n[i];
+    }
+    nn = PN__SQRT(nn);
+    for (i = 0; i < d; ++i) n[i] /= nn;
+    if (d == 2) {
+        mm = PN__SQRT(J * J + c * c * n[0] * n[0]); /* (m + c n0)(m - c n0) = J^2 */
+    } else {
+        /* f(m) = sum log(m + c n_i) - 2 log J is increasing and concave: Newton from
+           m = tr b / d, where f >= 0, decreases monotonically to the root */
+        mm = trb / d;
+        for (it = 0; it < 100; ++it) {
+            pn_real f = -2 * PN__LOG(J), fp = 0, step;
+            for (i = 0; i < d; ++i) {
+                f += PN__LOG(mm + c * n[i]);
+                fp += 1 / (mm + c * n[i]);
+            }
+            step = f / fp;
+            mm -= step;
+            if (PN__FABS(step) <= 2 * PN__EPS * mm) break;
+        }
+    }
+    for (i = 0; i < d; ++i) z[i] = PN__SQRT(mm + c * n[i]);
+}
+
+/* Principal return mapping. *plastic = 0 means z == s exactly and h unchanged. */
+static pn_result pn__return_principal(const pn_material *m, int d, const pn_real *s, pn_real h,
+                                      pn_real *z, pn_real *h_new, int *plastic) {
+    pn_real e[3], tr = 0, r = 0, ehat[3], dd = (pn_real)d;
+    int i;
+    *plastic = 0;
+    *h_new = h;
+    for (i = 0; i < d; ++i) z[i] = s[i];
+    switch (m->plastic) {
+    case PN_PLASTIC_DRUCKER_PRAGER: {
+        /* Klar et al. 2016 in the cohesion-shifted strain e - c; volume correction
+           (Tampubolon et al. 2017) adds the stored log-volume gain h to the trace */
+        pn_real alpha = pn__dp_alpha(m->sin_phi), c = m->cohesion_strain, dg;
+        pn_real hv = m->volume_correction ? h : 0;
+        for (i = 0; i < d; ++i) {
+            e[i] = PN__LOG(s[i]) - c + hv / dd;
+            tr += e[i];
+        }
+        for (i = 0; i < d; ++i) {
+            ehat[i] = e[i] - tr / dd;
+            r += ehat[i] * ehat[i];
+        }
+        r = PN__SQRT(r);
+        if (tr >= 0) { /* expansion: the cone apex, stress free */
+            for (i = 0; i < d; ++i) z[i] = PN__EXP(c);
+            *h_new = m->volume_correction ? tr : 0;
+            *plastic = 1;
+            return PN_OK;
+        }
+        dg = r + (dd * m->lambda + 2 * m->mu) / (2 * m->mu) * tr * alpha;
+        if (dg <= 0) { /* inside; a pending volume credit is absorbed into Z */
+            if (hv != 0) {
+                for (i = 0; i < d; ++i) z[i] = PN__EXP(e[i] + c);
+                *h_new = 0;
+                *plastic = 1;
+            }
+            return PN_OK;
+        }
+        for (i = 0; i < d; ++i) z[i] = PN__EXP(e[i] - dg * ehat[i] / r + c);
+        *h_new = 0;
+        *plastic = 1;
+        return PN_OK;
+    }
+    case PN_PLASTIC_VON_MISES: {
+        pn_real y, scale;
+        if (!(h >= 0)) return PN_ERROR_INVALID_ARGUMENT; /* accumulated plastic strain */
+        pn__yield_principal(m, d, s, h, &y, &scale);
+        if (y <= 0) return PN_OK;
+        *plastic = 1;
+        if (m->elastic != PN_ELASTIC_STVK_HENCKY) return pn__vm_rootfind(m, d, s, h, z, h_new);
+        {
+            /* closed form for StVK-Hencky: dev tau = 2 mu e_hat */
+            pn_real tauy = pn__vm_tau_y(m, h), dg;
+            for (i = 0; i < d; ++i) {
+                e[i] = PN__LOG(s[i]);
+                tr += e[i];
+            }
+            for (i = 0; i < d; ++i) {
+                ehat[i] = e[i] - tr / dd;
+                r += ehat[i] * ehat[i];
+            }
+            r = PN__SQRT(r);
+            dg = (2 * m->mu * r - tauy) / (2 * m->mu + 2 * m->hardening_modulus / 3);
+            for (i = 0; i < d; ++i) z[i] = PN__EXP(e[i] - dg * ehat[i] / r);
+            *h_new = h + PN__SQRT((pn_real)2 / 3) * dg;
+        }
+        return PN_OK;
+    }
+    case PN_PLASTIC_CAM_CLAY: {
+        pn__camclay c;
+        pn_real beta = m->beta, Jn;
+        pn__camclay_eval(m, d, s, h, &c);
+        if (c.p > c.p0 || c.p < -beta * c.p0) {
+            /* tips: compression p -> p0 or tension p -> -beta p0, no shear */
+            Jn = c.p > c.p0 ? PN__SQRT(1 - 2 * c.p0 / c.kappa)
+                            : PN__SQRT(1 + 2 * beta * c.p0 / c.kappa);
+            for (i = 0; i < d; ++i) z[i] = PN__POW(Jn, 1 / dd);
+            if (m->camclay_hardening) *h_new = h + PN__LOG(c.J / Jn);
+            *plastic = 1;
+            return PN_OK;
+        }
+        if (c.y <= 0) return PN_OK;
+        *plastic = 1;
+        {
+            /* shear: q onto the ellipse at fixed p */
+            pn_real q2t = -c.M * c.M * (c.p + beta * c.p0) * (c.p - c.p0) / (1 + 2 * beta);
+            pn_real shat_t = PN__SQRT(PN__MAX(q2t, 0) / ((6 - dd) / 2));
+            pn_real cc = shat_t / (m->mu * PN__POW(c.J, -2 / dd)); /* |dev b_new| */
+            pn__camclay_shear(d, s, c.J, cc, z);
+        }
+        if (m->camclay_hardening) {
+            /* hardening by a "fake" pressure p_x where the line from the trial point to the
+               ellipse centre (p_c, 0) crosses the surface: with P = p_c + t (p - p_c),
+               Q = t q, y = 0 gives t^2 = M^2 a^2 / ((1 + 2 beta) q^2 + M^2 (p - p_c)^2),
+               a = (1 + beta) p0 / 2 the half-width. logJp moves by log(J / J_x). */
+            pn_real pc = (1 - beta) * c.p0 / 2, a = (1 + beta) * c.p0 / 2, t, px, jx2;
+            t = c.M * a / PN__SQRT((1 + 2 * beta) * c.q2 + c.M * c.M * (c.p - pc) * (c.p - pc));
+            px = pc + t * (c.p - pc);
+            jx2 = 1 - 2 * px / c.kappa;
+            if (jx2 > 0) *h_new = h + (pn_real)0.5 * PN__LOG(c.J * c.J / jx2);
+        }
+        return PN_OK;
+    }
+    case PN_PLASTIC_SNOW_STOMAKHIN: {
+        /* clamp the stretches to [1 - theta_c, 1 + theta_s]; log Jp += log(J / J_new) */
+        pn_real J = 1, Jn = 1;
+        for (i = 0; i < d; ++i) {
+            z[i] = PN__MIN(PN__MAX(s[i], 1 - m->theta_c), 1 + m->theta_s);
+            if (z[i] != s[i]) *plastic = 1;
+            J *= s[i];
+            Jn *= z[i];
+        }
+        if (*plastic) *h_new = h + PN__LOG(J / Jn);
+        return PN_OK;
+    }
+    default: return PN_OK;
+    }
+}
+
+PN__DEF pn_result pn_return_map(const pn_material *m, int d, const pn_real *F, pn_real h,
+                                pn_real *Z, pn_real *h_new, pn_real *T) {
+    pn_real U[9], s[3], V[9], z[3], hn, zz[9], tt[9], w[3];
+    int plastic, i, n = d * d;
+    pn_result r = pn__check_F(d, F);
+    PN_ASSERT(m && F);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, U, s, V);
+    if (m->plastic == PN_PLASTIC_NONE) { /* T = P(F) */
+        pn__principal pr;
+        pn_real mu, la;
+        if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+        pn__lame_at(m, h, &mu, &la);
+        pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
+        pn__udvt(d, U, pr.g, V, tt);
+        if (!pn__all_finite(n, tt)) return PN_ERROR_NONFINITE;
+        if (Z) memcpy(Z, F, sizeof(pn_real) * (size_t)n);
+        if (h_new) *h_new = h;
+        if (T) memcpy(T, tt, sizeof(pn_real) * (size_t)n);
+        return PN_OK;
+    }
+    if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED; /* plastic flow is defined for det F > 0 */
+    r = pn__return_principal(m, d, s, h, z, &hn, &plastic);
+    if (r != PN_OK) return r;
+    if (plastic) pn__udvt(d, U, z, V, zz);
+    else memcpy(zz, F, sizeof(pn_real) * (size_t)n);
+    /* T = tau(Z) F^-T = U diag(tau_i(z) / s_i) V^T */
+    pn__tau_principal(m, hn, d, z, w);
+    for (i = 0; i < d; ++i) w[i] /= s[i];
+    pn__udvt(d, U, w, V, tt);
+    if (!pn__finite(hn) || !pn__all_finite(n, zz) || !pn__all_finite(n, tt))
+        return PN_ERROR_NONFINITE;
+    if (Z) memcpy(Z, zz, sizeof(pn_real) * (size_t)n);
+    if (h_new) *h_new = hn;
+    if (T) memcpy(T, tt, sizeof(pn_real) * (size_t)n);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_yield_function(const pn_material *m, int d, const pn_real *F, pn_real h,
+                                    pn_real *y, pn_real *scale) {
+    pn_real U[9], s[3], V[9], yy, sc;
+    pn_result r = pn__check_F(d, F);
+    PN_ASSERT(m && F && y);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, U, s, V);
+    if (m->plastic != PN_PLASTIC_NONE && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    pn__yield_principal(m, d, s, h, &yy, &sc);
+    if (!pn__finite(yy)) return PN_ERROR_NONFINITE;
+    *y = yy;
+    if (scale) *scale = sc;
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>energy-vm: exact StVK-Hencky + von Mises energy (frozen tau_Y, r = tau_Y / (2 mu))
+       psi = kappa/2 (tr e)^2 + mu |e_hat|^2               |e_hat| <= r
+       psi = kappa/2 (tr e)^2 + tau_Y |e_hat| - tau_Y^2/(4 mu)   otherwise
+   Its e-gradient is the Kirchhoff stress of the projected strain, so its F-gradient is
+   tau(Z(F)) F^-T. C1: the Hessian jumps across |e_hat| = r.
+   ====================================================================================== */
+
+PN__DEF pn_result pn_von_mises_energy(const pn_material *m, int d, const pn_real *F, pn_real h,
+                                      pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
+    pn_real U[9], s[3], V[9], e[3], tr = 0, rr = 0, n[3], ge[3], Ae[9], kappa, tauy, c, dd = (pn_real)d;
+    pn__principal pr;
+    int i, j;
+    pn_result res = pn__check_F(d, F);
+    PN_ASSERT(m && F);
+    if (res != PN_OK) return res;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    if (m->plastic != PN_PLASTIC_VON_MISES || m->elastic != PN_ELASTIC_STVK_HENCKY)
+        return PN_ERROR_UNSUPPORTED;
+    if (!(h >= 0)) return PN_ERROR_INVALID_ARGUMENT;
+    pn__svd(d, F, U, s, V);
+    if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    kappa = m->lambda + 2 * m->mu / dd;
+    tauy = pn__vm_tau_y(m, h);
+    for (i = 0; i < d; ++i) {
+        e[i] = PN__LOG(s[i]);
+        tr += e[i];
+    }
+    for (i = 0; i < d; ++i) {
+        n[i] = e[i] - tr / dd;
+        rr += n[i] * n[i];
+    }
+    rr = PN__SQRT(rr);
+    memset(&pr, 0, sizeof pr);
+    if (2 * m->mu * rr <= tauy) {
+        pr.psi = kappa / 2 * tr * tr + m->mu * rr * rr;
+        c = 2 * m->mu;
+        for (i = 0; i < d; ++i) ge[i] = kappa * tr + c * n[i];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) Ae[i * 3 + j] = kappa + c * ((i == j ? 1 : 0) - 1 / dd);
+    } else {
+        pr.psi = kappa / 2 * tr * tr + tauy * rr - tauy * tauy / (4 * m->mu);
+        c = tauy / rr;
+        for (i = 0; i < d; ++i) n[i] /= rr;
+        for (i = 0; i < d; ++i) ge[i] = kappa * tr + tauy * n[i];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j)
+                Ae[i * 3 + j] = kappa + c * ((i == j ? 1 : 0) - 1 / dd - n[i] * n[j]);
+    }
+    pn__hencky_to_s(d, s, ge, Ae, c, &pr);
+    return pn__energy_out(d, U, V, &pr, psi, P, dPdF, flags);
+}
+
+/* ======================================================================================
+   >>energy-lagged: Psi_lag(F; F0) = psi_el(F G), G = F0^-1 Z(F0) = V diag(z/s) V^T.
+   dPsi/dF = P_el(F G) G^T; d2Psi/dF_ij dF_kl = G_jm H_el[im][kb] G_lb.
+   ====================================================================================== */
+
+PN__DEF pn_result pn_lagged_prepare(const pn_material *m, int d, const pn_real *F0, pn_real h0,
+                                    pn_real *G, pn_real *h_G) {
+    pn_real U[9], s[3], V[9], z[3], hn, g[9], w[3];
+    int plastic, i;
+    pn_result r = pn__check_F(d, F0);
+    PN_ASSERT(m && F0 && G && h_G);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h0)) return PN_ERROR_NONFINITE;
+    if (m->plastic == PN_PLASTIC_NONE) {
+        pn__identity(d, g);
+        hn = h0;
+    } else {
+        pn__svd(d, F0, U, s, V);
+        if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+        r = pn__return_principal(m, d, s, h0, z, &hn, &plastic);
+        if (r != PN_OK) return r;
+        if (plastic) {
+            for (i = 0; i < d; ++i) w[i] = z[i] / s[i];
+            pn__udvt(d, V, w, V, g);
+        } else {
+            pn__identity(d, g);
+        }
+        if (!pn__finite(hn) || !pn__all_finite(d * d, g)) return PN_ERROR_NONFINITE;
+    }
+    memcpy(G, g, sizeof(pn_real) * (size_t)(d * d));
+    *h_G = hn;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_lagged_energy(const pn_material *m, int d, const pn_real *F, const pn_real *G,
+                                   pn_real h_G, pn_real *psi, pn_real *P, pn_real *dPdF,
+                                   unsigned flags) {
+    pn_real A[9], e, pa[9], ha[81], p[9], hh[81];
+    int n = d * d, i, j, k, l, a, b, mm;
+    pn_result r = pn__check_F(d, F);
+    PN_ASSERT(m && F && G);
+    if (r != PN_OK) return r;
+    if (!pn__all_finite(n, G) || !pn__finite(h_G)) return PN_ERROR_NONFINITE;
+    pn_mat_mul(d, F, G, A);
+    r = pn_elastic_energy(m, d, A, h_G, &e, pa, dPdF ? ha : NULL, flags);
+    if (r != PN_OK) return r;
+    for (i = 0; i < d; ++i) /* P = P_el(A) G^T */
+        for (j = 0; j < d; ++j) {
+            pn_real acc = 0;
+            for (mm = 0; mm < d; ++mm) acc += pa[i * d + mm] * G[j * d + mm];
+            p[i * d + j] = acc;
+        }
+    if (dPdF) {
+        /* congruence by G keeps a PSD-projected H_el PSD */
+        pn_real t[81]; /* t[(i m),(k l)] = sum_b H[(i m),(k b)] G_lb */
+        for (i = 0; i < d; ++i)
+            for (mm = 0; mm < d; ++mm)
+                for (k = 0; k < d; ++k)
+                    for (l = 0; l < d; ++l) {
+                        pn_real acc = 0;
+                        for (b = 0; b < d; ++b) acc += ha[(i * d + mm) * n + k * d + b] * G[l * d + b];
+                        t[(i * d + mm) * n + k * d + l] = acc;
+                    }
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j)
+                for (a = 0; a < n; ++a) {
+                    pn_real acc = 0;
+                    for (mm = 0; mm < d; ++mm) acc += G[j * d + mm] * t[(i * d + mm) * n + a];
+                    hh[(i * d + j) * n + a] = acc;
+                }
+    }
+    if (!pn__all_finite(n, p) || (dPdF && !pn__all_finite(n * n, hh))) return PN_ERROR_NONFINITE;
+    if (psi) *psi = e;
+    if (P) memcpy(P, p, sizeof(pn_real) * (size_t)n);
+    if (dPdF) memcpy(dPdF, hh, sizeof(pn_real) * (size_t)(n * n));
+    return PN_OK;
+}
+
+#endif /* PLASTINET_IMPLEMENTATION */
+
+/*
+------------------------------------------------------------------------------
+This software is available under 2 licenses -- choose whichever you prefer.
+------------------------------------------------------------------------------
+ALTERNATIVE A - MIT License
+Copyright (c) 2026 the plastinet authors
+Permission is hereby granted, free of charge, to any person obtaining a copy of
+this software and associated documentation files (the "Software"), to deal in
+the Software without restriction, including without limitation the rights to
+use, copy, modify, merge, publish, distribute, sublicense, and/or sell copies
+of the Software, and to permit persons to whom the Software is furnished to do
+so, subject to the following conditions:
+The above copyright notice and this permission notice shall be included in all
+copies or substantial portions of the Software.
+THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR
+IMPLIED, INCLUDING BUT NOT LIMITED TO THE WARRANTIES OF MERCHANTABILITY,
+FITNESS FOR A PARTICULAR PURPOSE AND NONINFRINGEMENT. IN NO EVENT SHALL THE
+AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM, DAMAGES OR OTHER
+LIABILITY, WHETHER IN AN ACTION OF CONTRACT, TORT OR OTHERWISE, ARISING FROM,
+OUT OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER DEALINGS IN THE
+SOFTWARE.
+------------------------------------------------------------------------------
+ALTERNATIVE B - Public Domain (www.unlicense.org)
+This is free and unencumbered software released into the public domain.
+Anyone is free to copy, modify, publish, use, compile, sell, or distribute this
+software, either in source code form or as a compiled binary, for any purpose,
+commercial or non-commercial, and by any means.
+In jurisdictions that recognize copyright laws, the author or authors of this
+software dedicate any and all copyright interest in the software to the public
+domain. We make this dedication in the belief that its use will be of greater
+benefit to the public at large and to the detriment of our heirs and
+successors. We intend this dedication to be an overt act of relinquishment in
+perpetuity of all present and future rights to this software under copyright
+law.
+------------------------------------------------------------------------------
+*/

@@ -1,0 +1,34 @@
+# plastinet: `make run` (the demo) and `make test` (every test). Nothing else is needed to use
+# the headers: copy plastinet.h into your project.
+CC ?= cc
+CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
+LDLIBS = -lm
+
+.PHONY: all run test test-sanitize clean examples
+
+all: examples
+
+examples: build/material_point
+
+build/material_point: examples/material_point.c plastinet.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/material_point.c $(LDLIBS) -o $@
+
+# The material-point driver on a von Mises tensile test (uniaxial stress, linear hardening):
+# prints the stress-strain curve.
+run: build/material_point
+	@echo "# von Mises steel, uniaxial stress, linear hardening (build/material_point --help for more)"
+	@build/material_point --dim 3 --plastic von_mises --path uniaxial_stress --steps 40 \
+	    --max-strain 0.01 | awk -F, 'NR==1 {for (i = 1; i <= NF; i++) c[$$i] = i; \
+	    printf "%10s %14s %14s %12s\n", "step", "axial_strain", "axial_stress_MPa", "plastic_h"; next} \
+	    /^#/ {next} {printf "%10d %14.6f %14.3f %12.6f\n", $$c["step"], $$c["axial_log_strain"], \
+	    $$c["axial_cauchy"] / 1e6, $$c["h"]}'
+
+test:
+	@tests/run.sh
+
+test-sanitize:
+	@SANITIZE=1 tests/run.sh
+
+clean:
+	rm -rf build

@@ -1,0 +1,106 @@
+/* Compile-configuration check: built by tests/run.sh as C99 and C++11 under gcc and clang
+   with -Wall -Wextra -Werror -pedantic, with PLASTINET_STATIC, PN_REAL=float, PN_NO_STDIO,
+   PN_NO_2D and PN_NO_3D. It touches every public function once and checks loose sanity
+   (loose so that the float build passes too); the real tests are in test_main.c.
+   compile_check_tu2.c includes the header without the implementation and links with this
+   file (except under PLASTINET_STATIC), which checks the extern declarations. */
+#define PLASTINET_IMPLEMENTATION
+#include "../plastinet.h"
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+int pn_check_second_tu(void); /* compile_check_tu2.c */
+
+static int failures = 0;
+#define CHECK(c)                                                                            \
+    do {                                                                                    \
+        if (!(c)) {                                                                         \
+            printf("compile_check: %s:%d: %s\n", __FILE__, __LINE__, #c);                   \
+            failures++;                                                                     \
+        }                                                                                   \
+    } while (0)
+
+static void smoke(int d) {
+    pn_material_desc desc;
+    pn_material m;
+    const char *why = NULL;
+    pn_real F[9], U[9], s[3], V[9], R[9], S[9], E[9], Z[9], T[9], G[9], P[9], H[81], psi, h, hg, y, sc;
+    pn_real Fi[9] = {0}, I[9];
+    int i, j;
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j) F[i * d + j] = (pn_real)((i == j ? 1.1 : 0.0) + 0.05 * (i + 2 * j));
+    CHECK(pn_svd(d, F, U, s, V) == PN_OK);
+    CHECK(s[0] >= s[d - 1] && s[d - 1] > 0);
+    CHECK(fabs((double)(pn_mat_det(d, U) - 1)) < 1e-5);
+    CHECK(pn_polar(d, F, R, S) == PN_OK);
+    CHECK(pn_hencky_strain(d, F, E) == PN_OK);
+    CHECK(pn_mat_inverse(d, F, Fi) == PN_OK);
+    pn_mat_mul(d, F, Fi, I);
+    CHECK(fabs((double)(I[0] - 1)) < 1e-5);
+    CHECK(pn_sym_eigen(d, S, U, s) == PN_OK);
+    CHECK(pn_sym_project_psd(d, S) == PN_OK);
+    memset(&desc, 0, sizeof desc);
+    desc.plastic = PN_PLASTIC_VON_MISES;
+    desc.youngs_modulus_pa = 1000;
+    desc.poisson_ratio = (pn_real)0.3;
+    desc.yield_stress_pa = 10;
+    CHECK(pn_material_init(&m, &desc, &why) == PN_OK);
+    CHECK(pn_elastic_energy(&m, d, F, 0, &psi, P, H, PN_EVAL_PROJECT_PSD) == PN_OK && psi > 0);
+    CHECK(pn_kirchhoff_stress(&m, d, F, 0, S) == PN_OK);
+    CHECK(pn_return_map(&m, d, F, 0, Z, &h, T) == PN_OK && h > 0);
+    CHECK(pn_yield_function(&m, d, Z, h, &y, &sc) == PN_OK && fabs((double)(y / sc)) < 1e-4);
+    CHECK(pn_von_mises_energy(&m, d, F, 0, &psi, P, H, 0) == PN_OK);
+    CHECK(pn_lagged_prepare(&m, d, F, 0, G, &hg) == PN_OK);
+    CHECK(pn_lagged_energy(&m, d, F, G, hg, &psi, P, H, 0) == PN_OK);
+    for (i = 0; i < d * d; ++i) CHECK(fabs((double)(P[i] - T[i])) <= 1e-4 * fabs((double)T[0]) + 1e-3);
+    desc.youngs_modulus_pa = -1;
+    CHECK(pn_material_init(&m, &desc, &why) == PN_ERROR_INVALID_PARAMETER && why != NULL);
+    F[0] = (pn_real)NAN;
+    CHECK(pn_svd(d, F, U, s, V) == PN_ERROR_NONFINITE);
+}
+
+int main(void) {
+    char buf[256];
+    pn_material m;
+    pn_material_desc desc;
+    memset(&desc, 0, sizeof desc);
+    desc.youngs_modulus_pa = 1;
+    CHECK(pn_material_init(&m, &desc, NULL) == PN_OK);
+#ifndef PN_NO_STDIO
+    CHECK(pn_material_describe(&m, buf, sizeof buf) > 0);
+#else
+    buf[0] = 0;
+    (void)buf;
+#endif
+    CHECK(strlen(pn_result_string(PN_ERROR_INVERTED)) > 0);
+    CHECK(pn_elastic_model_from_name(pn_elastic_model_name(PN_ELASTIC_STVK_HENCKY)) ==
+          (int)PN_ELASTIC_STVK_HENCKY);
+    CHECK(pn_plastic_model_from_name("cam_clay") == (int)PN_PLASTIC_CAM_CLAY);
+    {
+        void *p = pn_alloc(NULL, 16);
+        CHECK(p != NULL);
+        pn_free(NULL, p);
+    }
+#ifndef PN_NO_2D
+    smoke(2);
+#else
+    {
+        pn_real F[4] = {1, 0, 0, 1}, U[4], s[2], V[4];
+        CHECK(pn_svd(2, F, U, s, V) == PN_ERROR_DIMENSION);
+    }
+#endif
+#ifndef PN_NO_3D
+    smoke(3);
+#else
+    {
+        pn_real F[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, U[9], s[3], V[9];
+        CHECK(pn_svd(3, F, U, s, V) == PN_ERROR_DIMENSION);
+    }
+#endif
+#ifndef PLASTINET_STATIC
+    CHECK(pn_check_second_tu() == 1);
+#endif
+    printf("compile_check: %s\n", failures ? "FAILED" : "ok");
+    return failures ? 1 : 0;
+}

@@ -1,0 +1,6 @@
+/* Second translation unit: the header without the implementation must declare everything. */
+#include "../plastinet.h"
+int pn_check_second_tu(void);
+int pn_check_second_tu(void) {
+    return pn_result_string(PN_OK)[0] == 'o' && pn_plastic_model_from_name("von_mises") == (int)PN_PLASTIC_VON_MISES;
+}

@@ -1,0 +1,60 @@
+#!/bin/sh
+# The one test runner: compile-configuration checks, then every unit/property/driver test.
+# Usage: tests/run.sh [name-filter]     SANITIZE=1 tests/run.sh  (ASan + UBSan build)
+# Last line: N passed, N failed
+cd "$(dirname "$0")/.." || exit 1
+mkdir -p build
+CC=${CC:-cc}
+W="-Wall -Wextra -Werror -pedantic"
+passed=0
+failed=0
+ok() { passed=$((passed + 1)); echo "ok   $1"; }
+bad() { failed=$((failed + 1)); echo "FAIL $1"; }
+
+# 1. the header in every configuration that matters, under every compiler found
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    for cc in gcc clang g++ clang++; do
+        command -v "$cc" >/dev/null 2>&1 || { echo "skip $cc (not installed)"; continue; }
+        case $cc in *++) std="-x c++ -std=c++11";; *) std="-std=c99";; esac
+        for cfg in "" "-DPLASTINET_STATIC" "-DPN_REAL=float" "-DPN_NO_STDIO" "-DPN_NO_2D" "-DPN_NO_3D"; do
+            name="compile $cc ${std#-x c++ } ${cfg:-default}"
+            out=build/compile_check
+            if [ "$cfg" = "-DPLASTINET_STATIC" ]; then srcs="tests/compile_check.c"; else srcs="tests/compile_check.c tests/compile_check_tu2.c"; fi
+            # shellcheck disable=SC2086
+            if $cc $std $W -O1 $cfg $srcs -lm -o $out 2>build/compile.log && ./$out >>build/compile.log 2>&1; then
+                ok "$name"
+            else
+                bad "$name"; sed 's/^/    /' build/compile.log | head -20
+            fi
+        done
+    done
+fi
+
+# 2. the test binary
+if [ -n "$SANITIZE" ]; then
+    flags="-O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
+    bin=build/test_main_san
+else
+    flags="-O2 -g"
+    bin=build/test_main
+fi
+# shellcheck disable=SC2086
+if ! $CC -std=c99 $W $flags tests/test_main.c -lm -o $bin; then
+    bad "build $bin"
+    echo "$passed passed, $failed failed"
+    exit 1
+fi
+./$bin "$@" >build/test_main.log 2>&1
+status=$?
+cat build/test_main.log | grep -v '^[0-9]* passed, [0-9]* failed$'
+last=$(tail -n 1 build/test_main.log)
+p=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\1/p')
+f=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\2/p')
+if [ -z "$p" ]; then
+    bad "$bin crashed or printed no summary (exit $status)"
+else
+    passed=$((passed + p)); failed=$((failed + f))
+    if [ "$status" -ne 0 ] && [ "$f" -eq 0 ]; then bad "$bin exit status $status"; fi
+fi
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]
