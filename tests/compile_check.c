@@ -25,7 +25,8 @@ static void smoke(int d) {
     pn_material_desc desc;
     pn_material m;
     const char *why = NULL;
-    pn_real F[9], U[9], s[3], V[9], R[9], S[9], E[9], Z[9], T[9], G[9], P[9], H[81], psi, h, hg, y, sc;
+    pn_real F[9], U[9] = {0}, s[3] = {0}, V[9], R[9], S[9] = {0}, E[9], Z[9], T[9] = {0}, G[9] = {0};
+    pn_real P[9] = {0}, H[81], psi = 0, h = 0, hg = 0, y = 0, sc = 1;
     pn_real Fi[9] = {0}, I[9];
     int i, j;
     for (i = 0; i < d; ++i)
