@@ -274,7 +274,11 @@ PN_API pn_result pn_kirchhoff_stress(const pn_material *m, int dim, const pn_rea
 /* Project the trial elastic deformation F onto the elastic region of the plastic model with
    state h. Outputs (each optional): Z = Z(F, h) the projected F, h_new the updated state, and
    T = tau(Z) F^-T the target force density (PlasticityNet Eq. 7). Inside the elastic region
-   Z = F and h_new = h (except that a Drucker-Prager volume correction is absorbed into Z). */
+   Z = F and h_new = h (except that a Drucker-Prager volume correction is absorbed into Z).
+   Z lies on the yield surface of the state h the projection used; hardening then moves the
+   surface (von Mises and the Cam-Clay compression side grow it, so Z stays inside; Cam-Clay
+   softens on its tension side, so Z(Z, h_new) may project again). Plastic models need
+   det F > 0 (PN_ERROR_INVERTED otherwise); with PN_PLASTIC_NONE, T = P(F). */
 PN_API pn_result pn_return_map(const pn_material *m, int dim, const pn_real *F, pn_real h,
                                pn_real *Z, pn_real *h_new, pn_real *T);
 
@@ -282,7 +286,10 @@ PN_API pn_result pn_return_map(const pn_material *m, int dim, const pn_real *F, 
    Drucker-Prager and von Mises Pa (|dev tau| + alpha tr tau resp. |dev tau| - sqrt(2/3)
    sigma_Y), Cam-Clay Pa^2 ((1 + 2 beta) q^2 + M^2 (p + beta p0)(p - p0)), Stomakhin
    dimensionless (distance of the singular values outside [1 - theta_c, 1 + theta_s]),
-   NONE: -1. A scale (same units) for relative residuals goes to *scale if not NULL. */
+   NONE: -1. A scale (same units: the magnitude of the terms of y at F) for relative residuals
+   goes to *scale if not NULL. At the Drucker-Prager apex and the Cam-Clay tips both y and the
+   scale vanish (to rounding): measure a projection's residual there against the scale of the
+   trial point instead. */
 PN_API pn_result pn_yield_function(const pn_material *m, int dim, const pn_real *F, pn_real h,
                                    pn_real *y, pn_real *scale);
 
