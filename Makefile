@@ -4,7 +4,7 @@ CC ?= cc
 CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run test test-sanitize clean examples
+.PHONY: all run test test-sanitize bench-core clean examples
 
 all: examples
 
@@ -26,6 +26,12 @@ run: build/material_point
 
 test:
 	@tests/run.sh
+
+# Nanoseconds per call of the core (SVD, energies, return mappings), 2D and 3D.
+bench-core: bench/bench_core.c plastinet.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/bench_core.c $(LDLIBS) -o build/bench_core
+	build/bench_core --csv build/bench_core.csv
 
 test-sanitize:
 	@SANITIZE=1 tests/run.sh

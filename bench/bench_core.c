@@ -1,0 +1,138 @@
+/* bench_core: nanoseconds per call of the constitutive core, 2D and 3D.
+   Build: cc -std=c99 -O2 bench/bench_core.c -lm -o bench_core
+   Usage: bench_core [--csv FILE] [--reps N]
+   Inputs are random F = R1 diag(exp(e)) R2 with e in [-0.3, 0.3]^d, so return mappings see a
+   mix of elastic and plastic points. CPU time by clock(); results are per machine and never
+   asserted anywhere. */
+#define PLASTINET_IMPLEMENTATION
+#include "../plastinet.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+
+#define NF 1024
+
+typedef struct bench_rng { unsigned long long s; } bench_rng;
+static double bench_uniform(bench_rng *r) {
+    unsigned long long z = (r->s += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return (double)((z ^ (z >> 31)) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+static void bench_rotation(int d, bench_rng *r, pn_real *R) {
+    pn_real A[9], s[3], V[9];
+    int i;
+    for (i = 0; i < d * d; ++i) A[i] = (pn_real)(2 * bench_uniform(r) - 1);
+    pn_svd(d, A, R, s, V);
+}
+
+static void bench_inputs(int d, pn_real *Fs) {
+    bench_rng r;
+    int k, i;
+    r.s = 12345u + (unsigned)d;
+    for (k = 0; k < NF; ++k) {
+        pn_real R1[9], R2[9], S[9], T[9];
+        bench_rotation(d, &r, R1);
+        bench_rotation(d, &r, R2);
+        for (i = 0; i < d * d; ++i) S[i] = 0;
+        for (i = 0; i < d; ++i) S[i * d + i] = (pn_real)exp(0.6 * bench_uniform(&r) - 0.3);
+        pn_mat_mul(d, R1, S, T);
+        pn_mat_mul(d, T, R2, Fs + 9 * k);
+    }
+}
+
+enum { OP_SVD, OP_ENERGY, OP_ENERGY_PSD, OP_RETURN, OP_VM_ENERGY, OP_LAGGED };
+
+static double bench_op(int op, const pn_material *m, int d, const pn_real *Fs, long reps,
+                       double *sink) {
+    pn_real U[9], s[3], V[9], P[9], H[81], psi = 0, Z[9], T[9], G[9], hg = 0, h = 0;
+    long it;
+    clock_t t0;
+    if (op == OP_LAGGED) pn_lagged_prepare(m, d, Fs, 0, G, &hg);
+    t0 = clock();
+    for (it = 0; it < reps; ++it) {
+        const pn_real *F = Fs + 9 * (it % NF);
+        switch (op) {
+        case OP_SVD: pn_svd(d, F, U, s, V); *sink += s[0]; break;
+        case OP_ENERGY: pn_elastic_energy(m, d, F, 0, &psi, P, H, 0); *sink += H[0]; break;
+        case OP_ENERGY_PSD: pn_elastic_energy(m, d, F, 0, &psi, P, H, PN_EVAL_PROJECT_PSD); *sink += H[0]; break;
+        case OP_RETURN: pn_return_map(m, d, F, 0, Z, &h, T); *sink += T[0]; break;
+        case OP_VM_ENERGY: pn_von_mises_energy(m, d, F, 0, &psi, P, H, 0); *sink += H[0]; break;
+        case OP_LAGGED: pn_lagged_energy(m, d, F, G, hg, &psi, P, H, 0); *sink += H[0]; break;
+        }
+    }
+    return (double)(clock() - t0) / CLOCKS_PER_SEC * 1e9 / (double)reps;
+}
+
+int main(int argc, char **argv) {
+    static pn_real Fs[2][9 * NF];
+    const char *csv = NULL;
+    long reps = 200000;
+    double sink = 0;
+    FILE *out = NULL;
+    int i, d;
+    struct { const char *name; pn_elastic_model e; pn_plastic_model p; } mats[] = {
+        {"fixed_corotated", PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE},
+        {"stvk_hencky", PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_NONE},
+        {"neo_hookean", PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE},
+        {"sand_drucker_prager", PN_ELASTIC_DEFAULT, PN_PLASTIC_DRUCKER_PRAGER},
+        {"metal_von_mises", PN_ELASTIC_DEFAULT, PN_PLASTIC_VON_MISES},
+        {"metal_von_mises_nh", PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_VON_MISES},
+        {"snow_cam_clay", PN_ELASTIC_DEFAULT, PN_PLASTIC_CAM_CLAY},
+        {"snow_stomakhin", PN_ELASTIC_DEFAULT, PN_PLASTIC_SNOW_STOMAKHIN},
+    };
+    for (i = 1; i < argc; ++i) {
+        if (!strcmp(argv[i], "--csv") && i + 1 < argc) csv = argv[++i];
+        else if (!strcmp(argv[i], "--reps") && i + 1 < argc) reps = atol(argv[++i]);
+        else {
+            fprintf(stderr, "usage: bench_core [--csv FILE] [--reps N]\n");
+            return 2;
+        }
+    }
+    if (reps < NF) reps = NF;
+    if (csv && !(out = fopen(csv, "w"))) {
+        fprintf(stderr, "bench_core: cannot write %s\n", csv);
+        return 1;
+    }
+    bench_inputs(2, Fs[0]);
+    bench_inputs(3, Fs[1]);
+    if (out) fprintf(out, "dim,material,operation,ns_per_call\n");
+    printf("%-22s %-4s %10s %12s %12s %12s %12s %12s\n", "material", "dim", "svd", "energy+P+H",
+           "+psd", "return_map", "vm_energy", "lagged");
+    for (i = 0; i < (int)(sizeof mats / sizeof mats[0]); ++i)
+        for (d = 2; d <= 3; ++d) {
+            pn_material_desc desc;
+            pn_material m;
+            double ns[6];
+            int op;
+            memset(&desc, 0, sizeof desc);
+            desc.elastic = mats[i].e;
+            desc.plastic = mats[i].p;
+            desc.youngs_modulus_pa = 1e7;
+            desc.poisson_ratio = 0.3;
+            desc.friction_angle_deg = 30;
+            desc.yield_stress_pa = 1e5;
+            desc.camclay_beta = 0.3;
+            desc.camclay_xi = 0.5;
+            desc.snow_theta_c = 0.025;
+            desc.snow_theta_s = 0.0075;
+            desc.snow_xi = 10;
+            if (pn_material_init(&m, &desc, NULL) != PN_OK) return 1;
+            for (op = 0; op < 6; ++op) {
+                int vm = m.plastic == PN_PLASTIC_VON_MISES && m.elastic == PN_ELASTIC_STVK_HENCKY;
+                ns[op] = (op == OP_VM_ENERGY && !vm) ? -1 : bench_op(op, &m, d, Fs[d - 2], reps, &sink);
+                if (out && ns[op] >= 0) {
+                    static const char *names[] = {"svd", "energy_P_H", "energy_P_H_psd", "return_map",
+                                                  "vm_energy_P_H", "lagged_energy_P_H"};
+                    fprintf(out, "%d,%s,%s,%.1f\n", d, mats[i].name, names[op], ns[op]);
+                }
+            }
+            printf("%-22s %-4d %10.0f %12.0f %12.0f %12.0f ", mats[i].name, d, ns[0], ns[1], ns[2], ns[3]);
+            if (ns[4] >= 0) printf("%12.0f ", ns[4]); else printf("%12s ", "-");
+            printf("%12.0f\n", ns[5]);
+        }
+    if (out) fclose(out);
+    fprintf(stderr, "(ns per call; checksum %g)\n", sink);
+    return 0;
+}
