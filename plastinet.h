@@ -258,7 +258,8 @@ PN_API int pn_material_describe(const pn_material *m, char *buf, size_t cap);
 /* ---- elastic energies --------------------------------------------------------------------- */
 
 /* Flags for the energy evaluators. */
-enum { PN_EVAL_PROJECT_PSD = 1 }; /* dP/dF replaced by its nearest PSD matrix (for Newton) */
+enum { PN_EVAL_PROJECT_PSD = 1 }; /* dP/dF replaced by a PSD matrix for Newton: the nearest
+                                     one (elastic, exact von Mises); see pn_lagged_energy */
 
 /* Elastic energy density psi(F) (J/m^3 = Pa), first Piola stress P (Pa) and dP/dF (Pa), each
    output optional (NULL). h only matters for SNOW_STOMAKHIN (hardened Lame constants). */
@@ -304,7 +305,9 @@ PN_API pn_result pn_von_mises_energy(const pn_material *m, int dim, const pn_rea
 
 /* Lagged-plasticity energy Psi_lag(F; F0) = psi_el(F G, h_G), G = F0^-1 Z(F0, h0): the
    no-network baseline whose gradient at F = F0 is exactly T(F0). Prepare G and h_G once per
-   F0, then evaluate at any F. */
+   F0, then evaluate at any F. With PN_EVAL_PROJECT_PSD the elastic Hessian at F G is projected
+   (nearest PSD) and then carried to F by the congruence with G: PSD and cheap, but not the
+   nearest PSD matrix of the lagged Hessian, since G is not a rotation. */
 PN_API pn_result pn_lagged_prepare(const pn_material *m, int dim, const pn_real *F0, pn_real h0,
                                    pn_real *G, pn_real *h_G);
 PN_API pn_result pn_lagged_energy(const pn_material *m, int dim, const pn_real *F,
@@ -1351,18 +1354,16 @@ static void pn__camclay_shear(int d, const pn_real *s, pn_real J, pn_real c, pn_
     if (d == 2) {
         mm = PN__SQRT(J * J + c * c * n[0] * n[0]); /* (m + c n0)(m - c n0) = J^2 */
     } else {
-        /* f(m) = sum log(m + c n_i) - 2 log J is increasing and concave: Newton from
-           m = tr b / d, where f >= 0, decreases monotonically to the root */
+        /* f(m) = prod (m + c n_i) - J^2 is increasing and convex where every factor is
+           positive. At the trial mean m = tr b / d, f >= 0 (shrinking dev b at fixed mean
+           raises the product), so Newton from there decreases monotonically to the root and
+           never leaves the domain. */
         mm = trb / d;
         for (it = 0; it < 100; ++it) {
-            pn_real f = -2 * PN__LOG(J), fp = 0, step;
-            for (i = 0; i < d; ++i) {
-                f += PN__LOG(mm + c * n[i]);
-                fp += 1 / (mm + c * n[i]);
-            }
-            step = f / fp;
+            pn_real a0 = mm + c * n[0], a1 = mm + c * n[1], a2 = mm + c * n[2];
+            pn_real f = a0 * a1 * a2 - J * J, fp = a1 * a2 + a0 * a2 + a0 * a1, step = f / fp;
+            if (!(step > 2 * PN__EPS * mm)) break; /* converged, or rounding stalls it */
             mm -= step;
-            if (PN__FABS(step) <= 2 * PN__EPS * mm) break;
         }
     }
     for (i = 0; i < d; ++i) z[i] = PN__SQRT(mm + c * n[i]);

@@ -8,7 +8,6 @@
    library. Helpers carry the t_la_ prefix (this file shares one translation unit with the
    other test files). */
 
-#include <stdlib.h>
 
 #define T_LA_N 100000  /* random cases per kind and dimension (the issue asks for 1e5)      */
 #define T_LA_TOL 1e-12 /* relative tolerance of reconstruction, orthogonality, ...         */
