@@ -83,7 +83,8 @@ static const pn_mp_flag pn_mp_flags[] = {
     {"--snow-xi", PN_MP_REAL, offsetof(pn_mp_opts, snow_xi),
      "hardening coefficient (snow_stomakhin)"},
     {"--h0", PN_MP_REAL, offsetof(pn_mp_opts, h0),
-     "initial plastic state (von_mises: plastic strain >= 0; cam_clay/snow: log Jp)"},
+     "initial plastic state (von_mises: plastic strain >= 0; drucker_prager: stored log-volume "
+     "gain >= 0; cam_clay, snow_stomakhin: log Jp)"},
     {"--path", PN_MP_STRING, offsetof(pn_mp_opts, path),
      "uniaxial_stress | uniaxial_strain | simple_shear | isotropic | cyclic | csv"},
     {"--steps", PN_MP_INT, offsetof(pn_mp_opts, steps), "number of steps (default 200)"},
@@ -609,8 +610,9 @@ static pn_result pn_mp_uniaxial_stress_step(const pn_material *m, int d, const p
         ghi = gx < 0 ? gprev : gx;
     }
     if (!(glo < 0 && ghi > 0)) return PN_ERROR_NOT_CONVERGED;
-    for (it = 0; it < 300; ++it) {
+    for (it = 0;; ++it) {
         double x = (lo * ghi - hi * glo) / (ghi - glo);
+        if (it == 300) return PN_ERROR_NOT_CONVERGED;
         if (!(x > lo && x < hi)) x = 0.5 * (lo + hi);
         res = pn_mp_lateral(m, d, p, l, x, &q, &g);
         if (res != PN_OK) return res;

@@ -581,6 +581,54 @@ PN_TEST(driver_bad_csv_writes_nothing) {
     remove(path);
 }
 
+/* A step that fails mid-run (here: an inverting F, which the csv validation would reject,
+   fed straight to the stepping loop) stops with exit 1, names the step on stderr and keeps
+   the complete rows before it. */
+PN_TEST(driver_step_failure_reported) {
+    pn_mp_run r;
+    pn_material_desc desc;
+    pn_real hist[27];
+    FILE *out = tmpfile(), *err = tmpfile();
+    char text[4096];
+    size_t n;
+    int rc, i, rows = 0, header = 0;
+    PN_CHECK(out && err);
+    if (!out || !err) return;
+    memset(&r, 0, sizeof r);
+    memset(&desc, 0, sizeof desc);
+    desc.plastic = PN_PLASTIC_VON_MISES;
+    desc.youngs_modulus_pa = 200e9;
+    desc.poisson_ratio = 0.3;
+    desc.yield_stress_pa = 250e6;
+    PN_CHECK(pn_material_init(&r.m, &desc, NULL) == PN_OK);
+    for (i = 0; i < 27; ++i) hist[i] = (pn_real)(i % 9 % 4 == 0 ? 1 : 0);
+    hist[0] = (pn_real)1.001;
+    hist[9] = (pn_real)1.002;
+    hist[18] = (pn_real)-1.0; /* step 3 reflects the point */
+    r.dim = 3;
+    r.steps = 3;
+    r.path = PN_MP_CSV;
+    r.csv_F = hist;
+    rc = pn_mp_simulate(&r, out, err);
+    rewind(out);
+    n = fread(text, 1, sizeof text - 1, out);
+    text[n] = 0;
+    for (i = 0; i < (int)n; ++i)
+        if (text[i] == '\n') ++rows;
+    header = strstr(text, "step,F11") != NULL;
+    rewind(err);
+    n = fread(text, 1, sizeof text - 1, err);
+    text[n] = 0;
+    if (n > 0 && text[n - 1] == '\n') text[n - 1] = 0;
+    PN_REPORT("exit %d, %d lines written, stderr: %s", rc, rows, text);
+    PN_CHECK(rc == 1);
+    PN_CHECK(header);
+    PN_CHECK(rows == 2 + 3); /* comment, header, steps 0..2 */
+    PN_CHECK(strstr(text, "step 3") != NULL);
+    fclose(out);
+    fclose(err);
+}
+
 static const pn_test_case pn_tests_driver[] = {
     {"driver_von_mises_uniaxial_stress", driver_von_mises_uniaxial_stress},
     {"driver_von_mises_cyclic_loop_closes", driver_von_mises_cyclic_loop_closes},
@@ -591,4 +639,5 @@ static const pn_test_case pn_tests_driver[] = {
     {"driver_csv_matches_builtin_path", driver_csv_matches_builtin_path},
     {"driver_bad_input_writes_nothing", driver_bad_input_writes_nothing},
     {"driver_bad_csv_writes_nothing", driver_bad_csv_writes_nothing},
+    {"driver_step_failure_reported", driver_step_failure_reported},
 };

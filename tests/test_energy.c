@@ -317,7 +317,7 @@ typedef struct t_en_stats {
    Hessian with this file's own eigen-solver. */
 static void t_en_lagged_psd_reference(const t_en_fn *f, int dim, const double *F, double *ref) {
     const int n2 = dim * dim;
-    double A[9], He[81], Hp[81];
+    double A[9] = {0}, He[81], Hp[81];
     int i, j, k, l, m, b;
     for (i = 0; i < dim; ++i)
         for (j = 0; j < dim; ++j) {
