@@ -1160,6 +1160,25 @@ PN__DEF pn_result pn_kirchhoff_stress(const pn_material *m, int d, const pn_real
    >>return-mapping: all models act on the singular values, Z(F) = U diag(z) V^T.
    ====================================================================================== */
 
+/* Hencky split of the shifted log stretches e_i = log s_i - c + v/d: e, its deviatoric part
+   ehat (optional), tr e and |ehat|. c shifts the strain (cohesion), v adds a log-volume. */
+static void pn__hencky_split(int d, const pn_real *s, pn_real c, pn_real v, pn_real *e,
+                             pn_real *ehat, pn_real *tr, pn_real *r) {
+    pn_real t = 0, r2 = 0, dd = (pn_real)d;
+    int i;
+    for (i = 0; i < d; ++i) {
+        e[i] = PN__LOG(s[i]) - c + v / dd;
+        t += e[i];
+    }
+    for (i = 0; i < d; ++i) {
+        pn_real x = e[i] - t / dd;
+        if (ehat) ehat[i] = x;
+        r2 += x * x;
+    }
+    *tr = t;
+    *r = PN__SQRT(r2);
+}
+
 /* Drucker-Prager friction coefficient alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)) */
 static pn_real pn__dp_alpha(pn_real sin_phi) {
     return PN__SQRT((pn_real)2 / 3) * 2 * sin_phi / (3 - sin_phi);
@@ -1223,22 +1242,16 @@ static pn_real pn__dev_norm(int d, const pn_real *t) {
 /* Yield function in principal stretches; see pn_yield_function for units. */
 static void pn__yield_principal(const pn_material *m, int d, const pn_real *s, pn_real h, pn_real *y,
                                 pn_real *scale) {
-    pn_real e[3], tr = 0, dev2 = 0, full2 = 0, mu2 = 2 * m->mu;
+    pn_real e[3], tr = 0, full2 = 0, mu2 = 2 * m->mu;
     int i;
     switch (m->plastic) {
     case PN_PLASTIC_DRUCKER_PRAGER: {
         /* cone in stress: |dev tau| + alpha tr tau <= 0 with tau of the cohesion-shifted strain;
            the volume-correction credit h is not part of the stress state */
-        pn_real bulk = d * m->lambda + mu2, alpha = pn__dp_alpha(m->sin_phi);
-        for (i = 0; i < d; ++i) {
-            e[i] = PN__LOG(s[i]) - m->cohesion_strain;
-            tr += e[i];
-        }
-        for (i = 0; i < d; ++i) {
-            dev2 += (e[i] - tr / d) * (e[i] - tr / d);
-            full2 += e[i] * e[i];
-        }
-        *y = mu2 * PN__SQRT(dev2) + alpha * bulk * tr;
+        pn_real bulk = d * m->lambda + mu2, alpha = pn__dp_alpha(m->sin_phi), dev;
+        pn__hencky_split(d, s, m->cohesion_strain, 0, e, NULL, &tr, &dev);
+        for (i = 0; i < d; ++i) full2 += e[i] * e[i];
+        *y = mu2 * dev + alpha * bulk * tr;
         *scale = mu2 * PN__SQRT(full2) + alpha * bulk * PN__FABS(tr);
         break;
     }
@@ -1279,17 +1292,9 @@ static void pn__yield_principal(const pn_material *m, int d, const pn_real *s, p
    where the stress is hydrostatic). */
 static pn_result pn__vm_rootfind(const pn_material *m, int d, const pn_real *s, pn_real h,
                                  pn_real *z, pn_real *h_new) {
-    pn_real e[3], n[3], tr = 0, r = 0, lo, hi, g, f = 0, fp, tauy0, k23, sq23 = PN__SQRT((pn_real)2 / 3);
+    pn_real e[3], n[3], tr, r, lo, hi, g, f = 0, fp, tauy0, k23, sq23 = PN__SQRT((pn_real)2 / 3);
     int i, j, it, ok = 0;
-    for (i = 0; i < d; ++i) {
-        e[i] = PN__LOG(s[i]);
-        tr += e[i];
-    }
-    for (i = 0; i < d; ++i) {
-        n[i] = e[i] - tr / d;
-        r += n[i] * n[i];
-    }
-    r = PN__SQRT(r);
+    pn__hencky_split(d, s, 0, 0, e, n, &tr, &r);
     for (i = 0; i < d; ++i) n[i] /= r;
     tauy0 = pn__vm_tau_y(m, h);
     k23 = 2 * m->hardening_modulus / 3;
@@ -1372,7 +1377,7 @@ static void pn__camclay_shear(int d, const pn_real *s, pn_real J, pn_real c, pn_
 /* Principal return mapping. *plastic = 0 means z == s exactly and h unchanged. */
 static pn_result pn__return_principal(const pn_material *m, int d, const pn_real *s, pn_real h,
                                       pn_real *z, pn_real *h_new, int *plastic) {
-    pn_real e[3], tr = 0, r = 0, ehat[3], dd = (pn_real)d;
+    pn_real e[3], tr, r, ehat[3], dd = (pn_real)d;
     int i;
     *plastic = 0;
     *h_new = h;
@@ -1383,15 +1388,7 @@ static pn_result pn__return_principal(const pn_material *m, int d, const pn_real
            (Tampubolon et al. 2017) adds the stored log-volume gain h to the trace */
         pn_real alpha = pn__dp_alpha(m->sin_phi), c = m->cohesion_strain, dg;
         pn_real hv = m->volume_correction ? h : 0;
-        for (i = 0; i < d; ++i) {
-            e[i] = PN__LOG(s[i]) - c + hv / dd;
-            tr += e[i];
-        }
-        for (i = 0; i < d; ++i) {
-            ehat[i] = e[i] - tr / dd;
-            r += ehat[i] * ehat[i];
-        }
-        r = PN__SQRT(r);
+        pn__hencky_split(d, s, c, hv, e, ehat, &tr, &r);
         if (tr >= 0) { /* expansion: the cone apex, stress free */
             for (i = 0; i < d; ++i) z[i] = PN__EXP(c);
             *h_new = m->volume_correction ? tr : 0;
@@ -1422,15 +1419,7 @@ static pn_result pn__return_principal(const pn_material *m, int d, const pn_real
         {
             /* closed form for StVK-Hencky: dev tau = 2 mu e_hat */
             pn_real tauy = pn__vm_tau_y(m, h), dg;
-            for (i = 0; i < d; ++i) {
-                e[i] = PN__LOG(s[i]);
-                tr += e[i];
-            }
-            for (i = 0; i < d; ++i) {
-                ehat[i] = e[i] - tr / dd;
-                r += ehat[i] * ehat[i];
-            }
-            r = PN__SQRT(r);
+            pn__hencky_split(d, s, 0, 0, e, ehat, &tr, &r);
             dg = (2 * m->mu * r - tauy) / (2 * m->mu + 2 * m->hardening_modulus / 3);
             for (i = 0; i < d; ++i) z[i] = PN__EXP(e[i] - dg * ehat[i] / r);
             *h_new = h + PN__SQRT((pn_real)2 / 3) * dg;
@@ -1553,7 +1542,7 @@ PN__DEF pn_result pn_yield_function(const pn_material *m, int d, const pn_real *
 
 PN__DEF pn_result pn_von_mises_energy(const pn_material *m, int d, const pn_real *F, pn_real h,
                                       pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
-    pn_real U[9], s[3], V[9], e[3], tr = 0, rr = 0, n[3], ge[3], Ae[9], kappa, tauy, c, dd = (pn_real)d;
+    pn_real U[9], s[3], V[9], e[3], tr, rr, n[3], ge[3], Ae[9], kappa, tauy, c, dd = (pn_real)d;
     pn__principal pr;
     int i, j;
     pn_result res = pn__check_F(d, F);
@@ -1567,15 +1556,7 @@ PN__DEF pn_result pn_von_mises_energy(const pn_material *m, int d, const pn_real
     if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
     kappa = m->lambda + 2 * m->mu / dd;
     tauy = pn__vm_tau_y(m, h);
-    for (i = 0; i < d; ++i) {
-        e[i] = PN__LOG(s[i]);
-        tr += e[i];
-    }
-    for (i = 0; i < d; ++i) {
-        n[i] = e[i] - tr / dd;
-        rr += n[i] * n[i];
-    }
-    rr = PN__SQRT(rr);
+    pn__hencky_split(d, s, 0, 0, e, n, &tr, &rr);
     memset(&pr, 0, sizeof pr);
     if (2 * m->mu * rr <= tauy) {
         pr.psi = kappa / 2 * tr * tr + m->mu * rr * rr;
