@@ -115,11 +115,6 @@ static double pn_td_max3(double acc, double a, double b) {
     return acc;
 }
 
-static double pn_td_det3(const double *A) {
-    return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
-           A[2] * (A[3] * A[7] - A[4] * A[6]);
-}
-
 /* Least-squares slope of y against x over rows [a, b]. */
 static double pn_td_slope(const pn_td_table *t, int cx, int cy, int a, int b) {
     double sx = 0, sy = 0, sxx = 0, sxy = 0, n = 0;
@@ -352,7 +347,7 @@ PN_TEST(driver_von_mises_simple_shear) {
     for (k = 0; k < t.rows; ++k) {
         double F[9];
         for (i = 0; i < 9; ++i) F[i] = pn_td_at(&t, k, cdet[i]);
-        detdev = pn_td_max3(detdev, pn_td_det3(F) - 1, 0);
+        detdev = pn_td_max3(detdev, t_det(3, F) - 1, 0);
         PN_CHECK_NEAR(F[1], 0.01 * k / 200, 1e-15);
         peak = pn_td_max3(peak, pn_td_at(&t, k, c12), 0);
     }
@@ -406,7 +401,7 @@ PN_TEST(driver_2d_uniaxial_strain_elastic) {
     static const char *const args[] = {"--dim", "2", "--plastic", "none", "--elastic",
                                        "stvk_hencky", "--E", "1e6", "--nu", "0.25", "--path",
                                        "uniaxial_strain", "--max-strain", "0.2", "--steps", "20"};
-    const double E = 1e6, nu = 0.25, mu = E / (2 * (1 + nu)), la = E * nu / ((1 + nu) * (1 - 2 * nu));
+    const double E = 1e6, nu = 0.25, mu = t_mu(E, nu), la = t_lambda(E, nu);
     pn_td_table t;
     int rc = pn_td_run(args, 16, &t), k, c11, c22, c12, cs11, cF11, cF22;
     double err = 0;

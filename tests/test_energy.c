@@ -4,9 +4,10 @@
    #included by test_main.c after plastinet.h (with PLASTINET_IMPLEMENTATION) and pn_test.h;
    defines pn_tests_energy. Expected values come from independent sources: central differences
    with Richardson extrapolation, the principal-stretch formulas of FORMULAS.md evaluated on
-   singular values known by construction (F = R1 diag(s) R2), and a Jacobi eigen-solver written
-   here for the PSD projection. Helpers carry the t_en_ prefix (one translation unit is shared
-   with the other test files). */
+   singular values known by construction (F = R1 diag(s) R2), and the tests' own Jacobi
+   eigen-solver for the PSD projection. The helpers shared with the other test files (products,
+   norm, random rotations, the Jacobi solver, Lame constants) are in test_util.h; those of this
+   file carry the t_en_ prefix (one translation unit is shared with the other test files). */
 
 
 #define T_EN_NS 100          /* samples per (model, dimension, kind)                        */
@@ -15,172 +16,25 @@
 #define T_EN_SYM_TOL 1e-12   /* asymmetry of dP/dF, relative                                */
 #define T_EN_PSD_TOL 1e-10   /* projected dP/dF against our own projection, relative        */
 
-/* ---- dense helpers -------------------------------------------------------------------------- */
+/* ---- helpers of this file (the shared ones are in test_util.h) ----------------------------- */
 
-static double t_en_norm(int count, const double *a) {
-    double m = 0, acc = 0;
-    int i;
-    for (i = 0; i < count; ++i)
-        if (fabs(a[i]) > m) m = fabs(a[i]);
-    if (m == 0 || !(m < HUGE_VAL)) return m;
-    for (i = 0; i < count; ++i) acc += (a[i] / m) * (a[i] / m);
-    return m * sqrt(acc);
-}
-static double t_en_dist(int count, const double *a, const double *b) {
-    double d[81];
-    int i;
-    for (i = 0; i < count; ++i) d[i] = a[i] - b[i];
-    return t_en_norm(count, d);
-}
-static void t_en_mul(int n, const double *A, const double *B, double *C) {
-    int i, j, k;
-    for (i = 0; i < n; ++i)
-        for (j = 0; j < n; ++j) {
-            double acc = 0;
-            for (k = 0; k < n; ++k) acc += A[i * n + k] * B[k * n + j];
-            C[i * n + j] = acc;
-        }
-}
-/* C = A diag(d) B^T */
-static void t_en_adbt(int n, const double *A, const double *d, const double *B, double *C) {
-    int i, j, k;
-    for (i = 0; i < n; ++i)
-        for (j = 0; j < n; ++j) {
-            double acc = 0;
-            for (k = 0; k < n; ++k) acc += A[i * n + k] * d[k] * B[j * n + k];
-            C[i * n + j] = acc;
-        }
-}
-/* F = R1 diag(s) R2 */
-static void t_en_build(int dim, const double *R1, const double *s, const double *R2, double *F) {
-    int i, j, k;
-    for (i = 0; i < dim; ++i)
-        for (j = 0; j < dim; ++j) {
-            double acc = 0;
-            for (k = 0; k < dim; ++k) acc += R1[i * dim + k] * s[k] * R2[k * dim + j];
-            F[i * dim + j] = acc;
-        }
-}
-static double t_en_det(int dim, const double *A) {
-    if (dim == 2) return A[0] * A[3] - A[1] * A[2];
-    return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
-           A[2] * (A[3] * A[7] - A[4] * A[6]);
-}
-static double t_en_asym(int n, const double *A) {
-    double m = 0;
-    int i, j;
-    for (i = 0; i < n; ++i)
-        for (j = i + 1; j < n; ++j) m += 2 * (A[i * n + j] - A[j * n + i]) * (A[i * n + j] - A[j * n + i]);
-    return sqrt(m);
-}
-static int t_en_finite(int count, const double *a) {
-    int i;
-    for (i = 0; i < count; ++i)
-        if (!(fabs(a[i]) < HUGE_VAL)) return 0;
-    return 1;
-}
 static void t_en_maxto(double *worst, double v) {
     if (!(v <= *worst) && *worst == *worst) *worst = v; /* a NaN sticks */
 }
 
-/* ---- random factors -------------------------------------------------------------------------- */
-
-static double t_en_gauss(pn_test_rng *r) {
-    double u1 = pn_test_rng_uniform(r), u2 = pn_test_rng_uniform(r);
-    if (u1 < 1e-300) u1 = 1e-300;
-    return sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
-}
-static double t_en_logu(pn_test_rng *r, double lo, double hi) {
-    return exp(pn_test_rng_range(r, log(lo), log(hi)));
-}
-static int t_en_randint(pn_test_rng *r, int n) { return (int)(pn_test_rng_u64(r) % (unsigned)n); }
-static void t_en_rand_rot(pn_test_rng *r, int dim, double *R) {
-    if (dim == 2) {
-        double a = pn_test_rng_range(r, 0, 6.283185307179586);
-        R[0] = cos(a); R[1] = -sin(a);
-        R[2] = sin(a); R[3] = cos(a);
-    } else {
-        double w = t_en_gauss(r), x = t_en_gauss(r), y = t_en_gauss(r), z = t_en_gauss(r);
-        double n = sqrt(w * w + x * x + y * y + z * z);
-        w /= n; x /= n; y /= n; z /= n;
-        R[0] = 1 - 2 * (y * y + z * z); R[1] = 2 * (x * y - w * z);     R[2] = 2 * (x * z + w * y);
-        R[3] = 2 * (x * y + w * z);     R[4] = 1 - 2 * (x * x + z * z); R[5] = 2 * (y * z - w * x);
-        R[6] = 2 * (x * z - w * y);     R[7] = 2 * (y * z + w * x);     R[8] = 1 - 2 * (x * x + y * y);
-    }
-}
-
-/* ---- reference symmetric eigen-solver and PSD projection (not pn_sym_eigen) ------------- */
-
-/* Cyclic Jacobi: A (n x n, n <= 9, symmetrised on entry) = Q diag(w) Q^T, w unsorted. */
-static void t_en_jacobi(int n, const double *A_in, double *Q, double *w) {
-    double A[81];
-    int i, j, p, q, sweep;
-    for (i = 0; i < n; ++i)
-        for (j = 0; j < n; ++j) A[i * n + j] = 0.5 * (A_in[i * n + j] + A_in[j * n + i]);
-    for (i = 0; i < n * n; ++i) Q[i] = 0;
-    for (i = 0; i < n; ++i) Q[i * n + i] = 1;
-    for (sweep = 0; sweep < 100; ++sweep) {
-        int rotated = 0;
-        for (p = 0; p < n; ++p)
-            for (q = p + 1; q < n; ++q) {
-                double apq = A[p * n + q], app = A[p * n + p], aqq = A[q * n + q], theta, t, c, s;
-                int k;
-                if (apq == 0) continue;
-                if (fabs(app) + 1e3 * fabs(apq) == fabs(app) && fabs(aqq) + 1e3 * fabs(apq) == fabs(aqq) &&
-                    sweep > 3) {
-                    A[p * n + q] = A[q * n + p] = 0;
-                    continue;
-                }
-                rotated = 1;
-                theta = (aqq - app) / (2.0 * apq);
-                t = fabs(theta) > 1e150 ? 0.5 / theta
-                                        : (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
-                c = 1.0 / sqrt(t * t + 1.0);
-                s = t * c;
-                for (k = 0; k < n; ++k) {
-                    double akp = A[k * n + p], akq = A[k * n + q];
-                    A[k * n + p] = c * akp - s * akq;
-                    A[k * n + q] = s * akp + c * akq;
-                }
-                for (k = 0; k < n; ++k) {
-                    double apk = A[p * n + k], aqk = A[q * n + k];
-                    A[p * n + k] = c * apk - s * aqk;
-                    A[q * n + k] = s * apk + c * aqk;
-                }
-                A[p * n + q] = A[q * n + p] = 0;
-                for (k = 0; k < n; ++k) {
-                    double qkp = Q[k * n + p], qkq = Q[k * n + q];
-                    Q[k * n + p] = c * qkp - s * qkq;
-                    Q[k * n + q] = s * qkp + c * qkq;
-                }
-            }
-        if (!rotated) break;
-    }
-    for (i = 0; i < n; ++i) w[i] = A[i * n + i];
-}
-/* Nearest PSD matrix of the symmetric part of H; returns the smallest eigenvalue. */
+/* Nearest PSD matrix of the symmetric part of H (t_jacobi, not pn_sym_eigen); returns the
+   smallest eigenvalue. */
 static double t_en_project_psd(int n, const double *H, double *out) {
-    double Q[81], w[9], mn = HUGE_VAL;
-    int i;
-    t_en_jacobi(n, H, Q, w);
-    for (i = 0; i < n; ++i) {
-        if (w[i] < mn) mn = w[i];
-        if (w[i] < 0) w[i] = 0;
-    }
-    t_en_adbt(n, Q, w, Q, out);
-    return mn;
+    double Q[81], w[9];
+    t_jacobi(n, H, Q, w);
+    return t_psd_rebuild(n, Q, w, out);
 }
 /* smallest singular value by our own eigen-decomposition of A^T A */
 static double t_en_smin(int dim, const double *A) {
     double AtA[9], Q[9], w[3], mn = HUGE_VAL;
-    int i, j, k;
-    for (i = 0; i < dim; ++i)
-        for (j = 0; j < dim; ++j) {
-            double acc = 0;
-            for (k = 0; k < dim; ++k) acc += A[k * dim + i] * A[k * dim + j];
-            AtA[i * dim + j] = acc;
-        }
-    t_en_jacobi(dim, AtA, Q, w);
+    int i;
+    t_mul_tn(dim, A, A, AtA);
+    t_jacobi(dim, AtA, Q, w);
     for (i = 0; i < dim; ++i)
         if (w[i] < mn) mn = w[i];
     return sqrt(mn > 0 ? mn : 0);
@@ -208,8 +62,6 @@ static int t_en_init(pn_test_ctx *pn__t, pn_material *m, const pn_material_desc 
 }
 static const double t_en_E[3] = {1e4, 1e6, 1e7};
 static const double t_en_nu[3] = {0.3, 0.45, -0.3};
-static double t_en_mu(double E, double nu) { return E / (2 * (1 + nu)); }
-static double t_en_lambda(double E, double nu) { return E * nu / ((1 + nu) * (1 - 2 * nu)); }
 
 /* Lagged-energy test materials: sand, metal, Cam-Clay snow, Stomakhin snow. */
 enum { T_EN_SAND, T_EN_METAL, T_EN_CAMCLAY, T_EN_STOMAKHIN, T_EN_NLAGGED };
@@ -244,7 +96,7 @@ static double t_en_lagged_h0(pn_test_rng *rng, int which) {
     switch (which) {
     case T_EN_SAND: return 0;
     case T_EN_METAL: return pn_test_rng_range(rng, 0, 0.1);
-    case T_EN_CAMCLAY: return t_en_randint(rng, 2) ? -0.05 : pn_test_rng_range(rng, -0.1, 0);
+    case T_EN_CAMCLAY: return t_randint(rng, 2) ? -0.05 : pn_test_rng_range(rng, -0.1, 0);
     default: return pn_test_rng_range(rng, -0.1, 0.1);
     }
 }
@@ -319,11 +171,7 @@ static void t_en_lagged_psd_reference(const t_en_fn *f, int dim, const double *F
     const int n2 = dim * dim;
     double A[9] = {0}, He[81], Hp[81];
     int i, j, k, l, m, b;
-    for (i = 0; i < dim; ++i)
-        for (j = 0; j < dim; ++j) {
-            A[i * dim + j] = 0;
-            for (k = 0; k < dim; ++k) A[i * dim + j] += F[i * dim + k] * f->G[k * dim + j];
-        }
+    t_mul(dim, F, f->G, A);
     if (pn_elastic_energy(f->m, dim, A, f->h, NULL, NULL, He, 0) != PN_OK) {
         for (i = 0; i < n2 * n2; ++i) ref[i] = NAN;
         return;
@@ -357,8 +205,8 @@ static void t_en_check_sample(t_en_stats *st, const t_en_fn *f, int dim, const d
         st->eval_fail++;
         return;
     }
-    nH = t_en_norm(n4, H);
-    t_en_maxto(&st->sym, t_en_asym(n2, H) / (nH > 1e-8 * E ? nH : 1e-8 * E));
+    nH = t_norm(n4, H);
+    t_en_maxto(&st->sym, t_asym(n2, H) / (nH > 1e-8 * E ? nH : 1e-8 * E));
     {
         double Q[81], w[9];
         int i;
@@ -367,14 +215,14 @@ static void t_en_check_sample(t_en_stats *st, const t_en_fn *f, int dim, const d
             t_en_lagged_psd_reference(f, dim, F, ref);
         else
             t_en_project_psd(n2, H, ref);
-        e = t_en_dist(n4, Hp, ref) / den;
+        e = t_dist(n4, Hp, ref) / den;
         if (!(e <= st->psd) && st->psd == st->psd) {
             st->psd = e;
             st->psd_dim = dim;
             memcpy(st->psd_F, F, sizeof(double) * (size_t)n2);
         }
-        t_en_maxto(&st->psd_excess, (t_en_dist(n4, H, Hp) - t_en_dist(n4, H, ref)) / den);
-        t_en_jacobi(n2, Hp, Q, w);
+        t_en_maxto(&st->psd_excess, (t_dist(n4, H, Hp) - t_dist(n4, H, ref)) / den);
+        t_jacobi(n2, Hp, Q, w);
         for (i = 0; i < n2; ++i) t_en_maxto(&st->psd_min, -w[i] / (nH > 1e-8 * E ? nH : 1e-8 * E));
     }
     if (!do_fd) {
@@ -383,8 +231,8 @@ static void t_en_check_sample(t_en_stats *st, const t_en_fn *f, int dim, const d
     }
     st->eval_fail += t_en_fd(f, dim, F, h_fd, 0, fd);
     {
-        double nP = t_en_norm(n2, P);
-        e = t_en_dist(n2, fd, P) / (nP > 1e-8 * E ? nP : 1e-8 * E);
+        double nP = t_norm(n2, P);
+        e = t_dist(n2, fd, P) / (nP > 1e-8 * E ? nP : 1e-8 * E);
         *eg = e;
         if (!(e <= st->grad) && st->grad == st->grad) {
             st->grad = e;
@@ -393,7 +241,7 @@ static void t_en_check_sample(t_en_stats *st, const t_en_fn *f, int dim, const d
         }
     }
     st->eval_fail += t_en_fd(f, dim, F, h_fd, 1, fd);
-    e = t_en_dist(n4, fd, H) / (nH > 1e-8 * E ? nH : 1e-8 * E);
+    e = t_dist(n4, fd, H) / (nH > 1e-8 * E ? nH : 1e-8 * E);
     *eh = e;
     if (!(e <= st->hess) && st->hess == st->hess) {
         st->hess = e;
@@ -519,23 +367,23 @@ static double t_en_sample(pn_test_rng *rng, int dim, int kind, double *s, double
                           double *F) {
     int i, j;
     double scale = 1;
-    t_en_rand_rot(rng, dim, R1);
-    t_en_rand_rot(rng, dim, R2);
-    for (i = 0; i < 3; ++i) s[i] = t_en_logu(rng, 0.2, 5);
+    t_rand_rot(rng, dim, R1);
+    t_rand_rot(rng, dim, R2);
+    for (i = 0; i < 3; ++i) s[i] = t_logu(rng, 0.2, 5);
     switch (kind) {
     case T_EN_EQUAL: {
         static const double gap[4] = {0, 1e-13, 1e-11, 1e-9};
-        int v = t_en_randint(rng, 3);
+        int v = t_randint(rng, 3);
         if (v == 0 || dim == 2) {
-            for (i = 1; i < dim; ++i) s[i] = s[0] * (1 + gap[t_en_randint(rng, 4)] * pn_test_rng_uniform(rng));
+            for (i = 1; i < dim; ++i) s[i] = s[0] * (1 + gap[t_randint(rng, 4)] * pn_test_rng_uniform(rng));
         } else {
-            int a = t_en_randint(rng, 3), b = (a + 1 + t_en_randint(rng, 2)) % 3;
-            s[b] = s[a] * (1 + gap[t_en_randint(rng, 4)] * pn_test_rng_range(rng, -1, 1));
+            int a = t_randint(rng, 3), b = (a + 1 + t_randint(rng, 2)) % 3;
+            s[b] = s[a] * (1 + gap[t_randint(rng, 4)] * pn_test_rng_range(rng, -1, 1));
         }
         break;
     }
     case T_EN_SINGULAR:
-        s[t_en_randint(rng, dim)] = t_en_logu(rng, 1e-3, 1e-2);
+        s[t_randint(rng, dim)] = t_logu(rng, 1e-3, 1e-2);
         break;
     case T_EN_REST:
         for (i = 0; i < 3; ++i) s[i] = 1 + 1e-3 * pn_test_rng_range(rng, -1, 1);
@@ -554,14 +402,14 @@ static double t_en_sample(pn_test_rng *rng, int dim, int kind, double *s, double
             s[dim - 1] = -s[dim - 1];
         } else {
             static const double tiny[4] = {0, 1e-6, 1e-3, 1e-2};
-            s[dim - 1] = tiny[t_en_randint(rng, 4)] * (t_en_randint(rng, 2) ? 1 : -1);
+            s[dim - 1] = tiny[t_randint(rng, 4)] * (t_randint(rng, 2) ? 1 : -1);
         }
         break;
     default:
         break;
     }
     for (i = dim; i < 3; ++i) s[i] = 1;
-    t_en_build(dim, R1, s, R2, F);
+    t_adb(dim, R1, s, R2, F);
     if (kind == T_EN_INVERTED || kind == T_EN_DEGENERATE) {
         scale = s[dim - 2] + s[dim - 1];
     } else {
@@ -580,7 +428,7 @@ PN_TEST(energy_material_lame) {
         for (j = 0; j < 3; ++j) {
             pn_material_desc d;
             pn_material m;
-            double E = t_en_E[i], nu = t_en_nu[j], mu = t_en_mu(E, nu), lam = t_en_lambda(E, nu);
+            double E = t_en_E[i], nu = t_en_nu[j], mu = t_mu(E, nu), lam = t_lambda(E, nu);
             pn_real mu2 = 0, lam2 = 0;
             t_en_desc(&d, PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, E, nu);
             if (!t_en_init(pn__t, &m, &d)) continue;
@@ -607,7 +455,7 @@ PN_TEST(energy_rest_state) {
                     pn_material_desc d;
                     pn_material m;
                     t_en_fn f;
-                    double E = t_en_E[ie], nu = t_en_nu[in], mu = t_en_mu(E, nu), lam = t_en_lambda(E, nu);
+                    double E = t_en_E[ie], nu = t_en_nu[in], mu = t_mu(E, nu), lam = t_lambda(E, nu);
                     double F[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, psi = 1, P[9], H[81], Hp[81], C[81];
                     int i, j, k, l, n2 = dim * dim;
                     if (model <= PN_ELASTIC_NEO_HOOKEAN_SNOW) {
@@ -640,9 +488,9 @@ PN_TEST(energy_rest_state) {
                                     C[(i * dim + j) * n2 + k * dim + l] =
                                         mu * ((i == k && j == l) + (i == l && j == k)) + lam * (i == j && k == l);
                     t_en_maxto(&wpsi, fabs(psi) / E);
-                    t_en_maxto(&wP, t_en_norm(n2, P) / E);
-                    t_en_maxto(&wH, t_en_dist(n2 * n2, H, C) / t_en_norm(n2 * n2, C));
-                    t_en_maxto(&wHp, t_en_dist(n2 * n2, Hp, C) / t_en_norm(n2 * n2, C)); /* C is PSD */
+                    t_en_maxto(&wP, t_norm(n2, P) / E);
+                    t_en_maxto(&wH, t_dist(n2 * n2, H, C) / t_norm(n2 * n2, C));
+                    t_en_maxto(&wHp, t_dist(n2 * n2, Hp, C) / t_norm(n2 * n2, C)); /* C is PSD */
                 }
     PN_REPORT("%d (model, dim, E, nu) at F = I: |psi|/E %.2e, |P|/E %.2e, dP/dF vs isotropic "
               "tensor %.2e (projected %.2e)",
@@ -693,14 +541,14 @@ static void t_en_run_elastic(pn_test_ctx *pn__t, pn_elastic_model model, unsigne
                     /* floor: the stress of a 1e-3 strain (rounding F to doubles moves P by
                        ~1e-16 |dP/dF| |F|, which is all there is near rest) */
                     double psi_ref, dpsi[3], Pref[9], psi = 0, P[9], nP;
-                    double floor = 1e-3 * (2 * t_en_mu(E, nu) + fabs(t_en_lambda(E, nu)));
+                    double floor = 1e-3 * (2 * t_mu(E, nu) + fabs(t_lambda(E, nu)));
                     int n2 = dim * dim;
-                    t_en_ref_elastic(model, t_en_mu(E, nu), t_en_lambda(E, nu), dim, s, &psi_ref, dpsi);
-                    t_en_build(dim, R1, dpsi, R2, Pref);
+                    t_en_ref_elastic(model, t_mu(E, nu), t_lambda(E, nu), dim, s, &psi_ref, dpsi);
+                    t_adb(dim, R1, dpsi, R2, Pref);
                     if (pn_elastic_energy(&m, dim, F, 0, &psi, P, NULL, 0) == PN_OK) {
-                        nP = t_en_norm(n2, Pref);
-                        t_en_maxto(&st.ref_psi, fabs(psi - psi_ref) / (fabs(psi_ref) + nP * t_en_norm(n2, F) + floor));
-                        t_en_maxto(&st.ref_P, t_en_dist(n2, P, Pref) / (nP + floor));
+                        nP = t_norm(n2, Pref);
+                        t_en_maxto(&st.ref_psi, fabs(psi - psi_ref) / (fabs(psi_ref) + nP * t_norm(n2, F) + floor));
+                        t_en_maxto(&st.ref_P, t_dist(n2, P, Pref) / (nP + floor));
                     } else
                         st.eval_fail++;
                 }
@@ -732,16 +580,16 @@ PN_TEST(energy_stomakhin_hardening) {
         if (!t_en_init(pn__t, &m, &d)) return;
         if (m.elastic != PN_ELASTIC_FIXED_COROTATED) model_ok = 0;
         sc = exp(10.0 * (1 - exp(h)));
-        t_en_ref_elastic(PN_ELASTIC_FIXED_COROTATED, sc * t_en_mu(E, 0.3), sc * t_en_lambda(E, 0.3), dim, s,
+        t_en_ref_elastic(PN_ELASTIC_FIXED_COROTATED, sc * t_mu(E, 0.3), sc * t_lambda(E, 0.3), dim, s,
                          &psi_ref, dpsi);
-        t_en_build(dim, R1, dpsi, R2, Pref);
+        t_adb(dim, R1, dpsi, R2, Pref);
         if (pn_elastic_energy(&m, dim, F, h, &psi, P, NULL, 0) != PN_OK) {
             PN_CHECK(!"pn_elastic_energy failed");
             continue;
         }
-        nP = t_en_norm(n2, Pref);
-        t_en_maxto(&wpsi, fabs(psi - psi_ref) / (fabs(psi_ref) + nP * t_en_norm(n2, F) + 1e-4 * E * sc));
-        t_en_maxto(&wP, t_en_dist(n2, P, Pref) / (nP + 1e-4 * E * sc));
+        nP = t_norm(n2, Pref);
+        t_en_maxto(&wpsi, fabs(psi - psi_ref) / (fabs(psi_ref) + nP * t_norm(n2, F) + 1e-4 * E * sc));
+        t_en_maxto(&wP, t_dist(n2, P, Pref) / (nP + 1e-4 * E * sc));
     }
     PN_REPORT("h in [-0.2, 0.2]: psi %.2e, P %.2e relative to the scaled fixed-corotated formulas", wpsi, wP);
     PN_CHECK(model_ok);
@@ -758,9 +606,9 @@ static double t_en_vm_sample(pn_test_rng *rng, int dim, int kind, double r, doub
         /* e = t 1 + rho n, n a unit deviatoric direction, rho in [0, 3r] (kind 0) or
            r (1 +- 1e-8 .. 1e-2), on either side of the yield surface (kind 4) */
         double n[3], mean = 0, nn = 0, t = pn_test_rng_range(rng, -0.3, 0.3), rho = 3 * r * pn_test_rng_uniform(rng);
-        if (kind == 4) rho = r * (1 + (t_en_randint(rng, 2) ? 1 : -1) * pow(10.0, pn_test_rng_range(rng, -8, -2)));
+        if (kind == 4) rho = r * (1 + (t_randint(rng, 2) ? 1 : -1) * pow(10.0, pn_test_rng_range(rng, -8, -2)));
         for (i = 0; i < dim; ++i) {
-            n[i] = t_en_gauss(rng);
+            n[i] = t_gauss(rng);
             mean += n[i] / dim;
         }
         for (i = 0; i < dim; ++i) {
@@ -770,9 +618,9 @@ static double t_en_vm_sample(pn_test_rng *rng, int dim, int kind, double r, doub
         nn = sqrt(nn);
         for (i = 0; i < dim; ++i) s[i] = exp(t + rho * n[i] / nn);
         for (i = dim; i < 3; ++i) s[i] = 1;
-        t_en_rand_rot(rng, dim, R1);
-        t_en_rand_rot(rng, dim, R2);
-        t_en_build(dim, R1, s, R2, F);
+        t_rand_rot(rng, dim, R1);
+        t_rand_rot(rng, dim, R2);
+        t_adb(dim, R1, s, R2, F);
         for (i = 0; i < dim; ++i)
             if (s[i] < scale) scale = s[i];
         return scale;
@@ -795,7 +643,7 @@ PN_TEST(energy_fd_von_mises) {
                 pn_material_desc d;
                 pn_material m;
                 t_en_fn f;
-                double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_en_mu(E, nu), lam = t_en_lambda(E, nu);
+                double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_mu(E, nu), lam = t_lambda(E, nu);
                 double K = (k & 1) ? 0.05 * E : 0, h = pn_test_rng_range(&rng, 0, 0.2);
                 double tauY = sqrt(2.0 / 3.0) * (1e-3 * E + K * h), r = tauY / (2 * mu);
                 double s[3], R1[9], R2[9], F[9], scale, dist, psi_ref, dpsi[3], Pref[9], psi = 0, P[9];
@@ -820,11 +668,11 @@ PN_TEST(energy_fd_von_mises) {
                 t_en_check_sample(&st, &f, dim, F, E, step, fabs(dist) >= 2e-6, &eg, &eh);
                 t_en_maxto(&wk_grad[kind], eg);
                 t_en_maxto(&wk_hess[kind], eh);
-                t_en_build(dim, R1, dpsi, R2, Pref);
+                t_adb(dim, R1, dpsi, R2, Pref);
                 if (pn_von_mises_energy(&m, dim, F, h, &psi, P, NULL, 0) == PN_OK) {
-                    double nP = t_en_norm(n2, Pref);
-                    t_en_maxto(&st.ref_psi, fabs(psi - psi_ref) / (fabs(psi_ref) + nP * t_en_norm(n2, F) + 1e-6 * E));
-                    t_en_maxto(&st.ref_P, t_en_dist(n2, P, Pref) / (nP + 1e-6 * E));
+                    double nP = t_norm(n2, Pref);
+                    t_en_maxto(&st.ref_psi, fabs(psi - psi_ref) / (fabs(psi_ref) + nP * t_norm(n2, F) + 1e-6 * E));
+                    t_en_maxto(&st.ref_P, t_dist(n2, P, Pref) / (nP + 1e-6 * E));
                 } else
                     st.eval_fail++;
             }
@@ -846,21 +694,21 @@ PN_TEST(energy_von_mises_matches_return_map) {
         pn_material_desc d;
         pn_material m;
         int dim = 2 + (k & 1), n2 = dim * dim;
-        double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_en_mu(E, nu), tauY = sqrt(2.0 / 3.0) * 1e-3 * E;
+        double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_mu(E, nu), tauY = sqrt(2.0 / 3.0) * 1e-3 * E;
         double s[3], R1[9], R2[9], F[9], P[9], T[9], Z[9], h = pn_test_rng_range(&rng, 0, 0.3), hn, nT;
         double psi_ref, dpsi[3];
         t_en_desc(&d, PN_ELASTIC_DEFAULT, PN_PLASTIC_VON_MISES, E, nu);
         d.yield_stress_pa = 1e-3 * E;
         if (!t_en_init(pn__t, &m, &d)) return;
         t_en_vm_sample(&rng, dim, (k / 2) % 5, tauY / (2 * mu), s, R1, R2, F);
-        if (t_en_ref_vm(mu, t_en_lambda(E, nu), tauY, dim, s, &psi_ref, dpsi) <= 0) ++n_el; else ++n_pl;
+        if (t_en_ref_vm(mu, t_lambda(E, nu), tauY, dim, s, &psi_ref, dpsi) <= 0) ++n_el; else ++n_pl;
         if (pn_von_mises_energy(&m, dim, F, h, NULL, P, NULL, 0) != PN_OK ||
             pn_return_map(&m, dim, F, h, Z, &hn, T) != PN_OK) {
             ++fails;
             continue;
         }
-        nT = t_en_norm(n2, T);
-        t_en_maxto(&worst, t_en_dist(n2, P, T) / (nT > 1e-6 * E ? nT : 1e-6 * E));
+        nT = t_norm(n2, T);
+        t_en_maxto(&worst, t_dist(n2, P, T) / (nT > 1e-6 * E ? nT : 1e-6 * E));
     }
     PN_REPORT("%ld elastic, %ld plastic F: |P - T| / max(|T|, 1e-6 E) worst %.2e", n_el, n_pl, worst);
     PN_CHECK(fails == 0);
@@ -871,28 +719,28 @@ PN_TEST(energy_von_mises_matches_return_map) {
 /* F0 = R1 diag(exp(e0)) R2 with e0 of random size; F near it (as in the PlasticityNet loss). */
 static void t_en_lagged_pair(pn_test_rng *rng, int dim, int which, double *F0, double *F, int variant) {
     static const double size[3] = {0.005, 0.05, 0.3};
-    double e0[3], s[3], R1[9], R2[9], c = size[t_en_randint(rng, 3)], de = which >= T_EN_CAMCLAY ? 0.2 : 0.1;
+    double e0[3], s[3], R1[9], R2[9], c = size[t_randint(rng, 3)], de = which >= T_EN_CAMCLAY ? 0.2 : 0.1;
     int i;
     for (i = 0; i < 3; ++i) {
         e0[i] = i < dim ? c * pn_test_rng_range(rng, -1, 1) : 0;
         s[i] = exp(e0[i]);
     }
-    t_en_rand_rot(rng, dim, R1);
-    t_en_rand_rot(rng, dim, R2);
-    t_en_build(dim, R1, s, R2, F0);
+    t_rand_rot(rng, dim, R1);
+    t_rand_rot(rng, dim, R2);
+    t_adb(dim, R1, s, R2, F0);
     if (variant == 0) { /* F = F0 */
         memcpy(F, F0, sizeof(double) * 9);
     } else if (variant == 1) { /* F = R3 diag(exp(e0 + de)) R4 */
         for (i = 0; i < dim; ++i) s[i] = exp(e0[i] + de * pn_test_rng_range(rng, -1, 1));
-        t_en_rand_rot(rng, dim, R1);
-        t_en_rand_rot(rng, dim, R2);
-        t_en_build(dim, R1, s, R2, F);
+        t_rand_rot(rng, dim, R1);
+        t_rand_rot(rng, dim, R2);
+        t_adb(dim, R1, s, R2, F);
     } else { /* F = F0 (I + small) */
         double A[9];
         for (i = 0; i < 9; ++i) A[i] = 0;
         for (i = 0; i < dim * dim; ++i) A[i] = 0.02 * pn_test_rng_range(rng, -1, 1);
         for (i = 0; i < dim; ++i) A[i * dim + i] += 1;
-        t_en_mul(dim, F0, A, F);
+        t_mul(dim, F0, A, F);
     }
 }
 
@@ -920,17 +768,17 @@ static void t_en_run_lagged(pn_test_ctx *pn__t, int which, unsigned long long se
                 ++prep_fail;
                 continue;
             }
-            if (t_en_dist(n2, Z, F0) > 1e-12 * t_en_norm(n2, F0)) ++outside; else ++inside;
+            if (t_dist(n2, Z, F0) > 1e-12 * t_norm(n2, F0)) ++outside; else ++inside;
             /* G = F0^-1 Z(F0): F0 G = Z */
-            t_en_mul(dim, F0, G, FG0);
-            t_en_maxto(&wG, t_en_dist(n2, FG0, Z) / t_en_norm(n2, Z));
+            t_mul(dim, F0, G, FG0);
+            t_en_maxto(&wG, t_dist(n2, FG0, Z) / t_norm(n2, Z));
             f.kind = T_EN_LAGGED;
             f.m = &m;
             f.h = hG;
             f.G = G;
-            t_en_mul(dim, F, G, FG);
+            t_mul(dim, F, G, FG);
             /* a step h in F moves F G by at most h |G| */
-            step = 1e-4 * t_en_smin(dim, FG) / t_en_norm(n2, G);
+            step = 1e-4 * t_en_smin(dim, FG) / t_norm(n2, G);
             if (step > 1e-4) step = 1e-4;
             t_en_check_sample(&st, &f, dim, F, E, step, 1, &eg, &eh);
         }
@@ -972,11 +820,11 @@ PN_TEST(energy_lagged_gradient_matches_return_map) {
                 ++fails;
                 continue;
             }
-            if (t_en_dist(n2, Z, F0) > 1e-12 * t_en_norm(n2, F0)) ++n_out[which];
-            nT = t_en_norm(n2, T);
+            if (t_dist(n2, Z, F0) > 1e-12 * t_norm(n2, F0)) ++n_out[which];
+            nT = t_norm(n2, T);
             /* floor 1e-4 E: at the Drucker-Prager tip T = 0 exactly, while F0 G = Z only up to
                rounding, which leaves |P_lag| ~ 1e-15 E */
-            t_en_maxto(&worst[which], t_en_dist(n2, P, T) / (nT > 1e-4 * E ? nT : 1e-4 * E));
+            t_en_maxto(&worst[which], t_dist(n2, P, T) / (nT > 1e-4 * E ? nT : 1e-4 * E));
             t_en_maxto(&whG, fabs(hG - hn) / (fabs(hn) > 1 ? fabs(hn) : 1));
         }
         PN_REPORT("%-20s |P_lag(F0) - T(F0)| / max(|T|, 1e-4 E) %.2e (%ld of 2000 F0 outside)", t_en_lagged_name[which],
@@ -1029,24 +877,24 @@ PN_TEST(energy_rotation_invariance) {
                 f.G = G;
                 f.h = hG;
             }
-            t_en_rand_rot(&rng, dim, Q);
+            t_rand_rot(&rng, dim, Q);
             if (t_en_eval(&f, dim, F, &psi, P, H, 0) != PN_OK) {
                 ++fails;
                 continue;
             }
             for (side = 0; side < (c >= 5 ? 1 : 2); ++side) {
                 if (side == 0)
-                    t_en_mul(dim, Q, F, QF);
+                    t_mul(dim, Q, F, QF);
                 else
-                    t_en_mul(dim, F, Q, QF);
+                    t_mul(dim, F, Q, QF);
                 if (t_en_eval(&f, dim, QF, &psi2, P2, H2, 0) != PN_OK) {
                     ++fails;
                     continue;
                 }
                 if (side == 0)
-                    t_en_mul(dim, Q, P, Pt);
+                    t_mul(dim, Q, P, Pt);
                 else
-                    t_en_mul(dim, P, Q, Pt);
+                    t_mul(dim, P, Q, Pt);
                 for (i = 0; i < dim; ++i)
                     for (j = 0; j < dim; ++j)
                         for (kk = 0; kk < dim; ++kk)
@@ -1058,11 +906,11 @@ PN_TEST(energy_rotation_invariance) {
                                                          : H[(i * dim + a) * n2 + kk * dim + b] * Q[a * dim + j] * Q[b * dim + l];
                                 Ht[(i * dim + j) * n2 + kk * dim + l] = acc;
                             }
-                nP = t_en_norm(n2, P);
-                nH = t_en_norm(n2 * n2, H);
+                nP = t_norm(n2, P);
+                nH = t_norm(n2 * n2, H);
                 t_en_maxto(&wpsi, fabs(psi2 - psi) / (fabs(psi) + 1e-8 * E));
-                t_en_maxto(&wP, t_en_dist(n2, P2, Pt) / (nP + 1e-8 * E));
-                t_en_maxto(&wH, t_en_dist(n2 * n2, H2, Ht) / (nH + 1e-8 * E));
+                t_en_maxto(&wP, t_dist(n2, P2, Pt) / (nP + 1e-8 * E));
+                t_en_maxto(&wH, t_dist(n2 * n2, H2, Ht) / (nH + 1e-8 * E));
             }
         }
     PN_REPORT("4 elastic models, von Mises energy, lagged sand/snow (left only): psi %.2e, P %.2e, dP/dF %.2e",
@@ -1117,9 +965,9 @@ PN_TEST(energy_optional_outputs) {
             fails += t_en_eval(&f, dim, F, NULL, NULL, Hp, PN_EVAL_PROJECT_PSD) != PN_OK;
             fails += t_en_eval(&f, dim, F, &psi1, P1, Hp1, PN_EVAL_PROJECT_PSD) != PN_OK;
             t_en_maxto(&worst, fabs(psi1 - psi) / (fabs(psi) + 1e-12 * E));
-            t_en_maxto(&worst, t_en_dist(n2, P1, P) / (t_en_norm(n2, P) + 1e-12 * E));
-            t_en_maxto(&worst, t_en_dist(n2 * n2, H1, H) / t_en_norm(n2 * n2, H));
-            t_en_maxto(&worst, t_en_dist(n2 * n2, Hp1, Hp) / t_en_norm(n2 * n2, H));
+            t_en_maxto(&worst, t_dist(n2, P1, P) / (t_norm(n2, P) + 1e-12 * E));
+            t_en_maxto(&worst, t_dist(n2 * n2, H1, H) / t_norm(n2 * n2, H));
+            t_en_maxto(&worst, t_dist(n2 * n2, Hp1, Hp) / t_norm(n2 * n2, H));
         }
     PN_REPORT("psi / P / dP/dF requested alone or together: worst relative difference %.2e", worst);
     PN_CHECK(fails == 0);
@@ -1168,19 +1016,19 @@ PN_TEST(energy_inverted_rejected) {
             } else {
                 do {
                     for (i = 0; i < dim * dim; ++i) F[i] = pn_test_rng_range(&rng, -2, 2);
-                } while (!(t_en_det(dim, F) < -1e-3));
+                } while (!(t_det(dim, F) < -1e-3));
             }
             for (i = 0; i < 9; ++i) kP[i] = P[i] = 1.5 * i;
             for (i = 0; i < 81; ++i) kH[i] = H[i] = -0.5 * i;
             r = t_en_eval(&f, dim, F, &psi, P, H, 0);
             ++n;
             if (c == 0) { /* fixed corotated: defined */
-                if (r != PN_OK || !t_en_finite(1, &psi) || !t_en_finite(dim * dim, P) ||
-                    (k % 4 != 0 && !t_en_finite(dim * dim * dim * dim, H)))
+                if (r != PN_OK || !t_finite(1, &psi) || !t_finite(dim * dim, P) ||
+                    (k % 4 != 0 && !t_finite(dim * dim * dim * dim, H)))
                     ++fc_bad;
             } else if (r != PN_ERROR_INVERTED || psi != 4.5 || memcmp(P, kP, sizeof P) || memcmp(H, kH, sizeof H)) {
                 ++bad;
-                if (bad <= 3) fprintf(stderr, "      case %d (dim %d, det %g): result %d\n", c, dim, t_en_det(dim, F), (int)r);
+                if (bad <= 3) fprintf(stderr, "      case %d (dim %d, det %g): result %d\n", c, dim, t_det(dim, F), (int)r);
             }
         }
     /* the exact von Mises energy needs a von Mises material with StVK-Hencky elasticity */

@@ -5,96 +5,27 @@
    defines pn_tests_linalg. Every expected value comes from an independent source: matrices are
    built as R1 diag(s) R2 from known factors, and the reference eigen-solver, determinant,
    matrix exponential and PSD characterisation below are written here, not taken from the
-   library. Helpers carry the t_la_ prefix (this file shares one translation unit with the
-   other test files). */
+   library. The helpers shared with the other test files (products, norm, determinant, random
+   rotations, the Jacobi solver) are in test_util.h; those of this file carry the t_la_ prefix
+   (one translation unit is shared with the other test files). */
 
 
 #define T_LA_N 100000  /* random cases per kind and dimension (the issue asks for 1e5)      */
 #define T_LA_TOL 1e-12 /* relative tolerance of reconstruction, orthogonality, ...         */
 
-/* ---- small dense helpers (n x n row-major, n <= 9) ------------------------------------- */
+/* ---- small dense helpers (n x n row-major, n <= 9; the shared ones are in test_util.h) ---- */
 
-static void t_la_mul(int n, const double *A, const double *B, double *C) {
-    int i, j, k;
-    for (i = 0; i < n; ++i)
-        for (j = 0; j < n; ++j) {
-            double acc = 0;
-            for (k = 0; k < n; ++k) acc += A[i * n + k] * B[k * n + j];
-            C[i * n + j] = acc;
-        }
-}
-/* C = A^T B */
-static void t_la_mul_tn(int n, const double *A, const double *B, double *C) {
-    int i, j, k;
-    for (i = 0; i < n; ++i)
-        for (j = 0; j < n; ++j) {
-            double acc = 0;
-            for (k = 0; k < n; ++k) acc += A[k * n + i] * B[k * n + j];
-            C[i * n + j] = acc;
-        }
-}
-/* C = A B^T */
-static void t_la_mul_nt(int n, const double *A, const double *B, double *C) {
-    int i, j, k;
-    for (i = 0; i < n; ++i)
-        for (j = 0; j < n; ++j) {
-            double acc = 0;
-            for (k = 0; k < n; ++k) acc += A[i * n + k] * B[j * n + k];
-            C[i * n + j] = acc;
-        }
-}
-/* C = A diag(d) B^T (the SVD reconstruction) */
-static void t_la_adbt(int n, const double *A, const double *d, const double *B, double *C) {
-    int i, j, k;
-    for (i = 0; i < n; ++i)
-        for (j = 0; j < n; ++j) {
-            double acc = 0;
-            for (k = 0; k < n; ++k) acc += A[i * n + k] * d[k] * B[j * n + k];
-            C[i * n + j] = acc;
-        }
-}
-static double t_la_norm(int count, const double *a) {
-    double m = 0, acc = 0;
-    int i;
-    for (i = 0; i < count; ++i)
-        if (fabs(a[i]) > m) m = fabs(a[i]);
-    if (m == 0) return 0;
-    for (i = 0; i < count; ++i) acc += (a[i] / m) * (a[i] / m);
-    return m * sqrt(acc);
-}
-static double t_la_dist(int count, const double *a, const double *b) {
-    double d[81];
-    int i;
-    for (i = 0; i < count; ++i) d[i] = a[i] - b[i];
-    return t_la_norm(count, d);
-}
 /* |A^T A - I| */
 static double t_la_orth_err(int n, const double *A) {
     double C[81];
     int i;
-    t_la_mul_tn(n, A, A, C);
+    t_mul_tn(n, A, A, C);
     for (i = 0; i < n; ++i) C[i * n + i] -= 1.0;
-    return t_la_norm(n * n, C);
-}
-static double t_la_asym(int n, const double *A) {
-    double m = 0;
-    int i, j;
-    for (i = 0; i < n; ++i)
-        for (j = i + 1; j < n; ++j) {
-            double d = A[i * n + j] - A[j * n + i];
-            m += 2 * d * d;
-        }
-    return sqrt(m);
-}
-/* Determinant by cofactor expansion (independent of pn_mat_det). */
-static double t_la_det(int dim, const double *A) {
-    if (dim == 2) return A[0] * A[3] - A[1] * A[2];
-    return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
-           A[2] * (A[3] * A[7] - A[4] * A[6]);
+    return t_norm(n * n, C);
 }
 /* Inverse by the adjugate (cofactor transpose) / det. */
 static void t_la_adj_inverse(int dim, const double *A, double *Ai) {
-    double d = t_la_det(dim, A);
+    double d = t_det(dim, A);
     if (dim == 2) {
         Ai[0] = A[3] / d;
         Ai[1] = -A[1] / d;
@@ -113,17 +44,7 @@ static void t_la_adj_inverse(int dim, const double *A, double *Ai) {
     Ai[8] = (A[0] * A[4] - A[1] * A[3]) / d;
 }
 
-/* ---- random numbers and random factors --------------------------------------------------- */
-
-static double t_la_gauss(pn_test_rng *r) {
-    double u1 = pn_test_rng_uniform(r), u2 = pn_test_rng_uniform(r);
-    if (u1 < 1e-300) u1 = 1e-300;
-    return sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
-}
-static double t_la_logu(pn_test_rng *r, double lo, double hi) {
-    return exp(pn_test_rng_range(r, log(lo), log(hi)));
-}
-static int t_la_randint(pn_test_rng *r, int n) { return (int)(pn_test_rng_u64(r) % (unsigned)n); }
+/* ---- random factors -------------------------------------------------------------------------- */
 
 /* Rotation about a unit axis (x, y, z) by angle a (Rodrigues). */
 static void t_la_axis_angle(double x, double y, double z, double a, double *R) {
@@ -131,21 +52,6 @@ static void t_la_axis_angle(double x, double y, double z, double a, double *R) {
     R[0] = c + x * x * t;     R[1] = x * y * t - z * s; R[2] = x * z * t + y * s;
     R[3] = y * x * t + z * s; R[4] = c + y * y * t;     R[5] = y * z * t - x * s;
     R[6] = z * x * t - y * s; R[7] = z * y * t + x * s; R[8] = c + z * z * t;
-}
-/* Uniformly distributed rotation (unit quaternion from four Gaussians). */
-static void t_la_rand_rot(pn_test_rng *r, int dim, double *R) {
-    if (dim == 2) {
-        double a = pn_test_rng_range(r, 0, 6.283185307179586);
-        R[0] = cos(a); R[1] = -sin(a);
-        R[2] = sin(a); R[3] = cos(a);
-    } else {
-        double w = t_la_gauss(r), x = t_la_gauss(r), y = t_la_gauss(r), z = t_la_gauss(r);
-        double n = sqrt(w * w + x * x + y * y + z * z);
-        w /= n; x /= n; y /= n; z /= n;
-        R[0] = 1 - 2 * (y * y + z * z); R[1] = 2 * (x * y - w * z);     R[2] = 2 * (x * z + w * y);
-        R[3] = 2 * (x * y + w * z);     R[4] = 1 - 2 * (x * x + z * z); R[5] = 2 * (y * z - w * x);
-        R[6] = 2 * (x * z - w * y);     R[7] = 2 * (y * z + w * x);     R[8] = 1 - 2 * (x * x + y * y);
-    }
 }
 /* Random n x n orthogonal matrix: a product of n Householder reflections. */
 static void t_la_rand_orth(pn_test_rng *r, int n, double *Q) {
@@ -155,7 +61,7 @@ static void t_la_rand_orth(pn_test_rng *r, int n, double *Q) {
     for (k = 0; k < n; ++k) {
         double v[9], vv = 0, Qv[9];
         for (i = 0; i < n; ++i) {
-            v[i] = t_la_gauss(r);
+            v[i] = t_gauss(r);
             vv += v[i] * v[i];
         }
         if (vv == 0) continue;
@@ -167,71 +73,14 @@ static void t_la_rand_orth(pn_test_rng *r, int n, double *Q) {
             for (j = 0; j < n; ++j) Q[i * n + j] -= 2.0 * Qv[i] * v[j] / vv;
     }
 }
-/* F = R1 diag(s) R2 */
-static void t_la_build(int dim, const double *R1, const double *s, const double *R2, double *F) {
-    int i, j, k;
-    for (i = 0; i < dim; ++i)
-        for (j = 0; j < dim; ++j) {
-            double acc = 0;
-            for (k = 0; k < dim; ++k) acc += R1[i * dim + k] * s[k] * R2[k * dim + j];
-            F[i * dim + j] = acc;
-        }
-}
 
 /* ---- reference symmetric eigen-solver (cyclic Jacobi, independent of pn_sym_eigen) -------- */
 
-/* A (n x n symmetric, n <= 9) = Q diag(w) Q^T, w ascending, Q columns eigenvectors. */
+/* A (n x n symmetric, n <= 9) = Q diag(w) Q^T, w ascending, Q columns eigenvectors: t_jacobi,
+   then sorted. */
 static void t_la_jacobi(int n, const double *A_in, double *Q, double *w) {
-    double A[81];
-    int i, j, p, q, sweep;
-    for (i = 0; i < n * n; ++i) A[i] = A_in[i];
-    for (i = 0; i < n; ++i)
-        for (j = i + 1; j < n; ++j) A[j * n + i] = A[i * n + j] = 0.5 * (A[i * n + j] + A[j * n + i]);
-    for (i = 0; i < n * n; ++i) Q[i] = 0;
-    for (i = 0; i < n; ++i) Q[i * n + i] = 1;
-    for (sweep = 0; sweep < 100; ++sweep) {
-        double off = 0;
-        for (p = 0; p < n; ++p)
-            for (q = p + 1; q < n; ++q) off += fabs(A[p * n + q]);
-        if (off == 0) break;
-        for (p = 0; p < n; ++p)
-            for (q = p + 1; q < n; ++q) {
-                double apq = A[p * n + q], app = A[p * n + p], aqq = A[q * n + q];
-                double theta, t, c, s;
-                int k;
-                if (apq == 0) continue;
-                /* once negligible against both diagonal entries, drop it (Numerical Recipes) */
-                if (sweep > 3 && fabs(app) + 1e3 * fabs(apq) == fabs(app) &&
-                    fabs(aqq) + 1e3 * fabs(apq) == fabs(aqq)) {
-                    A[p * n + q] = A[q * n + p] = 0;
-                    continue;
-                }
-                theta = (aqq - app) / (2.0 * apq);
-                if (fabs(theta) > 1e150)
-                    t = 0.5 / theta;
-                else
-                    t = (theta >= 0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
-                c = 1.0 / sqrt(t * t + 1.0);
-                s = t * c;
-                for (k = 0; k < n; ++k) { /* A <- A J */
-                    double akp = A[k * n + p], akq = A[k * n + q];
-                    A[k * n + p] = c * akp - s * akq;
-                    A[k * n + q] = s * akp + c * akq;
-                }
-                for (k = 0; k < n; ++k) { /* A <- J^T A */
-                    double apk = A[p * n + k], aqk = A[q * n + k];
-                    A[p * n + k] = c * apk - s * aqk;
-                    A[q * n + k] = s * apk + c * aqk;
-                }
-                A[p * n + q] = A[q * n + p] = 0;
-                for (k = 0; k < n; ++k) { /* Q <- Q J */
-                    double qkp = Q[k * n + p], qkq = Q[k * n + q];
-                    Q[k * n + p] = c * qkp - s * qkq;
-                    Q[k * n + q] = s * qkp + c * qkq;
-                }
-            }
-    }
-    for (i = 0; i < n; ++i) w[i] = A[i * n + i];
+    int i, j;
+    t_jacobi(n, A_in, Q, w);
     for (i = 1; i < n; ++i) { /* insertion sort, ascending, columns follow */
         for (j = i; j > 0 && w[j - 1] > w[j]; --j) {
             double tw = w[j];
@@ -305,7 +154,7 @@ static void t_la_check_case(t_la_stats *st, int dim, const double *F, int con, c
     pn_result r;
     const int n2 = dim * dim;
     st->cases++;
-    nF = t_la_norm(n2, F);
+    nF = t_norm(n2, F);
 
     /* expected |singular values|, descending, and the sign of det F */
     if (con) {
@@ -331,13 +180,13 @@ static void t_la_check_case(t_la_stats *st, int dim, const double *F, int con, c
             if (!(sc[i] > 0)) posdef_con = 0;
     } else {
         double FtF[9];
-        t_la_mul_tn(dim, F, F, FtF);
+        t_mul_tn(dim, F, F, FtF);
         t_la_jacobi(dim, FtF, Q, w);
         for (i = 0; i < dim; ++i) {
             a2[i] = w[dim - 1 - i]; /* squared singular values, descending, accurate to eps |F|^2 */
             a[i] = sqrt(a2[i] > 0 ? a2[i] : 0);
         }
-        detF = t_la_det(dim, F);
+        detF = t_det(dim, F);
         detsign = detF > 0 ? 1 : (detF < 0 ? -1 : 0);
         sign_clear = fabs(detF) > 1e-8 * pow(nF, (double)dim);
     }
@@ -347,12 +196,12 @@ static void t_la_check_case(t_la_stats *st, int dim, const double *F, int con, c
     t_la_note(st, T_LA_M_STATUS, r == PN_OK ? 0 : 1, dim, F);
     if (r == PN_OK) {
         int order_bad = 0;
-        t_la_adbt(dim, U, s, V, T);
-        t_la_note(st, T_LA_M_RECON, nF > 0 ? t_la_dist(n2, T, F) / nF : t_la_norm(n2, T), dim, F);
+        t_adbt(dim, U, s, V, T);
+        t_la_note(st, T_LA_M_RECON, nF > 0 ? t_dist(n2, T, F) / nF : t_norm(n2, T), dim, F);
         t_la_note(st, T_LA_M_ORTH, t_la_orth_err(dim, U), dim, F);
         t_la_note(st, T_LA_M_ORTH, t_la_orth_err(dim, V), dim, F);
-        t_la_note(st, T_LA_M_DET, fabs(t_la_det(dim, U) - 1), dim, F);
-        t_la_note(st, T_LA_M_DET, fabs(t_la_det(dim, V) - 1), dim, F);
+        t_la_note(st, T_LA_M_DET, fabs(t_det(dim, U) - 1), dim, F);
+        t_la_note(st, T_LA_M_DET, fabs(t_det(dim, V) - 1), dim, F);
         for (i = 0; i + 1 < dim; ++i) {
             if (!(fabs(s[i]) >= fabs(s[i + 1]))) order_bad = 1;
             if (!(s[i] >= 0)) order_bad = 1;
@@ -375,11 +224,11 @@ static void t_la_check_case(t_la_stats *st, int dim, const double *F, int con, c
     r = pn_polar(dim, F, R, S);
     t_la_note(st, T_LA_M_STATUS, r == PN_OK ? 0 : 1, dim, F);
     if (r == PN_OK) {
-        t_la_mul(dim, R, S, T);
-        t_la_note(st, T_LA_M_PRECON, nF > 0 ? t_la_dist(n2, T, F) / nF : t_la_norm(n2, T), dim, F);
+        t_mul(dim, R, S, T);
+        t_la_note(st, T_LA_M_PRECON, nF > 0 ? t_dist(n2, T, F) / nF : t_norm(n2, T), dim, F);
         t_la_note(st, T_LA_M_PORTH, t_la_orth_err(dim, R), dim, F);
-        t_la_note(st, T_LA_M_PORTH, fabs(t_la_det(dim, R) - 1), dim, F);
-        t_la_note(st, T_LA_M_PSYM, t_la_asym(dim, S) / (nF > 0 ? nF : 1), dim, F);
+        t_la_note(st, T_LA_M_PORTH, fabs(t_det(dim, R) - 1), dim, F);
+        t_la_note(st, T_LA_M_PSYM, t_asym(dim, S) / (nF > 0 ? nF : 1), dim, F);
         if (heavy) {
             /* S^2 = F^T F, so the eigenvalues of S are +-s_i; the convention puts the one
                negative sign of an inverted F on the smallest magnitude. */
@@ -417,8 +266,8 @@ static void t_la_check_case(t_la_stats *st, int dim, const double *F, int con, c
             /* unique polar factor; its sensitivity is |F| / (s_i + s_j) */
             double minpair = a[dim - 1] + a[dim - 2];
             if (minpair > 1e-3 * a[0]) {
-                t_la_mul(dim, R1, R2, T);
-                t_la_note(st, T_LA_M_PROT, t_la_dist(n2, T, R), dim, F);
+                t_mul(dim, R1, R2, T);
+                t_la_note(st, T_LA_M_PROT, t_dist(n2, T, R), dim, F);
             }
         }
     }
@@ -431,9 +280,7 @@ static void t_la_check_case(t_la_stats *st, int dim, const double *F, int con, c
         t_la_note(st, T_LA_M_HSTATUS,
                   (r == PN_ERROR_INVERTED && memcmp(eps, sentinel, sizeof eps) == 0) ? 0 : 1, dim, F);
     } else if (sign_clear && detsign > 0) {
-        int fin = 1;
-        for (i = 0; i < n2; ++i)
-            if (!(fabs(eps[i]) < HUGE_VAL)) fin = 0;
+        int fin = t_finite(n2, eps);
         t_la_note(st, T_LA_M_HSTATUS, (r == PN_OK && fin) ? 0 : 1, dim, F);
         if (r == PN_OK && fin) {
             st->hencky_ok++;
@@ -442,32 +289,31 @@ static void t_la_check_case(t_la_stats *st, int dim, const double *F, int con, c
                 double ew[3], FFt[9];
                 t_la_jacobi(dim, eps, Q, w);
                 for (i = 0; i < dim; ++i) ew[i] = exp(2 * w[i]);
-                t_la_adbt(dim, Q, ew, Q, T);
-                t_la_mul_nt(dim, F, F, FFt);
+                t_adbt(dim, Q, ew, Q, T);
+                t_mul_nt(dim, F, F, FFt);
                 /* an absolute error d in eps is a relative error ~2d in exp(2 eps); both sides
                    round eps at ~1e-16 |eps|, so measure relative to max(1, 2 |eps|) */
                 {
                     double wm = 1;
                     for (i = 0; i < dim; ++i)
                         if (2 * fabs(w[i]) > wm) wm = 2 * fabs(w[i]);
-                    t_la_note(st, T_LA_M_HEXP, t_la_dist(n2, T, FFt) / t_la_norm(n2, FFt) / wm, dim, F);
+                    t_la_note(st, T_LA_M_HEXP, t_dist(n2, T, FFt) / t_norm(n2, FFt) / wm, dim, F);
                 }
             }
             if (con && a[0] <= 1e3 * a[dim - 1]) {
                 /* F F^T = R1 diag(s^2) R1^T whatever the signs of s */
                 double ls[3], ne;
                 for (i = 0; i < dim; ++i) ls[i] = log(fabs(sc[i]));
-                t_la_adbt(dim, R1, ls, R1, T2);
-                ne = t_la_norm(n2, T2);
-                t_la_note(st, T_LA_M_HREF, t_la_dist(n2, eps, T2) / (ne > 1 ? ne : 1), dim, F);
+                t_adbt(dim, R1, ls, R1, T2);
+                ne = t_norm(n2, T2);
+                t_la_note(st, T_LA_M_HREF, t_dist(n2, eps, T2) / (ne > 1 ? ne : 1), dim, F);
             }
         }
     } else {
         /* det F at rounding level: either answer is fine, but never a silent inf/NaN */
         int ok = 1;
         if (r == PN_OK) {
-            for (i = 0; i < n2; ++i)
-                if (!(fabs(eps[i]) < HUGE_VAL)) ok = 0;
+            ok = t_finite(n2, eps);
         } else if (r == PN_ERROR_INVERTED) {
             if (memcmp(eps, sentinel, sizeof eps) != 0) ok = 0;
         } else
@@ -523,23 +369,23 @@ enum {
 static int t_la_gen(pn_test_rng *rng, int kind, int dim, double *F, double *sc, double *R1,
                     double *R2) {
     int i, v;
-    t_la_rand_rot(rng, dim, R1);
-    t_la_rand_rot(rng, dim, R2);
-    for (i = 0; i < 3; ++i) sc[i] = t_la_logu(rng, 0.1, 10.0);
+    t_rand_rot(rng, dim, R1);
+    t_rand_rot(rng, dim, R2);
+    for (i = 0; i < 3; ++i) sc[i] = t_logu(rng, 0.1, 10.0);
     switch (kind) {
     case T_LA_GENERIC:
-        v = t_la_randint(rng, 4);
+        v = t_randint(rng, 4);
         if (v == 0) { /* raw random entries */
             for (i = 0; i < dim * dim; ++i) F[i] = pn_test_rng_range(rng, -1, 1);
             return 0;
         }
-        if (v == 1) sc[t_la_randint(rng, dim)] *= -1; /* any sign pattern */
+        if (v == 1) sc[t_randint(rng, dim)] *= -1; /* any sign pattern */
         break;
     case T_LA_REPEATED: {
         double base = sc[0], rel[4] = {0, 1e-15, 1e-12, 1e-9};
-        double d1 = rel[t_la_randint(rng, 4)] * pn_test_rng_uniform(rng);
-        double d2 = rel[t_la_randint(rng, 4)] * pn_test_rng_uniform(rng);
-        v = t_la_randint(rng, 4);
+        double d1 = rel[t_randint(rng, 4)] * pn_test_rng_uniform(rng);
+        double d2 = rel[t_randint(rng, 4)] * pn_test_rng_uniform(rng);
+        v = t_randint(rng, 4);
         if (dim == 2) {
             sc[0] = base;
             sc[1] = base * (1 + d1);
@@ -554,13 +400,13 @@ static int t_la_gen(pn_test_rng *rng, int kind, int dim, double *F, double *sc, 
         } else { /* the two smallest, or equal in any position */
             sc[0] = base;
             sc[1] = sc[2] = base * 0.3;
-            sc[1 + t_la_randint(rng, 2)] *= 1 + d1;
+            sc[1 + t_randint(rng, 2)] *= 1 + d1;
         }
-        if (t_la_randint(rng, 4) == 0) sc[t_la_randint(rng, dim)] *= -1;
+        if (t_randint(rng, 4) == 0) sc[t_randint(rng, dim)] *= -1;
         break;
     }
     case T_LA_ZERO:
-        v = t_la_randint(rng, 6);
+        v = t_randint(rng, 6);
         if (v == 0) { /* rank one outer product */
             double x[3], y[3];
             int j;
@@ -573,34 +419,34 @@ static int t_la_gen(pn_test_rng *rng, int kind, int dim, double *F, double *sc, 
             return 0;
         }
         {
-            int nz = 1 + t_la_randint(rng, dim); /* 1 .. dim zeros, at random places */
-            for (i = 0; i < nz; ++i) sc[t_la_randint(rng, dim)] = 0;
+            int nz = 1 + t_randint(rng, dim); /* 1 .. dim zeros, at random places */
+            for (i = 0; i < nz; ++i) sc[t_randint(rng, dim)] = 0;
             if (v == 1) sc[0] = sc[1] = sc[2] = 0; /* F = 0 */
-            if (t_la_randint(rng, 3) == 0) sc[t_la_randint(rng, dim)] *= -1;
+            if (t_randint(rng, 3) == 0) sc[t_randint(rng, dim)] *= -1;
         }
         break;
     case T_LA_TINY:
         for (i = 0; i < 3; ++i) sc[i] *= 1e-8;
-        v = t_la_randint(rng, 3);
-        if (v == 1) sc[t_la_randint(rng, dim)] /= 1e-8; /* one O(1) value */
+        v = t_randint(rng, 3);
+        if (v == 1) sc[t_randint(rng, dim)] /= 1e-8; /* one O(1) value */
         if (v == 2 && dim == 3) sc[0] /= 1e-8, sc[1] /= 1e-8;
-        if (t_la_randint(rng, 4) == 0) sc[t_la_randint(rng, dim)] *= -1;
+        if (t_randint(rng, 4) == 0) sc[t_randint(rng, dim)] *= -1;
         break;
     case T_LA_HUGE:
         for (i = 0; i < 3; ++i) sc[i] *= 1e8;
-        v = t_la_randint(rng, 4);
-        if (v == 1) sc[t_la_randint(rng, dim)] *= 1e-8; /* one O(1) value */
-        if (v == 2) sc[t_la_randint(rng, dim)] *= 1e-16; /* one 1e-8 value (ratio 1e16) */
+        v = t_randint(rng, 4);
+        if (v == 1) sc[t_randint(rng, dim)] *= 1e-8; /* one O(1) value */
+        if (v == 2) sc[t_randint(rng, dim)] *= 1e-16; /* one 1e-8 value (ratio 1e16) */
         if (v == 3 && dim == 3) sc[1] *= 1e-8, sc[2] *= 1e-8;
-        if (t_la_randint(rng, 4) == 0) sc[t_la_randint(rng, dim)] *= -1;
+        if (t_randint(rng, 4) == 0) sc[t_randint(rng, dim)] *= -1;
         break;
     case T_LA_DIAGONAL: {
         static const double pick[5] = {0.5, 1, 2, 3, 0};
-        v = t_la_randint(rng, 3);
+        v = t_randint(rng, 3);
         for (i = 0; i < dim; ++i) {
-            if (v == 1) sc[i] = pick[t_la_randint(rng, 4)]; /* repeats likely */
-            if (v == 2) sc[i] = pick[t_la_randint(rng, 5)]; /* with zeros */
-            if (t_la_randint(rng, 2)) sc[i] = -sc[i];
+            if (v == 1) sc[i] = pick[t_randint(rng, 4)]; /* repeats likely */
+            if (v == 2) sc[i] = pick[t_randint(rng, 5)]; /* with zeros */
+            if (t_randint(rng, 2)) sc[i] = -sc[i];
         }
         for (i = 0; i < 9; ++i) R1[i] = R2[i] = 0;
         for (i = 0; i < dim; ++i) R1[i * dim + i] = R2[i * dim + i] = 1;
@@ -608,20 +454,20 @@ static int t_la_gen(pn_test_rng *rng, int kind, int dim, double *F, double *sc, 
     }
     case T_LA_ROTATION:
         sc[0] = sc[1] = sc[2] = 1;
-        v = t_la_randint(rng, 8);
+        v = t_randint(rng, 8);
         for (i = 0; i < 9; ++i) R2[i] = 0;
         for (i = 0; i < dim; ++i) R2[i * dim + i] = 1;
         if (v == 0) { /* half turn about a random axis (trace -1) or the identity */
             if (dim == 2) {
-                R1[0] = R1[3] = t_la_randint(rng, 2) ? -1 : 1;
+                R1[0] = R1[3] = t_randint(rng, 2) ? -1 : 1;
                 R1[1] = R1[2] = 0;
             } else {
-                double x = t_la_gauss(rng), y = t_la_gauss(rng), z = t_la_gauss(rng);
+                double x = t_gauss(rng), y = t_gauss(rng), z = t_gauss(rng);
                 double n = sqrt(x * x + y * y + z * z);
                 t_la_axis_angle(x / n, y / n, z / n, 3.141592653589793, R1);
             }
         } else if (v == 1 && dim == 3) { /* exact half turns about coordinate axes */
-            int ax = t_la_randint(rng, 3);
+            int ax = t_randint(rng, 3);
             for (i = 0; i < 9; ++i) R1[i] = 0;
             for (i = 0; i < 3; ++i) R1[i * 3 + i] = (i == ax) ? 1 : -1;
         } else if (v == 2) { /* tiny angle */
@@ -634,16 +480,16 @@ static int t_la_gen(pn_test_rng *rng, int kind, int dim, double *F, double *sc, 
         }
         break;
     case T_LA_INVERTED:
-        v = t_la_randint(rng, 4);
+        v = t_randint(rng, 4);
         if (v == 0) { /* raw random entries with det < 0 */
             do {
                 for (i = 0; i < dim * dim; ++i) F[i] = pn_test_rng_range(rng, -1, 1);
-            } while (!(t_la_det(dim, F) < -1e-3));
+            } while (!(t_det(dim, F) < -1e-3));
             return 0;
         }
         if (v == 1) { /* reflection */
             sc[0] = sc[1] = sc[2] = 1;
-            sc[t_la_randint(rng, dim)] = -1;
+            sc[t_randint(rng, dim)] = -1;
         } else if (v == 2 && dim == 3) { /* three negatives */
             sc[0] = -sc[0];
             sc[1] = -sc[1];
@@ -651,19 +497,19 @@ static int t_la_gen(pn_test_rng *rng, int kind, int dim, double *F, double *sc, 
         } else if (v == 3) { /* repeated magnitudes across the sign: (a, b, -b) */
             sc[dim - 1] = -sc[dim - 2];
         } else
-            sc[t_la_randint(rng, dim)] *= -1;
+            sc[t_randint(rng, dim)] *= -1;
         break;
     case T_LA_EXTREME: {
-        double scale = pow(10.0, (double)(t_la_randint(rng, 301) - 150));
+        double scale = pow(10.0, (double)(t_randint(rng, 301) - 150));
         for (i = 0; i < 3; ++i) sc[i] *= scale;
-        if (t_la_randint(rng, 4) == 0) sc[t_la_randint(rng, dim)] *= -1;
+        if (t_randint(rng, 4) == 0) sc[t_randint(rng, dim)] *= -1;
         break;
     }
     default:
         break;
     }
     for (i = dim; i < 3; ++i) sc[i] = 0;
-    t_la_build(dim, R1, sc, R2, F);
+    t_adb(dim, R1, sc, R2, F);
     return 1;
 }
 
@@ -721,7 +567,7 @@ PN_TEST(linalg_hencky_rejects_det_le_0) {
         pn_result r;
         do {
             for (i = 0; i < dim * dim; ++i) F[i] = pn_test_rng_range(&rng, -2, 2);
-        } while (!(t_la_det(dim, F) < -1e-6));
+        } while (!(t_det(dim, F) < -1e-6));
         for (i = 0; i < 9; ++i) keep[i] = eps[i] = -1.25 * i;
         r = pn_hencky_strain(dim, F, eps);
         ++n;
@@ -744,9 +590,9 @@ PN_TEST(linalg_det_inverse_mul) {
         pn_result r;
         dim = 2 + (c & 1);
         /* small integers: every formula is exact */
-        for (i = 0; i < dim * dim; ++i) A[i] = (double)(t_la_randint(&rng, 19) - 9);
+        for (i = 0; i < dim * dim; ++i) A[i] = (double)(t_randint(&rng, 19) - 9);
         d = pn_mat_det(dim, A);
-        dr = t_la_det(dim, A);
+        dr = t_det(dim, A);
         if (fabs(d - dr) > worst_int) worst_int = fabs(d - dr);
         for (i = 0; i < 9; ++i) keep[i] = Ai[i] = 1e300;
         r = pn_mat_inverse(dim, A, Ai);
@@ -759,15 +605,15 @@ PN_TEST(linalg_det_inverse_mul) {
         /* random reals, conditioned by construction */
         {
             double R1[9], R2[9], s[3];
-            for (i = 0; i < 3; ++i) s[i] = t_la_logu(&rng, 0.1, 10) * (t_la_randint(&rng, 2) ? 1 : -1);
-            scale = t_la_logu(&rng, 1e-6, 1e6);
+            for (i = 0; i < 3; ++i) s[i] = t_logu(&rng, 0.1, 10) * (t_randint(&rng, 2) ? 1 : -1);
+            scale = t_logu(&rng, 1e-6, 1e6);
             for (i = 0; i < 3; ++i) s[i] *= scale;
-            t_la_rand_rot(&rng, dim, R1);
-            t_la_rand_rot(&rng, dim, R2);
-            t_la_build(dim, R1, s, R2, A);
+            t_rand_rot(&rng, dim, R1);
+            t_rand_rot(&rng, dim, R2);
+            t_adb(dim, R1, s, R2, A);
         }
         d = pn_mat_det(dim, A);
-        dr = t_la_det(dim, A);
+        dr = t_det(dim, A);
         /* both are backward stable: error ~ eps |A|^dim (the condition number is <= 100) */
         {
             double e = fabs(d - dr) / fabs(dr);
@@ -777,20 +623,20 @@ PN_TEST(linalg_det_inverse_mul) {
         PN_CHECK(r == PN_OK);
         t_la_adj_inverse(dim, A, Ar);
         {
-            double e = t_la_dist(dim * dim, Ai, Ar) / t_la_norm(dim * dim, Ar);
+            double e = t_dist(dim * dim, Ai, Ar) / t_norm(dim * dim, Ar);
             if (!(e <= worst_inv)) worst_inv = e;
         }
-        t_la_mul(dim, A, Ai, I);
+        t_mul(dim, A, Ai, I);
         for (i = 0; i < dim; ++i) I[i * dim + i] -= 1;
         {
-            double e = t_la_norm(dim * dim, I);
+            double e = t_norm(dim * dim, I);
             if (!(e <= worst_id)) worst_id = e;
         }
         for (i = 0; i < dim * dim; ++i) B[i] = pn_test_rng_range(&rng, -3, 3);
         pn_mat_mul(dim, A, B, C);
-        t_la_mul(dim, A, B, Cref);
+        t_mul(dim, A, B, Cref);
         {
-            double e = t_la_dist(dim * dim, C, Cref) / (t_la_norm(dim * dim, A) * t_la_norm(dim * dim, B));
+            double e = t_dist(dim * dim, C, Cref) / (t_norm(dim * dim, A) * t_norm(dim * dim, B));
             if (!(e <= worst_mul)) worst_mul = e;
         }
     }
@@ -821,23 +667,23 @@ static int t_la_sym_gen(pn_test_rng *rng, int n, int kind, double *A, double *wk
     case 6: { /* O(1) and tiny ones of either sign, down to 1e-12 */
         for (i = 0; i < n; ++i) {
             if (kind == 6)
-                wk[i] = (t_la_randint(rng, 2) ? 1 : -1) * pow(10.0, -12.0 * pn_test_rng_uniform(rng));
+                wk[i] = (t_randint(rng, 2) ? 1 : -1) * pow(10.0, -12.0 * pn_test_rng_uniform(rng));
             else if (kind == 1)
-                wk[i] = (double)(t_la_randint(rng, 3) - 1);
+                wk[i] = (double)(t_randint(rng, 3) - 1);
             else if (kind == 2)
-                wk[i] = t_la_randint(rng, 2) ? 0.0 : pn_test_rng_range(rng, -2, 2);
+                wk[i] = t_randint(rng, 2) ? 0.0 : pn_test_rng_range(rng, -2, 2);
             else
-                wk[i] = (t_la_randint(rng, 2) ? 1 : -1) * t_la_logu(rng, 1e-8, 1e8);
+                wk[i] = (t_randint(rng, 2) ? 1 : -1) * t_logu(rng, 1e-8, 1e8);
         }
         t_la_rand_orth(rng, n, Q);
-        t_la_adbt(n, Q, wk, Q, A);
+        t_adbt(n, Q, wk, Q, A);
         for (i = 0; i < n; ++i) /* exactly symmetric */
             for (j = i + 1; j < n; ++j) A[j * n + i] = A[i * n + j];
         break;
     }
     case 4: /* diagonal, any order */
         for (i = 0; i < n * n; ++i) A[i] = 0;
-        for (i = 0; i < n; ++i) A[i * n + i] = wk[i] = (double)(t_la_randint(rng, 7) - 3);
+        for (i = 0; i < n; ++i) A[i * n + i] = wk[i] = (double)(t_randint(rng, 7) - 3);
         break;
     default: /* zero matrix */
         for (i = 0; i < n * n; ++i) A[i] = 0;
@@ -864,7 +710,7 @@ PN_TEST(linalg_sym_eigen) {
             int kind = c % 7, known;
             pn_result r;
             known = t_la_sym_gen(&rng, n, kind, A, wk);
-            nA = t_la_norm(n * n, A);
+            nA = t_norm(n * n, A);
             r = pn_sym_eigen(n, A, Q, w);
             if (r != PN_OK) {
                 ++status_bad;
@@ -872,9 +718,9 @@ PN_TEST(linalg_sym_eigen) {
             }
             for (i = 0; i + 1 < n; ++i)
                 if (!(w[i] <= w[i + 1])) ++order_bad;
-            t_la_adbt(n, Q, w, Q, T);
+            t_adbt(n, Q, w, Q, T);
             {
-                double e = nA > 0 ? t_la_dist(n * n, T, A) / nA : t_la_norm(n * n, T);
+                double e = nA > 0 ? t_dist(n * n, T, A) / nA : t_norm(n * n, T);
                 if (!(e <= w_recon)) w_recon = e;
                 e = t_la_orth_err(n, Q);
                 if (!(e <= w_orth)) w_orth = e;
@@ -925,7 +771,7 @@ PN_TEST(linalg_sym_project_psd) {
             t_la_sym_gen(&rng, n, kind, A, wk);
             if (c % 12 == 7) { /* PSD input: must come back unchanged */
                 double B[81];
-                t_la_mul_tn(n, A, A, B);
+                t_mul_tn(n, A, A, B);
                 for (i = 0; i < n * n; ++i) A[i] = B[i];
                 {
                     int a2, b2;
@@ -933,7 +779,7 @@ PN_TEST(linalg_sym_project_psd) {
                         for (b2 = a2 + 1; b2 < n; ++b2) A[b2 * n + a2] = A[a2 * n + b2];
                 }
             }
-            nA = t_la_norm(n * n, A);
+            nA = t_norm(n * n, A);
             memcpy(P, A, sizeof(double) * (size_t)(n * n));
             r = pn_sym_project_psd(n, P);
             if (r != PN_OK) {
@@ -943,7 +789,7 @@ PN_TEST(linalg_sym_project_psd) {
             if (nA == 0) nA = 1;
             for (i = 0; i < n * n; ++i) N[i] = A[i] - P[i];
             {
-                double e = t_la_asym(n, P) / nA;
+                double e = t_asym(n, P) / nA;
                 if (!(e <= w_sym)) w_sym = e;
             }
             t_la_jacobi(n, P, Q, w);
@@ -954,34 +800,30 @@ PN_TEST(linalg_sym_project_psd) {
             if (!(fabs(ip) / (nA * nA) <= w_inner)) w_inner = fabs(ip) / (nA * nA);
             /* reference: clamp the eigenvalues of our own decomposition */
             t_la_jacobi(n, A, Q, w);
-            for (i = 0; i < n; ++i)
-                if (w[i] < 0) w[i] = 0;
-            t_la_adbt(n, Q, w, Q, ref);
+            t_psd_rebuild(n, Q, w, ref);
             {
-                double e = t_la_dist(n * n, P, ref) / nA;
+                double e = t_dist(n * n, P, ref) / nA;
                 if (!(e <= w_ref)) w_ref = e;
             }
             if (c % 12 == 7) {
-                double e = t_la_dist(n * n, P, A) / nA;
+                double e = t_dist(n * n, P, A) / nA;
                 if (!(e <= w_fixed)) w_fixed = e;
             }
             /* idempotent */
             memcpy(P2, P, sizeof(double) * (size_t)(n * n));
             if (pn_sym_project_psd(n, P2) == PN_OK) {
-                double e = t_la_dist(n * n, P2, P) / nA;
+                double e = t_dist(n * n, P2, P) / nA;
                 if (!(e <= w_idem)) w_idem = e;
             } else
                 ++status_bad;
             /* nearest: no random PSD matrix is closer */
             {
-                double X[81], B[81], dP = t_la_dist(n * n, A, P), dX;
+                double X[81], B[81], dP = t_dist(n * n, A, P), dX;
                 int k;
                 for (k = 0; k < n * n; ++k) B[k] = P[k] + 0.01 * nA * pn_test_rng_range(&rng, -1, 1);
                 t_la_jacobi(n, B, Q, w); /* symmetrises B, then clamp */
-                for (k = 0; k < n; ++k)
-                    if (w[k] < 0) w[k] = 0;
-                t_la_adbt(n, Q, w, Q, X);
-                dX = t_la_dist(n * n, A, X);
+                t_psd_rebuild(n, Q, w, X);
+                dX = t_dist(n * n, A, X);
                 if (!((dP - dX) / nA <= w_near)) w_near = (dP - dX) / nA;
             }
         }

@@ -4,6 +4,7 @@
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "pn_test.h"
+#include "test_util.h" /* the reference helpers the test files share */
 
 #include "test_linalg.c"  /* pn_tests_linalg: SVD, polar, Hencky, eigen, PSD projection  */
 #include "test_energy.c"  /* pn_tests_energy: finite differences of every energy        */

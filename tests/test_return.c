@@ -21,40 +21,7 @@
 
 #define PN_TR_SAMPLES 2000 /* random trial F per material and dimension */
 
-/* ---- small dense helpers, independent of the library ----------------------------------- */
-
-static void pn_tr_mul(int d, const double *A, const double *B, double *C) {
-    int i, j, k;
-    for (i = 0; i < d; ++i)
-        for (j = 0; j < d; ++j) {
-            double acc = 0;
-            for (k = 0; k < d; ++k) acc += A[i * d + k] * B[k * d + j];
-            C[i * d + j] = acc;
-        }
-}
-
-static void pn_tr_transpose(int d, const double *A, double *At) {
-    int i, j;
-    for (i = 0; i < d; ++i)
-        for (j = 0; j < d; ++j) At[j * d + i] = A[i * d + j];
-}
-
-/* out = A diag(w) B */
-static void pn_tr_compose(int d, const double *A, const double *w, const double *B, double *out) {
-    int i, j, k;
-    for (i = 0; i < d; ++i)
-        for (j = 0; j < d; ++j) {
-            double acc = 0;
-            for (k = 0; k < d; ++k) acc += A[i * d + k] * w[k] * B[k * d + j];
-            out[i * d + j] = acc;
-        }
-}
-
-static double pn_tr_det(int d, const double *A) {
-    if (d == 2) return A[0] * A[3] - A[1] * A[2];
-    return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
-           A[2] * (A[3] * A[7] - A[4] * A[6]);
-}
+/* ---- small dense helpers, independent of the library (the shared ones: test_util.h) ---- */
 
 static double pn_tr_maxabs(int n, const double *A) {
     double m = 0;
@@ -174,8 +141,8 @@ typedef struct pn_tr_lame { double mu, la, kappa; } pn_tr_lame;
 static pn_tr_lame pn_tr_lame_of(const pn_material_desc *p, int d) {
     pn_tr_lame l;
     double E = p->youngs_modulus_pa, nu = p->poisson_ratio;
-    l.mu = E / (2 * (1 + nu));
-    l.la = E * nu / ((1 + nu) * (1 - 2 * nu));
+    l.mu = t_mu(E, nu);
+    l.la = t_lambda(E, nu);
     l.kappa = l.la + 2 * l.mu / d;
     return l;
 }
@@ -483,7 +450,7 @@ static void pn_tr_max_into(double *acc, double v) {
 static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_test_rng *rng,
                          pn_tr_stats *st) {
     const pn_material_desc *p = &c->desc;
-    double R1[9], R2[9], R1t[9], R2t[9], e[3], s[3], F[9], h, mag, Fi[9], FiT[9], tmp[9], D[9];
+    double R1[9], R2[9], e[3], s[3], F[9], h, mag, Fi[9], tmp[9], D[9];
     double z[3], tauZ[9], Tk[9], Tr[9], w[3], yF, scF, Z[9], T[9], hn;
     pn_real Fr[9], Zr[9], Tl[9], hnr, y, sc, tau_l[9], Fi_l[9];
     pn_tr_ref ref;
@@ -497,7 +464,7 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
         s[i] = exp(e[i]);
     }
     h = pn_test_rng_uniform(rng) < c->h_zero ? 0 : pn_test_rng_range(rng, c->h_lo, c->h_hi);
-    pn_tr_compose(d, R1, s, R2, F);
+    t_adb(d, R1, s, R2, F);
     for (i = 0; i < n; ++i) Fr[i] = F[i];
     pn_tr_reference(p, d, e, h, &ref);
     st->n++;
@@ -522,10 +489,8 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
     }
 
     /* Z in the test's frame: D = R1^T Z R2^T must be diagonal */
-    pn_tr_transpose(d, R1, R1t);
-    pn_tr_transpose(d, R2, R2t);
-    pn_tr_mul(d, R1t, Z, tmp);
-    pn_tr_mul(d, tmp, R2t, D);
+    t_mul_tn(d, R1, Z, tmp);
+    t_mul_nt(d, tmp, R2, D);
     for (i = 0; i < d; ++i)
         for (j = 0; j < d; ++j)
             if (i != j) pn_tr_max_into(&st->coaxial, fabs(D[i * d + j]) / pn_tr_maxabs(n, Z));
@@ -563,7 +528,7 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
             else pn_tr_max_into(&st->resid, fabs(yz) / pn_tr_max(scz, pn_tr_yield_floor(p, d)));
             /* isochoric flow; a DP volume correction adds its stored log-volume h by design */
             if (p->plastic != PN_PLASTIC_SNOW_STOMAKHIN)
-                pn_tr_max_into(&st->volume, fabs(pn_tr_det(d, Z) / pn_tr_det(d, F) /
+                pn_tr_max_into(&st->volume, fabs(t_det(d, Z) / t_det(d, F) /
                                                      exp(p->volume_correction ? h : 0) - 1));
         }
         if (ref.kind == PN_TR_TIP || ref.kind == PN_TR_TIP_TENSION) {
@@ -571,13 +536,13 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
                 /* apex: Z = exp(c) R1 R2 (singular values exp(c)); stress free without cohesion */
                 double RR[9], cz[3];
                 for (i = 0; i < d; ++i) cz[i] = exp(p->cohesion_strain);
-                pn_tr_compose(d, R1, cz, R2, RR);
+                t_adb(d, R1, cz, R2, RR);
                 pn_tr_max_into(&st->resid_tip, pn_tr_reldiff(n, Z, RR, 0));
                 if (p->cohesion_strain == 0)
                     pn_tr_max_into(&st->resid_tip, pn_tr_maxabs(n, T) / p->youngs_modulus_pa);
             } else { /* Cam-Clay: p(Z) = -kappa/2 (det Z^2 - 1) equals p0 or -beta p0 */
                 pn_tr_lame l = pn_tr_lame_of(p, d);
-                double Jz = pn_tr_det(d, Z), pz = -l.kappa / 2 * (Jz * Jz - 1);
+                double Jz = t_det(d, Z), pz = -l.kappa / 2 * (Jz * Jz - 1);
                 double p0 = l.kappa * (1e-5 + sinh(p->camclay_xi * pn_tr_max(-h, 0)));
                 pn_tr_max_into(&st->resid_tip, fabs(pz - ref.p_tip) / (p0 * pn_tr_max(1, p->camclay_beta)));
                 /* compaction hardens (log Jp falls), tension softens */
@@ -614,7 +579,7 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
                 bad = pn_tr_max(bad, (1 - p->snow_theta_c) - z[i]);
             }
             pn_tr_max_into(&st->snow_box, bad);
-            pn_tr_max_into(&st->h_ref, pn_tr_h_err(hn, h + log(pn_tr_det(d, F) / pn_tr_det(d, Z)), h));
+            pn_tr_max_into(&st->h_ref, pn_tr_h_err(hn, h + log(t_det(d, F) / t_det(d, Z)), h));
         }
     }
 
@@ -628,14 +593,13 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
             tauZ[i] = tau_l[i];
             Fi[i] = Fi_l[i];
         }
-        pn_tr_transpose(d, Fi, FiT);
-        pn_tr_mul(d, tauZ, FiT, Tk);
+        t_mul_nt(d, tauZ, Fi, Tk);
         pn_tr_max_into(&st->T_kirch, pn_tr_reldiff(n, T, Tk, PN_TR_STRAIN_FLOOR * p->youngs_modulus_pa));
     }
     /* ... and through the test's principal stresses: T = R1 diag(tau_i(z) / s_i) R2 */
     pn_tr_tau_principal(p, d, z, hn, w);
     for (i = 0; i < d; ++i) w[i] /= s[i];
-    pn_tr_compose(d, R1, w, R2, Tr);
+    t_adb(d, R1, w, R2, Tr);
     pn_tr_max_into(&st->T_ref, pn_tr_reldiff(n, T, Tr, PN_TR_STRAIN_FLOOR * p->youngs_modulus_pa));
 
     /* idempotence: project the result again with the new state. Cam-Clay softens in tension
@@ -671,8 +635,8 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
         pn_real Fq[9], Zqr[9], Tqr[9], hq;
         pn_tr_rotation(rng, d, Q);
         pn_tr_rotation(rng, d, Rr);
-        pn_tr_mul(d, Q, F, QF);
-        pn_tr_mul(d, QF, Rr, QFR);
+        t_mul(d, Q, F, QF);
+        t_mul(d, QF, Rr, QFR);
         for (i = 0; i < n; ++i) Fq[i] = QFR[i];
         r = pn_return_map(m, d, Fq, h, Zqr, &hq, Tqr);
         if (r != PN_OK) {
@@ -682,10 +646,10 @@ static void pn_tr_sample(const pn_tr_case *c, const pn_material *m, int d, pn_te
                 Zq[i] = Zqr[i];
                 Tq[i] = Tqr[i];
             }
-            pn_tr_mul(d, Q, Z, QZ);
-            pn_tr_mul(d, QZ, Rr, QZR);
-            pn_tr_mul(d, Q, T, QT);
-            pn_tr_mul(d, QT, Rr, QTR);
+            t_mul(d, Q, Z, QZ);
+            t_mul(d, QZ, Rr, QZR);
+            t_mul(d, Q, T, QT);
+            t_mul(d, QT, Rr, QTR);
             if (!ref.border) {
                 pn_tr_max_into(&st->equiv, pn_tr_reldiff(n, Zq, QZR, 0));
                 pn_tr_max_into(&st->equiv, pn_tr_reldiff(n, Tq, QTR, PN_TR_STRAIN_FLOOR * p->youngs_modulus_pa));
@@ -838,7 +802,7 @@ PN_TEST(return_cam_clay_large_shear_3d) {
     for (i = 0; i < 9; ++i) Zd[i] = Z[i];
     PN_CHECK(pn_yield_function(&m, 3, Z, h, &y, &sc) == PN_OK);
     PN_CHECK_LE(fabs(y) / sc, 1e-9);
-    PN_CHECK_LE(fabs(pn_tr_det(3, Zd) / (s[0] * s[1] * s[2]) - 1), 1e-12);
+    PN_CHECK_LE(fabs(t_det(3, Zd) / (s[0] * s[1] * s[2]) - 1), 1e-12);
     for (i = 0; i < 3; ++i) PN_CHECK_NEAR(Zd[i * 4], ref.z[i], 1e-10);
 }
 
@@ -880,7 +844,7 @@ PN_TEST(return_von_mises_energy_gradient) {
                 tr += e[i];
             }
             h = k % 3 ? pn_test_rng_range(&rng, 0, 0.1) : 0;
-            pn_tr_compose(d, R1, s, R2, F);
+            t_adb(d, R1, s, R2, F);
             for (i = 0; i < n; ++i) Fr[i] = F[i];
             /* K = 0 material with the frozen yield stress of (mk, h) */
             d0 = dk;
@@ -1098,7 +1062,7 @@ PN_TEST(return_inverted) {
                 pn_tr_rotation(&rng, d, R2);
                 for (i = 0; i < d; ++i) s[i] = exp(pn_test_rng_range(&rng, -0.5, 0.5));
                 s[k % d] = k % 4 == 0 ? 0 : -s[k % d]; /* singular or reflected */
-                pn_tr_compose(d, R1, s, R2, F);
+                t_adb(d, R1, s, R2, F);
                 for (i = 0; i < d * d; ++i) Fr[i] = F[i];
                 if (k % 4 == 0) /* exactly singular: repeat a row */
                     for (i = 0; i < d; ++i) Fr[d + i] = Fr[i];
