@@ -12,14 +12,21 @@
 
        pn_material_desc d;
        pn_material sand;
+       const char *why = NULL;
        memset(&d, 0, sizeof d);                       // zeroed fields mean defaults
        d.plastic = PN_PLASTIC_DRUCKER_PRAGER;         // elastic defaults to StVK-Hencky
        d.youngs_modulus_pa = 1e7; d.poisson_ratio = 0.3; d.friction_angle_deg = 30;
        if (pn_material_init(&sand, &d, &why) != PN_OK) puts(why);
 
-       pn_real F[9] = {...}, Z[9], T[9], h = 0, h_new;   // 3x3 row-major
-       pn_return_map(&sand, 3, F, h, Z, &h_new, T);      // project F onto the yield surface;
-                                                        // T = tau(Z(F)) F^-T, the force density
+       pn_real F[9] = {1.02, 0.01, 0, 0, 0.97, 0, 0, 0, 1};  // 3x3 row-major, trial elastic F
+       pn_real Z[9], T[9], h = 0, h_new;
+       pn_return_map(&sand, 3, F, h, Z, &h_new, T);   // Z: F projected onto the yield surface,
+                                                      // T = tau(Z(F)) F^-T, the force density
+
+       // an implicit solver instead asks an energy for psi, P = dpsi/dF and a PSD dP/dF:
+       pn_real G[9], hG, psi, P[9], H[81];
+       pn_lagged_prepare(&sand, 3, F, h, G, &hG);     // once per F0 (here F0 = F)
+       pn_lagged_energy(&sand, 3, F, G, hG, &psi, P, H, PN_EVAL_PROJECT_PSD);
 
    Matrices are row-major arrays of dim*dim reals (F[i*dim+j] = F_ij), dim = 2 or 3.
    A pn_real[9] serves both dimensions. Fourth-order tensors (dP/dF) are dim^2 x dim^2
