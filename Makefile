@@ -19,10 +19,12 @@ build/material_point: examples/material_point.c plastinet.h
 run: build/material_point
 	@echo "# von Mises steel, uniaxial stress, linear hardening (build/material_point --help for more)"
 	@build/material_point --dim 3 --plastic von_mises --path uniaxial_stress --steps 40 \
-	    --max-strain 0.01 | awk -F, '/^#/ {next} /^step,/ {for (i = 1; i <= NF; i++) c[$$i] = i; \
+	    --max-strain 0.01 --out build/run.csv
+	@awk -F, '/^#/ {next} /^step,/ {for (i = 1; i <= NF; i++) c[$$i] = i; \
 	    printf "%10s %14s %17s %12s\n", "step", "axial_strain", "axial_stress_MPa", "plastic_h"; next} \
 	    {printf "%10d %14.6f %17.3f %12.6f\n", $$c["step"], $$c["axial_log_strain"], \
-	    $$c["axial_sigma"] / 1e6, $$c["h"]}'
+	    $$c["axial_sigma"] / 1e6, $$c["h"]}' build/run.csv
+	@echo "# full CSV (F, Fe, Kirchhoff and Cauchy stress, h, yield value per step): build/run.csv"
 
 test:
 	@tests/run.sh
