@@ -1128,34 +1128,40 @@ static pn_result pn__energy_out(int d, const pn_real *U, const pn_real *V, const
     return PN_OK;
 }
 
-PN__DEF pn_result pn_elastic_energy(const pn_material *m, int d, const pn_real *F, pn_real h,
-                                    pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
-    pn_real U[9], s[3], V[9], mu, la;
-    pn__principal pr;
+/* Validate F and h, then the SVD of F and the principal data of the elastic model there. */
+static pn_result pn__elastic_at(const pn_material *m, int d, const pn_real *F, pn_real h, pn_real *U,
+                                pn_real *s, pn_real *V, pn__principal *pr) {
+    pn_real mu, la;
     pn_result r = pn__check_F(d, F);
-    PN_ASSERT(m && F);
     if (r != PN_OK) return r;
     if (!pn__finite(h)) return PN_ERROR_NONFINITE;
     pn__svd(d, F, U, s, V);
     if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
     pn__lame_at(m, h, &mu, &la);
-    pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
+    pn__elastic_principal(m->elastic, mu, la, d, s, pr);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_elastic_energy(const pn_material *m, int d, const pn_real *F, pn_real h,
+                                    pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
+    pn_real U[9], s[3], V[9];
+    pn__principal pr;
+    pn_result r;
+    PN_ASSERT(m && F);
+    r = pn__elastic_at(m, d, F, h, U, s, V, &pr);
+    if (r != PN_OK) return r;
     return pn__energy_out(d, U, V, &pr, psi, P, dPdF, flags);
 }
 
 PN__DEF pn_result pn_kirchhoff_stress(const pn_material *m, int d, const pn_real *F, pn_real h,
                                       pn_real *tau) {
-    pn_real U[9], s[3], V[9], t[3], out[9], mu, la;
+    pn_real U[9], s[3], V[9], t[3] = {0, 0, 0}, out[9];
     pn__principal pr;
     int i;
-    pn_result r = pn__check_F(d, F);
+    pn_result r;
     PN_ASSERT(m && F && tau);
+    r = pn__elastic_at(m, d, F, h, U, s, V, &pr);
     if (r != PN_OK) return r;
-    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
-    pn__svd(d, F, U, s, V);
-    if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
-    pn__lame_at(m, h, &mu, &la);
-    pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
     for (i = 0; i < d; ++i) t[i] = s[i] * pr.g[i]; /* tau = P F^T = U diag(s g) U^T */
     pn__udvt(d, U, t, U, out);
     if (!pn__all_finite(d * d, out)) return PN_ERROR_NONFINITE;
@@ -1488,17 +1494,12 @@ PN__DEF pn_result pn_return_map(const pn_material *m, int d, const pn_real *F, p
                                 pn_real *Z, pn_real *h_new, pn_real *T) {
     pn_real U[9], s[3], V[9], z[3], hn, zz[9], tt[9], w[3];
     int plastic, i, n = d * d;
-    pn_result r = pn__check_F(d, F);
+    pn_result r;
     PN_ASSERT(m && F);
-    if (r != PN_OK) return r;
-    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
-    pn__svd(d, F, U, s, V);
     if (m->plastic == PN_PLASTIC_NONE) { /* T = P(F) */
         pn__principal pr;
-        pn_real mu, la;
-        if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
-        pn__lame_at(m, h, &mu, &la);
-        pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
+        r = pn__elastic_at(m, d, F, h, U, s, V, &pr);
+        if (r != PN_OK) return r;
         pn__udvt(d, U, pr.g, V, tt);
         if (!pn__all_finite(n, tt)) return PN_ERROR_NONFINITE;
         if (Z) memcpy(Z, F, sizeof(pn_real) * (size_t)n);
@@ -1506,6 +1507,10 @@ PN__DEF pn_result pn_return_map(const pn_material *m, int d, const pn_real *F, p
         if (T) memcpy(T, tt, sizeof(pn_real) * (size_t)n);
         return PN_OK;
     }
+    r = pn__check_F(d, F);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    pn__svd(d, F, U, s, V);
     if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED; /* plastic flow is defined for det F > 0 */
     r = pn__return_principal(m, d, s, h, z, &hn, &plastic);
     if (r != PN_OK) return r;
