@@ -33,31 +33,37 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     done
 fi
 
-# 2. the test binary
+# 2. the test binaries: test_main (double, every test) and test_float (PN_REAL=float)
 if [ -n "$SANITIZE" ]; then
     flags="-O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
-    bin=build/test_main_san
+    suffix=_san
 else
     flags="-O2 -g"
-    bin=build/test_main
+    suffix=
 fi
-# shellcheck disable=SC2086
-if ! $CC -std=c99 $W $flags tests/test_main.c -lm -o $bin; then
-    bad "build $bin"
-    echo "$passed passed, $failed failed"
-    exit 1
-fi
-./$bin "$@" >build/test_main.log 2>&1
-status=$?
-cat build/test_main.log | grep -v '^[0-9]* passed, [0-9]* failed$'
-last=$(tail -n 1 build/test_main.log)
-p=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\1/p')
-f=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\2/p')
-if [ -z "$p" ]; then
-    bad "$bin crashed or printed no summary (exit $status)"
-else
-    passed=$((passed + p)); failed=$((failed + f))
-    if [ "$status" -ne 0 ] && [ "$f" -eq 0 ]; then bad "$bin exit status $status"; fi
-fi
+# run_bin NAME SOURCE EXTRA_FLAGS [filter]: build, run, add its "N passed, N failed" to ours
+run_bin() {
+    bin=build/$1$suffix
+    # shellcheck disable=SC2086
+    if ! $CC -std=c99 $W $flags $3 "$2" -lm -o "$bin"; then
+        bad "build $bin"
+        return
+    fi
+    shift 3
+    ./"$bin" "$@" >"$bin.log" 2>&1
+    status=$?
+    grep -v '^[0-9]* passed, [0-9]* failed$' "$bin.log"
+    last=$(tail -n 1 "$bin.log")
+    p=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\1/p')
+    f=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\2/p')
+    if [ -z "$p" ]; then
+        bad "$bin crashed or printed no summary (exit $status)"
+    else
+        passed=$((passed + p)); failed=$((failed + f))
+        if [ "$status" -ne 0 ] && [ "$f" -eq 0 ]; then bad "$bin exit status $status"; fi
+    fi
+}
+run_bin test_main tests/test_main.c "" "$@"
+run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
