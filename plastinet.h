@@ -131,6 +131,8 @@ typedef enum pn_result {
     PN_ERROR_OUT_OF_MEMORY,
     PN_ERROR_DIMENSION,         /* dimension compiled out, or a model of the wrong dim     */
     PN_ERROR_FORMAT,            /* a model of an unknown format version                    */
+    PN_ERROR_OVERFLOW,          /* finite inputs, but the result overflowed (NaN or inf):
+                                   the deformation is too extreme for the model          */
     PN_RESULT_COUNT
 } pn_result;
 
@@ -402,6 +404,7 @@ PN__DEF const char *pn_result_string(pn_result r) {
     case PN_ERROR_OUT_OF_MEMORY: return "out of memory";
     case PN_ERROR_DIMENSION: return "unsupported dimension (not 2 or 3, compiled out, or a model of another dimension)";
     case PN_ERROR_FORMAT: return "unknown model format version";
+    case PN_ERROR_OVERFLOW: return "the result overflowed (NaN or infinity) although the inputs are finite: the deformation is too extreme for the model";
     case PN_RESULT_COUNT: break;
     }
     return "unknown pn_result";
@@ -1121,7 +1124,7 @@ static pn_result pn__energy_out(int d, const pn_real *U, const pn_real *V, const
     int n = d * d;
     pn__assemble(d, U, V, pr, p, dPdF ? h : NULL, (flags & PN_EVAL_PROJECT_PSD) != 0);
     if (!pn__finite(pr->psi) || !pn__all_finite(n, p) || (dPdF && !pn__all_finite(n * n, h)))
-        return PN_ERROR_NONFINITE;
+        return PN_ERROR_OVERFLOW;
     if (psi) *psi = pr->psi;
     if (P) memcpy(P, p, sizeof(pn_real) * (size_t)n);
     if (dPdF) memcpy(dPdF, h, sizeof(pn_real) * (size_t)(n * n));
@@ -1164,7 +1167,7 @@ PN__DEF pn_result pn_kirchhoff_stress(const pn_material *m, int d, const pn_real
     if (r != PN_OK) return r;
     for (i = 0; i < d; ++i) t[i] = s[i] * pr.g[i]; /* tau = P F^T = U diag(s g) U^T */
     pn__udvt(d, U, t, U, out);
-    if (!pn__all_finite(d * d, out)) return PN_ERROR_NONFINITE;
+    if (!pn__all_finite(d * d, out)) return PN_ERROR_OVERFLOW;
     memcpy(tau, out, sizeof(pn_real) * (size_t)(d * d));
     return PN_OK;
 }
@@ -1501,7 +1504,7 @@ PN__DEF pn_result pn_return_map(const pn_material *m, int d, const pn_real *F, p
         r = pn__elastic_at(m, d, F, h, U, s, V, &pr);
         if (r != PN_OK) return r;
         pn__udvt(d, U, pr.g, V, tt);
-        if (!pn__all_finite(n, tt)) return PN_ERROR_NONFINITE;
+        if (!pn__all_finite(n, tt)) return PN_ERROR_OVERFLOW;
         if (Z) memcpy(Z, F, sizeof(pn_real) * (size_t)n);
         if (h_new) *h_new = h;
         if (T) memcpy(T, tt, sizeof(pn_real) * (size_t)n);
@@ -1521,7 +1524,7 @@ PN__DEF pn_result pn_return_map(const pn_material *m, int d, const pn_real *F, p
     for (i = 0; i < d; ++i) w[i] /= s[i];
     pn__udvt(d, U, w, V, tt);
     if (!pn__finite(hn) || !pn__all_finite(n, zz) || !pn__all_finite(n, tt))
-        return PN_ERROR_NONFINITE;
+        return PN_ERROR_OVERFLOW;
     if (Z) memcpy(Z, zz, sizeof(pn_real) * (size_t)n);
     if (h_new) *h_new = hn;
     if (T) memcpy(T, tt, sizeof(pn_real) * (size_t)n);
@@ -1538,7 +1541,7 @@ PN__DEF pn_result pn_yield_function(const pn_material *m, int d, const pn_real *
     pn__svd(d, F, U, s, V);
     if (m->plastic != PN_PLASTIC_NONE && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
     pn__yield_principal(m, d, s, h, &yy, &sc);
-    if (!pn__finite(yy)) return PN_ERROR_NONFINITE;
+    if (!pn__finite(yy)) return PN_ERROR_OVERFLOW;
     *y = yy;
     if (scale) *scale = sc;
     return PN_OK;
@@ -1616,7 +1619,7 @@ PN__DEF pn_result pn_lagged_prepare(const pn_material *m, int d, const pn_real *
         } else {
             pn__identity(d, g);
         }
-        if (!pn__finite(hn) || !pn__all_finite(d * d, g)) return PN_ERROR_NONFINITE;
+        if (!pn__finite(hn) || !pn__all_finite(d * d, g)) return PN_ERROR_OVERFLOW;
     }
     memcpy(G, g, sizeof(pn_real) * (size_t)(d * d));
     *h_G = hn;
@@ -1660,7 +1663,7 @@ PN__DEF pn_result pn_lagged_energy(const pn_material *m, int d, const pn_real *F
                     hh[(i * d + j) * n + a] = acc;
                 }
     }
-    if (!pn__all_finite(n, p) || (dPdF && !pn__all_finite(n * n, hh))) return PN_ERROR_NONFINITE;
+    if (!pn__all_finite(n, p) || (dPdF && !pn__all_finite(n * n, hh))) return PN_ERROR_OVERFLOW;
     if (psi) *psi = e;
     if (P) memcpy(P, p, sizeof(pn_real) * (size_t)n);
     if (dPdF) memcpy(dPdF, hh, sizeof(pn_real) * (size_t)(n * n));

@@ -1093,6 +1093,100 @@ PN_TEST(return_von_mises_negative_state) {
     PN_CHECK(!pn_tr_touched(Z, hn, T));
 }
 
+/* Stability at the extremes: every public evaluator over random materials (any elastic and
+   plastic model, E from 1e3 to 1e12 Pa, the whole parameter ranges) and random F with
+   log-stretches up to +-15, some inverted, random states. Each call must either succeed with
+   finite outputs, or return an error code with every output untouched; a finite input must
+   never be reported as PN_ERROR_NONFINITE (an overflow is PN_ERROR_OVERFLOW). */
+static int t_ex_untouched(int n, const pn_real *a) {
+    int i;
+    for (i = 0; i < n; ++i)
+        if (a[i] != 7) return 0;
+    return 1;
+}
+PN_TEST(return_extremes_fuzz) {
+    pn_test_rng rng;
+    long calls = 0, ok = 0, bad = 0, codes[PN_RESULT_COUNT];
+    int t, i;
+    rng.s = 991;
+    for (i = 0; i < (int)PN_RESULT_COUNT; ++i) codes[i] = 0;
+    for (t = 0; t < 60000; ++t) {
+        int d = 2 + (t & 1), n = d * d;
+        pn_material_desc ds;
+        pn_material m;
+        double R1[9], R2[9], s[3], Fd[9], range = t % 3 == 0 ? 15 : t % 3 == 1 ? 3 : 0.5;
+        pn_real F[9], F2[9], Z[9], T[9], P[9], H[81], G[9], psi = 7, hn = 7, hG = 7, y = 7, sc = 7, h;
+        pn_result r[6];
+        int k;
+        memset(&ds, 0, sizeof ds);
+        ds.plastic = (pn_plastic_model)(pn_test_rng_u64(&rng) % PN_PLASTIC_MODEL_COUNT);
+        ds.elastic = (pn_elastic_model)(pn_test_rng_u64(&rng) % PN_ELASTIC_MODEL_COUNT);
+        ds.youngs_modulus_pa = pow(10, pn_test_rng_range(&rng, 3, 12));
+        ds.poisson_ratio = pn_test_rng_range(&rng, -0.49, 0.49);
+        ds.friction_angle_deg = pn_test_rng_range(&rng, 1, 89);
+        ds.cohesion_strain = pn_test_rng_range(&rng, 0, 0.1);
+        ds.volume_correction = (int)(pn_test_rng_u64(&rng) & 1);
+        ds.yield_stress_pa = ds.youngs_modulus_pa * pow(10, pn_test_rng_range(&rng, -7, -1));
+        ds.hardening_modulus_pa = ds.youngs_modulus_pa * pn_test_rng_range(&rng, 0, 0.2);
+        ds.camclay_beta = pn_test_rng_range(&rng, 0, 2);
+        ds.camclay_xi = pn_test_rng_range(&rng, 0, 20);
+        ds.snow_theta_c = pn_test_rng_range(&rng, 0.01, 0.2);
+        ds.snow_theta_s = pn_test_rng_range(&rng, 0, 0.02);
+        ds.snow_xi = pn_test_rng_range(&rng, 0, 20);
+        if (pn_material_init(&m, &ds, NULL) != PN_OK) continue; /* unsupported pairs */
+        t_rand_rot(&rng, d, R1);
+        t_rand_rot(&rng, d, R2);
+        for (k = 0; k < d; ++k) s[k] = exp(pn_test_rng_range(&rng, -range, range));
+        if (t % 7 == 0) s[d - 1] = -s[d - 1];
+        t_adb(d, R1, s, R2, Fd);
+        for (k = 0; k < n; ++k) F[k] = Fd[k];
+        for (k = 0; k < n; ++k) F2[k] = F[k] * (1 + 0.01 * pn_test_rng_range(&rng, -1, 1));
+        h = ds.plastic == PN_PLASTIC_VON_MISES ? pn_test_rng_range(&rng, 0, 1) : pn_test_rng_range(&rng, -1, 1);
+        for (k = 0; k < 9; ++k) Z[k] = T[k] = P[k] = G[k] = 7;
+        for (k = 0; k < 81; ++k) H[k] = 7;
+        r[0] = pn_return_map(&m, d, F, h, Z, &hn, T);
+        bad += r[0] == PN_OK ? !(t_finite(n, Z) && t_finite(n, T) && t_finite(1, &hn))
+                             : !(t_ex_untouched(n, Z) && t_ex_untouched(n, T) && hn == 7);
+        r[1] = pn_yield_function(&m, d, F, h, &y, &sc);
+        bad += r[1] == PN_OK ? !(t_finite(1, &y) && t_finite(1, &sc)) : !(y == 7 && sc == 7);
+        for (k = 0; k < 81; ++k) H[k] = 7;
+        for (k = 0; k < 9; ++k) P[k] = 7;
+        psi = 7;
+        r[2] = pn_elastic_energy(&m, d, F, h, &psi, P, H, (t & 2) ? PN_EVAL_PROJECT_PSD : 0u);
+        bad += r[2] == PN_OK ? !(t_finite(1, &psi) && t_finite(n, P) && t_finite(n * n, H))
+                             : !(psi == 7 && t_ex_untouched(n, P) && t_ex_untouched(n * n, H));
+        r[3] = pn_lagged_prepare(&m, d, F, h, G, &hG);
+        bad += r[3] == PN_OK ? !(t_finite(n, G) && t_finite(1, &hG)) : !(t_ex_untouched(n, G) && hG == 7);
+        r[4] = PN_OK;
+        if (r[3] == PN_OK) {
+            for (k = 0; k < 81; ++k) H[k] = 7;
+            for (k = 0; k < 9; ++k) P[k] = 7;
+            psi = 7;
+            r[4] = pn_lagged_energy(&m, d, F2, G, hG, &psi, P, H, PN_EVAL_PROJECT_PSD);
+            bad += r[4] == PN_OK ? !(t_finite(1, &psi) && t_finite(n, P) && t_finite(n * n, H))
+                                 : !(psi == 7 && t_ex_untouched(n, P) && t_ex_untouched(n * n, H));
+        }
+        for (k = 0; k < 81; ++k) H[k] = 7;
+        for (k = 0; k < 9; ++k) P[k] = 7;
+        psi = 7;
+        r[5] = pn_von_mises_energy(&m, d, F, h < 0 ? -h : h, &psi, P, H, 0);
+        bad += r[5] == PN_OK ? !(t_finite(1, &psi) && t_finite(n, P) && t_finite(n * n, H))
+                             : !(psi == 7 && t_ex_untouched(n, P) && t_ex_untouched(n * n, H));
+        for (k = 0; k < 6; ++k) {
+            calls++;
+            ok += r[k] == PN_OK;
+            if ((int)r[k] >= 0 && r[k] < PN_RESULT_COUNT) codes[r[k]]++;
+        }
+    }
+    PN_REPORT("%ld calls: %ld ok, %ld inverted, %ld unsupported, %ld overflow, %ld not-converged, "
+              "%ld with a wrong output", calls, ok, codes[PN_ERROR_INVERTED],
+              codes[PN_ERROR_UNSUPPORTED], codes[PN_ERROR_OVERFLOW], codes[PN_ERROR_NOT_CONVERGED], bad);
+    PN_CHECK(bad == 0);
+    PN_CHECK(codes[PN_ERROR_NONFINITE] == 0);     /* every input here is finite */
+    PN_CHECK(codes[PN_ERROR_NOT_CONVERGED] == 0); /* the root finds are bracketed */
+    PN_CHECK(ok > calls / 2);
+}
+
 static const pn_test_case pn_tests_return[] = {
     {"return_drucker_prager", return_drucker_prager},
     {"return_drucker_prager_cohesion", return_drucker_prager_cohesion},
@@ -1108,4 +1202,5 @@ static const pn_test_case pn_tests_return[] = {
     {"return_unsupported_combinations", return_unsupported_combinations},
     {"return_inverted", return_inverted},
     {"return_von_mises_negative_state", return_von_mises_negative_state},
+    {"return_extremes_fuzz", return_extremes_fuzz},
 };
