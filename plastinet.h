@@ -74,12 +74,15 @@
    inf, impossible parameters, a deformation where the model is undefined) never crashes and
    never writes a partial result: on any error every output is left exactly as it was.
    pn_material_init additionally names the offending parameter. NULL required pointers and
-   similar programming errors trip PN_ASSERT.
+   similar programming errors trip PN_ASSERT. NaN or inf in an input is PN_ERROR_NONFINITE; a
+   result that overflows for finite inputs (stretches far beyond any physical range) is
+   PN_ERROR_OVERFLOW.
 
    Inverted deformations: the Hencky-strain models (StVK-Hencky, Drucker-Prager, von Mises,
    exact von Mises energy) and the Neo-Hookean models are undefined for det F <= 0 and return
-   PN_ERROR_INVERTED. Fixed corotated is defined for every F (singular at s_i + s_j = 0 only in
-   its Hessian, where the rotation is undefined).
+   PN_ERROR_INVERTED; so do all return mappings of plastic models. Fixed corotated is defined
+   for every F (its Hessian is singular where s_i + s_j = 0, where the rotation is undefined;
+   there the divisor is clamped to machine epsilon).
 
    ======================================================================================
    THREADS AND DETERMINISM
