@@ -4,7 +4,9 @@ CC ?= cc
 CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run test test-sanitize bench-core clean examples
+.PHONY: all run test test-sanitize bench-core clean examples models model-report crosscheck
+# torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
+PY ?= /usr/bin/python3
 
 all: examples
 
@@ -30,10 +32,27 @@ test:
 	@tests/run.sh
 
 # Nanoseconds per call of the core (SVD, energies, return mappings), 2D and 3D.
-bench-core: bench/bench_core.c plastinet.h
+bench-core: bench/bench_core.c bench/bench_util.h plastinet.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_core.c $(LDLIBS) -o build/bench_core
 	build/bench_core --csv build/bench_core.csv
+
+# Train (resuming checkpoints), export and measure the shipped models: all, or MODEL=name.
+models:
+	$(PY) gen/make_models.py $(MODEL)
+
+# models/REPORT.md: quality and cost of every model in models/ (bench/model_report.c).
+model-report: build/model_report
+	build/model_report --out models/REPORT.md
+	@cat models/REPORT.md
+
+build/model_report: bench/model_report.c bench/bench_util.h plastinet.h $(wildcard models/*.h)
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/model_report.c $(LDLIBS) -o $@
+
+# C against torch (targets, every model); also part of `make test` when torch is installed.
+crosscheck:
+	$(PY) gen/crosscheck.py
 
 test-sanitize:
 	@SANITIZE=1 tests/run.sh

@@ -1,4 +1,4 @@
-/* plastinet.h - v0.1 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.2 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -28,6 +28,17 @@
        pn_lagged_prepare(&sand, 3, F, h, G, &hG);     // once per F0 (here F0 = F)
        pn_lagged_energy(&sand, 3, F, G, hG, &psi, P, H, PN_EVAL_PROJECT_PSD);
 
+   PlasticityNet: a learned energy for plasticity in implicit solvers (models/README.md):
+
+       #include "models/pn_model_sand_2d.h"          // after plastinet.h
+       pn_material sand2d;  pn_pnet net;  pn_pnet_desc nd;  pn_pnet_point pt;
+       pn_model_material(pn_model_sand_2d(), 1e7, &sand2d);   // its training material, E = 1e7
+       memset(&nd, 0, sizeof nd);  nd.energy = pn_model_sand_2d();
+       pn_pnet_init(&net, &nd, &sand2d, 2, &why);
+       pn_real F0[4] = {1, 0, 0, 0.98}, F1[4] = {1.01, 0, 0.02, 0.97}, P2[4], H2[16];
+       pn_pnet_prepare(&net, F0, 0, &pt, NULL, NULL); // once per F0 (each fixed-point pass)
+       pn_pnet_energy(&net, &pt, F1, &psi, P2, H2, PN_EVAL_PROJECT_PSD);
+
    Matrices are row-major arrays of dim*dim reals (F[i*dim+j] = F_ij), dim = 2 or 3.
    A pn_real[9] serves both dimensions. Fourth-order tensors (dP/dF) are dim^2 x dim^2
    row-major: dPdF[(i*dim+j)*dim*dim + k*dim+l] = dP_ij / dF_kl.
@@ -45,6 +56,12 @@
                 singular-value clamp snow of Stomakhin et al. 2013
      >>energy-vm      exact StVK-Hencky + von Mises elastoplastic energy (frozen yield stress)
      >>energy-lagged  lagged-plasticity energy Psi_el(F G), G = F0^-1 Z(F0)
+     >>mlp      inference of small MLPs stored as float arrays: value, input gradient and the
+                exact input Hessian (forward-mode second order)
+     >>features rotation invariants of F (from C = F^T F, no SVD) and their F-derivatives
+     >>pnet     PlasticityNet learned elastoplastic energy Psi(F; F0, h) (Li et al. 2022,
+                Eqs. 8 and 11) from a model header in models/, rescaled to any E
+     >>learned-return  learned volume-preserving von Mises return mapping (Eqs. 12-13)
 
    ======================================================================================
    OPTIONS (define before including the implementation)
@@ -63,7 +80,9 @@
    ======================================================================================
    MEMORY
    ======================================================================================
-   The core allocates nothing: every function works on caller-provided arrays. Solvers built
+   The core allocates nothing: every function works on caller-provided arrays (pn_mlp_eval
+   keeps its work arrays on the stack: about 4700 reals, 38 KB in double;
+   model weights are static const data in the model headers). Solvers built
    on it take a pn_allocator (both callbacks or neither, with a user pointer) and store it with
    the object they allocate.
 
@@ -96,6 +115,8 @@
    ======================================================================================
      0.1  constitutive core: deformation math, elastic energies, return mappings,
           exact von Mises and lagged-plasticity energies.
+     0.2  learned models: MLP inference with exact Hessians, PlasticityNet energies and the
+          learned return mapping; model headers in models/ (format version 1).
 */
 #ifndef PLASTINET_H
 #define PLASTINET_H
@@ -113,7 +134,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 1
+#define PN_VERSION_MINOR 2
 
 #ifdef __cplusplus
 extern "C" {
@@ -325,6 +346,135 @@ PN_API pn_result pn_lagged_prepare(const pn_material *m, int dim, const pn_real 
 PN_API pn_result pn_lagged_energy(const pn_material *m, int dim, const pn_real *F,
                                   const pn_real *G, pn_real h_G, pn_real *psi, pn_real *P,
                                   pn_real *dPdF, unsigned flags);
+
+/* ---- learned models: MLP inference, PlasticityNet energies, learned return mapping ---------- */
+
+/* Layout version of the pn_model structs written by gen/export.py; a model of another version
+   is refused with PN_ERROR_FORMAT. */
+#define PN_MODEL_FORMAT_VERSION 1
+#define PN_MLP_MAX_LAYERS 8     /* linear layers */
+#define PN_MLP_MAX_WIDTH 64     /* units per layer (inputs and outputs included) */
+#define PN_MLP_MAX_DIFF 4       /* inputs an evaluation can differentiate with respect to */
+
+typedef enum pn_activation {
+    PN_ACTIVATION_SILU = 1,     /* z / (1 + exp(-z)) */
+    PN_ACTIVATION_TANH,
+    PN_ACTIVATION_SOFTPLUS      /* log(1 + exp(z)) */
+} pn_activation;
+
+/* A multilayer perceptron with float weights (computed in pn_real): linear layers with the
+   activation after each one but the last. weight[l] is size[l+1] x size[l], row-major (torch's
+   nn.Linear layout), bias[l] has size[l+1] entries. */
+typedef struct pn_mlp {
+    int n_layers;
+    int size[PN_MLP_MAX_LAYERS + 1]; /* size[0] inputs, size[n_layers] outputs */
+    pn_activation activation;
+    const float *weight[PN_MLP_MAX_LAYERS];
+    const float *bias[PN_MLP_MAX_LAYERS];
+} pn_mlp;
+
+/* Evaluate out = mlp(in) and, when n_diff > 0, the derivatives with respect to the first n_diff
+   inputs (n_diff <= PN_MLP_MAX_DIFF): grad[o * n_diff + k] = d out_o / d in_k and, if hess is
+   not NULL, hess[(o * n_diff + k) * n_diff + l] = d2 out_o / d in_k d in_l (exact: forward
+   tangents and a backward pass). grad and hess may be NULL. PN_ERROR_FORMAT for a malformed
+   network, PN_ERROR_NONFINITE for NaN/inf inputs, PN_ERROR_OVERFLOW if a result is not finite;
+   outputs are written only on success. */
+PN_API pn_result pn_mlp_eval(const pn_mlp *mlp, const pn_real *in, int n_diff, pn_real *out,
+                             pn_real *grad, pn_real *hess);
+
+typedef enum pn_model_kind {
+    PN_MODEL_ENERGY = 1,        /* PlasticityNet energy N(F, F0, h) (Li et al. 2022, Eq. 8)    */
+    PN_MODEL_RETURN_MAP         /* learned volume-preserving return mapping (Eqs. 12-13)       */
+} pn_model_kind;
+
+/* A trained model as a generated header in models/ describes it (see models/README.md). The
+   material fields describe what it was trained for; plastic stresses are ratios to E. */
+typedef struct pn_model {
+    int format_version;              /* PN_MODEL_FORMAT_VERSION of the generator           */
+    const char *name;                /* "sand_2d", ...                                     */
+    pn_model_kind kind;
+    int dim;                         /* 2 or 3                                             */
+    pn_elastic_model elastic;
+    pn_plastic_model plastic;
+    double youngs_modulus_train_pa;  /* E of the training data                             */
+    double poisson_ratio;
+    double friction_angle_deg;       /* Drucker-Prager, Cam-Clay                           */
+    double cohesion_strain;          /* Drucker-Prager                                     */
+    double yield_stress_ratio;       /* von Mises sigma_Y0 / E                             */
+    double hardening_ratio;          /* von Mises K / E                                    */
+    double camclay_beta, camclay_xi; /* Cam-Clay                                           */
+    double h_min, h_max;             /* hardening-state range of the training data         */
+    double e_box, de_box;            /* sampling: log stretches of F0 in [-e_box, e_box]^d,
+                                        those of F within de_box of them (Section 5.1)     */
+    const char *return_map;          /* name of the learned return mapping the energy was
+                                        trained with, or NULL (analytic return mapping)   */
+    int n_inputs;                    /* network inputs, = mlp.size[0]                      */
+    double in_shift[16], in_scale[16]; /* network input u_i = (raw_i - shift_i) * scale_i  */
+    double out_scale;                /* energy: N = out_scale mlp(u) at E = E_train        */
+    pn_mlp mlp;
+    const char *summary;             /* training and quality summary, one line             */
+} pn_model;
+
+/* Check a model's format version, kind, layout and dimension (dim = 0: any). On failure *why
+   (if not NULL) names the problem. */
+PN_API pn_result pn_model_check(const pn_model *model, int dim, const char **why);
+
+/* The material a model was trained for, at Young's modulus E (Pa). */
+PN_API pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m);
+
+/* PlasticityNet (Li et al. 2022): the energy
+     Psi(F; F0, h) = N(F, F0, h) - (grad_F N(F0, F0, h) - T(F0)) : F + w mu/2 |F - F0|^2
+   (Eqs. 8 and 11) whose gradient at F = F0 is exactly T(F0) = tau(Z(F0)) F0^-T and approximates
+   T(F) nearby. N is a function of rotation invariants of F and F0 (exactly objective and
+   isotropic), scaled by E / E_train. */
+typedef struct pn_pnet_desc {
+    const pn_model *energy;          /* required, kind PN_MODEL_ENERGY                      */
+    const pn_model *return_map;      /* the learned return mapping energy->return_map names;
+                                        NULL when that is NULL                             */
+    pn_real regularizer;             /* w in Eq. 11: 0 means 1; negative means 0 (off)     */
+} pn_pnet_desc;
+
+typedef struct pn_pnet {
+    const pn_model *energy, *return_map;
+    pn_material material;            /* the simulated material (any E)                     */
+    pn_real scale;                   /* E / E_train                                        */
+    pn_real reg;                     /* w mu (Pa)                                          */
+} pn_pnet;
+
+/* Per-point data, computed once per F0 by pn_pnet_prepare. */
+typedef struct pn_pnet_point {
+    pn_real F0[9];
+    pn_real x0[3];                   /* invariant features of F0                            */
+    pn_real h;                       /* hardening state (the network sees it clamped to the
+                                        model's range; T(F0) used it as given)            */
+    pn_real C[9];                    /* linear correction (E-scaled grad N(F0) - T(F0))      */
+} pn_pnet_point;
+
+/* Bind a model to a material. The material must match the model's training material (models,
+   Poisson ratio, plastic parameters relative to E; E itself is free) and dim the model's
+   (dim = 0 accepts the model's own):
+   PN_ERROR_INVALID_PARAMETER, PN_ERROR_DIMENSION or PN_ERROR_FORMAT otherwise, with *why. */
+PN_API pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_material *m,
+                              int dim, const char **why);
+
+/* Prepare a point for F0 and hardening state h: computes T(F0) by the return mapping (analytic,
+   or the learned one) and the linear correction. h_new (optional) gets the return mapping's
+   updated state at F0, T0 (optional) T(F0). */
+PN_API pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real h,
+                                 pn_pnet_point *pt, pn_real *h_new, pn_real *T0);
+
+/* Psi(F; F0, h) (Pa), P = dPsi/dF and dP/dF, each optional, at a prepared point. With
+   PN_EVAL_PROJECT_PSD dP/dF is replaced by its nearest PSD matrix. PN_ERROR_INVERTED for
+   det F <= 0 (the invariants need J > 0). */
+PN_API pn_result pn_pnet_energy(const pn_pnet *net, const pn_pnet_point *pt, const pn_real *F,
+                                pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags);
+
+/* Learned volume-preserving von Mises return mapping (Eqs. 12-13): as pn_return_map, with the
+   plastic multiplier from the network: dgamma = min(|e_hat| - r(s, h), |e_hat|) clamped at 0,
+   r = r_ref exp(mlp(u)). m must match the model's training material. */
+PN_API pn_result pn_learned_return_map(const pn_model *model, const pn_material *m, int dim,
+                                       const pn_real *F, pn_real h, pn_real *Z, pn_real *h_new,
+                                       pn_real *T);
 
 #ifdef __cplusplus
 }
@@ -1670,6 +1820,599 @@ PN__DEF pn_result pn_lagged_energy(const pn_material *m, int d, const pn_real *F
     if (psi) *psi = e;
     if (P) memcpy(P, p, sizeof(pn_real) * (size_t)n);
     if (dPdF) memcpy(dPdF, hh, sizeof(pn_real) * (size_t)(n * n));
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>mlp: value by a forward pass; gradient by a backward (adjoint) pass; the Hessian with
+   respect to the first n_diff inputs from the identity for an MLP with affine layers,
+       d2 f / dx dx = sum over hidden units u of  (df/da_u) s''(z_u) (dz_u/dx) (dz_u/dx)^T,
+   with the tangents dz_u/dx carried forward and the adjoints df/da_u from the backward pass:
+   2 + n_diff passes instead of the 1 + n_diff + n_diff(n_diff+1)/2 of forward mode.
+   ====================================================================================== */
+
+#define PN__MLP_MAX_HIDDEN ((PN_MLP_MAX_LAYERS - 1) * PN_MLP_MAX_WIDTH)
+
+static pn_real pn__sigmoid(pn_real z) {
+    if (z >= 0) return 1 / (1 + PN__EXP(-z));
+    {
+        pn_real e = PN__EXP(z);
+        return e / (1 + e);
+    }
+}
+
+/* activation value and first two derivatives */
+static void pn__activate(pn_activation act, pn_real z, pn_real *a, pn_real *a1, pn_real *a2) {
+    switch (act) {
+    case PN_ACTIVATION_TANH: {
+        pn_real t = (pn_real)tanh((double)z);
+        *a = t;
+        *a1 = 1 - t * t;
+        *a2 = -2 * t * (1 - t * t);
+        break;
+    }
+    case PN_ACTIVATION_SOFTPLUS: {
+        pn_real sg = pn__sigmoid(z);
+        *a = PN__MAX(z, 0) + PN__LOG1P(PN__EXP(-PN__FABS(z)));
+        *a1 = sg;
+        *a2 = sg * (1 - sg);
+        break;
+    }
+    default: { /* PN_ACTIVATION_SILU */
+        pn_real sg = pn__sigmoid(z);
+        *a = z * sg;
+        *a1 = sg + z * sg * (1 - sg);
+        *a2 = sg * (1 - sg) * (2 + z * (1 - 2 * sg));
+        break;
+    }
+    }
+}
+
+static pn_real pn__dot(int n, const pn_real *a, const pn_real *b) {
+    pn_real s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+    int i = 0;
+    for (; i + 4 <= n; i += 4) {
+        s0 += a[i] * b[i];
+        s1 += a[i + 1] * b[i + 1];
+        s2 += a[i + 2] * b[i + 2];
+        s3 += a[i + 3] * b[i + 3];
+    }
+    for (; i < n; ++i) s0 += a[i] * b[i];
+    return (s0 + s1) + (s2 + s3);
+}
+
+static int pn__mlp_ok(const pn_mlp *n) {
+    int l;
+    if (n->n_layers < 1 || n->n_layers > PN_MLP_MAX_LAYERS) return 0;
+    if (n->activation < PN_ACTIVATION_SILU || n->activation > PN_ACTIVATION_SOFTPLUS) return 0;
+    for (l = 0; l <= n->n_layers; ++l)
+        if (n->size[l] < 1 || n->size[l] > PN_MLP_MAX_WIDTH) return 0;
+    for (l = 0; l < n->n_layers; ++l)
+        if (!n->weight[l] || !n->bias[l]) return 0;
+    return 1;
+}
+
+PN__DEF pn_result pn_mlp_eval(const pn_mlp *net, const pn_real *in, int n_diff, pn_real *out,
+                              pn_real *grad, pn_real *hess) {
+    /* forward: buf[c * width + unit], c = 0 the value, c = 1..nt-1 the tangents dz/dx_k */
+    pn_real buf[2][(1 + PN_MLP_MAX_DIFF) * PN_MLP_MAX_WIDTH], wrow[PN_MLP_MAX_WIDTH];
+    pn_real d1[PN__MLP_MAX_HIDDEN], d2[PN__MLP_MAX_HIDDEN];      /* s'(z), s''(z) per unit  */
+    pn_real tg[PN__MLP_MAX_HIDDEN * PN_MLP_MAX_DIFF];             /* dz/dx per unit          */
+    pn_real lam[2][PN_MLP_MAX_WIDTH], H[PN_MLP_MAX_DIFF * PN_MLP_MAX_DIFF];
+    pn_real val[PN_MLP_MAX_WIDTH], gout[PN_MLP_MAX_WIDTH * PN_MLP_MAX_DIFF];
+    pn_real hout[PN_MLP_MAX_WIDTH * PN_MLP_MAX_DIFF * PN_MLP_MAX_DIFF];
+    int off[PN_MLP_MAX_LAYERS], L, l, i, j, c, k, o, cur = 0, nt, n_in, n_out;
+    int want_h = hess != NULL && n_diff > 0, want_g = (grad != NULL || want_h) && n_diff > 0;
+    PN_ASSERT(net && in && out);
+    if (!pn__mlp_ok(net) || n_diff < 0 || n_diff > PN_MLP_MAX_DIFF || n_diff > net->size[0])
+        return PN_ERROR_FORMAT;
+    L = net->n_layers;
+    n_in = net->size[0];
+    n_out = net->size[L];
+    if (!pn__all_finite(n_in, in)) return PN_ERROR_NONFINITE;
+    nt = 1 + (want_h ? n_diff : 0);
+    for (i = 0; i < n_in; ++i) {
+        buf[0][i] = in[i];
+        for (c = 1; c < nt; ++c) buf[0][c * n_in + i] = c - 1 == i ? 1 : 0;
+    }
+    for (l = 0, k = 0; l < L; ++l) {
+        int n0 = net->size[l], n1 = net->size[l + 1];
+        const float *W = net->weight[l], *b = net->bias[l];
+        pn_real *x = buf[cur], *y = buf[1 - cur];
+        for (j = 0; j < n1; ++j) {
+            const float *wj = W + (size_t)j * (size_t)n0;
+            for (i = 0; i < n0; ++i) wrow[i] = (pn_real)wj[i];
+            for (c = 0; c < nt; ++c) /* four partial sums: independent add chains */
+                y[c * n1 + j] = pn__dot(n0, wrow, x + c * n0);
+            y[j] += (pn_real)b[j];
+        }
+        if (l < L - 1) { /* hidden layer: keep s', s'' and the tangents of z for the passes back */
+            off[l] = k;
+            for (j = 0; j < n1; ++j, ++k) {
+                pn_real a;
+                pn__activate(net->activation, y[j], &a, &d1[k], &d2[k]);
+                y[j] = a;
+                for (c = 1; c < nt; ++c) {
+                    tg[k * PN_MLP_MAX_DIFF + c - 1] = y[c * n1 + j];
+                    y[c * n1 + j] *= d1[k];
+                }
+            }
+        }
+        cur = 1 - cur;
+    }
+    memcpy(val, buf[cur], sizeof(pn_real) * (size_t)n_out);
+    if (!pn__all_finite(n_out, val)) return PN_ERROR_OVERFLOW;
+    /* backward, once per output: lam = df/dz of the current layer's outputs */
+    for (o = 0; want_g && o < n_out; ++o) {
+        int lc = 0;
+        memset(H, 0, sizeof H);
+        for (j = 0; j < n_out; ++j) lam[0][j] = j == o ? 1 : 0;
+        for (l = L - 1; l >= 0; --l) {
+            int n0 = net->size[l], n1 = net->size[l + 1];
+            const float *W = net->weight[l];
+            pn_real *mu = lam[1 - lc];
+            for (i = 0; i < n0; ++i) mu[i] = 0;
+            for (j = 0; j < n1; ++j) {
+                const float *wj = W + (size_t)j * (size_t)n0;
+                pn_real lj = lam[lc][j];
+                if (lj != 0)
+                    for (i = 0; i < n0; ++i) mu[i] += (pn_real)wj[i] * lj;
+            }
+            if (l > 0) { /* mu = df/da of hidden layer l-1: its Hessian term, then df/dz */
+                int base = off[l - 1];
+                for (i = 0; i < n0; ++i) {
+                    int u = base + i;
+                    if (want_h) {
+                        pn_real w2 = mu[i] * d2[u];
+                        const pn_real *t = tg + u * PN_MLP_MAX_DIFF;
+                        for (j = 0; j < n_diff; ++j)
+                            for (c = j; c < n_diff; ++c) H[j * PN_MLP_MAX_DIFF + c] += w2 * t[j] * t[c];
+                    }
+                    mu[i] *= d1[u];
+                }
+            }
+            lc = 1 - lc;
+        }
+        for (j = 0; j < n_diff; ++j) gout[o * n_diff + j] = lam[lc][j]; /* df/dx */
+        if (!pn__all_finite(n_diff, gout + o * n_diff)) return PN_ERROR_OVERFLOW;
+        if (want_h)
+            for (j = 0; j < n_diff; ++j)
+                for (c = j; c < n_diff; ++c) {
+                    pn_real v = H[j * PN_MLP_MAX_DIFF + c];
+                    if (!pn__finite(v)) return PN_ERROR_OVERFLOW;
+                    hout[(o * n_diff + j) * n_diff + c] = v;
+                    hout[(o * n_diff + c) * n_diff + j] = v;
+                }
+    }
+    /* every check passed: now the outputs */
+    for (o = 0; o < n_out; ++o) out[o] = val[o];
+    if (grad && n_diff > 0) memcpy(grad, gout, sizeof(pn_real) * (size_t)(n_out * n_diff));
+    if (want_h) memcpy(hess, hout, sizeof(pn_real) * (size_t)(n_out * n_diff * n_diff));
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>features: rotation invariants of F for the energy networks, smooth wherever J > 0 and
+   computed from C = F^T F without an SVD (gen/pn_torch.py, `features`):
+     x1 = log J
+     2D: x2 = log(I1 / 2) - log J                    (= log cosh(e_1 - e_2))
+     3D: a = log(I1 / 3) - 2/3 log J, b = log(II / 3) - 4/3 log J, x2 = (a + b)/2, x3 = a - b
+   with I1 = tr C and II = tr cof C. Derivatives (row-major d^2 vectors, d^2 x d^2 Hessians):
+     d log J = F^-T, d2 log J[ij][kl] = -Finv_jk Finv_li; dI1 = 2F, d2 I1 = 2 Id;
+     dII = 2 (I1 F - F C), d2 II[ij][kl] = 4 F_ij F_kl + 2 I1 d_ik d_jl
+                                          - 2 (d_ik C_lj + F_il F_kj + B_ik d_jl), B = F F^T.
+   ====================================================================================== */
+
+typedef struct pn__features {
+    int nf;
+    pn_real x[3];
+    pn_real dx[3][9];
+    pn_real d2x[3][81];
+} pn__features;
+
+/* level 0: values, 1: + gradients, 2: + Hessians. Needs det F > 0. */
+static void pn__features_eval(int d, const pn_real *F, int level, pn__features *f) {
+    pn_real Fi[9], C[9], B[9], dL[9], dI1[9], dII[9], J, L, I1 = 0, II = 0;
+    int n = d * d, i, j, k, l, a;
+    J = pn_mat_det(d, F);
+    L = PN__LOG(J);
+    for (i = 0; i < n; ++i) I1 += F[i] * F[i];
+    f->nf = d == 2 ? 2 : 3;
+    f->x[0] = L;
+    if (d == 3) {
+        for (i = 0; i < 3; ++i)
+            for (j = 0; j < 3; ++j) {
+                pn_real c = 0, bb = 0;
+                for (k = 0; k < 3; ++k) {
+                    c += F[k * 3 + i] * F[k * 3 + j];
+                    bb += F[i * 3 + k] * F[j * 3 + k];
+                }
+                C[i * 3 + j] = c;
+                B[i * 3 + j] = bb;
+            }
+        /* II as the sum of the principal 2x2 minors of C: no cancellation against I1^2 */
+        II = C[0] * C[4] - C[1] * C[3] + C[0] * C[8] - C[2] * C[6] + C[4] * C[8] - C[5] * C[7];
+        {
+            pn_real av = PN__LOG(I1 / 3) - 2 * L / 3, bv = PN__LOG(II / 3) - 4 * L / 3;
+            f->x[1] = (av + bv) / 2;
+            f->x[2] = av - bv;
+        }
+    } else {
+        f->x[1] = PN__LOG(I1 / 2) - L;
+    }
+    if (level < 1) return;
+    pn_mat_inverse(d, F, Fi); /* J > 0: cannot fail */
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j) {
+            dL[i * d + j] = Fi[j * d + i];
+            dI1[i * d + j] = 2 * F[i * d + j];
+        }
+    if (d == 3)
+        for (i = 0; i < 3; ++i)
+            for (j = 0; j < 3; ++j) {
+                pn_real fc = 0;
+                for (k = 0; k < 3; ++k) fc += F[i * 3 + k] * C[k * 3 + j];
+                dII[i * 3 + j] = 2 * (I1 * F[i * 3 + j] - fc);
+            }
+    for (a = 0; a < n; ++a) {
+        pn_real da = dI1[a] / I1 - (d == 2 ? 1 : (pn_real)2 / 3) * dL[a];
+        if (d == 2) {
+            f->dx[0][a] = dL[a];
+            f->dx[1][a] = da;
+        } else {
+            pn_real db = dII[a] / II - (pn_real)4 / 3 * dL[a];
+            f->dx[0][a] = dL[a];
+            f->dx[1][a] = (da + db) / 2;
+            f->dx[2][a] = da - db;
+        }
+    }
+    if (level < 2) return;
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j)
+            for (k = 0; k < d; ++k)
+                for (l = 0; l < d; ++l) {
+                    int r = i * d + j, c = k * d + l, id = i == k && j == l;
+                    pn_real d2L = -Fi[j * d + k] * Fi[l * d + i];
+                    pn_real d2I1 = id ? 2 : 0;
+                    pn_real ha = d2I1 / I1 - dI1[r] * dI1[c] / (I1 * I1);
+                    f->d2x[0][r * n + c] = d2L;
+                    if (d == 2) {
+                        f->d2x[1][r * n + c] = ha - d2L;
+                    } else {
+                        pn_real d2II = 4 * F[r] * F[c] + I1 * d2I1 -
+                                       2 * ((i == k ? C[l * 3 + j] : 0) + F[i * 3 + l] * F[k * 3 + j] +
+                                            (j == l ? B[i * 3 + k] : 0));
+                        pn_real hb = d2II / II - dII[r] * dII[c] / (II * II);
+                        ha -= (pn_real)2 / 3 * d2L;
+                        hb -= (pn_real)4 / 3 * d2L;
+                        f->d2x[1][r * n + c] = (ha + hb) / 2;
+                        f->d2x[2][r * n + c] = ha - hb;
+                    }
+                }
+}
+
+/* ======================================================================================
+   >>pnet: model checks, material matching, PlasticityNet energy (Li et al. 2022, Eqs. 8, 11)
+     N(F, F0, h) = (E / E_train) out_scale mlp(u),
+     u = ([x(F) - x(F0), x(F0), clamp(h)] - in_shift) * in_scale
+     Psi = N(F, F0, h) - C : F + reg/2 |F - F0|^2,  C = grad_F N(F0, F0, h) - T(F0)
+   ====================================================================================== */
+
+static int pn__model_nf(const pn_model *mo) { return mo->dim == 2 ? 2 : 3; }
+
+static int pn__model_inputs(const pn_model *mo) {
+    return mo->kind == PN_MODEL_ENERGY ? 2 * pn__model_nf(mo) + 1 : (mo->dim == 2 ? 3 : 4);
+}
+
+static int pn__model_normalisation_ok(const pn_model *mo) {
+    int i;
+    for (i = 0; i < mo->n_inputs && i < 16; ++i)
+        if (!pn__finite((pn_real)mo->in_shift[i]) || !pn__finite((pn_real)mo->in_scale[i])) return 0;
+    return 1;
+}
+
+PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) {
+    const char *w = NULL;
+    pn_result r = PN_OK;
+    PN_ASSERT(mo);
+    if (mo->format_version != PN_MODEL_FORMAT_VERSION) {
+        w = "model format version differs from PN_MODEL_FORMAT_VERSION: regenerate it (make models)";
+        r = PN_ERROR_FORMAT;
+    } else if (mo->kind != PN_MODEL_ENERGY && mo->kind != PN_MODEL_RETURN_MAP) {
+        w = "unknown model kind";
+        r = PN_ERROR_FORMAT;
+    } else if (!pn__dim_ok(mo->dim)) {
+        w = "model dimension is not 2 or 3, or is compiled out (PN_NO_2D / PN_NO_3D)";
+        r = PN_ERROR_DIMENSION;
+    } else if (dim != 0 && mo->dim != dim) {
+        w = "model was trained for another dimension";
+        r = PN_ERROR_DIMENSION;
+    } else if (!pn__mlp_ok(&mo->mlp) || mo->n_inputs != mo->mlp.size[0] ||
+               mo->n_inputs != pn__model_inputs(mo) || mo->mlp.size[mo->mlp.n_layers] != 1) {
+        w = "model network layout is malformed";
+        r = PN_ERROR_FORMAT;
+    } else if (!(mo->youngs_modulus_train_pa > 0) || !(mo->h_min <= mo->h_max) ||
+               !pn__finite((pn_real)mo->out_scale) || !pn__model_normalisation_ok(mo)) {
+        w = "model training parameters are malformed";
+        r = PN_ERROR_FORMAT;
+    }
+    if (why && w) *why = w;
+    return r;
+}
+
+PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *m) {
+    pn_material_desc d;
+    PN_ASSERT(mo && m);
+    memset(&d, 0, sizeof d);
+    d.elastic = mo->elastic;
+    d.plastic = mo->plastic;
+    d.youngs_modulus_pa = E;
+    d.poisson_ratio = (pn_real)mo->poisson_ratio;
+    d.friction_angle_deg = (pn_real)mo->friction_angle_deg;
+    d.cohesion_strain = (pn_real)mo->cohesion_strain;
+    d.yield_stress_pa = (pn_real)(mo->yield_stress_ratio * E);
+    d.hardening_modulus_pa = (pn_real)(mo->hardening_ratio * E);
+    d.camclay_beta = (pn_real)mo->camclay_beta;
+    d.camclay_xi = (pn_real)mo->camclay_xi;
+    return pn_material_init(m, &d, NULL);
+}
+
+static int pn__close(double a, double b) { return fabs(a - b) <= 1e-6 * (fabs(a) + fabs(b)) + 1e-12; }
+
+/* Does material m match the model's training material (up to E)? */
+static pn_result pn__model_matches(const pn_model *mo, const pn_material *m, const char **why) {
+    const char *w = NULL;
+    double E = (double)m->E;
+    if (m->elastic != mo->elastic) w = "the material's elastic model differs from the model's";
+    else if (m->plastic != mo->plastic) w = "the material's plastic model differs from the model's";
+    else if (!pn__close((double)m->nu, mo->poisson_ratio))
+        w = "the material's poisson_ratio differs from the model's training material";
+    else if ((m->plastic == PN_PLASTIC_DRUCKER_PRAGER || m->plastic == PN_PLASTIC_CAM_CLAY) &&
+             !pn__close((double)m->sin_phi, sin(mo->friction_angle_deg * 3.14159265358979323846 / 180)))
+        w = "the material's friction_angle_deg differs from the model's training material";
+    else if (m->plastic == PN_PLASTIC_DRUCKER_PRAGER &&
+             (!pn__close((double)m->cohesion_strain, mo->cohesion_strain) || m->volume_correction))
+        w = "the material's cohesion_strain or volume_correction differs from the model's";
+    else if (m->plastic == PN_PLASTIC_VON_MISES &&
+             (!pn__close((double)m->yield_stress / E, mo->yield_stress_ratio) ||
+              !pn__close((double)m->hardening_modulus / E, mo->hardening_ratio)))
+        w = "the material's yield_stress_pa or hardening_modulus_pa relative to E differs from the model's";
+    else if (m->plastic == PN_PLASTIC_CAM_CLAY &&
+             (!pn__close((double)m->beta, mo->camclay_beta) || !pn__close((double)m->xi, mo->camclay_xi)))
+        w = "the material's camclay_beta or camclay_xi differs from the model's";
+    if (!w) return PN_OK;
+    if (why) *why = w;
+    return PN_ERROR_INVALID_PARAMETER;
+}
+
+PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_material *m,
+                               int dim, const char **why) {
+    const pn_model *e, *rm;
+    pn_result r;
+    const char *w = NULL;
+    PN_ASSERT(net && desc && m);
+    e = desc->energy;
+    rm = desc->return_map;
+    if (!e) {
+        if (why) *why = "pn_pnet_desc.energy is NULL";
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    r = pn_model_check(e, dim, why);
+    if (r != PN_OK) return r;
+    if (e->kind != PN_MODEL_ENERGY) {
+        if (why) *why = "pn_pnet_desc.energy is not an energy model";
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    r = pn__model_matches(e, m, why);
+    if (r != PN_OK) return r;
+    if (e->return_map) {
+        if (!rm) w = "this energy was trained with a learned return mapping: set pn_pnet_desc.return_map";
+        else if (!rm->name || strcmp(rm->name, e->return_map) != 0)
+            w = "pn_pnet_desc.return_map is not the return mapping this energy was trained with";
+    } else if (rm) {
+        w = "this energy was trained with the analytic return mapping: pn_pnet_desc.return_map must be NULL";
+    }
+    if (w) {
+        if (why) *why = w;
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if (rm) {
+        r = pn_model_check(rm, e->dim, why);
+        if (r != PN_OK) return r;
+        if (rm->kind != PN_MODEL_RETURN_MAP) {
+            if (why) *why = "pn_pnet_desc.return_map is not a return-mapping model";
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+        r = pn__model_matches(rm, m, why);
+        if (r != PN_OK) return r;
+    }
+    if (!pn__finite(desc->regularizer)) {
+        if (why) *why = "pn_pnet_desc.regularizer is not finite";
+        return PN_ERROR_NONFINITE;
+    }
+    net->energy = e;
+    net->return_map = rm;
+    net->material = *m;
+    net->scale = (pn_real)((double)m->E / e->youngs_modulus_train_pa);
+    net->reg = desc->regularizer < 0 ? 0 : (desc->regularizer == 0 ? 1 : desc->regularizer) * m->mu;
+    return PN_OK;
+}
+
+/* N and its derivatives with respect to F at F (features f, level as in pn__features_eval). */
+static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, int d,
+                                  const pn__features *f, int level, pn_real *N, pn_real *gN,
+                                  pn_real *HN) {
+    const pn_model *mo = net->energy;
+    pn_real u[16], out, g[3], H[9], h, s;
+    int nf = f->nf, i, k, l, a, b, n = d * d;
+    pn_result r;
+    h = PN__MIN(PN__MAX(pt->h, (pn_real)mo->h_min), (pn_real)mo->h_max);
+    for (i = 0; i < nf; ++i) {
+        u[i] = (f->x[i] - pt->x0[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
+        u[nf + i] = (pt->x0[i] - (pn_real)mo->in_shift[nf + i]) * (pn_real)mo->in_scale[nf + i];
+    }
+    u[2 * nf] = (h - (pn_real)mo->in_shift[2 * nf]) * (pn_real)mo->in_scale[2 * nf];
+    r = pn_mlp_eval(&mo->mlp, u, level > 0 ? nf : 0, &out, g, level > 1 ? H : NULL);
+    if (r != PN_OK) return r;
+    s = net->scale * (pn_real)mo->out_scale;
+    *N = s * out;
+    if (level > 0) {
+        /* chain rule through u_k = (x_k - x0_k - shift_k) scale_k */
+        for (k = 0; k < nf; ++k) g[k] *= s * (pn_real)mo->in_scale[k];
+        for (a = 0; a < n; ++a) {
+            pn_real acc = 0;
+            for (k = 0; k < nf; ++k) acc += g[k] * f->dx[k][a];
+            gN[a] = acc;
+        }
+    }
+    if (level > 1) {
+        for (k = 0; k < nf; ++k)
+            for (l = 0; l < nf; ++l)
+                H[k * nf + l] *= s * (pn_real)(mo->in_scale[k] * mo->in_scale[l]);
+        for (a = 0; a < n; ++a)
+            for (b = a; b < n; ++b) {
+                pn_real acc = 0;
+                for (k = 0; k < nf; ++k) {
+                    pn_real hk = 0;
+                    for (l = 0; l < nf; ++l) hk += H[k * nf + l] * f->dx[l][b];
+                    acc += f->dx[k][a] * hk + g[k] * f->d2x[k][a * n + b];
+                }
+                HN[a * n + b] = acc;
+                HN[b * n + a] = acc;
+            }
+    }
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real h,
+                                  pn_pnet_point *pt, pn_real *h_new, pn_real *T0) {
+    pn_pnet_point p;
+    pn__features f;
+    pn_real T[9], hn, N, gN[9];
+    int d, n, i;
+    pn_result r;
+    PN_ASSERT(net && net->energy && F0 && pt);
+    d = net->energy->dim;
+    n = d * d;
+    r = pn__check_F(d, F0);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    if (!(pn_mat_det(d, F0) > 0)) return PN_ERROR_INVERTED;
+    r = net->return_map ? pn_learned_return_map(net->return_map, &net->material, d, F0, h, NULL, &hn, T)
+                        : pn_return_map(&net->material, d, F0, h, NULL, &hn, T);
+    if (r != PN_OK) return r;
+    memset(&p, 0, sizeof p);
+    memcpy(p.F0, F0, sizeof(pn_real) * (size_t)n);
+    p.h = h;
+    pn__features_eval(d, F0, 1, &f);
+    for (i = 0; i < f.nf; ++i) p.x0[i] = f.x[i];
+    r = pn__pnet_network(net, &p, d, &f, 1, &N, gN, NULL);
+    if (r != PN_OK) return r;
+    for (i = 0; i < n; ++i) p.C[i] = gN[i] - T[i];
+    if (!pn__all_finite(n, p.C)) return PN_ERROR_OVERFLOW;
+    *pt = p;
+    if (h_new) *h_new = hn;
+    if (T0) memcpy(T0, T, sizeof(pn_real) * (size_t)n);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_pnet_energy(const pn_pnet *net, const pn_pnet_point *pt, const pn_real *F,
+                                 pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
+    pn__features f;
+    pn_real N, gN[9], HN[81], e;
+    int d, n, a, level;
+    pn_result r;
+    PN_ASSERT(net && net->energy && pt && F);
+    d = net->energy->dim;
+    n = d * d;
+    r = pn__check_F(d, F);
+    if (r != PN_OK) return r;
+    if (!(pn_mat_det(d, F) > 0)) return PN_ERROR_INVERTED;
+    level = dPdF ? 2 : (P ? 1 : 0);
+    pn__features_eval(d, F, level, &f);
+    r = pn__pnet_network(net, pt, d, &f, level, &N, gN, HN);
+    if (r != PN_OK) return r;
+    e = N;
+    for (a = 0; a < n; ++a) {
+        pn_real df = F[a] - pt->F0[a];
+        e += -pt->C[a] * F[a] + net->reg / 2 * df * df;
+        if (level > 0) gN[a] += -pt->C[a] + net->reg * df;
+        if (level > 1) HN[a * n + a] += net->reg;
+    }
+    if (level > 1 && (flags & PN_EVAL_PROJECT_PSD)) {
+        if (!pn__all_finite(n * n, HN)) return PN_ERROR_OVERFLOW;
+        r = pn_sym_project_psd(n, HN);
+        if (r != PN_OK) return r;
+    }
+    if (!pn__finite(e) || (level > 0 && !pn__all_finite(n, gN)) || (level > 1 && !pn__all_finite(n * n, HN)))
+        return PN_ERROR_OVERFLOW;
+    if (psi) *psi = e;
+    if (P) memcpy(P, gN, sizeof(pn_real) * (size_t)n);
+    if (dPdF) memcpy(dPdF, HN, sizeof(pn_real) * (size_t)(n * n));
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>learned-return: von Mises return mapping with a learned plastic multiplier (Li et al.
+   2022, Eqs. 12-13). Outside the analytic yield surface, H = e - dgamma n with
+     dgamma = clamp(|e_hat| - r, 0, |e_hat|),  r = r_ref exp(out_scale mlp(u)),
+     r_ref = (sqrt(2/3) sigma_Y(h) + 2K/3 |e_hat|) / (2 mu J^(2/d) + 2K/3)  (small-strain radius)
+     u = ([tr e, |e_hat|, (3D) sqrt(6) sum n_i^3, clamp(h)] - in_shift) * in_scale
+   ====================================================================================== */
+
+PN__DEF pn_result pn_learned_return_map(const pn_model *mo, const pn_material *m, int d,
+                                        const pn_real *F, pn_real h, pn_real *Z, pn_real *h_new,
+                                        pn_real *T) {
+    pn_real U[9], s[3], V[9], z[3] = {1, 1, 1}, e[3], eh[3], tr, rr, y, sc, hn = h, w[3], zz[9], tt[9];
+    pn_real raw[4], u[4], out, rad, rref, dg, K, hc;
+    int i, nr, n = d * d, plastic = 0;
+    pn_result r;
+    PN_ASSERT(mo && m && F);
+    r = pn_model_check(mo, d, NULL);
+    if (r != PN_OK) return r;
+    if (mo->kind != PN_MODEL_RETURN_MAP) return PN_ERROR_INVALID_ARGUMENT;
+    r = pn__model_matches(mo, m, NULL);
+    if (r != PN_OK) return r;
+    r = pn__check_F(d, F);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    if (!(h >= 0)) return PN_ERROR_INVALID_ARGUMENT;
+    pn__svd(d, F, U, s, V);
+    if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    for (i = 0; i < d; ++i) z[i] = s[i];
+    pn__yield_principal(m, d, s, h, &y, &sc);
+    if (y > 0) {
+        pn__hencky_split(d, s, 0, 0, e, eh, &tr, &rr);
+        K = m->hardening_modulus;
+        hc = PN__MIN(PN__MAX(h, (pn_real)mo->h_min), (pn_real)mo->h_max);
+        nr = 0;
+        raw[nr++] = tr;
+        raw[nr++] = rr;
+        if (d == 3) {
+            pn_real c3 = 0;
+            for (i = 0; i < 3; ++i) c3 += (eh[i] / rr) * (eh[i] / rr) * (eh[i] / rr);
+            raw[nr++] = PN__SQRT(6) * c3;
+        }
+        raw[nr++] = hc;
+        for (i = 0; i < nr; ++i) u[i] = (raw[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
+        r = pn_mlp_eval(&mo->mlp, u, 0, &out, NULL, NULL);
+        if (r != PN_OK) return r;
+        rref = (pn__vm_tau_y(m, h) + 2 * K / 3 * rr) / (2 * m->mu * PN__EXP(2 * tr / d) + 2 * K / 3);
+        rad = rref * PN__EXP((pn_real)mo->out_scale * out);
+        dg = PN__MIN(PN__MAX(rr - rad, 0), rr);
+        for (i = 0; i < d; ++i) z[i] = PN__EXP(e[i] - dg * eh[i] / rr);
+        hn = h + PN__SQRT((pn_real)2 / 3) * dg;
+        plastic = 1;
+    }
+    if (plastic) pn__udvt(d, U, z, V, zz);
+    else memcpy(zz, F, sizeof(pn_real) * (size_t)n);
+    pn__tau_principal(m, hn, d, z, w);
+    for (i = 0; i < d; ++i) w[i] /= s[i];
+    pn__udvt(d, U, w, V, tt);
+    if (!pn__finite(hn) || !pn__all_finite(n, zz) || !pn__all_finite(n, tt)) return PN_ERROR_OVERFLOW;
+    if (Z) memcpy(Z, zz, sizeof(pn_real) * (size_t)n);
+    if (h_new) *h_new = hn;
+    if (T) memcpy(T, tt, sizeof(pn_real) * (size_t)n);
     return PN_OK;
 }
 

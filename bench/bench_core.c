@@ -9,36 +9,21 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
+#include "bench_util.h"
 
 #define NF 1024
-
-typedef struct bench_rng { unsigned long long s; } bench_rng;
-static double bench_uniform(bench_rng *r) {
-    unsigned long long z = (r->s += 0x9E3779B97F4A7C15ULL);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    return (double)((z ^ (z >> 31)) >> 11) * (1.0 / 9007199254740992.0);
-}
-
-static void bench_rotation(int d, bench_rng *r, pn_real *R) {
-    pn_real A[9], s[3], V[9];
-    int i;
-    for (i = 0; i < d * d; ++i) A[i] = (pn_real)(2 * bench_uniform(r) - 1);
-    pn_svd(d, A, R, s, V);
-}
 
 static void bench_inputs(int d, pn_real *Fs) {
     bench_rng r;
     int k, i;
     r.s = 12345u + (unsigned)d;
     for (k = 0; k < NF; ++k) {
-        pn_real R1[9], R2[9], S[9], T[9];
-        bench_rotation(d, &r, R1);
-        bench_rotation(d, &r, R2);
-        for (i = 0; i < d * d; ++i) S[i] = 0;
-        for (i = 0; i < d; ++i) S[i * d + i] = (pn_real)exp(0.6 * bench_uniform(&r) - 0.3);
-        pn_mat_mul(d, R1, S, T);
-        pn_mat_mul(d, T, R2, Fs + 9 * k);
+        pn_real R1[9], R2[9];
+        double e[3];
+        bench_rotation(&r, d, R1);
+        bench_rotation(&r, d, R2);
+        for (i = 0; i < d; ++i) e[i] = 0.6 * bench_uniform(&r) - 0.3;
+        bench_compose(d, R1, e, R2, Fs + 9 * k);
     }
 }
 

@@ -6,6 +6,7 @@
    file (except under PLASTINET_STATIC), which checks the extern declarations. */
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
+#include "../models/pn_models.h" /* every generated header, in every configuration */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -61,6 +62,54 @@ static void smoke(int d) {
     CHECK(pn_svd(d, F, U, s, V) == PN_ERROR_NONFINITE);
 }
 
+/* Every shipped model: checked, bound to its material and evaluated once (or refused with
+   PN_ERROR_DIMENSION when its dimension is compiled out). */
+static void smoke_models(void) {
+    int k, i;
+    for (k = 0; pn_models_all[k]; ++k) {
+        const pn_model *mo = pn_models_all[k]();
+        pn_material m;
+        pn_real F[9] = {0}, T[9] = {0}, P[9] = {0}, H[81], psi = 0, hn = 0;
+        const char *why = NULL;
+        int d = mo->dim, ok_dim;
+#if defined(PN_NO_2D)
+        ok_dim = d != 2;
+#elif defined(PN_NO_3D)
+        ok_dim = d != 3;
+#else
+        ok_dim = 1;
+#endif
+        CHECK(pn_model_check(mo, 0, &why) == (ok_dim ? PN_OK : PN_ERROR_DIMENSION));
+        if (!ok_dim) continue;
+        CHECK(pn_model_material(mo, 1e6, &m) == PN_OK);
+        for (i = 0; i < d; ++i) F[i * d + i] = (pn_real)(1 + 0.05 * i);
+        F[1] = (pn_real)0.02;
+        if (mo->kind == PN_MODEL_RETURN_MAP) {
+            CHECK(pn_learned_return_map(mo, &m, d, F, 0, NULL, &hn, T) == PN_OK && hn >= 0);
+        } else {
+            pn_pnet net;
+            pn_pnet_desc nd;
+            pn_pnet_point pt;
+            int j;
+            memset(&nd, 0, sizeof nd);
+            memset(&net, 0, sizeof net);
+            memset(&pt, 0, sizeof pt);
+            nd.energy = mo;
+            for (j = 0; mo->return_map && pn_models_all[j]; ++j)
+                if (!strcmp(pn_models_all[j]()->name, mo->return_map)) nd.return_map = pn_models_all[j]();
+            CHECK(pn_pnet_init(&net, &nd, &m, d, &why) == PN_OK);
+            CHECK(pn_pnet_prepare(&net, F, (pn_real)mo->h_min, &pt, &hn, T) == PN_OK);
+            CHECK(pn_pnet_energy(&net, &pt, F, &psi, P, H, PN_EVAL_PROJECT_PSD) == PN_OK);
+            for (i = 0; i < d * d; ++i) /* exact at F0 (Eq. 8) */
+                CHECK(fabs((double)(P[i] - T[i])) <= 1e-3 * (1 + fabs((double)T[i])) * 1e6);
+        }
+    }
+    {
+        pn_real in[2] = {0, 0}, out = 0, g[2], h[4];
+        CHECK(pn_mlp_eval(&pn_models_all[0]()->mlp, in, 0, &out, g, h) != PN_ERROR_NONFINITE);
+    }
+}
+
 int main(void) {
     char buf[256];
     pn_material m;
@@ -99,6 +148,7 @@ int main(void) {
         CHECK(pn_svd(3, F, U, s, V) == PN_ERROR_DIMENSION);
     }
 #endif
+    smoke_models();
 #ifndef PLASTINET_STATIC
     CHECK(pn_check_second_tu() == 1);
 #endif

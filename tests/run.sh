@@ -41,6 +41,19 @@ else
     flags="-O2 -g"
     suffix=
 fi
+# tally NAME LOG STATUS: print LOG without its summary line, add that "N passed, N failed" to ours
+tally() {
+    grep -v '^[0-9]* passed, [0-9]* failed$' "$2"
+    last=$(tail -n 1 "$2")
+    p=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\1/p')
+    f=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\2/p')
+    if [ -z "$p" ]; then
+        bad "$1 crashed or printed no summary (exit $3)"
+    else
+        passed=$((passed + p)); failed=$((failed + f))
+        if [ "$3" -ne 0 ] && [ "$f" -eq 0 ]; then bad "$1 exit status $3"; fi
+    fi
+}
 # run_bin NAME SOURCE EXTRA_FLAGS [filter]: build, run, add its "N passed, N failed" to ours
 run_bin() {
     bin=build/$1$suffix
@@ -51,19 +64,26 @@ run_bin() {
     fi
     shift 3
     ./"$bin" "$@" >"$bin.log" 2>&1
-    status=$?
-    grep -v '^[0-9]* passed, [0-9]* failed$' "$bin.log"
-    last=$(tail -n 1 "$bin.log")
-    p=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\1/p')
-    f=$(echo "$last" | sed -n 's/^\([0-9]*\) passed, \([0-9]*\) failed$/\2/p')
-    if [ -z "$p" ]; then
-        bad "$bin crashed or printed no summary (exit $status)"
-    else
-        passed=$((passed + p)); failed=$((failed + f))
-        if [ "$status" -ne 0 ] && [ "$f" -eq 0 ]; then bad "$bin exit status $status"; fi
-    fi
+    tally "$bin" "$bin.log" $?
 }
-run_bin test_main tests/test_main.c "" "$@"
+# the shipped models (models/pn_models.h, written by gen/export.py) are tested when present
+models=
+[ -f models/pn_models.h ] && models=-DPN_TEST_HAVE_MODELS
+run_bin test_main tests/test_main.c "$models" "$@"
 run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"
+
+# 3. C against torch (gen/crosscheck.py): the training targets and every shipped model. Runs
+#    whenever torch is installed (Debian: apt-get install -y python3-torch); CI requires it.
+PY=${PY:-/usr/bin/python3}
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    if "$PY" -c "import torch" >/dev/null 2>&1; then
+        "$PY" gen/crosscheck.py >build/crosscheck.log 2>&1
+        tally crosscheck build/crosscheck.log $?
+    elif [ "${CI:-}" = true ]; then
+        bad "crosscheck: torch is not installed (CI needs it: apt-get install -y python3-torch)"
+    else
+        echo "skip crosscheck (torch not installed: apt-get install -y python3-torch)"
+    fi
+fi
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -103,12 +103,14 @@ static double t_en_lagged_h0(pn_test_rng *rng, int which) {
 
 /* ---- one interface over the three evaluators ------------------------------------------------ */
 
-enum { T_EN_ELASTIC, T_EN_VM, T_EN_LAGGED };
+enum { T_EN_ELASTIC, T_EN_VM, T_EN_LAGGED, T_EN_PNET };
 typedef struct t_en_fn {
     int kind;
     const pn_material *m;
     double h;        /* state (elastic: Stomakhin hardening; von Mises: frozen a; lagged: h_G) */
     const double *G; /* lagged only */
+    const pn_pnet *net;          /* PlasticityNet only (test_pnet.c) */
+    const pn_pnet_point *pt;
 } t_en_fn;
 
 static pn_result t_en_eval(const t_en_fn *f, int dim, const double *F, double *psi, double *P,
@@ -116,6 +118,7 @@ static pn_result t_en_eval(const t_en_fn *f, int dim, const double *F, double *p
     switch (f->kind) {
     case T_EN_ELASTIC: return pn_elastic_energy(f->m, dim, F, f->h, psi, P, dPdF, flags);
     case T_EN_VM: return pn_von_mises_energy(f->m, dim, F, f->h, psi, P, dPdF, flags);
+    case T_EN_PNET: return pn_pnet_energy(f->net, f->pt, F, psi, P, dPdF, flags);
     default: return pn_lagged_energy(f->m, dim, F, f->G, f->h, psi, P, dPdF, flags);
     }
 }

@@ -1,5 +1,6 @@
 /* The one test binary: every unit, property and driver test of plastinet.
    Build: cc -std=c99 -O2 -Wall -Wextra -pedantic tests/test_main.c -lm -o build/test_main
+          (add -DPN_TEST_HAVE_MODELS to test the models of models/pn_models.h, as tests/run.sh does)
    Run:   build/test_main [name-filter]          last line: N passed, N failed */
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
@@ -10,6 +11,7 @@
 #include "test_energy.c"  /* pn_tests_energy: finite differences of every energy        */
 #include "test_return.c"  /* pn_tests_return: return-mapping invariants, bad input      */
 #include "test_driver.c"  /* pn_tests_driver: the material-point driver end to end      */
+#include "test_pnet.c"    /* pn_tests_pnet: MLP, PlasticityNet energy, learned return map */
 
 #define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
@@ -20,6 +22,7 @@ int main(int argc, char **argv) {
     pn_test_run(pn_tests_energy, PN_COUNT(pn_tests_energy), filter, &passed, &failed);
     pn_test_run(pn_tests_return, PN_COUNT(pn_tests_return), filter, &passed, &failed);
     pn_test_run(pn_tests_driver, PN_COUNT(pn_tests_driver), filter, &passed, &failed);
+    pn_test_run(pn_tests_pnet, PN_COUNT(pn_tests_pnet), filter, &passed, &failed);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

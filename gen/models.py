@@ -1,0 +1,53 @@
+"""The models plastinet ships: material, dimension, sampling box, network size, training budget.
+
+Every model is trained at E = 1 (stress and Hessian scale linearly with E at fixed Poisson ratio
+and plastic parameters, so plastinet.h rescales to any E); plastic stresses are given as ratios
+to E. The hardening state h of each material (the same definition as plastinet.h):
+  sand      none (Drucker-Prager without hardening or volume correction): h = 0
+  snow      log J_p, the plastic volume ratio, in [-0.15, 0]; p0 = kappa sinh(xi max(-h, 0)),
+            so 0 is powder (no strength) and -0.15 is hard-packed snow (p0 = 0.47 kappa,
+            xi = 3). The upper end keeps p0 < kappa / 2, where the compression tip exists.
+  metal     accumulated equivalent plastic strain a in [0, 1]; sigma_Y = sigma_Y0 + K a
+            (sigma_Y0 = 3e-3 E, K = 1e-2 E: an aluminium-like alloy).
+"""
+from pn_torch import Material
+
+MATERIALS = {
+    "sand": dict(mat=Material("stvk_hencky", "drucker_prager", nu=0.3, friction_angle_deg=30.0),
+                 h=(0.0, 0.0), de=0.1),
+    "snow": dict(mat=Material("neo_hookean_snow", "cam_clay", nu=0.3, friction_angle_deg=45.0,
+                              camclay_beta=0.3, camclay_xi=3.0),
+                 h=(-0.15, 0.0), de=0.2),
+    "metal": dict(mat=Material("stvk_hencky", "von_mises", nu=0.3, yield_stress=3e-3,
+                               hardening_modulus=1e-2),
+                  h=(0.0, 1.0), de=0.1),
+    "metal_nh": dict(mat=Material("neo_hookean", "von_mises", nu=0.3, yield_stress=3e-3,
+                                  hardening_modulus=1e-2),
+                     h=(0.0, 1.0), de=0.1),
+}
+
+# kind: "energy" (PlasticityNet Eq. 8) or "return_map" (Eqs. 12-13). e_box: the log singular
+# values of F0 are uniform in [-e_box, e_box]^d, those of F add de (Section 5.1).
+MODELS = {}
+
+
+def _add(name, material, dim, kind="energy", hidden=(32, 32, 32), iters=20000, batch=2048,
+         lr=2e-3, activation="silu", seed=1, return_map=None):
+    m = MATERIALS[material]
+    MODELS[name] = dict(name=name, material=material, mat=m["mat"], dim=dim, kind=kind,
+                        hidden=tuple(hidden), iters=iters, batch=batch, lr=lr,
+                        activation=activation, seed=seed, h=m["h"], de=m["de"], e_box=1.0,
+                        return_map=return_map)
+
+
+_add("sand_2d", "sand", 2)
+_add("sand_2d_small", "sand", 2, hidden=(16, 16))
+_add("sand_3d", "sand", 3)
+_add("snow_2d", "snow", 2)
+_add("snow_3d", "snow", 3)
+_add("metal_2d", "metal", 2)
+_add("metal_3d", "metal", 3)
+_add("metal_nh_return_2d", "metal_nh", 2, kind="return_map", hidden=(16, 16), iters=6000)
+_add("metal_nh_return_3d", "metal_nh", 3, kind="return_map", hidden=(16, 16), iters=6000)
+_add("metal_nh_2d", "metal_nh", 2, return_map="metal_nh_return_2d")
+_add("metal_nh_3d", "metal_nh", 3, return_map="metal_nh_return_3d")
