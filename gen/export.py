@@ -90,9 +90,15 @@ def export(cfg, quality_path=None):
         "   Material: elastic %s, plastic %s, E_train = %g Pa (plastinet.h rescales stress and" % (mat.elastic, mat.plastic, mat.E),
         "   Hessian to any E), nu = %g, %s." % (mat.nu, plast),
         "   Hardening state h in [%g, %g]: %s." % (cfg["h"][0], cfg["h"][1], H_MEANING[material]),
-        "   Sampling (Section 5.1): log singular values of F0 uniform in [-%g, %g]^%d, those of F" % (cfg["e_box"], cfg["e_box"], d),
-        "   within %g of them, independent random rotations of F and F0, h uniform." % cfg["de"],
     ]
+    if cfg["kind"] == "energy":
+        banner += [
+            "   Sampling (Section 5.1): log singular values of F0 uniform in [-%g, %g]^%d, those of F" % (cfg["e_box"], cfg["e_box"], d),
+            "   within %g of them, independent random rotations of F and F0, h uniform." % cfg["de"]]
+    else:
+        banner += [
+            "   Sampling: half with log singular values uniform in [-%g, %g]^%d, half with |e_hat|" % (cfg["e_box"], cfg["e_box"], d),
+            "   log-uniform in [1e-3, 2] (near the yield surface) and tr e in [-%g, %g]; h uniform." % (cfg["e_box"], cfg["e_box"])]
     if cfg.get("return_map"):
         banner.append("   Target stresses from the learned return mapping %s (pn_model_%s.h)." % (cfg["return_map"], cfg["return_map"]))
     banner += [
@@ -103,7 +109,7 @@ def export(cfg, quality_path=None):
             "mean |grad Psi - T|^2 / mean |T|^2" if cfg["kind"] == "energy" else "Eq. 13, y scaled by tau_Y"),
     ]
     if quality:
-        banner += ["", "   Quality (tools/model_report.c on fresh samples; models/REPORT.md):"]
+        banner += ["", "   Quality (bench/model_report.c on fresh samples; models/REPORT.md):"]
         banner += ["     " + q for q in quality]
     banner += [
         "",

@@ -5,11 +5,15 @@
    Material: elastic neo_hookean, plastic von_mises, E_train = 1 Pa (plastinet.h rescales stress and
    Hessian to any E), nu = 0.3, sigma_Y0 = 0.003 E, K = 0.01 E.
    Hardening state h in [0, 1]: accumulated equivalent plastic strain a; sigma_Y = sigma_Y0 + K a.
-   Sampling (Section 5.1): log singular values of F0 uniform in [-1, 1]^2, those of F
-   within 0.1 of them, independent random rotations of F and F0, h uniform.
+   Sampling: half with log singular values uniform in [-1, 1]^2, half with |e_hat|
+   log-uniform in [1e-3, 2] (near the yield surface) and tr e in [-1, 1]; h uniform.
    Network: 3 inputs, hidden 16-16 (silu), 1 output; 353 parameters.
    Training: gen/train.py --model metal_nh_return_2d: Adam, 6000 iterations x 2048 samples, lr 0.002 cosine,
    seed 1, one thread; final loss 5.552e-10 (Eq. 13, y scaled by tau_Y).
+
+   Quality (bench/model_report.c on fresh samples; models/REPORT.md):
+     against the root find (100000 samples): |log z - log z_ref| mean 2.3e-07, max 3.4e-05;
+       |T - T_ref| / |T_ref| mean 3.1e-07, max 6.2e-05; yield residual max 0.00042
 
    Use: #include "plastinet.h" first, then this header; the weights are compiled where
    PLASTINET_IMPLEMENTATION is defined. pn_model_metal_nh_return_2d() returns the description.
