@@ -50,7 +50,16 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("names", nargs="*", help="models to make (default: all)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--times", action="store_true", help="print each trained model's training time")
     a = ap.parse_args()
+    if a.times:
+        import torch
+        for n in a.names or list(MODELS):
+            p = os.path.join(HERE, "ckpt", n + ".done.pt")
+            if os.path.exists(p):
+                st = torch.load(p)
+                print("%-22s %6.0f s  %6d iterations  final loss %.4g" % (n, st["seconds"], MODELS[n]["iters"], st["final_loss"]))
+        return
     names = a.names or list(MODELS)
     for n in names:
         if n not in MODELS:
