@@ -4,15 +4,25 @@
 #ifndef PN_MODELS_H
 #define PN_MODELS_H
 #include "pn_model_sand_2d.h"
+#include "pn_model_sand_2d_small.h"
 #include "pn_model_sand_3d.h"
+#include "pn_model_snow_2d.h"
+#include "pn_model_snow_3d.h"
+#include "pn_model_metal_2d.h"
+#include "pn_model_metal_3d.h"
 #include "pn_model_metal_nh_return_2d.h"
 #include "pn_model_metal_nh_return_3d.h"
-#define PN_MODEL_COUNT 4
+#define PN_MODEL_COUNT 9
 /* The accessors of every model, in a fixed order (NULL-terminated). */
 typedef const pn_model *(*pn_model_accessor)(void);
 static const pn_model_accessor pn_models_all[PN_MODEL_COUNT + 1] = {
     pn_model_sand_2d,
+    pn_model_sand_2d_small,
     pn_model_sand_3d,
+    pn_model_snow_2d,
+    pn_model_snow_3d,
+    pn_model_metal_2d,
+    pn_model_metal_3d,
     pn_model_metal_nh_return_2d,
     pn_model_metal_nh_return_3d,
     0};
