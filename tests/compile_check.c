@@ -7,6 +7,7 @@
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../models/pn_models.h" /* every generated header, in every configuration */
+#include "../plastinet_mpm.h"
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -110,6 +111,37 @@ static void smoke_models(void) {
     }
 }
 
+/* The MPM solver: a few explicit steps of a small sand block. */
+static void smoke_mpm(int d) {
+    pn_mpm_desc wd;
+    pn_mpm_world *w = NULL;
+    pn_material_desc md;
+    pn_material m;
+    pn_mpm_stats st;
+    pn_real x[3] = {(pn_real)0.5, (pn_real)0.5, (pn_real)0.5}, mass = 0, mom[3];
+    int g, k;
+    memset(&wd, 0, sizeof wd);
+    wd.dim = d;
+    wd.res[0] = wd.res[1] = wd.res[2] = 16;
+    wd.dx_m = (pn_real)(1.0 / 16);
+    wd.gravity[1] = (pn_real)-9.81;
+    wd.max_particles = 4;
+    CHECK(pn_mpm_create(&wd, &w) == PN_OK);
+    if (!w) return;
+    memset(&md, 0, sizeof md);
+    md.plastic = PN_PLASTIC_DRUCKER_PRAGER;
+    md.youngs_modulus_pa = 1e4;
+    md.poisson_ratio = (pn_real)0.3;
+    md.friction_angle_deg = 30;
+    CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+    g = pn_mpm_add_group(w, &m, 1000);
+    CHECK(pn_mpm_add_particles(w, g, 1, x, NULL, (pn_real)1e-4) == PN_OK);
+    for (k = 0; k < 3; ++k) CHECK(pn_mpm_step_explicit(w, (pn_real)1e-3, &st) == PN_OK);
+    pn_mpm_totals(w, &mass, mom);
+    CHECK(mass > 0 && mom[1] < 0);
+    pn_mpm_destroy(w);
+}
+
 int main(void) {
     char buf[256];
     pn_material m;
@@ -132,6 +164,11 @@ int main(void) {
         CHECK(p != NULL);
         pn_free(NULL, p);
     }
+#ifndef PN_NO_2D
+    smoke_mpm(2);
+#else
+    smoke_mpm(3);
+#endif
 #ifndef PN_NO_2D
     smoke(2);
 #else

@@ -4,6 +4,7 @@
    Run:   build/test_main [name-filter]          last line: N passed, N failed */
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
+#include "../plastinet_mpm.h"
 #include "pn_test.h"
 #include "test_util.h" /* the reference helpers the test files share */
 
@@ -12,6 +13,7 @@
 #include "test_return.c"  /* pn_tests_return: return-mapping invariants, bad input      */
 #include "test_driver.c"  /* pn_tests_driver: the material-point driver end to end      */
 #include "test_pnet.c"    /* pn_tests_pnet: MLP, PlasticityNet energy, learned return map */
+#include "test_mpm.c"     /* pn_tests_mpm: explicit MPM on small scenes                 */
 
 #define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
@@ -23,6 +25,7 @@ int main(int argc, char **argv) {
     pn_test_run(pn_tests_return, PN_COUNT(pn_tests_return), filter, &passed, &failed);
     pn_test_run(pn_tests_driver, PN_COUNT(pn_tests_driver), filter, &passed, &failed);
     pn_test_run(pn_tests_pnet, PN_COUNT(pn_tests_pnet), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm, PN_COUNT(pn_tests_mpm), filter, &passed, &failed);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }
