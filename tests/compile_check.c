@@ -137,6 +137,8 @@ static void smoke_mpm(int d) {
     g = pn_mpm_add_group(w, &m, 1000);
     CHECK(pn_mpm_add_particles(w, g, 1, x, NULL, (pn_real)1e-4) == PN_OK);
     for (k = 0; k < 3; ++k) CHECK(pn_mpm_step_explicit(w, (pn_real)1e-3, &st) == PN_OK);
+    CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_LAGGED, NULL) == PN_OK);
+    CHECK(pn_mpm_step_implicit(w, (pn_real)1e-3, NULL, &st) == PN_OK);
     pn_mpm_totals(w, &mass, mom);
     CHECK(mass > 0 && mom[1] < 0);
     pn_mpm_destroy(w);
