@@ -4,21 +4,32 @@ CC ?= cc
 CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run test test-sanitize bench-core clean examples models model-report crosscheck
+.PHONY: all run run-material-point test test-sanitize bench-core clean examples models model-report crosscheck
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point
+examples: build/material_point build/sand_column
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/material_point.c $(LDLIBS) -o $@
 
+# The main demo: a 2D sand column collapsing under gravity, implicit at dt = 1e-3 s with the
+# embedded PlasticityNet sand model (E = 1e7 Pa); PNG frames in build/sand_column_frames/.
+run: build/sand_column
+	@mkdir -p build/sand_column_frames
+	build/sand_column --png --frames 30 --out build/sand_column_frames
+	@echo "# frames: build/sand_column_frames/frame_0001.png ... frame_0030.png"
+
+build/sand_column: examples/sand_column.c plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h models/pn_model_sand_3d.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/sand_column.c $(LDLIBS) -o $@
+
 # The material-point driver on a von Mises tensile test (uniaxial stress, linear hardening):
 # prints the stress-strain curve.
-run: build/material_point
+run-material-point: build/material_point
 	@echo "# von Mises steel, uniaxial stress, linear hardening (build/material_point --help for more)"
 	@build/material_point --dim 3 --plastic von_mises --path uniaxial_stress --steps 40 \
 	    --max-strain 0.01 --out build/run.csv
