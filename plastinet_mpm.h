@@ -167,7 +167,9 @@ PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy e
    velocities minimize 1/2 |v - v*|_M^2 + sum_p V_p Psi_p(F_p(v)) by Newton with PSD-projected
    per-particle Hessians, Jacobi-preconditioned conjugate gradients and a backtracking line
    search; around it the fixed point on F0 (F0 = F(v) of the previous pass). The state update
-   (APIC, return mapping) follows as in the explicit step. The first call allocates the solver
+   (APIC, return mapping) follows as in the explicit step. Walls inside the solve: sticky
+   holds every velocity component of the wall nodes at zero, slip and separate hold the normal
+   one (separate is treated as slip, without friction, in this release). The first call allocates the solver
    storage (PN_ERROR_OUT_OF_MEMORY possible); later calls allocate nothing. On failure the world
    is unchanged. desc may be NULL (defaults). */
 PN_API pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt_s, const pn_mpm_implicit_desc *desc,
