@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.1 (in progress) - material point method solvers on plastinet.h.
+/* plastinet_mpm.h - v0.2 - material point method solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -9,35 +9,46 @@
    ======================================================================================
    WHAT IS HERE (greppable banners in the implementation: // >>name)
    ======================================================================================
-     >>world     creation, particle groups and particles (structure of arrays), validation
-     >>transfer  quadratic B-spline weights, APIC particle-to-grid and grid-to-particle
-     >>grid      grid velocity update, gravity, domain walls (sticky, slip, separate with
-                 Coulomb friction)
-     >>implicit  optimization time integration: Newton + PCG + line search on the incremental
-                 potential, fixed point on F0 (PlasticityNet Eqs. 3, 10, 11), for the
-                 elastic, lagged, exact von Mises and PlasticityNet energies
+     >>world     creation, particle groups, particles (structure of arrays), colliders
+     >>bin       per step: each particle's quadratic B-spline stencil, particles sorted by
+                 stencil base node (counting sort), the list of active grid nodes
+     >>transfer  particle-to-grid as a gather per node, grid-to-particle per particle (APIC)
+     >>contact   domain walls and analytic colliders (half-spaces, boxes, spheres, moving):
+                 sticky, slip, separate with Coulomb friction
+     >>implicit  optimization time integration: Newton + filtered PCG + line search on the
+                 incremental potential, fixed point on F0 (PlasticityNet Eqs. 3, 10, 11),
+                 active set and lagged friction for separating contact, step halving
      >>explicit  symplectic Euler with the analytic return mapping after the F update (the
                  reference integrator; Jiang et al. 2016 course notes, Hu et al. 2018 MLS)
-
-   In progress (issue 4): colliders, OpenMP, the examples and the benchmarks arrive next.
 
    QUICK START
        pn_mpm_desc wd;  pn_mpm_world *w;  pn_material sand;  int g;
        memset(&wd, 0, sizeof wd);
        wd.dim = 2; wd.res[0] = wd.res[1] = 64; wd.dx_m = 1.0 / 64; wd.gravity[1] = -9.81;
+       wd.boundary = PN_MPM_BOUNDARY_SEPARATE; wd.friction = 0.5;
        wd.max_particles = 100000;
        pn_mpm_create(&wd, &w);
        g = pn_mpm_add_group(w, &sand, 1600);                 // material, density kg/m^3
        pn_mpm_add_particles(w, g, n, x, NULL, volume_m3);    // positions (m), optional v
        pn_mpm_step_explicit(w, 1e-4, NULL);                  // dt in seconds
+       pn_mpm_step_implicit(w, 1e-3, NULL, NULL);            // or implicit, 10x the step
        pn_mpm_destroy(w);
 
-   MEMORY: every array is allocated by pn_mpm_create through the allocator of the desc (both
-   callbacks or neither) for max_particles particles and the grid; a step allocates nothing.
-   ERRORS: a step that meets a non-finite value or a failed return mapping returns its
-   pn_result, names the particle in pn_mpm_world.error_particle, and leaves the world exactly
-   as it was before the step (the new state is built in scratch arrays and swapped in).
-   THREADS: one world per thread; the step itself is serial in this release.
+   MEMORY: pn_mpm_create allocates every array through the allocator of the desc (both
+   callbacks or neither) for max_particles particles and the grid; the first implicit step
+   allocates the solver storage; after that a step allocates nothing.
+   WORK: each step sorts the particles by grid node and works only on the nodes their
+   stencils touch (a few bytes per grid node are cleared per step, no floating point work).
+   ERRORS: a step that meets a non-finite value, an invalid state or (implicit) a solve that
+   does not converge after the fallback returns its pn_result, names the particle in
+   pn_mpm_world.error_particle when there is one, and leaves the world exactly as it was
+   before the step (the new state is built in scratch arrays and swapped in).
+   THREADS: compile with -fopenmp to run the particle and node loops on OpenMP threads.
+   Results are bitwise identical for any thread count: particle-to-grid is a gather over
+   particles sorted by node (no atomics, a fixed summation order) and every reduction sums
+   fixed-size chunks in a fixed order. One world must not be stepped from two threads at
+   once; different worlds may.
+   DETERMINISM: as for plastinet.h; -ffp-contract=off for the same bits across compilers.
 */
 #ifndef PLASTINET_MPM_H
 #define PLASTINET_MPM_H
@@ -50,18 +61,19 @@ extern "C" {
 #endif
 
 #define PN_MPM_MAX_GROUPS 16
+#define PN_MPM_MAX_COLLIDERS 16
 
 typedef enum pn_mpm_boundary {
-    PN_MPM_BOUNDARY_STICKY = 0,  /* velocity zeroed in the wall cells                        */
-    PN_MPM_BOUNDARY_SLIP,        /* normal velocity into the wall removed, tangential kept   */
+    PN_MPM_BOUNDARY_STICKY = 0,  /* velocity equals the obstacle's                           */
+    PN_MPM_BOUNDARY_SLIP,        /* normal velocity equals the obstacle's, tangential free   */
     PN_MPM_BOUNDARY_SEPARATE     /* only approaching normal velocity removed; Coulomb friction */
 } pn_mpm_boundary;
 
 /* World description; zeroed fields mean defaults where one is stated. The domain is the box
-   [0, res_i dx]^dim. */
+   [0, res_i dx]^dim; its walls are wall_cells thick. */
 typedef struct pn_mpm_desc {
     int dim;                     /* 2 or 3                                                  */
-    int res[3];                  /* grid cells per axis, >= 8                               */
+    int res[3];                  /* grid cells per axis, 8 .. 16384                         */
     pn_real dx_m;                /* cell size (m) > 0                                       */
     pn_real gravity[3];          /* m/s^2                                                   */
     pn_mpm_boundary boundary;    /* domain walls                                            */
@@ -71,6 +83,24 @@ typedef struct pn_mpm_desc {
     pn_allocator allocator;
 } pn_mpm_desc;
 
+/* Analytic collider: grid nodes inside it take its velocity as the boundary says. */
+typedef enum pn_mpm_shape {
+    PN_MPM_SHAPE_HALF_SPACE = 0, /* solid where (x - center) . normal < 0                     */
+    PN_MPM_SHAPE_BOX,            /* axis-aligned, |x_i - center_i| < half_extent_i            */
+    PN_MPM_SHAPE_SPHERE          /* |x - center| < radius (a disk in 2D)                      */
+} pn_mpm_shape;
+
+typedef struct pn_mpm_collider {
+    pn_mpm_shape shape;
+    pn_mpm_boundary boundary;
+    pn_real friction;            /* Coulomb coefficient (SEPARATE), >= 0                    */
+    pn_real center_m[3];         /* at t = 0; a point of the plane for a half-space          */
+    pn_real normal[3];           /* half-space: points out of the solid; need not be unit    */
+    pn_real half_extent_m[3];    /* box                                                      */
+    pn_real radius_m;            /* sphere                                                   */
+    pn_real velocity_m_s[3];     /* the shape translates: center(t) = center + t velocity    */
+} pn_mpm_collider;
+
 /* The energy the implicit integrator minimizes for a group (the explicit one always uses the
    analytic return mapping). */
 typedef enum pn_mpm_energy {
@@ -78,7 +108,7 @@ typedef enum pn_mpm_energy {
     PN_MPM_ENERGY_ELASTIC,       /* psi_el(F): plasticity ignored inside the solve          */
     PN_MPM_ENERGY_LAGGED,        /* psi_el(F G), G = F0^-1 Z(F0): the no-network baseline   */
     PN_MPM_ENERGY_EXACT_VM,      /* exact StVK-Hencky + von Mises energy (no fixed point)   */
-    PN_MPM_ENERGY_PNET           /* PlasticityNet (set with pn_mpm_group_set_pnet)           */
+    PN_MPM_ENERGY_PNET           /* PlasticityNet (set with pn_mpm_group_set_energy)         */
 } pn_mpm_energy;
 
 typedef struct pn_mpm_group {
@@ -95,6 +125,8 @@ typedef struct pn_mpm_implicit_desc {
     int cg_max;                  /* conjugate-gradient iterations per Newton step [500]      */
     pn_real newton_tol;          /* stop when max |dv| < newton_tol dx / dt [1e-5]          */
     pn_real cg_rel_tol;          /* relative residual of the linear solve [1e-3]            */
+    int max_halvings;            /* a step that fails is retried as 2, 4, ... substeps, at
+                                    most this many halvings [3]; < 0: never                 */
 } pn_mpm_implicit_desc;
 
 /* Statistics of the last step. */
@@ -102,43 +134,62 @@ typedef struct pn_mpm_stats {
     size_t particles;            /* active particles                                         */
     size_t plastic;              /* particles the return mapping projected                   */
     size_t left_domain;          /* particles deactivated this step for leaving the domain   */
+    size_t active_nodes;         /* grid nodes that carried work                             */
     pn_real max_speed_m_s;       /* largest particle speed after the step                    */
-    /* implicit steps */
-    int fixed_point_iters, newton_iters, cg_iters; /* totals over the step                  */
+    /* implicit steps (totals over the step and its substeps) */
+    int substeps;                /* 1, or 2^k after k halvings (the fallback)                */
+    int fixed_point_iters, newton_iters, cg_iters;
+    int active_set_rounds;       /* re-solves after separating contact changed its set      */
     int line_search_failures;    /* Newton steps whose line search found no decrease        */
-    pn_real newton_residual;     /* final max |dv| dt / dx of the last pass                  */
-    pn_real fixed_point_residual;/* max_q |F0_new - F0| of the last pass                     */
+    pn_real newton_residual;     /* largest final max |dv| dt / dx over the passes           */
+    pn_real fixed_point_residual;/* largest max_q |F0_new - F0| at the last pass             */
 } pn_mpm_stats;
 
 /* The world. Particle arrays (structure of arrays, read-only for users): x, v (dim per
    particle), C (affine velocity, dim^2), F (elastic deformation gradient, dim^2), h (plastic
-   state), vol0 (initial volume m^3), mass (kg), group, active. */
+   state), vol0 (initial volume m^3), mass (kg), group, active. The rest is internal. */
 typedef struct pn_mpm_world {
     pn_mpm_desc desc;
     int dim, wall;
-    size_t n, cap, nodes;
+    size_t n, cap, nodes, stride[3];
     pn_real *x, *v, *C, *F, *h, *vol0, *mass;
     int *group;
     unsigned char *active;
-    pn_real *grid_m, *grid_v;    /* node mass and velocity (momentum during the transfer)  */
-    pn_real *sx, *sv, *sC, *sF, *sh; /* scratch for the new state                         */
-    unsigned char *sactive;
     pn_mpm_group groups[PN_MPM_MAX_GROUPS];
     int n_groups;
-    /* implicit solver storage, allocated by the first implicit step */
-    pn_real *vstar, *vsol, *vtry, *grad, *dir, *cg_r, *cg_z, *cg_p, *cg_q, *diag;
-    unsigned char *fixed;        /* per node and axis: 1 = velocity component held at 0     */
-    pn_real *pP, *pH, *pG, *phG, *pF0;
-    pn_pnet_point *ppt;
+    pn_mpm_collider colliders[PN_MPM_MAX_COLLIDERS];
+    int n_colliders;
     pn_real time_s;
     long steps;
-    size_t error_particle;       /* particle that made the last step fail                  */
+    size_t error_particle;       /* particle that made the last step fail ((size_t)-1: none) */
     size_t left_total;           /* particles deactivated for leaving the domain, in total  */
+    /* >>bin: stencils, sort, active nodes */
+    size_t *pbase;               /* flat index of each particle's stencil base node          */
+    pn_real *pw, *pdw, *pfx;     /* per axis: 3 weights, 3 weight derivatives (1/m), x/dx - base */
+    size_t *order, *start;       /* particles sorted by base node; start[node] into order    */
+    size_t *act, n_act;          /* active nodes, ascending                                  */
+    long *dof;                   /* node -> index into act, or -1                            */
+    unsigned char *mark;
+    /* compact grid (index into act) and per-particle scratch */
+    pn_real *grid_m, *grid_v;
+    pn_real *pmat, *pscal, *part;
+    int *pstat;
+    pn_real *sx, *sv, *sC, *sF, *sh;
+    unsigned char *sactive;
+    /* contact per active node: held directions and the obstacle's velocity */
+    unsigned char *cn, *ckind, *chold;
+    pn_real *cdir, *cvel, *cmu, *clam, *ctan;
+    /* implicit solver storage, allocated by the first implicit step */
+    pn_real *vstar, *vsol, *vtry, *grad, *dir, *cg_r, *cg_z, *cg_p, *cg_q, *diag;
+    pn_real *pP, *pH, *pG, *phG, *pF0;
+    pn_pnet_point *ppt;
+    pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
+    unsigned char *bactive;
 } pn_mpm_world;
 
-/* Create a world (*out set on success). PN_ERROR_INVALID_PARAMETER names nothing here: the
-   checks are dim, res >= 8, dx > 0, finite gravity, friction >= 0, capacity > 0;
-   PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). */
+/* Create a world (*out set on success). PN_ERROR_INVALID_ARGUMENT for a bad dim, res outside
+   8 .. 16384, dx <= 0, non-finite gravity, friction < 0, capacity 0, a bad boundary or half an
+   allocator; PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). */
 PN_API pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out);
 PN_API void pn_mpm_destroy(pn_mpm_world *w);
 
@@ -147,11 +198,21 @@ PN_API void pn_mpm_destroy(pn_mpm_world *w);
 PN_API int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real density_kg_m3);
 
 /* Add n particles of group g at positions x (dim per particle, m), velocities v (NULL: at
-   rest), each of volume volume_m3, F = I, h = 0. All or nothing: PN_ERROR_NONFINITE or
+   rest), each of volume volume_m3, F = I, h = the material's initial state (0; for Cam-Clay
+   set it with pn_mpm_set_state). All or nothing: PN_ERROR_NONFINITE or
    PN_ERROR_INVALID_ARGUMENT (outside the walls, bad group or volume, over capacity) with the
-   world unchanged. */
+   world unchanged and error_particle naming the first bad one. */
 PN_API pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const pn_real *x,
                                       const pn_real *v, pn_real volume_m3);
+
+/* Set the plastic state h of particles first .. first + n - 1 (e.g. Cam-Clay log Jp < 0 for
+   snow with strength). PN_ERROR_NONFINITE / PN_ERROR_INVALID_ARGUMENT with nothing changed. */
+PN_API pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, const pn_real *h);
+
+/* Add a collider (copied; *index optional). PN_ERROR_INVALID_ARGUMENT for a full list, a bad
+   shape or boundary, non-finite or non-positive sizes, a zero half-space normal or a
+   negative friction. */
+PN_API pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c, int *index);
 
 /* One explicit step of dt_s seconds (symplectic Euler, APIC, return mapping after the F
    update). On failure the world is unchanged and w->error_particle names the culprit. */
@@ -163,15 +224,21 @@ PN_API pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt_s, pn_mpm_stat
 PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
                                          const pn_pnet *net);
 
-/* One implicit step (optimization time integration, PlasticityNet Eqs. 3, 10, 11): grid
-   velocities minimize 1/2 |v - v*|_M^2 + sum_p V_p Psi_p(F_p(v)) by Newton with PSD-projected
-   per-particle Hessians, Jacobi-preconditioned conjugate gradients and a backtracking line
-   search; around it the fixed point on F0 (F0 = F(v) of the previous pass). The state update
-   (APIC, return mapping) follows as in the explicit step. Walls inside the solve: sticky
-   holds every velocity component of the wall nodes at zero, slip and separate hold the normal
-   one (separate is treated as slip, without friction, in this release). The first call allocates the solver
-   storage (PN_ERROR_OUT_OF_MEMORY possible); later calls allocate nothing. On failure the world
-   is unchanged. desc may be NULL (defaults). */
+/* One implicit step (optimization time integration, PlasticityNet Eqs. 3, 10, 11): the
+   velocities of the active grid nodes minimize
+       E(v) = 1/2 |v - v*|_M^2 + sum_p V_p Psi_p(F_p(v))
+   by Newton with PSD-projected per-particle Hessians, Jacobi-preconditioned conjugate
+   gradients filtered by the contact constraints, and a backtracking (Armijo) line search,
+   stopping when max |dv| < newton_tol dx / dt. Around it the fixed point on F0 = F(v) and the
+   plastic state. Contact: sticky and slip hold velocity components at the obstacle's;
+   separate holds the normal component while the contact pushes (an active set, re-solved
+   when it changes); Coulomb friction then acts on the solution as in the explicit step, with
+   the normal impulse of the solve (the tangential speed drops by mu impulse / mass, not
+   below zero). The state update (APIC, return mapping) follows
+   as in the explicit step. A step that fails (an error, a non-finite value, or Newton short of
+   100 newton_tol) is retried as two half steps, up to max_halvings times; stats->substeps
+   says so. The first call allocates the solver storage (PN_ERROR_OUT_OF_MEMORY possible);
+   later calls allocate nothing. On failure the world is unchanged. desc may be NULL. */
 PN_API pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt_s, const pn_mpm_implicit_desc *desc,
                                       pn_mpm_stats *stats);
 
@@ -189,6 +256,15 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
 #error "plastinet_mpm.h: the plastinet.h implementation must come first"
 #endif
 
+/* OpenMP loops that compile away (and do not warn) without -fopenmp. Each iteration writes
+   only its own outputs, so the schedule cannot change a result. */
+#ifdef _OPENMP
+#define PN__OMP_FOR _Pragma("omp parallel for schedule(dynamic, 64)")
+#else
+#define PN__OMP_FOR
+#endif
+#define PN__MPM_CHUNK 1024 /* reductions sum chunks of this size, then the chunks in order */
+
 /* ======================================================================================
    >>world
    ====================================================================================== */
@@ -202,51 +278,28 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     return p;
 }
 
+/* every array the world owns (X-macro: one list for destroy) */
+#define PN__MPM_ARRAYS(X)                                                                       \
+    X(x) X(v) X(C) X(F) X(h) X(vol0) X(mass) X(group) X(active) X(pbase) X(pw) X(pdw) X(pfx)    \
+    X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(pmat) X(pscal) X(part)        \
+    X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
+    X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(ppt) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)
+
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
     pn_allocator a;
     if (!w) return;
     a = w->desc.allocator;
-    pn_free(&a, w->x);
-    pn_free(&a, w->v);
-    pn_free(&a, w->C);
-    pn_free(&a, w->F);
-    pn_free(&a, w->h);
-    pn_free(&a, w->vol0);
-    pn_free(&a, w->mass);
-    pn_free(&a, w->group);
-    pn_free(&a, w->active);
-    pn_free(&a, w->grid_m);
-    pn_free(&a, w->grid_v);
-    pn_free(&a, w->sx);
-    pn_free(&a, w->sv);
-    pn_free(&a, w->sC);
-    pn_free(&a, w->sF);
-    pn_free(&a, w->sh);
-    pn_free(&a, w->sactive);
-    pn_free(&a, w->vstar);
-    pn_free(&a, w->vsol);
-    pn_free(&a, w->vtry);
-    pn_free(&a, w->grad);
-    pn_free(&a, w->dir);
-    pn_free(&a, w->cg_r);
-    pn_free(&a, w->cg_z);
-    pn_free(&a, w->cg_p);
-    pn_free(&a, w->cg_q);
-    pn_free(&a, w->diag);
-    pn_free(&a, w->fixed);
-    pn_free(&a, w->pP);
-    pn_free(&a, w->pH);
-    pn_free(&a, w->pG);
-    pn_free(&a, w->phG);
-    pn_free(&a, w->pF0);
-    pn_free(&a, w->ppt);
+#define PN__MPM_FREE(f) pn_free(&a, w->f);
+    PN__MPM_ARRAYS(PN__MPM_FREE)
+#undef PN__MPM_FREE
     pn_free(&a, w);
 }
 
 PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
     pn_mpm_world *w;
-    int d, i, fail = 0;
-    size_t cap, nodes = 1;
+    int d, dd, i, fail = 0;
+    size_t cap, nodes = 1, k, nparts;
     PN_ASSERT(desc && out);
     d = desc->dim;
     if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
@@ -260,6 +313,8 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
             return PN_ERROR_INVALID_ARGUMENT;
         nodes *= (size_t)(desc->res[i] + 1);
     }
+    if (desc->wall_cells * 2 + 2 > desc->res[0]) return PN_ERROR_INVALID_ARGUMENT;
+    dd = d * d;
     cap = desc->max_particles;
     w = (pn_mpm_world *)pn__mpm_alloc(desc, 1, sizeof *w, &fail);
     if (!w) return PN_ERROR_OUT_OF_MEMORY;
@@ -268,27 +323,54 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
     w->wall = desc->wall_cells ? desc->wall_cells : 3;
     w->cap = cap;
     w->nodes = nodes;
-    w->x = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)d, sizeof(pn_real), &fail);
-    w->v = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)d, sizeof(pn_real), &fail);
-    w->C = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)(d * d), sizeof(pn_real), &fail);
-    w->F = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)(d * d), sizeof(pn_real), &fail);
-    w->h = (pn_real *)pn__mpm_alloc(desc, cap, sizeof(pn_real), &fail);
-    w->vol0 = (pn_real *)pn__mpm_alloc(desc, cap, sizeof(pn_real), &fail);
-    w->mass = (pn_real *)pn__mpm_alloc(desc, cap, sizeof(pn_real), &fail);
-    w->group = (int *)pn__mpm_alloc(desc, cap, sizeof(int), &fail);
-    w->active = (unsigned char *)pn__mpm_alloc(desc, cap, 1, &fail);
-    w->grid_m = (pn_real *)pn__mpm_alloc(desc, nodes, sizeof(pn_real), &fail);
-    w->grid_v = (pn_real *)pn__mpm_alloc(desc, nodes * (size_t)d, sizeof(pn_real), &fail);
-    w->sx = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)d, sizeof(pn_real), &fail);
-    w->sv = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)d, sizeof(pn_real), &fail);
-    w->sC = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)(d * d), sizeof(pn_real), &fail);
-    w->sF = (pn_real *)pn__mpm_alloc(desc, cap * (size_t)(d * d), sizeof(pn_real), &fail);
-    w->sh = (pn_real *)pn__mpm_alloc(desc, cap, sizeof(pn_real), &fail);
-    w->sactive = (unsigned char *)pn__mpm_alloc(desc, cap, 1, &fail);
+    w->error_particle = (size_t)-1;
+    w->stride[d - 1] = 1;
+    for (i = d - 2; i >= 0; --i) w->stride[i] = w->stride[i + 1] * (size_t)(desc->res[i + 1] + 1);
+    nparts = (cap > nodes * (size_t)d ? cap : nodes * (size_t)d) / PN__MPM_CHUNK + 2;
+#define PN__MPM_A(f, count, type) w->f = (type *)pn__mpm_alloc(desc, count, sizeof(type), &fail)
+    PN__MPM_A(x, cap * (size_t)d, pn_real);
+    PN__MPM_A(v, cap * (size_t)d, pn_real);
+    PN__MPM_A(C, cap * (size_t)dd, pn_real);
+    PN__MPM_A(F, cap * (size_t)dd, pn_real);
+    PN__MPM_A(h, cap, pn_real);
+    PN__MPM_A(vol0, cap, pn_real);
+    PN__MPM_A(mass, cap, pn_real);
+    PN__MPM_A(group, cap, int);
+    PN__MPM_A(active, cap, unsigned char);
+    PN__MPM_A(pbase, cap, size_t);
+    PN__MPM_A(pw, cap * 9, pn_real);
+    PN__MPM_A(pdw, cap * 9, pn_real);
+    PN__MPM_A(pfx, cap * 3, pn_real);
+    PN__MPM_A(order, cap, size_t);
+    PN__MPM_A(start, nodes + 1, size_t);
+    PN__MPM_A(act, nodes, size_t);
+    PN__MPM_A(dof, nodes, long);
+    PN__MPM_A(mark, nodes, unsigned char);
+    PN__MPM_A(grid_m, nodes, pn_real);
+    PN__MPM_A(grid_v, nodes * (size_t)d, pn_real);
+    PN__MPM_A(pmat, cap * (size_t)dd, pn_real);
+    PN__MPM_A(pscal, cap > nodes ? cap : nodes, pn_real);
+    PN__MPM_A(part, nparts, pn_real);
+    PN__MPM_A(pstat, cap, int);
+    PN__MPM_A(sx, cap * (size_t)d, pn_real);
+    PN__MPM_A(sv, cap * (size_t)d, pn_real);
+    PN__MPM_A(sC, cap * (size_t)dd, pn_real);
+    PN__MPM_A(sF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(sh, cap, pn_real);
+    PN__MPM_A(sactive, cap, unsigned char);
+    PN__MPM_A(cn, nodes, unsigned char);
+    PN__MPM_A(ckind, nodes, unsigned char);
+    PN__MPM_A(chold, nodes, unsigned char);
+    PN__MPM_A(cdir, nodes * 9, pn_real);
+    PN__MPM_A(cvel, nodes * 3, pn_real);
+    PN__MPM_A(cmu, nodes, pn_real);
+    PN__MPM_A(clam, nodes, pn_real);
+    PN__MPM_A(ctan, nodes * 3, pn_real);
     if (fail) {
         pn_mpm_destroy(w);
         return PN_ERROR_OUT_OF_MEMORY;
     }
+    for (k = 0; k < nodes; ++k) w->dof[k] = -1;
     *out = w;
     return PN_OK;
 }
@@ -297,6 +379,7 @@ PN__DEF int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real dens
     PN_ASSERT(w && m);
     if (w->n_groups >= PN_MPM_MAX_GROUPS || !pn__finite(density_kg_m3) || !(density_kg_m3 > 0))
         return -1;
+    memset(&w->groups[w->n_groups], 0, sizeof w->groups[0]);
     w->groups[w->n_groups].material = *m;
     w->groups[w->n_groups].density_kg_m3 = density_kg_m3;
     return w->n_groups++;
@@ -361,6 +444,50 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
     return PN_OK;
 }
 
+PN__DEF pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, const pn_real *h) {
+    size_t p;
+    PN_ASSERT(w && (h || n == 0));
+    if (first > w->n || n > w->n - first) return PN_ERROR_INVALID_ARGUMENT;
+    for (p = 0; p < n; ++p)
+        if (!pn__finite(h[p])) {
+            w->error_particle = first + p;
+            return PN_ERROR_NONFINITE;
+        }
+    memcpy(w->h + first, h, sizeof(pn_real) * n);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c, int *index) {
+    pn_mpm_collider k;
+    pn_real nn = 0;
+    int i, d;
+    PN_ASSERT(w && c);
+    d = w->dim;
+    k = *c;
+    if (w->n_colliders >= PN_MPM_MAX_COLLIDERS || k.shape < PN_MPM_SHAPE_HALF_SPACE ||
+        k.shape > PN_MPM_SHAPE_SPHERE || k.boundary < PN_MPM_BOUNDARY_STICKY ||
+        k.boundary > PN_MPM_BOUNDARY_SEPARATE || !pn__finite(k.friction) || !(k.friction >= 0) ||
+        !pn__all_finite(d, k.center_m) || !pn__all_finite(d, k.velocity_m_s))
+        return PN_ERROR_INVALID_ARGUMENT;
+    for (i = d; i < 3; ++i) k.center_m[i] = k.normal[i] = k.half_extent_m[i] = k.velocity_m_s[i] = 0;
+    if (k.shape == PN_MPM_SHAPE_HALF_SPACE) {
+        if (!pn__all_finite(d, k.normal)) return PN_ERROR_INVALID_ARGUMENT;
+        for (i = 0; i < d; ++i) nn += k.normal[i] * k.normal[i];
+        nn = PN__SQRT(nn);
+        if (!(nn > 0) || !pn__finite(nn)) return PN_ERROR_INVALID_ARGUMENT;
+        for (i = 0; i < d; ++i) k.normal[i] /= nn;
+    } else if (k.shape == PN_MPM_SHAPE_BOX) {
+        for (i = 0; i < d; ++i)
+            if (!pn__finite(k.half_extent_m[i]) || !(k.half_extent_m[i] > 0)) return PN_ERROR_INVALID_ARGUMENT;
+    } else if (!pn__finite(k.radius_m) || !(k.radius_m > 0)) {
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    w->colliders[w->n_colliders] = k;
+    if (index) *index = w->n_colliders;
+    w->n_colliders++;
+    return PN_OK;
+}
+
 PN__DEF void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentum) {
     size_t p;
     int i, d = w->dim;
@@ -375,155 +502,500 @@ PN__DEF void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *moment
         for (i = 0; i < d; ++i) momentum[i] = mom[i];
 }
 
-/* ======================================================================================
-   >>transfer: quadratic B-splines. For a particle at x (in cells), base = floor(x - 0.5),
-   fx = x - base in [0.5, 1.5): w0 = (1.5 - fx)^2 / 2, w1 = 0.75 - (fx - 1)^2,
-   w2 = (fx - 0.5)^2 / 2 per axis. APIC with D^-1 = 4 / dx^2 (quadratic splines). The
-   particle-to-grid and grid-to-particle passes themselves are shared by both integrators
-   (pn__mpm_p2g_momentum, pn__mpm_g2p below).
-   ====================================================================================== */
-
-static size_t pn__mpm_node(const pn_mpm_world *w, const int *idx) {
-    size_t k = (size_t)idx[0];
-    int i;
-    for (i = 1; i < w->dim; ++i) k = k * (size_t)(w->desc.res[i] + 1) + (size_t)idx[i];
-    return k;
+/* Deterministic sum: fixed chunks (in parallel), then the chunk sums in order. */
+static pn_real pn__mpm_sum(pn_mpm_world *w, size_t n, const pn_real *a, const pn_real *b) {
+    long c, nc = (long)((n + PN__MPM_CHUNK - 1) / PN__MPM_CHUNK);
+    pn_real s = 0;
+    PN__OMP_FOR
+    for (c = 0; c < nc; ++c) {
+        size_t i, lo = (size_t)c * PN__MPM_CHUNK, hi = PN__MIN(n, lo + PN__MPM_CHUNK);
+        pn_real acc = 0;
+        if (b)
+            for (i = lo; i < hi; ++i) acc += a[i] * b[i];
+        else
+            for (i = lo; i < hi; ++i) acc += a[i];
+        w->part[c] = acc;
+    }
+    for (c = 0; c < nc; ++c) s += w->part[c];
+    return s;
 }
 
-/* Stencil of particle p: nodes, weights, weight gradients (1/m) and offsets (m). */
-typedef struct pn__mpm_kernel {
-    int count;
-    size_t node[27];
-    pn_real w[27], gw[27][3], dpos[27][3];
-} pn__mpm_kernel;
-
-static void pn__mpm_kernel_at(const pn_mpm_world *w, const pn_real *x, pn__mpm_kernel *k) {
-    int d = w->dim, a, b, c, i, nc = d == 3 ? 3 : 1;
-    pn_real dx = w->desc.dx_m, wd[3][3] = {{0}}, dw[3][3] = {{0}}, fx[3] = {0, 0, 0};
-    int base[3] = {0, 0, 0}, idx[3];
-    for (i = 0; i < d; ++i) {
-        pn_real xc = x[i] / dx, f;
-        base[i] = (int)floor((double)(xc - (pn_real)0.5));
-        f = xc - (pn_real)base[i];
-        fx[i] = f;
-        wd[i][0] = (pn_real)0.5 * ((pn_real)1.5 - f) * ((pn_real)1.5 - f);
-        wd[i][1] = (pn_real)0.75 - (f - 1) * (f - 1);
-        wd[i][2] = (pn_real)0.5 * (f - (pn_real)0.5) * (f - (pn_real)0.5);
-        dw[i][0] = (f - (pn_real)1.5) / dx; /* d w / d x_p */
-        dw[i][1] = -2 * (f - 1) / dx;
-        dw[i][2] = (f - (pn_real)0.5) / dx;
-    }
-    if (d == 2) {
-        fx[2] = 0;
-        wd[2][0] = 1;
-        dw[2][0] = 0;
-    }
-    k->count = 0;
-    for (a = 0; a < 3; ++a)
-        for (b = 0; b < 3; ++b)
-            for (c = 0; c < nc; ++c) {
-                int n = k->count++, o[3];
-                o[0] = a; o[1] = b; o[2] = c;
-                for (i = 0; i < 3; ++i) idx[i] = base[i] + o[i];
-                k->node[n] = pn__mpm_node(w, idx);
-                k->w[n] = wd[0][a] * wd[1][b] * wd[2][c];
-                k->gw[n][0] = dw[0][a] * wd[1][b] * wd[2][c];
-                k->gw[n][1] = wd[0][a] * dw[1][b] * wd[2][c];
-                k->gw[n][2] = d == 3 ? wd[0][a] * wd[1][b] * dw[2][c] : 0;
-                for (i = 0; i < 3; ++i) k->dpos[n][i] = ((pn_real)o[i] - fx[i]) * dx;
-            }
-}
-
-/* ======================================================================================
-   >>grid: v = momentum / mass + dt g, then the walls.
-   ====================================================================================== */
-
-static void pn__mpm_grid_update(pn_mpm_world *w, pn_real dt) {
-    int d = w->dim, i, idx[3];
-    size_t k;
-    for (k = 0; k < w->nodes; ++k) {
-        pn_real *v = w->grid_v + k * (size_t)d, m = w->grid_m[k];
-        size_t r = k;
-        if (m <= 0) continue;
-        for (i = 0; i < d; ++i) v[i] = v[i] / m + dt * w->desc.gravity[i];
-        for (i = d - 1; i >= 0; --i) { /* node coordinates from the flat index */
-            idx[i] = (int)(r % (size_t)(w->desc.res[i] + 1));
-            r /= (size_t)(w->desc.res[i] + 1);
+/* The first particle (lowest index) whose pstat holds an error, with its code. */
+static pn_result pn__mpm_first_error(pn_mpm_world *w) {
+    size_t p;
+    for (p = 0; p < w->n; ++p)
+        if (w->active[p] && (w->pstat[p] & 0xff)) {
+            w->error_particle = p;
+            return (pn_result)(w->pstat[p] & 0xff);
         }
+    return PN_OK;
+}
+
+/* State check at the start of a step: x, v, C, F, h finite. */
+static pn_result pn__mpm_check_state(pn_mpm_world *w) {
+    int d = w->dim, dd = d * d;
+    size_t p;
+    for (p = 0; p < w->n; ++p) {
+        if (!w->active[p]) continue;
+        if (!pn__all_finite(d, w->x + p * (size_t)d) || !pn__all_finite(d, w->v + p * (size_t)d) ||
+            !pn__all_finite(dd, w->C + p * (size_t)dd) || !pn__all_finite(dd, w->F + p * (size_t)dd) ||
+            !pn__finite(w->h[p])) {
+            w->error_particle = p;
+            return PN_ERROR_NONFINITE;
+        }
+    }
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>bin: quadratic B-splines. For a particle at x (in cells), base = floor(x - 0.5),
+   fx = x - base in [0.5, 1.5): w0 = (1.5 - fx)^2 / 2, w1 = 0.75 - (fx - 1)^2,
+   w2 = (fx - 0.5)^2 / 2 per axis. Particles are sorted by base node (a stable counting
+   sort), so the particles that reach node i are those whose base is i - o, o in {0,1,2}^d,
+   and a gather over them sums in a fixed order whatever the thread count.
+   ====================================================================================== */
+
+static void pn__mpm_stencil(pn_mpm_world *w, size_t p) {
+    int d = w->dim, i;
+    pn_real dx = w->desc.dx_m, *W = w->pw + p * 9, *D = w->pdw + p * 9, *fx = w->pfx + p * 3;
+    size_t flat = 0;
+    for (i = 0; i < d; ++i) {
+        pn_real xc = w->x[p * (size_t)d + (size_t)i] / dx, f;
+        int b = (int)floor((double)(xc - (pn_real)0.5));
+        f = xc - (pn_real)b;
+        fx[i] = f;
+        W[i * 3 + 0] = (pn_real)0.5 * ((pn_real)1.5 - f) * ((pn_real)1.5 - f);
+        W[i * 3 + 1] = (pn_real)0.75 - (f - 1) * (f - 1);
+        W[i * 3 + 2] = (pn_real)0.5 * (f - (pn_real)0.5) * (f - (pn_real)0.5);
+        D[i * 3 + 0] = (f - (pn_real)1.5) / dx; /* d w / d x_p */
+        D[i * 3 + 1] = -2 * (f - 1) / dx;
+        D[i * 3 + 2] = (f - (pn_real)0.5) / dx;
+        flat += (size_t)b * w->stride[i];
+    }
+    w->pbase[p] = flat;
+}
+
+/* weight of particle p at its stencil offset o (0..2 per axis), its gradient (1/m) and the
+   offset node - particle (m) */
+static pn_real pn__mpm_weight(const pn_mpm_world *w, size_t p, const int *o, pn_real *gw, pn_real *dpos) {
+    const pn_real *W = w->pw + p * 9, *D = w->pdw + p * 9, *fx = w->pfx + p * 3;
+    pn_real dx = w->desc.dx_m, a = W[o[0]], b = W[3 + o[1]], c = 1;
+    if (w->dim == 3) {
+        c = W[6 + o[2]];
+        gw[2] = a * b * D[6 + o[2]];
+        dpos[2] = ((pn_real)o[2] - fx[2]) * dx;
+    }
+    gw[0] = D[o[0]] * b * c;
+    gw[1] = a * D[3 + o[1]] * c;
+    dpos[0] = ((pn_real)o[0] - fx[0]) * dx;
+    dpos[1] = ((pn_real)o[1] - fx[1]) * dx;
+    return a * b * c;
+}
+
+/* stencil slot s (0 .. 3^d - 1): offset vector and flat node offset */
+static size_t pn__mpm_slot(const pn_mpm_world *w, int s, int *o) {
+    int i;
+    size_t off = 0;
+    for (i = w->dim - 1; i >= 0; --i) {
+        o[i] = s % 3;
+        s /= 3;
+        off += (size_t)o[i] * w->stride[i];
+    }
+    return off;
+}
+
+static void pn__mpm_node_index(const pn_mpm_world *w, size_t node, int *idx) {
+    int i;
+    for (i = w->dim - 1; i >= 0; --i) {
+        idx[i] = (int)(node % (size_t)(w->desc.res[i] + 1));
+        node /= (size_t)(w->desc.res[i] + 1);
+    }
+}
+
+/* The base nodes (and the slot each is seen from) whose particles reach node `node`. */
+static int pn__mpm_node_bases(const pn_mpm_world *w, size_t node, size_t *base, int (*o)[3]) {
+    int idx[3], s, i, n = 0, ns = w->dim == 3 ? 27 : 9;
+    pn__mpm_node_index(w, node, idx);
+    for (s = 0; s < ns; ++s) {
+        size_t off = pn__mpm_slot(w, s, o[n]);
+        int ok = 1;
+        for (i = 0; i < w->dim; ++i) ok &= idx[i] >= o[n][i];
+        if (!ok) continue;
+        base[n++] = node - off;
+    }
+    return n;
+}
+
+static void pn__mpm_bin(pn_mpm_world *w) {
+    size_t p, k, prev = (size_t)-1;
+    long lp;
+    int s, ns = w->dim == 3 ? 27 : 9, o[3];
+    for (k = 0; k < w->n_act; ++k) w->dof[w->act[k]] = -1;
+    PN__OMP_FOR
+    for (lp = 0; lp < (long)w->n; ++lp)
+        if (w->active[lp]) pn__mpm_stencil(w, (size_t)lp);
+    /* stable counting sort by base node */
+    memset(w->start, 0, sizeof(size_t) * (w->nodes + 1));
+    for (p = 0; p < w->n; ++p)
+        if (w->active[p]) w->start[w->pbase[p] + 1]++;
+    for (k = 0; k < w->nodes; ++k) w->start[k + 1] += w->start[k];
+    for (p = 0; p < w->n; ++p)
+        if (w->active[p]) w->order[w->start[w->pbase[p]]++] = p;
+    for (k = w->nodes; k > 0; --k) w->start[k] = w->start[k - 1];
+    w->start[0] = 0;
+    /* active nodes: the stencils of the occupied base nodes, listed in ascending order */
+    for (k = 0; k < w->start[w->nodes]; ++k) {
+        size_t b = w->pbase[w->order[k]];
+        if (b == prev) continue;
+        prev = b;
+        for (s = 0; s < ns; ++s) w->mark[b + pn__mpm_slot(w, s, o)] = 1;
+    }
+    w->n_act = 0;
+    for (k = 0; k < w->nodes; ++k)
+        if (w->mark[k]) {
+            w->mark[k] = 0;
+            w->dof[k] = (long)w->n_act;
+            w->act[w->n_act++] = k;
+        }
+}
+
+/* ======================================================================================
+   >>transfer: APIC with D^-1 = 4 / dx^2 (quadratic splines). Particle to grid is a gather
+   per active node: mass, momentum m_p (v_p + C_p (x_i - x_p)) and, for the explicit step,
+   the stress impulse A_p (x_i - x_p) with A_p = -dt V0 (4/dx^2) tau_p (MLS-MPM, Hu et al.
+   2018). grid_v holds momentum after this.
+   ====================================================================================== */
+
+static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
+    int d = w->dim, dd = d * d;
+    long lk;
+    PN__OMP_FOR
+    for (lk = 0; lk < (long)w->n_act; ++lk) {
+        size_t k = (size_t)lk, base[27], s;
+        int o[27][3], nb = pn__mpm_node_bases(w, w->act[k], base, o), b, i, j;
+        pn_real m = 0, mom[3] = {0, 0, 0};
+        for (b = 0; b < nb; ++b)
+            for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
+                size_t p = w->order[s];
+                pn_real gw[3], dpos[3], wt = pn__mpm_weight(w, p, o[b], gw, dpos), wm = wt * w->mass[p];
+                const pn_real *vp = w->v + p * (size_t)d, *C = w->C + p * (size_t)dd, *A = w->pmat + p * (size_t)dd;
+                m += wm;
+                for (i = 0; i < d; ++i) {
+                    pn_real acc = vp[i], st = 0;
+                    for (j = 0; j < d; ++j) acc += C[i * d + j] * dpos[j];
+                    if (with_stress)
+                        for (j = 0; j < d; ++j) st += A[i * d + j] * dpos[j];
+                    mom[i] += wm * acc + wt * st;
+                }
+            }
+        w->grid_m[k] = m;
+        for (i = 0; i < d; ++i) w->grid_v[k * (size_t)d + (size_t)i] = mom[i];
+    }
+}
+
+/* dt sum_i v_i grad w_ip^T over particle p's stencil (v: compact grid vector) */
+static void pn__mpm_grad_v(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt, pn_real *G) {
+    int d = w->dim, s, ns = d == 3 ? 27 : 9, i, j, o[3];
+    for (i = 0; i < d * d; ++i) G[i] = 0;
+    for (s = 0; s < ns; ++s) {
+        size_t node = w->pbase[p] + pn__mpm_slot(w, s, o);
+        const pn_real *vi = v + (size_t)w->dof[node] * (size_t)d;
+        pn_real gw[3], dpos[3];
+        pn__mpm_weight(w, p, o, gw, dpos);
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) G[i * d + j] += dt * vi[i] * gw[j];
+    }
+}
+
+/* Grid to particles into scratch: APIC v, C; x += dt v; F from gradF (0: (I + dt C) F as in
+   the explicit step, 1: (I + dt sum v grad w^T) F, as the implicit energy saw it); then the
+   return mapping. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid. */
+static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt, int gradF,
+                             pn_mpm_stats *st) {
+    int d = w->dim, dd = d * d;
+    long lp;
+    size_t p;
+    pn_real inv_dx = 1 / w->desc.dx_m;
+    pn_result r;
+    PN__OMP_FOR
+    for (lp = 0; lp < (long)w->n; ++lp) {
+        size_t q = (size_t)lp;
+        const pn_mpm_group *g = &w->groups[w->group[q]];
+        pn_real nv[3] = {0, 0, 0}, nC[9] = {0}, G[9], Fn[9], Z[9], hn;
+        pn_real *xp = w->x + q * (size_t)d;
+        int i, j, s, ns = d == 3 ? 27 : 9, o[3], stat;
+        w->sactive[q] = w->active[q];
+        w->pstat[q] = 0;
+        if (!w->active[q]) { /* retired particles keep their last state */
+            memcpy(w->sx + q * (size_t)d, xp, sizeof(pn_real) * (size_t)d);
+            memcpy(w->sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+            memcpy(w->sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+            memcpy(w->sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+            w->sh[q] = w->h[q];
+            continue;
+        }
+        for (s = 0; s < ns; ++s) {
+            size_t node = w->pbase[q] + pn__mpm_slot(w, s, o);
+            const pn_real *gv = gv_all + (size_t)w->dof[node] * (size_t)d;
+            pn_real gw[3], dpos[3], wt = pn__mpm_weight(w, q, o, gw, dpos);
+            for (i = 0; i < d; ++i) {
+                nv[i] += wt * gv[i];
+                for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * wt * gv[i] * dpos[j];
+            }
+        }
+        if (gradF) {
+            pn__mpm_grad_v(w, q, gv_all, dt, G);
+        } else {
+            for (i = 0; i < dd; ++i) G[i] = dt * nC[i];
+        }
+        for (i = 0; i < d; ++i) G[i * d + i] += 1;
+        pn_mat_mul(d, G, w->F + q * (size_t)dd, Fn);
+        stat = (int)pn_return_map(&g->material, d, Fn, w->h[q], Z, &hn, NULL);
+        if (stat == PN_OK && (!pn__all_finite(d, nv) || !pn__all_finite(dd, nC))) stat = PN_ERROR_OVERFLOW;
+        if (stat != PN_OK) {
+            w->pstat[q] = stat;
+            continue;
+        }
+        if (hn != w->h[q] || memcmp(Z, Fn, sizeof(pn_real) * (size_t)dd) != 0) stat |= 0x100;
         for (i = 0; i < d; ++i) {
-            int lo = idx[i] < w->wall, hi = idx[i] > w->desc.res[i] - w->wall;
-            pn_real vn, vt2 = 0, vt, scale;
-            int j;
-            if (!lo && !hi) continue;
-            if (w->desc.boundary == PN_MPM_BOUNDARY_STICKY) {
-                for (j = 0; j < d; ++j) v[j] = 0;
+            w->sv[q * (size_t)d + (size_t)i] = nv[i];
+            w->sx[q * (size_t)d + (size_t)i] = xp[i] + dt * nv[i];
+        }
+        memcpy(w->sC + q * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);
+        memcpy(w->sF + q * (size_t)dd, Z, sizeof(pn_real) * (size_t)dd);
+        w->sh[q] = hn;
+        if (!pn__mpm_in_grid(w, w->sx + q * (size_t)d)) { /* went through a wall: retire it */
+            w->sactive[q] = 0;
+            stat |= 0x200;
+        }
+        w->pstat[q] = stat;
+    }
+    r = pn__mpm_first_error(w);
+    if (r != PN_OK) return r;
+    for (p = 0; p < w->n; ++p) {
+        pn_real sp = 0;
+        int i;
+        if (!w->active[p]) continue;
+        if (w->pstat[p] & 0x100) st->plastic++;
+        if (w->pstat[p] & 0x200) {
+            st->left_domain++;
+            continue;
+        }
+        for (i = 0; i < d; ++i) sp += w->sv[p * (size_t)d + (size_t)i] * w->sv[p * (size_t)d + (size_t)i];
+        st->particles++;
+        st->max_speed_m_s = PN__MAX(st->max_speed_m_s, PN__SQRT(sp));
+    }
+    return PN_OK;
+}
+
+/* the new state in scratch becomes the world */
+static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
+    pn_real *t;
+    unsigned char *u;
+    t = w->x; w->x = w->sx; w->sx = t;
+    t = w->v; w->v = w->sv; w->sv = t;
+    t = w->C; w->C = w->sC; w->sC = t;
+    t = w->F; w->F = w->sF; w->sF = t;
+    t = w->h; w->h = w->sh; w->sh = t;
+    u = w->active; w->active = w->sactive; w->sactive = u;
+    w->left_total += st->left_domain;
+    w->time_s += dt;
+    w->steps++;
+    w->error_particle = (size_t)-1;
+}
+
+/* ======================================================================================
+   >>contact: each active node gets the obstacle it is in (the domain walls first, then the
+   first collider that contains it): up to d orthonormal directions that point out of the
+   obstacle, the obstacle's velocity, its boundary kind and friction. Sticky holds every
+   component (relative to the obstacle), slip the normal ones, separate the normal ones
+   while the contact pushes. Nodes without mass are held at rest.
+   ====================================================================================== */
+
+/* signed distance of x from collider c at time t (negative inside) and the outward normal */
+static pn_real pn__mpm_collider_phi(const pn_mpm_collider *c, int d, const pn_real *x, pn_real t, pn_real *n) {
+    pn_real r[3], phi = 0, len = 0;
+    int i, best = 0;
+    for (i = 0; i < d; ++i) r[i] = x[i] - (c->center_m[i] + t * c->velocity_m_s[i]);
+    for (i = 0; i < 3; ++i) n[i] = 0;
+    if (c->shape == PN_MPM_SHAPE_HALF_SPACE) {
+        for (i = 0; i < d; ++i) {
+            phi += r[i] * c->normal[i];
+            n[i] = c->normal[i];
+        }
+        return phi;
+    }
+    if (c->shape == PN_MPM_SHAPE_SPHERE) {
+        for (i = 0; i < d; ++i) len += r[i] * r[i];
+        len = PN__SQRT(len);
+        for (i = 0; i < d; ++i) n[i] = len > 0 ? r[i] / len : (i == d - 1);
+        return len - c->radius_m;
+    }
+    /* box: inside, the nearest face decides the normal */
+    for (i = 0; i < d; ++i) {
+        pn_real q = PN__FABS(r[i]) - c->half_extent_m[i];
+        if (i == 0 || q > phi) {
+            phi = q;
+            best = i;
+        }
+    }
+    n[best] = r[best] < 0 ? -1 : 1;
+    return phi;
+}
+
+static void pn__mpm_contact(pn_mpm_world *w, pn_real t) {
+    int d = w->dim;
+    long lk;
+    PN__OMP_FOR
+    for (lk = 0; lk < (long)w->n_act; ++lk) {
+        size_t k = (size_t)lk;
+        int idx[3], i, j, c, cn = 0, kind = (int)w->desc.boundary;
+        pn_real *dir = w->cdir + k * 9, *vel = w->cvel + k * 3, mu = w->desc.friction, xn[3], nrm[3];
+        pn__mpm_node_index(w, w->act[k], idx);
+        for (i = 0; i < 9; ++i) dir[i] = 0;
+        for (i = 0; i < 3; ++i) vel[i] = 0;
+        for (i = 0; i < d; ++i) {
+            if (idx[i] < w->wall) dir[3 * cn++ + i] = 1;
+            else if (idx[i] > w->desc.res[i] - w->wall) dir[3 * cn++ + i] = -1;
+        }
+        if (cn == 0) {
+            for (i = 0; i < d; ++i) xn[i] = (pn_real)idx[i] * w->desc.dx_m;
+            for (c = 0; c < w->n_colliders; ++c) {
+                const pn_mpm_collider *co = &w->colliders[c];
+                if (pn__mpm_collider_phi(co, d, xn, t, nrm) > 0) continue;
+                cn = 1;
+                for (i = 0; i < 3; ++i) {
+                    dir[i] = nrm[i];
+                    vel[i] = co->velocity_m_s[i];
+                }
+                kind = (int)co->boundary;
+                mu = co->friction;
                 break;
             }
-            vn = v[i];
-            if ((lo && vn >= 0) || (hi && vn <= 0)) { /* leaving the wall */
-                if (w->desc.boundary == PN_MPM_BOUNDARY_SEPARATE) continue;
-            }
-            v[i] = 0;
-            if (w->desc.boundary == PN_MPM_BOUNDARY_SEPARATE && w->desc.friction > 0) {
-                /* Coulomb: the tangential speed drops by mu |vn|, not below zero */
-                for (j = 0; j < d; ++j)
-                    if (j != i) vt2 += v[j] * v[j];
-                vt = PN__SQRT(vt2);
-                scale = vt > 0 ? PN__MAX(0, vt - w->desc.friction * PN__FABS(vn)) / vt : 0;
-                for (j = 0; j < d; ++j)
-                    if (j != i) v[j] *= scale;
-            }
         }
+        if (!(w->grid_m[k] > 0)) { /* no mass: nothing moves it */
+            cn = d;
+            kind = PN_MPM_BOUNDARY_STICKY;
+            for (i = 0; i < 3; ++i) vel[i] = 0;
+        }
+        if (cn > 0 && kind == PN_MPM_BOUNDARY_STICKY) {
+            cn = d;
+            for (i = 0; i < 9; ++i) dir[i] = 0;
+            for (j = 0; j < d; ++j) dir[3 * j + j] = 1;
+        }
+        w->cn[k] = (unsigned char)cn;
+        w->ckind[k] = (unsigned char)kind;
+        w->cmu[k] = mu;
+        w->clam[k] = 0;
+        w->chold[k] = (unsigned char)((1 << cn) - 1);
     }
 }
 
+/* Explicit grid velocity projection (Stomakhin et al. 2013 style): relative to the obstacle,
+   sticky zeroes the velocity, slip removes the normal part, separate removes an approaching
+   normal part and reduces the tangential speed by mu |v_n| (Coulomb), not below zero. */
+static void pn__mpm_project(const pn_mpm_world *w, size_t k, pn_real *v) {
+    int d = w->dim, b, i, cn = w->cn[k], kind = w->ckind[k];
+    const pn_real *dir = w->cdir + k * 9, *vel = w->cvel + k * 3;
+    pn_real u[3] = {0, 0, 0};
+    if (cn == 0) return;
+    for (i = 0; i < d; ++i) u[i] = kind == PN_MPM_BOUNDARY_STICKY ? 0 : v[i] - vel[i];
+    for (b = 0; b < cn && kind != PN_MPM_BOUNDARY_STICKY; ++b) {
+        const pn_real *n = dir + 3 * b;
+        pn_real un = 0, ut = 0, sc;
+        for (i = 0; i < d; ++i) un += u[i] * n[i];
+        if (kind == PN_MPM_BOUNDARY_SEPARATE && un >= 0) continue;
+        for (i = 0; i < d; ++i) u[i] -= un * n[i];
+        if (kind != PN_MPM_BOUNDARY_SEPARATE || !(w->cmu[k] > 0)) continue;
+        for (i = 0; i < d; ++i) ut += u[i] * u[i];
+        ut = PN__SQRT(ut);
+        sc = ut > 0 ? PN__MAX(0, ut - w->cmu[k] * PN__FABS(un)) / ut : 0;
+        for (i = 0; i < d; ++i) u[i] *= sc;
+    }
+    for (i = 0; i < d; ++i) v[i] = vel[i] + u[i];
+}
+
+#define PN__MPM_STICK 0x80 /* chold flag: separating contact that sticks (every component held) */
+
+/* remove the held components of x (a node vector) */
+static void pn__mpm_filter(const pn_mpm_world *w, size_t k, pn_real *x) {
+    int d = w->dim, b, i;
+    const pn_real *dir = w->cdir + k * 9;
+    if (w->chold[k] & PN__MPM_STICK) {
+        for (i = 0; i < d; ++i) x[i] = 0;
+        return;
+    }
+    for (b = 0; b < w->cn[k]; ++b) {
+        pn_real xn = 0;
+        if (!(w->chold[k] >> b & 1)) continue;
+        for (i = 0; i < d; ++i) xn += x[i] * dir[3 * b + i];
+        for (i = 0; i < d; ++i) x[i] -= xn * dir[3 * b + i];
+    }
+}
+
+/* set the held components of v to the obstacle's */
+static void pn__mpm_hold(const pn_mpm_world *w, size_t k, pn_real *v) {
+    int d = w->dim, i;
+    const pn_real *vel = w->cvel + k * 3;
+    pn_real u[3];
+    for (i = 0; i < d; ++i) u[i] = v[i] - vel[i];
+    pn__mpm_filter(w, k, u);
+    for (i = 0; i < d; ++i) v[i] = vel[i] + u[i];
+}
+
 /* ======================================================================================
-   >>implicit: optimization time integration. Unknowns: the velocities of the grid nodes
-   that carry mass. E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_p V_p Psi_p(F_p(v)) with
-   F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p^n. dE/dv_i = m_i (v_i - v*_i) +
-   dt sum_p V_p P_p F_p^nT grad w_ip; the Hessian applies each particle's PSD dP/dF to
-   dF_p = dt (sum_j d_j grad w_jp^T) F_p^n.
+   >>implicit: optimization time integration. Unknowns: the velocities of the active nodes.
+   E(v) = sum_i m_i/2 |v_i - v*_i|^2 + sum_p V_p Psi_p(F_p(v)) over the velocities the
+   contact leaves free, with F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p^n.
+   dE/dv_i = m_i (v_i - v*_i) + dt sum_p V_p P_p F_p^nT grad w_ip; the Hessian
+   applies each particle's PSD dP/dF to dF_p = dt (sum_j d_j grad w_jp^T) F_p^n. Particle
+   terms are computed per particle, then gathered per node (the fixed order of >>bin).
    ====================================================================================== */
 
 static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
-    const pn_mpm_desc *ds = &w->desc;
+    const pn_mpm_desc *desc = &w->desc;
     size_t nd = w->nodes * (size_t)w->dim, cap = w->cap;
-    int d = w->dim, fail = 0;
+    int d = w->dim, dd = d * d, fail = 0;
     if (w->vstar) return PN_OK;
-    w->vstar = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->vsol = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->vtry = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->grad = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->dir = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->cg_r = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->cg_z = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->cg_p = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->cg_q = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->diag = (pn_real *)pn__mpm_alloc(ds, nd, sizeof(pn_real), &fail);
-    w->fixed = (unsigned char *)pn__mpm_alloc(ds, nd, 1, &fail);
-    w->pP = (pn_real *)pn__mpm_alloc(ds, cap * (size_t)(d * d), sizeof(pn_real), &fail);
-    w->pH = (pn_real *)pn__mpm_alloc(ds, cap * (size_t)(d * d * d * d), sizeof(pn_real), &fail);
-    w->pG = (pn_real *)pn__mpm_alloc(ds, cap * (size_t)(d * d), sizeof(pn_real), &fail);
-    w->phG = (pn_real *)pn__mpm_alloc(ds, cap, sizeof(pn_real), &fail);
-    w->pF0 = (pn_real *)pn__mpm_alloc(ds, cap * (size_t)(d * d), sizeof(pn_real), &fail);
-    w->ppt = (pn_pnet_point *)pn__mpm_alloc(ds, cap, sizeof(pn_pnet_point), &fail);
+    PN__MPM_A(vstar, nd, pn_real);
+    PN__MPM_A(vsol, nd, pn_real);
+    PN__MPM_A(vtry, nd, pn_real);
+    PN__MPM_A(grad, nd, pn_real);
+    PN__MPM_A(dir, nd, pn_real);
+    PN__MPM_A(cg_r, nd, pn_real);
+    PN__MPM_A(cg_z, nd, pn_real);
+    PN__MPM_A(cg_p, nd, pn_real);
+    PN__MPM_A(cg_q, nd, pn_real);
+    PN__MPM_A(diag, nd, pn_real);
+    PN__MPM_A(pP, cap * (size_t)dd, pn_real);
+    PN__MPM_A(pH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(pG, cap * (size_t)dd, pn_real);
+    PN__MPM_A(phG, cap, pn_real);
+    PN__MPM_A(pF0, cap * (size_t)dd, pn_real);
+    PN__MPM_A(ppt, cap, pn_pnet_point);
+    PN__MPM_A(bx, cap * (size_t)d, pn_real);
+    PN__MPM_A(bv, cap * (size_t)d, pn_real);
+    PN__MPM_A(bC, cap * (size_t)dd, pn_real);
+    PN__MPM_A(bF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(bh, cap, pn_real);
+    PN__MPM_A(bactive, cap, unsigned char);
     if (!fail) return PN_OK;
-    /* leave the world as it was: free what this call allocated */
-    {
-        pn_real **r[] = {&w->vstar, &w->vsol, &w->vtry, &w->grad, &w->dir, &w->cg_r, &w->cg_z,
-                         &w->cg_p, &w->cg_q, &w->diag, &w->pP, &w->pH, &w->pG, &w->phG, &w->pF0};
+    { /* leave the world as it was: free what this call allocated */
+        void **r[] = {(void **)&w->vstar, (void **)&w->vsol, (void **)&w->vtry, (void **)&w->grad,
+                      (void **)&w->dir, (void **)&w->cg_r, (void **)&w->cg_z, (void **)&w->cg_p,
+                      (void **)&w->cg_q, (void **)&w->diag, (void **)&w->pP, (void **)&w->pH,
+                      (void **)&w->pG, (void **)&w->phG, (void **)&w->pF0, (void **)&w->ppt,
+                      (void **)&w->bx, (void **)&w->bv, (void **)&w->bC, (void **)&w->bF,
+                      (void **)&w->bh, (void **)&w->bactive};
         size_t i;
         for (i = 0; i < sizeof r / sizeof r[0]; ++i) {
-            pn_free(&ds->allocator, *r[i]);
+            pn_free(&desc->allocator, *r[i]);
             *r[i] = NULL;
         }
-        pn_free(&ds->allocator, w->fixed);
-        pn_free(&ds->allocator, w->ppt);
-        w->fixed = NULL;
-        w->ppt = NULL;
     }
     return PN_ERROR_OUT_OF_MEMORY;
 }
+#undef PN__MPM_A
 
 PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
                                           const pn_pnet *net) {
@@ -550,20 +1022,6 @@ static pn_mpm_energy pn__mpm_energy_of(const pn_mpm_group *g) {
     return g->material.plastic == PN_PLASTIC_NONE ? PN_MPM_ENERGY_ELASTIC : PN_MPM_ENERGY_LAGGED;
 }
 
-/* F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p^n */
-static void pn__mpm_F_of(const pn_mpm_world *w, size_t p, const pn__mpm_kernel *k, const pn_real *v,
-                         pn_real dt, pn_real *F) {
-    int d = w->dim, i, j, n;
-    pn_real Gv[9] = {0};
-    for (n = 0; n < k->count; ++n) {
-        const pn_real *vi = v + k->node[n] * (size_t)d;
-        for (i = 0; i < d; ++i)
-            for (j = 0; j < d; ++j) Gv[i * d + j] += dt * vi[i] * k->gw[n][j];
-    }
-    for (i = 0; i < d; ++i) Gv[i * d + i] += 1;
-    pn_mat_mul(d, Gv, w->F + p * (size_t)(d * d), F);
-}
-
 /* Psi_p at F (energy density), with P and the PSD dP/dF when asked. */
 static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, pn_real *psi,
                              pn_real *P, pn_real *H) {
@@ -582,163 +1040,188 @@ static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, 
     }
 }
 
+/* out (d x d) = s A B^T */
+static void pn__mpm_mul_abt(int d, pn_real s, const pn_real *A, const pn_real *B, pn_real *out) {
+    int i, j, l;
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j) {
+            pn_real acc = 0;
+            for (l = 0; l < d; ++l) acc += A[i * d + l] * B[j * d + l];
+            out[i * d + j] = s * acc;
+        }
+}
+
+/* node vector out_k += sum_p pmat_p grad w_kp over the particles that reach node k */
+static void pn__mpm_gather_pmat(const pn_mpm_world *w, size_t k, pn_real *out) {
+    size_t base[27], s;
+    int o[27][3], nb = pn__mpm_node_bases(w, w->act[k], base, o), b, i, j, d = w->dim, dd = d * d;
+    for (b = 0; b < nb; ++b)
+        for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
+            size_t p = w->order[s];
+            const pn_real *A = w->pmat + p * (size_t)dd;
+            pn_real gw[3], dpos[3];
+            pn__mpm_weight(w, p, o[b], gw, dpos);
+            for (i = 0; i < d; ++i)
+                for (j = 0; j < d; ++j) out[i] += A[i * d + j] * gw[j];
+        }
+}
+
 /* E(v); with_derivs: also the gradient (w->grad) and each particle's P and dP/dF. A failed
-   evaluation (an inverted F, say) gives *E = +inf with_derivs == 0, else its error. */
+   particle evaluation (an inverted F, say) gives *E = +inf without derivatives, else its
+   error (w->error_particle says which). */
 static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt, int with_derivs,
                                    pn_real *E) {
-    int d = w->dim, dd = d * d, i, j, l, n;
-    size_t p, k;
-    pn_real e = 0;
-    if (with_derivs) memset(w->grad, 0, sizeof(pn_real) * w->nodes * (size_t)d);
-    for (k = 0; k < w->nodes; ++k) {
-        pn_real m = w->grid_m[k];
-        if (m <= 0) continue;
-        for (i = 0; i < d; ++i) {
-            pn_real dv = v[k * (size_t)d + (size_t)i] - w->vstar[k * (size_t)d + (size_t)i];
-            e += m / 2 * dv * dv;
-            if (with_derivs) w->grad[k * (size_t)d + (size_t)i] = m * dv;
-        }
-    }
-    for (p = 0; p < w->n; ++p) {
-        pn__mpm_kernel kr;
-        pn_real F[9], psi, *P = w->pP + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd), PF[9];
-        pn_result r;
+    int d = w->dim, dd = d * d;
+    long l;
+    pn_result r;
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n; ++l) {
+        size_t p = (size_t)l;
+        pn_real G[9], F[9], psi = 0, *P = w->pP + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
+        int i;
+        w->pscal[p] = 0;
+        w->pstat[p] = 0;
         if (!w->active[p]) continue;
-        pn__mpm_kernel_at(w, w->x + p * (size_t)d, &kr);
-        pn__mpm_F_of(w, p, &kr, v, dt, F);
-        r = pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs ? H : NULL);
-        if (r != PN_OK) {
-            if (with_derivs) {
-                w->error_particle = p;
-                return r;
-            }
-            *E = (pn_real)HUGE_VAL;
-            return PN_OK;
-        }
-        e += w->vol0[p] * psi;
-        if (!with_derivs) continue;
-        /* PF = V dt P F^nT */
-        for (i = 0; i < d; ++i)
-            for (j = 0; j < d; ++j) {
-                pn_real acc = 0;
-                for (l = 0; l < d; ++l) acc += P[i * d + l] * w->F[p * (size_t)dd + (size_t)(j * d + l)];
-                PF[i * d + j] = w->vol0[p] * dt * acc;
-            }
-        for (n = 0; n < kr.count; ++n) {
-            pn_real *gi = w->grad + kr.node[n] * (size_t)d;
-            for (i = 0; i < d; ++i)
-                for (j = 0; j < d; ++j) gi[i] += PF[i * d + j] * kr.gw[n][j];
-        }
+        pn__mpm_grad_v(w, p, v, dt, G);
+        for (i = 0; i < d; ++i) G[i * d + i] += 1;
+        pn_mat_mul(d, G, w->F + p * (size_t)dd, F);
+        w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs ? H : NULL);
+        w->pscal[p] = w->vol0[p] * psi;
+        if (with_derivs && w->pstat[p] == PN_OK) /* pmat = V dt P F^nT */
+            pn__mpm_mul_abt(d, w->vol0[p] * dt, P, w->F + p * (size_t)dd, w->pmat + p * (size_t)dd);
     }
-    *E = e;
+    r = pn__mpm_first_error(w);
+    if (r != PN_OK) {
+        if (with_derivs) return r;
+        *E = (pn_real)HUGE_VAL;
+        return PN_OK;
+    }
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n_act; ++l) {
+        size_t k = (size_t)l;
+        const pn_real *vk = v + k * (size_t)d, *sk = w->vstar + k * (size_t)d;
+        pn_real *gk = w->grad + k * (size_t)d, e = 0;
+        int i;
+        for (i = 0; i < d; ++i) {
+            pn_real dv = vk[i] - sk[i];
+            e += w->grid_m[k] / 2 * dv * dv;
+            if (with_derivs) gk[i] = w->grid_m[k] * dv;
+        }
+        if (w->clam[k] > 0 && !(w->chold[k] & PN__MPM_STICK)) { /* sliding: mu L t . u */
+            pn_real f = w->cmu[k] * w->clam[k];
+            for (i = 0; i < d; ++i) {
+                e += f * w->ctan[k * 3 + (size_t)i] * (vk[i] - w->cvel[k * 3 + (size_t)i]);
+                if (with_derivs) gk[i] += f * w->ctan[k * 3 + (size_t)i];
+            }
+        }
+        if (with_derivs) pn__mpm_gather_pmat(w, k, gk);
+        w->cg_q[k] = e; /* the node's energy, summed below */
+    }
+    *E = pn__mpm_sum(w, w->n, w->pscal, NULL) + pn__mpm_sum(w, w->n_act, w->cg_q, NULL);
     return PN_OK;
 }
 
-/* out = H x over the free components (fixed ones give 0) */
+/* out = S H x (S: the contact filter) */
 static void pn__mpm_hess_vec(pn_mpm_world *w, const pn_real *x, pn_real dt, pn_real *out) {
-    int d = w->dim, dd = d * d, i, j, l, n;
-    size_t p, k, nd = w->nodes * (size_t)d;
-    for (k = 0; k < w->nodes; ++k)
-        for (i = 0; i < d; ++i) out[k * (size_t)d + (size_t)i] = w->grid_m[k] * x[k * (size_t)d + (size_t)i];
-    for (p = 0; p < w->n; ++p) {
-        pn__mpm_kernel kr;
-        pn_real Gx[9] = {0}, dF[9], dP[9], PF[9];
+    int d = w->dim, dd = d * d;
+    long l;
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n; ++l) {
+        size_t p = (size_t)l;
+        pn_real Gx[9], dF[9], dP[9];
         const pn_real *Fn = w->F + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
+        int i, j;
         if (!w->active[p]) continue;
-        pn__mpm_kernel_at(w, w->x + p * (size_t)d, &kr);
-        for (n = 0; n < kr.count; ++n) {
-            const pn_real *xi = x + kr.node[n] * (size_t)d;
-            for (i = 0; i < d; ++i)
-                for (j = 0; j < d; ++j) Gx[i * d + j] += dt * xi[i] * kr.gw[n][j];
-        }
+        pn__mpm_grad_v(w, p, x, dt, Gx);
         pn_mat_mul(d, Gx, Fn, dF);
         for (i = 0; i < dd; ++i) {
             pn_real acc = 0;
             for (j = 0; j < dd; ++j) acc += H[i * dd + j] * dF[j];
             dP[i] = acc;
         }
-        for (i = 0; i < d; ++i)
-            for (j = 0; j < d; ++j) {
-                pn_real acc = 0;
-                for (l = 0; l < d; ++l) acc += dP[i * d + l] * Fn[j * d + l];
-                PF[i * d + j] = w->vol0[p] * dt * acc;
-            }
-        for (n = 0; n < kr.count; ++n) {
-            pn_real *oi = out + kr.node[n] * (size_t)d;
-            for (i = 0; i < d; ++i)
-                for (j = 0; j < d; ++j) oi[i] += PF[i * d + j] * kr.gw[n][j];
-        }
+        pn__mpm_mul_abt(d, w->vol0[p] * dt, dP, Fn, w->pmat + p * (size_t)dd);
     }
-    for (k = 0; k < nd; ++k)
-        if (w->fixed[k] || w->grid_m[k / (size_t)d] <= 0) out[k] = 0;
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n_act; ++l) {
+        size_t k = (size_t)l;
+        const pn_real *xk = x + k * (size_t)d;
+        pn_real *ok = out + k * (size_t)d;
+        int i;
+        for (i = 0; i < d; ++i) ok[i] = w->grid_m[k] * xk[i];
+        pn__mpm_gather_pmat(w, k, ok);
+        pn__mpm_filter(w, k, ok);
+    }
 }
 
-/* Jacobi preconditioner: the exact diagonal of H (mass plus each particle's contribution) */
+/* Jacobi preconditioner: the diagonal of H (mass and each particle's contribution) */
 static void pn__mpm_diagonal(pn_mpm_world *w, pn_real dt) {
-    int d = w->dim, dd = d * d, i, j, l, n, a, b;
-    size_t p, k, nd = w->nodes * (size_t)d;
-    for (k = 0; k < w->nodes; ++k)
-        for (i = 0; i < d; ++i) w->diag[k * (size_t)d + (size_t)i] = w->grid_m[k];
-    for (p = 0; p < w->n; ++p) {
-        pn__mpm_kernel kr;
-        const pn_real *Fn = w->F + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
-        if (!w->active[p]) continue;
-        pn__mpm_kernel_at(w, w->x + p * (size_t)d, &kr);
-        for (n = 0; n < kr.count; ++n) {
-            pn_real q[3]; /* q = F^nT grad w */
-            for (j = 0; j < d; ++j) {
-                q[j] = 0;
-                for (l = 0; l < d; ++l) q[j] += Fn[l * d + j] * kr.gw[n][l];
+    int d = w->dim, dd = d * d;
+    long l;
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n_act; ++l) {
+        size_t k = (size_t)l, base[27], s;
+        int o[27][3], nb = pn__mpm_node_bases(w, w->act[k], base, o), b, i, j, a, c;
+        pn_real *dg = w->diag + k * (size_t)d;
+        for (i = 0; i < d; ++i) dg[i] = w->grid_m[k];
+        for (b = 0; b < nb; ++b)
+            for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
+                size_t p = w->order[s];
+                const pn_real *Fn = w->F + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
+                pn_real gw[3], dpos[3], q[3];
+                pn__mpm_weight(w, p, o[b], gw, dpos);
+                for (j = 0; j < d; ++j) { /* q = F^nT grad w */
+                    q[j] = 0;
+                    for (a = 0; a < d; ++a) q[j] += Fn[a * d + j] * gw[a];
+                }
+                for (i = 0; i < d; ++i) {
+                    pn_real acc = 0; /* sum_ac H[(i a),(i c)] q_a q_c */
+                    for (a = 0; a < d; ++a)
+                        for (c = 0; c < d; ++c) acc += H[(i * d + a) * dd + i * d + c] * q[a] * q[c];
+                    dg[i] += w->vol0[p] * dt * dt * acc;
+                }
             }
-            for (i = 0; i < d; ++i) {
-                pn_real acc = 0; /* sum_ab H[(i a),(i b)] q_a q_b */
-                for (a = 0; a < d; ++a)
-                    for (b = 0; b < d; ++b) acc += H[(i * d + a) * dd + i * d + b] * q[a] * q[b];
-                w->diag[kr.node[n] * (size_t)d + (size_t)i] += w->vol0[p] * dt * dt * acc;
-            }
-        }
+        for (i = 0; i < d; ++i)
+            if (!(dg[i] > 0)) dg[i] = 1;
     }
-    for (k = 0; k < nd; ++k)
-        if (!(w->diag[k] > 0)) w->diag[k] = 1;
 }
 
-static pn_real pn__mpm_dot(size_t n, const pn_real *a, const pn_real *b) {
-    pn_real s = 0;
-    size_t i;
-    for (i = 0; i < n; ++i) s += a[i] * b[i];
-    return s;
-}
-
-/* Solve H dir = -grad by preconditioned CG over the free components; returns iterations. */
+/* Solve S H S dir = -S grad by preconditioned CG; returns iterations. */
 static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol) {
-    size_t nd = w->nodes * (size_t)w->dim, k;
+    int d = w->dim, it;
+    size_t nd = w->n_act * (size_t)d, k, i;
     pn_real rz, r0, rr;
-    int it;
     pn__mpm_diagonal(w, dt);
-    for (k = 0; k < nd; ++k) {
-        int free_ = !w->fixed[k] && w->grid_m[k / (size_t)w->dim] > 0;
-        w->dir[k] = 0;
-        w->cg_r[k] = free_ ? -w->grad[k] : 0;
-        w->cg_z[k] = w->cg_r[k] / w->diag[k];
-        w->cg_p[k] = w->cg_z[k];
+    for (k = 0; k < w->n_act; ++k) {
+        for (i = 0; i < (size_t)d; ++i) {
+            size_t c = k * (size_t)d + i;
+            w->dir[c] = 0;
+            w->cg_r[c] = -w->grad[c];
+        }
+        pn__mpm_filter(w, k, w->cg_r + k * (size_t)d);
+        for (i = 0; i < (size_t)d; ++i) w->cg_z[k * (size_t)d + i] = w->cg_r[k * (size_t)d + i] / w->diag[k * (size_t)d + i];
+        pn__mpm_filter(w, k, w->cg_z + k * (size_t)d);
     }
-    rz = pn__mpm_dot(nd, w->cg_r, w->cg_z);
-    r0 = PN__SQRT(pn__mpm_dot(nd, w->cg_r, w->cg_r));
+    memcpy(w->cg_p, w->cg_z, sizeof(pn_real) * nd);
+    rz = pn__mpm_sum(w, nd, w->cg_r, w->cg_z);
+    r0 = PN__SQRT(pn__mpm_sum(w, nd, w->cg_r, w->cg_r));
     if (r0 == 0) return 0;
     for (it = 0; it < max_it; ++it) {
         pn_real pq, alpha, rz_new, beta;
         pn__mpm_hess_vec(w, w->cg_p, dt, w->cg_q);
-        pq = pn__mpm_dot(nd, w->cg_p, w->cg_q);
+        pq = pn__mpm_sum(w, nd, w->cg_p, w->cg_q);
         if (!(pq > 0)) break; /* PSD Hessian plus mass: only rounding gets here */
         alpha = rz / pq;
         for (k = 0; k < nd; ++k) {
             w->dir[k] += alpha * w->cg_p[k];
             w->cg_r[k] -= alpha * w->cg_q[k];
         }
-        rr = PN__SQRT(pn__mpm_dot(nd, w->cg_r, w->cg_r));
+        rr = PN__SQRT(pn__mpm_sum(w, nd, w->cg_r, w->cg_r));
         if (rr <= rel_tol * r0) return it + 1;
-        for (k = 0; k < nd; ++k) w->cg_z[k] = w->cg_r[k] / w->diag[k];
-        rz_new = pn__mpm_dot(nd, w->cg_r, w->cg_z);
+        for (k = 0; k < w->n_act; ++k) {
+            for (i = 0; i < (size_t)d; ++i) w->cg_z[k * (size_t)d + i] = w->cg_r[k * (size_t)d + i] / w->diag[k * (size_t)d + i];
+            pn__mpm_filter(w, k, w->cg_z + k * (size_t)d);
+        }
+        rz_new = pn__mpm_sum(w, nd, w->cg_r, w->cg_z);
         beta = rz_new / rz;
         rz = rz_new;
         for (k = 0; k < nd; ++k) w->cg_p[k] = w->cg_z[k] + beta * w->cg_p[k];
@@ -750,145 +1233,228 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol)
    point); returns max |F0_new - F0_old| in *res (0 on the first pass). */
 static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real dt, int first,
                                       pn_real *res) {
-    int d = w->dim, dd = d * d, i;
+    int d = w->dim, dd = d * d;
+    long l;
     size_t p;
     pn_real worst = 0;
-    for (p = 0; p < w->n; ++p) {
-        const pn_mpm_group *g = &w->groups[w->group[p]];
-        pn__mpm_kernel kr;
-        pn_real F0[9], *old = w->pF0 + p * (size_t)dd;
-        pn_result r = PN_OK;
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n; ++l) {
+        size_t q = (size_t)l;
+        const pn_mpm_group *g = &w->groups[w->group[q]];
+        pn_real G[9], F0[9], *old = w->pF0 + q * (size_t)dd, diff = 0;
         pn_mpm_energy en;
-        if (!w->active[p]) continue;
-        pn__mpm_kernel_at(w, w->x + p * (size_t)d, &kr);
-        pn__mpm_F_of(w, p, &kr, v, dt, F0);
+        int i;
+        w->pstat[q] = 0;
+        w->pscal[q] = 0;
+        if (!w->active[q]) continue;
+        pn__mpm_grad_v(w, q, v, dt, G);
+        for (i = 0; i < d; ++i) G[i * d + i] += 1;
+        pn_mat_mul(d, G, w->F + q * (size_t)dd, F0);
         if (!first)
-            for (i = 0; i < dd; ++i) worst = PN__MAX(worst, PN__FABS(F0[i] - old[i]));
+            for (i = 0; i < dd; ++i) diff = PN__MAX(diff, PN__FABS(F0[i] - old[i]));
+        w->pscal[q] = diff;
         memcpy(old, F0, sizeof(pn_real) * (size_t)dd);
         en = pn__mpm_energy_of(g);
         if (en == PN_MPM_ENERGY_LAGGED)
-            r = pn_lagged_prepare(&g->material, d, F0, w->h[p], w->pG + p * (size_t)dd, &w->phG[p]);
+            w->pstat[q] = (int)pn_lagged_prepare(&g->material, d, F0, w->h[q], w->pG + q * (size_t)dd, &w->phG[q]);
         else if (en == PN_MPM_ENERGY_PNET)
-            r = pn_pnet_prepare(&g->pnet, F0, w->h[p], &w->ppt[p], NULL, NULL);
-        if (r != PN_OK) {
-            w->error_particle = p;
-            return r;
-        }
+            w->pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->ppt[q], NULL, NULL);
     }
+    for (p = 0; p < w->n; ++p) worst = PN__MAX(worst, w->pscal[p]);
     *res = worst;
-    return PN_OK;
+    return pn__mpm_first_error(w);
 }
 
-/* the new state in scratch becomes the world */
-static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
-    pn_real *t;
-    unsigned char *u;
-    t = w->x; w->x = w->sx; w->sx = t;
-    t = w->v; w->v = w->sv; w->sv = t;
-    t = w->C; w->C = w->sC; w->sC = t;
-    t = w->F; w->F = w->sF; w->sF = t;
-    t = w->h; w->h = w->sh; w->sh = t;
-    u = w->active; w->active = w->sactive; w->sactive = u;
-    w->left_total += st->left_domain;
-    w->time_s += dt;
-    w->steps++;
-}
-
-/* Grid to particles into scratch: APIC v, C; x += dt v; F from gradF (0: (I + dt C) F as in
-   the explicit step, 1: F(v) with the weight gradients, as the implicit energy saw it); then
-   the return mapping. */
-static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt, int gradF,
-                             pn_mpm_stats *st) {
-    int d = w->dim, dd = d * d, i, j, n;
-    size_t p;
-    pn_real inv_dx = 1 / w->desc.dx_m;
-    for (p = 0; p < w->n; ++p) {
-        const pn_mpm_group *g = &w->groups[w->group[p]];
-        pn__mpm_kernel kr;
-        pn_real nv[3] = {0, 0, 0}, nC[9] = {0}, G[9], Fn[9], Z[9], hn, sp = 0;
-        pn_real *xp = w->x + p * (size_t)d;
-        pn_result r;
-        w->sactive[p] = w->active[p];
-        if (!w->active[p]) { /* retired particles keep their last state */
-            memcpy(w->sx + p * (size_t)d, xp, sizeof(pn_real) * (size_t)d);
-            memcpy(w->sv + p * (size_t)d, w->v + p * (size_t)d, sizeof(pn_real) * (size_t)d);
-            memcpy(w->sC + p * (size_t)dd, w->C + p * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-            memcpy(w->sF + p * (size_t)dd, w->F + p * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-            w->sh[p] = w->h[p];
-            continue;
+/* Friction for the coming solve (grad at the start v, computed with no friction): the held
+   normal components of grad are the contact's normal impulse L (kg m/s, lagged: fixed for the
+   pass). A node sticks (every component held) when mu L could stop its tangential momentum,
+   else it slides with the Coulomb force mu L against its tangential velocity t. */
+static void pn__mpm_friction_init(pn_mpm_world *w, pn_real *v) {
+    int d = w->dim;
+    size_t k;
+    for (k = 0; k < w->n_act; ++k) {
+        const pn_real *dir = w->cdir + k * 9, *vel = w->cvel + k * 3, *g = w->grad + k * (size_t)d;
+        pn_real *vk = v + k * (size_t)d, L = 0, u[3], ut = 0;
+        int b, i;
+        w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
+        w->clam[k] = 0;
+        if (w->ckind[k] != PN_MPM_BOUNDARY_SEPARATE || !w->chold[k] || !(w->cmu[k] > 0)) continue;
+        for (b = 0; b < w->cn[k]; ++b) {
+            pn_real gn = 0;
+            if (!(w->chold[k] >> b & 1)) continue;
+            for (i = 0; i < d; ++i) gn += g[i] * dir[3 * b + i];
+            L += PN__MAX(gn, 0);
         }
-        pn__mpm_kernel_at(w, xp, &kr);
-        for (n = 0; n < kr.count; ++n) {
-            const pn_real *gv = gv_all + kr.node[n] * (size_t)d;
-            for (i = 0; i < d; ++i) {
-                nv[i] += kr.w[n] * gv[i];
-                for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * kr.w[n] * gv[i] * kr.dpos[n][j];
-            }
-        }
-        if (gradF) {
-            pn__mpm_F_of(w, p, &kr, gv_all, dt, Fn);
+        if (!(L > 0)) continue;
+        w->clam[k] = L;
+        for (i = 0; i < d; ++i) u[i] = vk[i] - vel[i];
+        pn__mpm_filter(w, k, u);
+        for (i = 0; i < d; ++i) ut += u[i] * u[i];
+        ut = PN__SQRT(ut);
+        if (w->grid_m[k] * ut <= w->cmu[k] * L) {
+            w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
+            pn__mpm_hold(w, k, vk);
         } else {
-            for (i = 0; i < dd; ++i) G[i] = dt * nC[i];
-            for (i = 0; i < d; ++i) G[i * d + i] += 1;
-            pn_mat_mul(d, G, w->F + p * (size_t)dd, Fn);
+            for (i = 0; i < d; ++i) w->ctan[k * 3 + (size_t)i] = u[i] / ut;
         }
-        r = pn_return_map(&g->material, d, Fn, w->h[p], Z, &hn, NULL);
-        if (r == PN_OK && (!pn__all_finite(d, nv) || !pn__all_finite(dd, nC))) r = PN_ERROR_OVERFLOW;
-        if (r != PN_OK) {
-            w->error_particle = p;
-            return r;
-        }
-        if (hn != w->h[p] || memcmp(Z, Fn, sizeof(pn_real) * (size_t)dd) != 0) st->plastic++;
-        for (i = 0; i < d; ++i) {
-            w->sv[p * (size_t)d + (size_t)i] = nv[i];
-            w->sx[p * (size_t)d + (size_t)i] = xp[i] + dt * nv[i];
-            sp += nv[i] * nv[i];
-        }
-        memcpy(w->sC + p * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);
-        memcpy(w->sF + p * (size_t)dd, Z, sizeof(pn_real) * (size_t)dd);
-        w->sh[p] = hn;
-        if (!pn__mpm_in_grid(w, w->sx + p * (size_t)d)) { /* went through a wall: retire it */
-            w->sactive[p] = 0;
-            st->left_domain++;
-            continue;
-        }
-        st->particles++;
-        st->max_speed_m_s = PN__MAX(st->max_speed_m_s, PN__SQRT(sp));
     }
-    return PN_OK;
 }
 
-/* Particle to grid without stress: node mass and APIC momentum (grid_v holds momentum). */
-static void pn__mpm_p2g_momentum(pn_mpm_world *w) {
-    int d = w->dim, dd = d * d, i, j, n;
-    size_t p;
-    memset(w->grid_m, 0, sizeof(pn_real) * w->nodes);
-    memset(w->grid_v, 0, sizeof(pn_real) * w->nodes * (size_t)d);
-    for (p = 0; p < w->n; ++p) {
-        pn__mpm_kernel kr;
-        const pn_real *vp = w->v + p * (size_t)d, *C = w->C + p * (size_t)dd;
-        if (!w->active[p]) continue;
-        pn__mpm_kernel_at(w, w->x + p * (size_t)d, &kr);
-        for (n = 0; n < kr.count; ++n) {
-            pn_real *gv = w->grid_v + kr.node[n] * (size_t)d, wm = kr.w[n] * w->mass[p];
-            w->grid_m[kr.node[n]] += wm;
+/* Separating contact after a solve (grad at the solution): release held normals the
+   solution pulls on, hold free ones it pushes through; a sticking node whose tangential
+   reaction exceeds mu L slides, a sliding node that friction turned back sticks. Returns 1
+   when the set changed. */
+static int pn__mpm_active_set(pn_mpm_world *w, pn_real *v, pn_real vtol) {
+    int d = w->dim, changed = 0;
+    size_t k;
+    for (k = 0; k < w->n_act; ++k) {
+        const pn_real *dir = w->cdir + k * 9, *vel = w->cvel + k * 3, *g = w->grad + k * (size_t)d;
+        pn_real *vk = v + k * (size_t)d, m = w->grid_m[k], f = w->cmu[k] * w->clam[k], gt[3], u[3], a = 0;
+        int b, i, ch = 0, stick = (w->chold[k] & PN__MPM_STICK) != 0;
+        if (w->ckind[k] != PN_MPM_BOUNDARY_SEPARATE || w->cn[k] == 0) continue;
+        for (b = 0; b < w->cn[k]; ++b) {
+            pn_real gn = 0, un = 0;
             for (i = 0; i < d; ++i) {
-                pn_real acc = vp[i];
-                for (j = 0; j < d; ++j) acc += C[i * d + j] * kr.dpos[n][j];
-                gv[i] += wm * acc;
+                gn += g[i] * dir[3 * b + i];
+                un += (vk[i] - vel[i]) * dir[3 * b + i];
+            }
+            if ((w->chold[k] >> b & 1) && gn < -vtol * m) { /* pulls away: let go */
+                w->chold[k] = (unsigned char)(w->chold[k] & ~(1 << b) & ~PN__MPM_STICK);
+                ch = 1;
+            } else if (!(w->chold[k] >> b & 1) && un < -vtol) { /* goes in: hold it */
+                w->chold[k] = (unsigned char)(w->chold[k] | 1 << b);
+                ch = 1;
+            }
+        }
+        if (!ch && stick) { /* tangential reaction against the friction cone */
+            w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
+            for (i = 0; i < d; ++i) gt[i] = g[i];
+            pn__mpm_filter(w, k, gt);
+            for (i = 0; i < d; ++i) a += gt[i] * gt[i];
+            a = PN__SQRT(a);
+            if (a > f + vtol * m) {
+                for (i = 0; i < d; ++i) w->ctan[k * 3 + (size_t)i] = -gt[i] / a;
+                ch = 1;
+            } else {
+                w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
+            }
+        } else if (!ch && f > 0) { /* sliding: did friction turn it back? */
+            for (i = 0; i < d; ++i) u[i] = vk[i] - vel[i];
+            pn__mpm_filter(w, k, u);
+            for (i = 0; i < d; ++i) a += u[i] * w->ctan[k * 3 + (size_t)i];
+            if (a < 0) {
+                w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
+                ch = 1;
+            }
+        }
+        if (ch) pn__mpm_hold(w, k, vk);
+        changed |= ch;
+    }
+    return changed;
+}
+
+/* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
+static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
+                                       pn_mpm_stats *st) {
+    int d = w->dim, i, pass, has_sep = 0;
+    size_t k, nd;
+    pn_result r;
+    pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
+    pn__mpm_bin(w);
+    pn__mpm_p2g(w, 0);
+    pn__mpm_contact(w, w->time_s);
+    nd = w->n_act * (size_t)d;
+    st->active_nodes = w->n_act;
+    /* v* = momentum / mass + dt g; separating contacts start held where they approach */
+    for (k = 0; k < w->n_act; ++k) {
+        pn_real m = w->grid_m[k];
+        for (i = 0; i < d; ++i) {
+            size_t c = k * (size_t)d + (size_t)i;
+            w->vstar[c] = m > 0 ? w->grid_v[c] / m + dt * w->desc.gravity[i] : 0;
+        }
+        if (w->ckind[k] == PN_MPM_BOUNDARY_SEPARATE && w->cn[k]) {
+            int b;
+            has_sep = 1;
+            w->chold[k] = 0;
+            for (b = 0; b < w->cn[k]; ++b) {
+                pn_real un = 0;
+                for (i = 0; i < d; ++i) un += (w->vstar[k * (size_t)d + (size_t)i] - w->cvel[k * 3 + (size_t)i]) * w->cdir[k * 9 + (size_t)(3 * b + i)];
+                if (un <= 0) w->chold[k] = (unsigned char)(w->chold[k] | 1 << b);
             }
         }
     }
+    memcpy(w->vsol, w->vstar, sizeof(pn_real) * nd);
+    for (k = 0; k < w->n_act; ++k) pn__mpm_hold(w, k, w->vsol + k * (size_t)d);
+    for (pass = 0; pass < o->fixed_point_iters; ++pass) {
+        pn_real fp_res = 0;
+        int round;
+        r = pn__mpm_prepare_pass(w, w->vsol, dt, pass == 0, &fp_res);
+        if (r != PN_OK) return r;
+        if (pass > 0) st->fixed_point_residual = PN__MAX(st->fixed_point_residual, fp_res);
+        st->fixed_point_iters++;
+        if (has_sep) { /* the contact's normal impulse at the start v, then stick or slide */
+            for (k = 0; k < w->n_act; ++k) w->clam[k] = 0;
+            r = pn__mpm_objective(w, w->vsol, dt, 1, &fp_res);
+            if (r != PN_OK) return r;
+            pn__mpm_friction_init(w, w->vsol);
+        }
+        for (round = 0; round < 8; ++round) {
+            int it;
+            for (it = 0; it < o->newton_max; ++it) {
+                pn_real E0, E1, gd, alpha = 1, dmax = 0;
+                r = pn__mpm_objective(w, w->vsol, dt, 1, &E0);
+                if (r != PN_OK) return r;
+                st->cg_iters += pn__mpm_pcg(w, dt, o->cg_max, o->cg_rel_tol);
+                st->newton_iters++;
+                for (k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
+                last_res = dmax / (w->desc.dx_m / dt);
+                if (!pn__finite(dmax)) return PN_ERROR_OVERFLOW;
+                if (dmax <= vscale) break;
+                gd = pn__mpm_sum(w, nd, w->grad, w->dir);
+                for (;;) { /* backtracking with the Armijo condition */
+                    for (k = 0; k < nd; ++k) w->vtry[k] = w->vsol[k] + alpha * w->dir[k];
+                    pn__mpm_objective(w, w->vtry, dt, 0, &E1);
+                    if (E1 <= E0 + (pn_real)1e-4 * alpha * gd) break;
+                    alpha /= 2;
+                    if (alpha < (pn_real)1e-10) break;
+                }
+                if (alpha < (pn_real)1e-10) { /* no decrease: keep v, count it, stop this round */
+                    st->line_search_failures++;
+                    break;
+                }
+                memcpy(w->vsol, w->vtry, sizeof(pn_real) * nd);
+            }
+            if (!has_sep || !pn__mpm_active_set(w, w->vsol, vscale)) break;
+            st->active_set_rounds++;
+        }
+    }
+    st->newton_residual = PN__MAX(st->newton_residual, last_res);
+    if (!(last_res <= 100 * o->newton_tol)) return PN_ERROR_NOT_CONVERGED;
+    r = pn__mpm_g2p(w, w->vsol, dt, 1, st);
+    if (r != PN_OK) return r;
+    pn__mpm_commit(w, dt, st);
+    return PN_OK;
+}
+
+static void pn__mpm_backup(pn_mpm_world *w, int restore) {
+    int d = w->dim, dd = d * d;
+    size_t n = w->n;
+#define PN__MPM_COPY(a, b, count, type) memcpy(restore ? w->a : w->b, restore ? w->b : w->a, sizeof(type) * (count))
+    PN__MPM_COPY(x, bx, n * (size_t)d, pn_real);
+    PN__MPM_COPY(v, bv, n * (size_t)d, pn_real);
+    PN__MPM_COPY(C, bC, n * (size_t)dd, pn_real);
+    PN__MPM_COPY(F, bF, n * (size_t)dd, pn_real);
+    PN__MPM_COPY(h, bh, n, pn_real);
+    PN__MPM_COPY(active, bactive, n, unsigned char);
+#undef PN__MPM_COPY
 }
 
 PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *desc,
                                        pn_mpm_stats *stats) {
     pn_mpm_implicit_desc o;
     pn_mpm_stats st;
-    int d, i, pass;
-    size_t k, nd;
-    pn_result r;
-    pn_real vscale;
+    pn_result r, first;
+    int level;
     PN_ASSERT(w);
     if (!pn__finite(dt) || !(dt > 0)) return PN_ERROR_INVALID_ARGUMENT;
     memset(&o, 0, sizeof o);
@@ -898,125 +1464,110 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (o.cg_max <= 0) o.cg_max = 500;
     if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
     if (!(o.cg_rel_tol > 0)) o.cg_rel_tol = (pn_real)1e-3;
+    if (o.max_halvings == 0) o.max_halvings = 3;
+    if (o.max_halvings > 10) o.max_halvings = 10;
+    if (!pn__finite(o.newton_tol) || !pn__finite(o.cg_rel_tol))
+        return PN_ERROR_INVALID_ARGUMENT;
+    r = pn__mpm_check_state(w);
+    if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
     if (r != PN_OK) return r;
-    d = w->dim;
-    nd = w->nodes * (size_t)d;
-    vscale = o.newton_tol * w->desc.dx_m / dt;
     memset(&st, 0, sizeof st);
-    /* v* = momentum / mass + dt g; wall components held at zero (sticky: all; slip and
-       separate: the normal one, which the solve treats as slip) */
-    pn__mpm_p2g_momentum(w);
-    for (k = 0; k < w->nodes; ++k) {
-        pn_real m = w->grid_m[k];
-        size_t rem = k;
-        int idx[3];
-        for (i = d - 1; i >= 0; --i) {
-            idx[i] = (int)(rem % (size_t)(w->desc.res[i] + 1));
-            rem /= (size_t)(w->desc.res[i] + 1);
-        }
-        for (i = 0; i < d; ++i) {
-            size_t c = k * (size_t)d + (size_t)i;
-            w->vstar[c] = m > 0 ? w->grid_v[c] / m + dt * w->desc.gravity[i] : 0;
-            w->fixed[c] = 0;
-        }
-        for (i = 0; i < d; ++i) {
-            int wall = idx[i] < w->wall || idx[i] > w->desc.res[i] - w->wall, j;
-            if (!wall) continue;
-            if (w->desc.boundary == PN_MPM_BOUNDARY_STICKY)
-                for (j = 0; j < d; ++j) w->fixed[k * (size_t)d + (size_t)j] = 1;
-            else
-                w->fixed[k * (size_t)d + (size_t)i] = 1;
-        }
-        for (i = 0; i < d; ++i)
-            if (w->fixed[k * (size_t)d + (size_t)i]) w->vstar[k * (size_t)d + (size_t)i] = 0;
+    st.substeps = 1;
+    first = pn__mpm_implicit_once(w, dt, &o, &st);
+    if (first == PN_OK) {
+        if (stats) *stats = st;
+        return PN_OK;
     }
-    memcpy(w->vsol, w->vstar, sizeof(pn_real) * nd);
-    for (pass = 0; pass < o.fixed_point_iters; ++pass) {
-        pn_real fp_res = 0;
-        int it;
-        r = pn__mpm_prepare_pass(w, w->vsol, dt, pass == 0, &fp_res);
-        if (r != PN_OK) return r;
-        if (pass > 0) st.fixed_point_residual = fp_res;
-        st.fixed_point_iters++;
-        for (it = 0; it < o.newton_max; ++it) {
-            pn_real E0, E1, gd, alpha = 1, dmax = 0;
-            r = pn__mpm_objective(w, w->vsol, dt, 1, &E0);
-            if (r != PN_OK) return r;
-            st.cg_iters += pn__mpm_pcg(w, dt, o.cg_max, o.cg_rel_tol);
-            st.newton_iters++;
-            for (k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
-            st.newton_residual = dmax / (w->desc.dx_m / dt);
-            if (!pn__finite(dmax)) {
-                w->error_particle = 0;
-                return PN_ERROR_OVERFLOW;
+    /* fallback: the same step as 2, 4, ... substeps; the world is restored if none works */
+    {
+        pn_real t0 = w->time_s;
+        long steps0 = w->steps;
+        size_t left0 = w->left_total, culprit = w->error_particle;
+        pn__mpm_backup(w, 0);
+        for (level = 1; level <= o.max_halvings; ++level) {
+            int s, n_sub = 1 << level;
+            memset(&st, 0, sizeof st);
+            for (s = 0; s < n_sub; ++s) {
+                pn_mpm_stats sub;
+                memset(&sub, 0, sizeof sub);
+                r = pn__mpm_implicit_once(w, dt / (pn_real)n_sub, &o, &sub);
+                if (r != PN_OK) break;
+                st.particles = sub.particles;
+                st.plastic += sub.plastic;
+                st.left_domain += sub.left_domain;
+                st.active_nodes = PN__MAX(st.active_nodes, sub.active_nodes);
+                st.max_speed_m_s = sub.max_speed_m_s;
+                st.fixed_point_iters += sub.fixed_point_iters;
+                st.newton_iters += sub.newton_iters;
+                st.cg_iters += sub.cg_iters;
+                st.active_set_rounds += sub.active_set_rounds;
+                st.line_search_failures += sub.line_search_failures;
+                st.newton_residual = PN__MAX(st.newton_residual, sub.newton_residual);
+                st.fixed_point_residual = PN__MAX(st.fixed_point_residual, sub.fixed_point_residual);
             }
-            if (dmax <= vscale) break;
-            gd = pn__mpm_dot(nd, w->grad, w->dir);
-            for (;;) { /* backtracking with the Armijo condition */
-                for (k = 0; k < nd; ++k) w->vtry[k] = w->vsol[k] + alpha * w->dir[k];
-                pn__mpm_objective(w, w->vtry, dt, 0, &E1);
-                if (E1 <= E0 + (pn_real)1e-4 * alpha * gd) break;
-                alpha /= 2;
-                if (alpha < (pn_real)1e-10) break;
+            if (r == PN_OK) {
+                st.substeps = n_sub;
+                w->time_s = t0 + dt;
+                w->steps = steps0 + 1;
+                if (stats) *stats = st;
+                return PN_OK;
             }
-            if (alpha < (pn_real)1e-10) { /* no decrease: keep v, count it, stop this pass */
-                st.line_search_failures++;
-                break;
-            }
-            memcpy(w->vsol, w->vtry, sizeof(pn_real) * nd);
+            pn__mpm_backup(w, 1);
+            w->time_s = t0;
+            w->steps = steps0;
+            w->left_total = left0;
         }
+        w->error_particle = culprit;
     }
-    for (k = 0; k < nd; ++k)
-        if (!pn__finite(w->vsol[k])) return PN_ERROR_OVERFLOW;
-    r = pn__mpm_g2p(w, w->vsol, dt, 1, &st);
-    if (r != PN_OK) return r;
-    pn__mpm_commit(w, dt, &st);
-    if (stats) *stats = st;
-    return PN_OK;
+    return first;
 }
 
 /* ======================================================================================
-   >>explicit: symplectic Euler. P2G of mass, APIC momentum and the stress impulse
-   -dt V0 (4/dx^2) tau (x_i - x_p) (tau the Kirchhoff stress of the elastic F; MLS-MPM,
-   Hu et al. 2018); grid update; G2P with F = (I + dt C) F and the return mapping.
+   >>explicit: symplectic Euler. Stress impulse per particle, P2G gather, grid update with
+   gravity and contact, G2P with F = (I + dt C) F and the return mapping.
    ====================================================================================== */
 
 PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *stats) {
-    int d, dd, i, j, n;
-    size_t p;
+    int d, dd;
+    long l;
     pn_real inv_dx;
     pn_mpm_stats st;
     pn_result r;
     PN_ASSERT(w);
     if (!pn__finite(dt) || !(dt > 0)) return PN_ERROR_INVALID_ARGUMENT;
+    r = pn__mpm_check_state(w);
+    if (r != PN_OK) return r;
     d = w->dim;
     dd = d * d;
     inv_dx = 1 / w->desc.dx_m;
     memset(&st, 0, sizeof st);
-    pn__mpm_p2g_momentum(w);
-    for (p = 0; p < w->n; ++p) {
-        pn__mpm_kernel kr;
+    st.substeps = 1;
+    pn__mpm_bin(w);
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n; ++l) {
+        size_t p = (size_t)l;
         const pn_mpm_group *g = &w->groups[w->group[p]];
-        pn_real tau[9] = {0}, A[9];
+        pn_real tau[9] = {0}, *A = w->pmat + p * (size_t)dd;
+        int i;
+        w->pstat[p] = 0;
         if (!w->active[p]) continue;
-        r = pn_kirchhoff_stress(&g->material, d, w->F + p * (size_t)dd, w->h[p], tau);
-        if (r != PN_OK) {
-            w->error_particle = p;
-            return r;
-        }
+        w->pstat[p] = (int)pn_kirchhoff_stress(&g->material, d, w->F + p * (size_t)dd, w->h[p], tau);
         for (i = 0; i < dd; ++i) A[i] = -dt * w->vol0[p] * 4 * inv_dx * inv_dx * tau[i];
-        pn__mpm_kernel_at(w, w->x + p * (size_t)d, &kr);
-        for (n = 0; n < kr.count; ++n) {
-            pn_real *gv = w->grid_v + kr.node[n] * (size_t)d;
-            for (i = 0; i < d; ++i) {
-                pn_real acc = 0;
-                for (j = 0; j < d; ++j) acc += A[i * d + j] * kr.dpos[n][j];
-                gv[i] += kr.w[n] * acc;
-            }
-        }
     }
-    pn__mpm_grid_update(w, dt);
+    r = pn__mpm_first_error(w);
+    if (r != PN_OK) return r;
+    pn__mpm_p2g(w, 1);
+    pn__mpm_contact(w, w->time_s);
+    st.active_nodes = w->n_act;
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n_act; ++l) {
+        size_t k = (size_t)l;
+        pn_real *v = w->grid_v + k * (size_t)d, m = w->grid_m[k];
+        int i;
+        for (i = 0; i < d; ++i) v[i] = m > 0 ? v[i] / m + dt * w->desc.gravity[i] : 0;
+        pn__mpm_project(w, k, v);
+    }
     r = pn__mpm_g2p(w, w->grid_v, dt, 0, &st);
     if (r != PN_OK) return r;
     pn__mpm_commit(w, dt, &st);
@@ -1024,4 +1575,6 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     return PN_OK;
 }
 
+#undef PN__OMP_FOR
+#undef PN__MPM_ARRAYS
 #endif /* PLASTINET_MPM_IMPLEMENTATION */
