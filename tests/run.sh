@@ -69,7 +69,8 @@ run_bin() {
 # the shipped models (models/pn_models.h, written by gen/export.py) are tested when present
 models=
 [ -f models/pn_models.h ] && models=-DPN_TEST_HAVE_MODELS
-run_bin test_main tests/test_main.c "$models" "$@"
+# test_main with OpenMP: test_mpm.c checks that 1 and 2 threads give the same bits
+run_bin test_main tests/test_main.c "$models -fopenmp" "$@"
 run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"
 
 # 3. C against torch (gen/crosscheck.py): the training targets and every shipped model. Runs

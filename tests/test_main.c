@@ -6,6 +6,9 @@
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
 #include "pn_test.h"
+#ifdef _OPENMP
+#include <omp.h> /* test_mpm.c compares 1 and 2 threads */
+#endif
 #include "test_util.h" /* the reference helpers the test files share */
 
 #include "test_linalg.c"  /* pn_tests_linalg: SVD, polar, Hencky, eigen, PSD projection  */
