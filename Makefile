@@ -4,13 +4,13 @@ CC ?= cc
 CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point test test-sanitize bench-core clean examples models model-report crosscheck
+.PHONY: all run run-material-point test test-sanitize bench-core bench-mpm clean examples models model-report crosscheck
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point build/sand_column
+examples: build/material_point build/sand_column build/snowball
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
@@ -23,9 +23,18 @@ run: build/sand_column
 	build/sand_column --png --frames 30 --out build/sand_column_frames
 	@echo "# frames: build/sand_column_frames/frame_0001.png ... frame_0030.png"
 
-build/sand_column: examples/sand_column.c plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h models/pn_model_sand_3d.h
+# What the MPM examples and bench/bench_mpm.c share: PNG/PLY output, the scenes, the mass IoU.
+EXAMPLE_DEPS = examples/pn_example.h plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h \
+    models/pn_model_sand_3d.h models/pn_model_snow_2d.h models/pn_model_snow_3d.h
+
+build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/sand_column.c $(LDLIBS) -o $@
+
+# A snowball thrown at a frictional floor (build/snowball --help; --png --out DIR for frames).
+build/snowball: examples/snowball.c $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/snowball.c $(LDLIBS) -o $@
 
 # The material-point driver on a von Mises tensile test (uniaxial stress, linear hardening):
 # prints the stress-strain curve.
@@ -47,6 +56,18 @@ bench-core: bench/bench_core.c bench/bench_util.h plastinet.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_core.c $(LDLIBS) -o build/bench_core
 	build/bench_core --csv build/bench_core.csv
+
+# MPM speed against accuracy (bench/README.md): sand column and snowball, 2D and 3D, explicit
+# reference, fair explicit baseline, implicit PlasticityNet and lagged at dt 1e-4..1e-2; a
+# Young's-modulus sweep. build/bench_mpm.{csv,svg,md}, build/bench_mpm_esweep.{csv,svg}.
+# BENCH_MPM_FLAGS=--quick for a smoke test in seconds.
+bench-mpm: build/bench_mpm
+	build/bench_mpm --out build $(BENCH_MPM_FLAGS)
+	@cat build/bench_mpm.md
+
+build/bench_mpm: bench/bench_mpm.c $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/bench_mpm.c $(LDLIBS) -o $@
 
 # Train (resuming checkpoints), export and measure the shipped models: all, or MODEL=name.
 models:

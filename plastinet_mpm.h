@@ -125,6 +125,10 @@ typedef struct pn_mpm_implicit_desc {
     int cg_max;                  /* conjugate-gradient iterations per Newton step [500]      */
     pn_real newton_tol;          /* stop when max |dv| < newton_tol dx / dt [1e-5]          */
     pn_real cg_rel_tol;          /* relative residual of the linear solve [1e-3]            */
+    int contact_rounds;          /* solves per pass while separating contact changes its
+                                    stick / slip / release set; 1: the set is corrected once
+                                    per pass, for the next one (lagged, like the friction
+                                    impulse) [1]                                            */
     int max_halvings;            /* a step that fails is retried as 2, 4, ... substeps, at
                                     most this many halvings [3]; < 0: never                 */
 } pn_mpm_implicit_desc;
@@ -139,7 +143,8 @@ typedef struct pn_mpm_stats {
     /* implicit steps (totals over the step and its substeps) */
     int substeps;                /* 1, or 2^k after k halvings (the fallback)                */
     int fixed_point_iters, newton_iters, cg_iters;
-    int active_set_rounds;       /* re-solves after separating contact changed its set      */
+    int active_set_rounds;       /* re-solves after separating contact changed its set
+                                    (contact_rounds > 1)                                    */
     int line_search_failures;    /* Newton steps whose line search found no decrease        */
     pn_real newton_residual;     /* largest final max |dv| dt / dx over the passes           */
     pn_real fixed_point_residual;/* largest max_q |F0_new - F0| at the last pass             */
@@ -152,6 +157,8 @@ typedef struct pn_mpm_world {
     pn_mpm_desc desc;
     int dim, wall;
     size_t n, cap, nodes, stride[3];
+    int ns, slot[27][3];         /* stencil size 3^dim and its offsets per axis             */
+    size_t slot_off[27];         /* flat node offset of each stencil slot                   */
     pn_real *x, *v, *C, *F, *h, *vol0, *mass;
     int *group;
     unsigned char *active;
@@ -231,13 +238,12 @@ PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy e
    gradients filtered by the contact constraints, and a backtracking (Armijo) line search,
    stopping when max |dv| < newton_tol dx / dt. Around it the fixed point on F0 = F(v) and the
    plastic state. Contact: sticky and slip hold velocity components at the obstacle's;
-   separate holds the normal component while the contact pushes (an active set, re-solved
-   when it changes); Coulomb friction then acts on the solution as in the explicit step, with
-   the normal impulse of the solve (the tangential speed drops by mu impulse / mass, not
-   below zero). The state update (APIC, return mapping) follows
-   as in the explicit step. A step that fails (an error, a non-finite value, or Newton short of
-   100 newton_tol) is retried as two half steps, up to max_halvings times; stats->substeps
-   says so. The first call allocates the solver storage (PN_ERROR_OUT_OF_MEMORY possible);
+   separate holds the normal component while the contact pushes and sticks (all components
+   held) or slides against the Coulomb force mu L t, L the normal impulse at the start of the
+   pass; the set is corrected after each solve (an active set; contact_rounds re-solves).
+   The state update (APIC, return mapping) follows as in the explicit step. A step that
+   fails (an error, a non-finite value, or Newton short of 100 newton_tol) is retried as two
+   half steps, then four, up to max_halvings times; stats->substeps says so. The first call allocates the solver storage (PN_ERROR_OUT_OF_MEMORY possible);
    later calls allocate nothing. On failure the world is unchanged. desc may be NULL. */
 PN_API pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt_s, const pn_mpm_implicit_desc *desc,
                                       pn_mpm_stats *stats);
@@ -296,6 +302,22 @@ PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
     pn_free(&a, w);
 }
 
+/* the stencil slots s = 0 .. 3^d - 1: offsets per axis and flat node offsets, once */
+static void pn__mpm_slots(pn_mpm_world *w) {
+    int s, i;
+    w->ns = w->dim == 3 ? 27 : 9;
+    for (s = 0; s < w->ns; ++s) {
+        int r = s;
+        w->slot_off[s] = 0;
+        w->slot[s][2] = 0;
+        for (i = w->dim - 1; i >= 0; --i) {
+            w->slot[s][i] = r % 3;
+            r /= 3;
+            w->slot_off[s] += (size_t)w->slot[s][i] * w->stride[i];
+        }
+    }
+}
+
 PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
     pn_mpm_world *w;
     int d, dd, i, fail = 0;
@@ -326,6 +348,7 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
     w->error_particle = (size_t)-1;
     w->stride[d - 1] = 1;
     for (i = d - 2; i >= 0; --i) w->stride[i] = w->stride[i + 1] * (size_t)(desc->res[i + 1] + 1);
+    pn__mpm_slots(w);
     nparts = (cap > nodes * (size_t)d ? cap : nodes * (size_t)d) / PN__MPM_CHUNK + 2;
 #define PN__MPM_A(f, count, type) w->f = (type *)pn__mpm_alloc(desc, count, sizeof(type), &fail)
     PN__MPM_A(x, cap * (size_t)d, pn_real);
@@ -592,18 +615,6 @@ static pn_real pn__mpm_weight(const pn_mpm_world *w, size_t p, const int *o, pn_
     return a * b * c;
 }
 
-/* stencil slot s (0 .. 3^d - 1): offset vector and flat node offset */
-static size_t pn__mpm_slot(const pn_mpm_world *w, int s, int *o) {
-    int i;
-    size_t off = 0;
-    for (i = w->dim - 1; i >= 0; --i) {
-        o[i] = s % 3;
-        s /= 3;
-        off += (size_t)o[i] * w->stride[i];
-    }
-    return off;
-}
-
 static void pn__mpm_node_index(const pn_mpm_world *w, size_t node, int *idx) {
     int i;
     for (i = w->dim - 1; i >= 0; --i) {
@@ -614,14 +625,14 @@ static void pn__mpm_node_index(const pn_mpm_world *w, size_t node, int *idx) {
 
 /* The base nodes (and the slot each is seen from) whose particles reach node `node`. */
 static int pn__mpm_node_bases(const pn_mpm_world *w, size_t node, size_t *base, int (*o)[3]) {
-    int idx[3], s, i, n = 0, ns = w->dim == 3 ? 27 : 9;
+    int idx[3], s, i, n = 0;
     pn__mpm_node_index(w, node, idx);
-    for (s = 0; s < ns; ++s) {
-        size_t off = pn__mpm_slot(w, s, o[n]);
+    for (s = 0; s < w->ns; ++s) {
         int ok = 1;
-        for (i = 0; i < w->dim; ++i) ok &= idx[i] >= o[n][i];
+        for (i = 0; i < w->dim; ++i) ok &= idx[i] >= w->slot[s][i];
         if (!ok) continue;
-        base[n++] = node - off;
+        for (i = 0; i < 3; ++i) o[n][i] = w->slot[s][i];
+        base[n++] = node - w->slot_off[s];
     }
     return n;
 }
@@ -629,7 +640,7 @@ static int pn__mpm_node_bases(const pn_mpm_world *w, size_t node, size_t *base, 
 static void pn__mpm_bin(pn_mpm_world *w) {
     size_t p, k, prev = (size_t)-1;
     long lp;
-    int s, ns = w->dim == 3 ? 27 : 9, o[3];
+    int s;
     for (k = 0; k < w->n_act; ++k) w->dof[w->act[k]] = -1;
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp)
@@ -648,7 +659,7 @@ static void pn__mpm_bin(pn_mpm_world *w) {
         size_t b = w->pbase[w->order[k]];
         if (b == prev) continue;
         prev = b;
-        for (s = 0; s < ns; ++s) w->mark[b + pn__mpm_slot(w, s, o)] = 1;
+        for (s = 0; s < w->ns; ++s) w->mark[b + w->slot_off[s]] = 1;
     }
     w->n_act = 0;
     for (k = 0; k < w->nodes; ++k)
@@ -695,13 +706,12 @@ static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
 
 /* dt sum_i v_i grad w_ip^T over particle p's stencil (v: compact grid vector) */
 static void pn__mpm_grad_v(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt, pn_real *G) {
-    int d = w->dim, s, ns = d == 3 ? 27 : 9, i, j, o[3];
+    int d = w->dim, s, i, j;
     for (i = 0; i < d * d; ++i) G[i] = 0;
-    for (s = 0; s < ns; ++s) {
-        size_t node = w->pbase[p] + pn__mpm_slot(w, s, o);
-        const pn_real *vi = v + (size_t)w->dof[node] * (size_t)d;
+    for (s = 0; s < w->ns; ++s) {
+        const pn_real *vi = v + (size_t)w->dof[w->pbase[p] + w->slot_off[s]] * (size_t)d;
         pn_real gw[3], dpos[3];
-        pn__mpm_weight(w, p, o, gw, dpos);
+        pn__mpm_weight(w, p, w->slot[s], gw, dpos);
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j) G[i * d + j] += dt * vi[i] * gw[j];
     }
@@ -723,7 +733,7 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
         const pn_mpm_group *g = &w->groups[w->group[q]];
         pn_real nv[3] = {0, 0, 0}, nC[9] = {0}, G[9], Fn[9], Z[9], hn;
         pn_real *xp = w->x + q * (size_t)d;
-        int i, j, s, ns = d == 3 ? 27 : 9, o[3], stat;
+        int i, j, s, stat;
         w->sactive[q] = w->active[q];
         w->pstat[q] = 0;
         if (!w->active[q]) { /* retired particles keep their last state */
@@ -734,10 +744,9 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
             w->sh[q] = w->h[q];
             continue;
         }
-        for (s = 0; s < ns; ++s) {
-            size_t node = w->pbase[q] + pn__mpm_slot(w, s, o);
-            const pn_real *gv = gv_all + (size_t)w->dof[node] * (size_t)d;
-            pn_real gw[3], dpos[3], wt = pn__mpm_weight(w, q, o, gw, dpos);
+        for (s = 0; s < w->ns; ++s) {
+            const pn_real *gv = gv_all + (size_t)w->dof[w->pbase[q] + w->slot_off[s]] * (size_t)d;
+            pn_real gw[3], dpos[3], wt = pn__mpm_weight(w, q, w->slot[s], gw, dpos);
             for (i = 0; i < d; ++i) {
                 nv[i] += wt * gv[i];
                 for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * wt * gv[i] * dpos[j];
@@ -1398,7 +1407,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
             if (r != PN_OK) return r;
             pn__mpm_friction_init(w, w->vsol);
         }
-        for (round = 0; round < 8; ++round) {
+        for (round = 0; round < o->contact_rounds; ++round) {
             int it;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0;
@@ -1425,7 +1434,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 memcpy(w->vsol, w->vtry, sizeof(pn_real) * nd);
             }
             if (!has_sep || !pn__mpm_active_set(w, w->vsol, vscale)) break;
-            st->active_set_rounds++;
+            if (round + 1 < o->contact_rounds) st->active_set_rounds++;
         }
     }
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
@@ -1464,6 +1473,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (o.cg_max <= 0) o.cg_max = 500;
     if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
     if (!(o.cg_rel_tol > 0)) o.cg_rel_tol = (pn_real)1e-3;
+    if (o.contact_rounds <= 0) o.contact_rounds = 1;
     if (o.max_halvings == 0) o.max_halvings = 3;
     if (o.max_halvings > 10) o.max_halvings = 10;
     if (!pn__finite(o.newton_tol) || !pn__finite(o.cg_rel_tol))

@@ -500,6 +500,7 @@ PN_TEST(mpm_implicit_fallback) {
     t_mpm_block(b, g, lo, sz, NULL);
     memset(&id, 0, sizeof id);
     id.newton_max = 2; /* too few for 2e-2 s from rest under gravity; enough for shorter steps */
+    id.max_halvings = 6;
     id.newton_tol = 1e-7;
     PN_CHECK(pn_mpm_step_implicit(a, 2e-2, &id, &st) == PN_OK);
     PN_CHECK(st.substeps > 1);

@@ -1,0 +1,748 @@
+/* bench_mpm: speed against accuracy of the MPM integrators of plastinet_mpm.h on the sand column
+   and the snowball of shared/design/VALIDATION.md (scenes in examples/pn_example.h).
+   Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
+   Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
+                    [--max-run-seconds S] [--out DIR]
+   Defaults: both scenes, 2D at res 64 (1 m) for 1 s and 3D at res 16 (0.5 m) for 0.5 s
+   simulated, no time limit per run, DIR = build. --quick: 2D only (unless --dim), res 32,
+   2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2 passes, sweep E 1e6 and 1e7.
+
+   For each scene and dimension, in one run:
+   1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
+      estimate dt = 0.5 dx / sqrt(E / rho) times 4 (rounded down to a whole number of steps
+      per frame) by halving until the whole run stays finite and bounded: no failed step, no
+      particle leaving the domain, max particle speed <= 2 (v0 + sqrt(2 g L)) and kinetic
+      energy <= 1.5 (initial kinetic + potential energy above the floor);
+   2. the explicit reference at a quarter of that step, and the same at an eighth: how far
+      their mean min/max mass IoU is from 1 says how converged the reference is;
+   3. implicit at dt 1e-4, 1e-3, 1e-2 s with 1, 2 and 4 fixed-point passes, with the
+      PlasticityNet energy and with the lagged energy.
+   Every run is compared with the reference frame by frame (25 fps, so that every dt above
+   divides a frame) by the mass IoUs of examples/pn_example.h: soft (the formula of
+   VALIDATION.md; below 1 even for identical fields, so the reference's score against itself
+   is its ceiling), min/max (1 for identical fields; the plots use it) and binary occupancy.
+   Then a Young's-modulus sweep of the 2D sand column (1e5 to 1e8 Pa): implicit PlasticityNet
+   at dt 1e-3 s, 1 fixed-point pass, against the fair explicit baseline found at each E (IoU
+   against that baseline, not a converged reference).
+   Wall time: clock_gettime(CLOCK_MONOTONIC) around the steps only (scene setup and the IoU
+   rasterization excluded); processor seconds (clock()) go to the CSV beside it, so a run
+   slowed by another process shows as wall > cpu.
+   Writes DIR/bench_mpm.csv, DIR/bench_mpm_esweep.csv, DIR/bench_mpm.svg (mean IoU against
+   wall seconds per simulated second), DIR/bench_mpm_esweep.svg and DIR/bench_mpm.md (tables
+   for the README); progress on stderr. A run that fails (step error, unbounded, over the time
+   limit) is a row that says so, with the figures of the frames it completed. */
+#define PLASTINET_IMPLEMENTATION
+#include "../examples/pn_example.h"
+
+#define BENCH_FPS 25 /* 0.04 s frames: 1e-4, 1e-3 and 1e-2 s all divide them */
+#define BENCH_MAX_FRAMES 1000
+#define BENCH_MAX_RUNS 64
+#define BENCH_REF_DIV 4 /* the reference runs at the fair step / 4, its check at / 8 */
+
+typedef enum { RUN_OK = 0, RUN_STEP_FAILED, RUN_UNBOUNDED, RUN_TIMEOUT } run_status;
+
+/* one row: what was run and what it gave */
+typedef struct bench_run {
+    char role[16];        /* reference, ref_check, fair, implicit                   */
+    int implicit, fp;     /* fixed-point passes (implicit)                          */
+    pn_mpm_energy energy; /* implicit only                                          */
+    double dt;
+    run_status status;
+    pn_result error;      /* RUN_STEP_FAILED                                        */
+    double fail_t;        /* simulated time the run stopped at, if it did           */
+    int frames, frames_done;
+    size_t particles;
+    double wall, cpu, sim; /* seconds stepping, simulated seconds done              */
+    pn_ex_tally tally;
+    double iou_mean, iou_min;       /* soft IoU (the formula of VALIDATION.md)     */
+    double mm_mean, mm_min;         /* min/max IoU (1 for identical fields)        */
+    double biou_mean;               /* binary occupancy IoU                        */
+    int scored;                     /* compared with a reference                   */
+} bench_run;
+
+typedef struct bench_cfg {
+    double duration[4];   /* simulated seconds, by dimension                       */
+    int res[4];           /* cells per axis, by dimension                          */
+    double max_run_s;     /* stop a run after this many wall seconds (0: never)     */
+    int quick;
+    const double *dts;    /* implicit steps                                        */
+    int n_dts;
+    const int *fps_iters; /* fixed-point passes                                    */
+    int n_fps;
+    const double *Es;     /* the sweep                                             */
+    int n_Es;
+    const char *out;
+} bench_cfg;
+
+static const char *energy_name(const bench_run *r) {
+    if (!r->implicit) return "return_mapping";
+    return r->energy == PN_MPM_ENERGY_PNET ? "pnet" : r->energy == PN_MPM_ENERGY_LAGGED ? "lagged" : "other";
+}
+
+static const char *status_name(const bench_run *r) {
+    static const char *const names[] = {"yes", "step failed", "unbounded", "timeout"};
+    return names[r->status];
+}
+
+/* the CSV's status column: ok, the step error, unbounded or timeout */
+static const char *status_detail(const bench_run *r) {
+    if (r->status == RUN_OK) return "ok";
+    return r->status == RUN_STEP_FAILED ? pn_result_string(r->error) : status_name(r);
+}
+
+static double wall_per_sim(const bench_run *r) { return r->sim > 0 ? r->wall / r->sim : 0; }
+
+/* sum m (|v|^2 / 2) and sum m g (y - floor) over active particles */
+static void energies(const pn_mpm_world *w, double floor_y, double *kin, double *pot) {
+    size_t p;
+    int i;
+    *kin = *pot = 0;
+    for (p = 0; p < w->n; ++p) {
+        double v2 = 0;
+        if (!w->active[p]) continue;
+        for (i = 0; i < w->dim; ++i) v2 += (double)w->v[p * (size_t)w->dim + (size_t)i] * (double)w->v[p * (size_t)w->dim + (size_t)i];
+        *kin += 0.5 * (double)w->mass[p] * v2;
+        *pot += (double)w->mass[p] * 9.81 * ((double)w->x[p * (size_t)w->dim + 1] - floor_y);
+    }
+}
+
+/* Frame f's scores of field a against the reference's b, kept as running sums (frame 0
+   starts them); a == NULL turns the sums over `f` frames into means. */
+static void bench_score(bench_run *r, int f, const double *a, const double *b, size_t nodes) {
+    pn_ex_iou_scores s;
+    if (!a) {
+        if (f > 0) {
+            r->iou_mean /= f;
+            r->mm_mean /= f;
+            r->biou_mean /= f;
+        }
+        return;
+    }
+    if (f == 0) {
+        r->iou_mean = r->mm_mean = r->biou_mean = 0;
+        r->iou_min = r->mm_min = 1;
+    }
+    s = pn_ex_iou(a, b, nodes);
+    r->scored = 1;
+    r->iou_mean += s.soft;
+    r->mm_mean += s.minmax;
+    r->biou_mean += s.binary;
+    if (s.soft < r->iou_min) r->iou_min = s.soft;
+    if (s.minmax < r->mm_min) r->mm_min = s.minmax;
+}
+
+/* Run scene s as r describes for `frames` frames. fields (frames x nodes, may be NULL) gets
+   each frame's normalized mass field; ref (may be NULL) is the reference's, for the IoU. */
+static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, double max_run_s, double *fields,
+                            const double *ref) {
+    pn_ex_scene s = *s0;
+    pn_mpm_world *w;
+    pn_mpm_implicit_desc id;
+    const char *why;
+    double frame_dt = 1.0 / BENCH_FPS, kin0, pot0, kin, pot, vmax, *field;
+    long per_frame = (long)floor(frame_dt / r->dt + 0.5);
+    size_t nodes;
+    int f;
+    r->frames = frames;
+    r->frames_done = 0;
+    r->status = RUN_OK;
+    r->wall = r->cpu = r->sim = 0;
+    memset(&r->tally, 0, sizeof r->tally);
+    if (r->implicit) s.energy = r->energy;
+    if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+        fprintf(stderr, "bench_mpm: %s\n", why);
+        exit(1);
+    }
+    r->particles = w->n;
+    nodes = pn_ex_field_size(w);
+    field = (double *)malloc(sizeof(double) * nodes);
+    if (!field) exit(1);
+    energies(w, pn_ex_scene_floor(&s), &kin0, &pot0);
+    vmax = 2 * (s.kind == PN_EX_SNOWBALL ? s.speed_m_s : 0) + 2 * sqrt(2 * 9.81 * s.domain_m);
+    memset(&id, 0, sizeof id);
+    id.fixed_point_iters = r->fp;
+    for (f = 0; f < frames; ++f) {
+        double t0 = pn_ex_seconds(), c0 = (double)clock() / CLOCKS_PER_SEC;
+        pn_result e = pn_ex_steps(w, r->implicit, r->dt, &id, per_frame, &r->tally);
+        r->wall += pn_ex_seconds() - t0;
+        r->cpu += (double)clock() / CLOCKS_PER_SEC - c0;
+        r->sim = (double)w->time_s;
+        if (e != PN_OK) {
+            r->status = RUN_STEP_FAILED;
+            r->error = e;
+            break;
+        }
+        energies(w, pn_ex_scene_floor(&s), &kin, &pot);
+        if (w->left_total > 0 || !(r->tally.max_speed_m_s <= vmax) || !(kin <= 1.5 * (kin0 + pot0))) {
+            r->status = RUN_UNBOUNDED;
+            break;
+        }
+        pn_ex_mass_field(w, fields ? fields + (size_t)f * nodes : field);
+        if (ref) bench_score(r, f, fields ? fields + (size_t)f * nodes : field, ref + (size_t)f * nodes, nodes);
+        r->frames_done = f + 1;
+        if (max_run_s > 0 && r->wall > max_run_s && f + 1 < frames) {
+            r->status = RUN_TIMEOUT;
+            break;
+        }
+    }
+    r->fail_t = r->sim;
+    if (ref) bench_score(r, r->frames_done, NULL, NULL, nodes);
+    free(field);
+    pn_mpm_destroy(w);
+}
+
+/* IoU of stored fields against the reference's, over the frames r completed */
+static void bench_compare(bench_run *r, const double *fields, const double *ref, size_t nodes) {
+    int f;
+    for (f = 0; f < r->frames_done; ++f) bench_score(r, f, fields + (size_t)f * nodes, ref + (size_t)f * nodes, nodes);
+    bench_score(r, r->frames_done, NULL, NULL, nodes);
+}
+
+static void bench_progress(const char *scene, int dim, const bench_run *r) {
+    char iou[48] = "";
+    if (r->scored) snprintf(iou, sizeof iou, "IoU soft %.3f min/max %.3f, ", r->iou_mean, r->mm_mean);
+    fprintf(stderr, "  %-5s %dD %-9s %-14s dt %-9.3g fp %d: %6.2f wall s/sim s, %sNewton %.1f CG %.0f per step, %s\n",
+            scene, dim, r->role, energy_name(r), r->dt, r->implicit ? r->fp : 0, wall_per_sim(r), iou,
+            r->tally.steps ? (double)r->tally.newton / r->tally.steps : 0.0,
+            r->tally.steps ? (double)r->tally.cg / r->tally.steps : 0.0, status_name(r));
+}
+
+/* The fair explicit baseline: the largest stable step, in halvings from the CFL estimate.
+   Its fields (if not NULL) are kept for the IoU. Returns 0 if no step was stable. */
+static int bench_fair(const pn_ex_scene *s, int frames, bench_run *r, double *fields) {
+    double frame_dt = 1.0 / BENCH_FPS, c = sqrt(s->E_pa / s->density_kg_m3);
+    double dt = 0.5 * pn_ex_scene_dx(s) / c * 4;
+    long n = (long)ceil(frame_dt / dt - 1e-9); /* whole steps per frame, so halving stays exact */
+    int k;
+    for (k = 0; k < 16; ++k, n *= 2) {
+        memset(r, 0, sizeof *r);
+        strcpy(r->role, "fair");
+        r->dt = frame_dt / (double)n;
+        bench_run_scene(s, r, frames, 0, fields, NULL);
+        fprintf(stderr, "    search dt %.4g: %s\n", r->dt, status_name(r));
+        if (r->status == RUN_OK) return 1;
+    }
+    return 0;
+}
+
+/* ---- output ----------------------------------------------------------------------------- */
+
+static void csv_header(FILE *f) {
+    fprintf(f, "scene,dim,role,integrator,energy,dt_s,fixed_point_iters,particles,frames,frames_done,"
+               "mass_iou_mean,mass_iou_min,minmax_iou_mean,minmax_iou_min,binary_iou_mean,wall_s,cpu_s,simulated_s,"
+               "wall_per_sim_s,ratio_to_fair,newton_per_step,cg_per_step,fixed_point_per_step,line_search_failures,"
+               "halved_steps,max_fixed_point_residual,finite,status\n");
+}
+
+static void csv_row(FILE *f, const char *scene, int dim, const bench_run *r, double fair_wps) {
+    double st = r->tally.steps ? (double)r->tally.steps : 1;
+    fprintf(f, "%s,%d,%s,%s,%s,%.6g,%d,%lu,%d,%d,%.4f,%.4f,%.4f,%.4f,%.4f,%.3f,%.3f,%.4f,%.4g,%.4g,%.2f,%.1f,%.2f,%ld,%ld,"
+               "%.3e,%s,\"%s\"\n", /* quoted: error strings hold commas */
+            scene, dim, r->role, r->implicit ? "implicit" : "explicit", energy_name(r), r->dt, r->implicit ? r->fp : 0,
+            (unsigned long)r->particles, r->frames, r->frames_done, r->iou_mean, r->iou_min, r->mm_mean, r->mm_min,
+            r->biou_mean, r->wall, r->cpu, r->sim, wall_per_sim(r), fair_wps > 0 ? wall_per_sim(r) / fair_wps : 0,
+            r->tally.newton / st, r->tally.cg / st, r->tally.fixed_point / st, r->tally.line_search_failures,
+            r->tally.halved, r->tally.max_fixed_point_residual, r->status == RUN_OK ? "yes" : "no",
+            status_detail(r));
+}
+
+static void md_row(FILE *f, const char *scene, int dim, const bench_run *r, double fair_wps) {
+    double st = r->tally.steps ? (double)r->tally.steps : 1;
+    char finite[96], fp[8], res[16];
+    if (r->status == RUN_OK) strcpy(finite, "yes");
+    else if (r->status == RUN_TIMEOUT) snprintf(finite, sizeof finite, "stopped at t = %.2f s (time limit)", r->fail_t);
+    else snprintf(finite, sizeof finite, "**no: %s at t = %.2f s**", r->status == RUN_STEP_FAILED ?
+                  pn_result_string(r->error) : status_name(r), r->fail_t);
+    if (r->implicit) snprintf(fp, sizeof fp, "%d", r->fp);
+    else strcpy(fp, "-");
+    /* with one pass the solver has no second F0 to compare with: the residual is not measured */
+    if (r->implicit && (r->fp > 1 || r->tally.max_fixed_point_residual > 0))
+        snprintf(res, sizeof res, "%.2e", r->tally.max_fixed_point_residual);
+    else strcpy(res, "-");
+    fprintf(f, "| %s | %d | %s | %s | %s | %.3g | %s | %.3f / %.3f | %.3f / %.3f | %.3f | %.3g | %.2f | %.1f / %.0f / %.1f "
+               "| %ld / %ld | %s | %s |\n",
+            scene, dim, r->role, r->implicit ? "implicit" : "explicit", energy_name(r), r->dt, fp, r->iou_mean,
+            r->iou_min, r->mm_mean, r->mm_min, r->biou_mean, wall_per_sim(r),
+            fair_wps > 0 ? wall_per_sim(r) / fair_wps : 0, r->tally.newton / st, r->tally.cg / st,
+            r->tally.fixed_point / st, r->tally.line_search_failures, r->tally.halved, res, finite);
+}
+
+/* ---- a small SVG plot: log-x axis, linear or log y, labelled markers -------------------- */
+
+typedef struct svg_panel {
+    double ox, oy, w, h;               /* plot area in pixels                         */
+    double x0, x1, y0, y1;             /* data range (log10 for log axes)             */
+    int logy;
+} svg_panel;
+
+static double svg_px(const svg_panel *p, double x) { return p->ox + (log10(x) - p->x0) / (p->x1 - p->x0) * p->w; }
+static double svg_py(const svg_panel *p, double y) {
+    double v = p->logy ? log10(y) : y;
+    return p->oy + p->h - (v - p->y0) / (p->y1 - p->y0) * p->h;
+}
+
+/* frame, decade ticks on x (and on y when logy), 0.1 ticks on a linear y */
+static void svg_axes(FILE *f, const svg_panel *p, const char *title, const char *xlabel, const char *ylabel) {
+    double t;
+    fprintf(f, "<rect x='%.1f' y='%.1f' width='%.1f' height='%.1f' fill='white' stroke='#444'/>\n", p->ox, p->oy, p->w,
+            p->h);
+    fprintf(f, "<text x='%.1f' y='%.1f' font-size='13' font-weight='bold'>%s</text>\n", p->ox, p->oy - 8, title);
+    fprintf(f, "<text x='%.1f' y='%.1f' font-size='11' text-anchor='middle'>%s</text>\n", p->ox + p->w / 2,
+            p->oy + p->h + 32, xlabel);
+    fprintf(f, "<text x='%.1f' y='%.1f' font-size='11' text-anchor='middle' transform='rotate(-90 %.1f %.1f)'>%s</text>\n",
+            p->ox - 42, p->oy + p->h / 2, p->ox - 42, p->oy + p->h / 2, ylabel);
+    for (t = ceil(p->x0 - 1e-9); t <= p->x1 + 1e-9; t += 1) {
+        double x = p->ox + (t - p->x0) / (p->x1 - p->x0) * p->w;
+        fprintf(f, "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/>\n", x, p->oy, x, p->oy + p->h);
+        fprintf(f, "<text x='%.1f' y='%.1f' font-size='10' text-anchor='middle'>1e%d</text>\n", x, p->oy + p->h + 14,
+                (int)t);
+    }
+    for (t = p->y0; t <= p->y1 + 1e-9; t += p->logy ? 1 : 0.1) {
+        double y = p->oy + p->h - (t - p->y0) / (p->y1 - p->y0) * p->h;
+        fprintf(f, "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#ddd'/>\n", p->ox, y, p->ox + p->w, y);
+        if (p->logy) fprintf(f, "<text x='%.1f' y='%.1f' font-size='10' text-anchor='end'>1e%d</text>\n", p->ox - 4, y + 3, (int)floor(t + 0.5));
+        else fprintf(f, "<text x='%.1f' y='%.1f' font-size='10' text-anchor='end'>%.1f</text>\n", p->ox - 4, y + 3, t);
+    }
+}
+
+/* Labels already placed in a panel, so a new one can dodge them (greedy, vertical moves). */
+typedef struct svg_labels {
+    double x[BENCH_MAX_RUNS], y[BENCH_MAX_RUNS], w[BENCH_MAX_RUNS];
+    int n;
+} svg_labels;
+
+static void svg_marker(FILE *f, const svg_panel *p, svg_labels *placed, double x, double y, const char *color,
+                       int square, const char *label) {
+    static const double shift[] = {0, 10, -10, 20, -20, 30, -30};
+    double X = svg_px(p, x), Y = svg_py(p, y), w = 5.2 * (double)strlen(label), ty = Y + 3;
+    int k, j;
+    if (square) fprintf(f, "<rect x='%.1f' y='%.1f' width='8' height='8' fill='%s'/>\n", X - 4, Y - 4, color);
+    else fprintf(f, "<circle cx='%.1f' cy='%.1f' r='4' fill='%s'/>\n", X, Y, color);
+    for (k = 0; k < 7; ++k) { /* the first vertical offset whose box meets no placed label */
+        double cy = Y + 3 + shift[k];
+        for (j = 0; j < placed->n; ++j)
+            if (X + 6 < placed->x[j] + placed->w[j] && placed->x[j] < X + 6 + w && fabs(cy - placed->y[j]) < 10) break;
+        if (j == placed->n) {
+            ty = cy;
+            break;
+        }
+    }
+    if (placed->n < BENCH_MAX_RUNS) {
+        placed->x[placed->n] = X + 6;
+        placed->y[placed->n] = ty;
+        placed->w[placed->n++] = w;
+    }
+    if (ty != Y + 3) /* a leader line from the marker to its moved label */
+        fprintf(f, "<line x1='%.1f' y1='%.1f' x2='%.1f' y2='%.1f' stroke='#999' stroke-width='0.5'/>\n", X + 3, Y,
+                X + 6, ty - 3);
+    fprintf(f, "<text x='%.1f' y='%.1f' font-size='9' fill='#333'>%s</text>\n", X + 6, ty, label);
+}
+
+/* decades covering [lo, hi] (both > 0) */
+static void svg_log_range(double lo, double hi, double *a, double *b) {
+    *a = floor(log10(lo));
+    *b = ceil(log10(hi));
+    if (*b <= *a) *b = *a + 1;
+}
+
+/* ---- one scene ---------------------------------------------------------------------------- */
+
+typedef struct bench_scene {
+    const char *name;
+    int dim;
+    bench_run runs[BENCH_MAX_RUNS];
+    int n_runs, fair_index;
+    double ref_convergence; /* 1 - mean min/max IoU(reference at dt/2, reference)       */
+} bench_scene;
+
+static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, bench_scene *out, FILE *csv) {
+    pn_ex_scene s;
+    int frames, i, j, e, k;
+    size_t nodes;
+    double *ref, *tmp, fair_wps;
+    pn_mpm_world *w;
+    const char *why;
+    bench_run *r;
+    static const pn_mpm_energy energies_run[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED};
+    pn_ex_scene_default(&s, kind, dim);
+    s.res = cfg->res[dim];
+    frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5);
+    if (frames < 1) frames = 1;
+    if (frames > BENCH_MAX_FRAMES) frames = BENCH_MAX_FRAMES;
+    memset(out, 0, sizeof *out);
+    out->name = kind == PN_EX_SAND_COLUMN ? "sand" : "snow";
+    out->dim = dim;
+    if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+        fprintf(stderr, "bench_mpm: %s\n", why);
+        exit(1);
+    }
+    nodes = pn_ex_field_size(w);
+    fprintf(stderr, "%s %dD: %lu particles, res %d, %d frames (%.2f s)\n", out->name, dim, (unsigned long)w->n, s.res,
+            frames, frames / (double)BENCH_FPS);
+    pn_mpm_destroy(w);
+    /* zeroed: frames a failed reference never reached compare as empty (IoU 0), never as garbage */
+    ref = (double *)calloc(nodes * (size_t)frames, sizeof(double));
+    tmp = (double *)calloc(nodes * (size_t)frames, sizeof(double));
+    if (!ref || !tmp) exit(1);
+    /* 1. fair baseline (fields kept in tmp until the reference exists) */
+    r = &out->runs[0];
+    if (!bench_fair(&s, frames, r, tmp)) {
+        fprintf(stderr, "bench_mpm: %s %dD: no stable explicit step found\n", out->name, dim);
+        out->n_runs = 1;
+        csv_row(csv, out->name, dim, r, 0);
+        free(ref);
+        free(tmp);
+        return;
+    }
+    out->fair_index = 0;
+    /* 2. reference and its check at half the step */
+    r = &out->runs[1];
+    strcpy(r->role, "reference");
+    r->dt = out->runs[0].dt / BENCH_REF_DIV;
+    bench_run_scene(&s, r, frames, 0, ref, NULL);
+    if (r->status != RUN_OK) fprintf(stderr, "bench_mpm: the reference failed (%s)\n", status_name(r));
+    bench_compare(r, ref, ref, nodes);
+    bench_compare(&out->runs[0], tmp, ref, nodes);
+    r = &out->runs[2];
+    strcpy(r->role, "ref_check");
+    r->dt = out->runs[0].dt / (2 * BENCH_REF_DIV);
+    bench_run_scene(&s, r, frames, 0, NULL, ref);
+    out->ref_convergence = 1 - r->mm_mean;
+    out->n_runs = 3;
+    for (i = 0; i < 3; ++i) bench_progress(out->name, dim, &out->runs[i]);
+    /* 3. implicit */
+    for (e = 0; e < 2; ++e)
+        for (i = 0; i < cfg->n_dts; ++i)
+            for (j = 0; j < cfg->n_fps; ++j) {
+                r = &out->runs[out->n_runs++];
+                strcpy(r->role, "implicit");
+                r->implicit = 1;
+                r->energy = energies_run[e];
+                r->dt = cfg->dts[i];
+                r->fp = cfg->fps_iters[j];
+                bench_run_scene(&s, r, frames, cfg->max_run_s, NULL, ref);
+                bench_progress(out->name, dim, r);
+            }
+    fair_wps = wall_per_sim(&out->runs[0]);
+    for (k = 0; k < out->n_runs; ++k) csv_row(csv, out->name, dim, &out->runs[k], fair_wps);
+    fflush(csv);
+    free(ref);
+    free(tmp);
+}
+
+/* ---- the Young's-modulus sweep (2D sand) ----------------------------------------------------- */
+
+typedef struct sweep_row {
+    double E;
+    bench_run fair, imp;
+    int found;
+} sweep_row;
+
+static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
+    int i, frames = (int)floor(cfg->duration[2] * BENCH_FPS + 0.5);
+    pn_ex_scene s;
+    size_t nodes = (size_t)(cfg->res[2] + 1) * (size_t)(cfg->res[2] + 1);
+    double *fair;
+    if (frames < 1) frames = 1;
+    if (!(fair = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
+    fprintf(csv, "E_pa,fair_dt_s,fair_wall_per_sim_s,fair_status,implicit_dt_s,implicit_wall_per_sim_s,"
+                 "implicit_over_fair,mass_iou_mean_vs_fair,mass_iou_min_vs_fair,minmax_iou_mean_vs_fair,"
+                 "minmax_iou_min_vs_fair,newton_per_step,cg_per_step,halved_steps,implicit_status\n");
+    for (i = 0; i < cfg->n_Es; ++i) {
+        sweep_row *w = &rows[i];
+        double st;
+        pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
+        s.res = cfg->res[2];
+        s.E_pa = cfg->Es[i];
+        w->E = s.E_pa;
+        fprintf(stderr, "E sweep, E = %.0e Pa\n", w->E);
+        w->found = bench_fair(&s, frames, &w->fair, fair);
+        memset(&w->imp, 0, sizeof w->imp);
+        strcpy(w->imp.role, "implicit");
+        w->imp.implicit = 1;
+        w->imp.energy = PN_MPM_ENERGY_PNET;
+        w->imp.dt = 1e-3;
+        w->imp.fp = 1;
+        bench_run_scene(&s, &w->imp, frames, cfg->max_run_s, NULL, w->found ? fair : NULL);
+        bench_progress("sand", 2, &w->fair);
+        bench_progress("sand", 2, &w->imp);
+        st = w->imp.tally.steps ? (double)w->imp.tally.steps : 1;
+        fprintf(csv, "%g,%.6g,%.4g,%s,%g,%.4g,%.4g,%.4f,%.4f,%.4f,%.4f,%.2f,%.1f,%ld,\"%s\"\n", w->E,
+                w->found ? w->fair.dt : 0, w->found ? wall_per_sim(&w->fair) : 0, w->found ? "yes" : "no stable step",
+                w->imp.dt, wall_per_sim(&w->imp), w->found ? wall_per_sim(&w->imp) / wall_per_sim(&w->fair) : 0,
+                w->imp.iou_mean, w->imp.iou_min, w->imp.mm_mean, w->imp.mm_min, w->imp.tally.newton / st,
+                w->imp.tally.cg / st, w->imp.tally.halved, status_detail(&w->imp));
+        fflush(csv);
+    }
+    free(fair);
+}
+
+/* ---- plots and the markdown report ------------------------------------------------------------ */
+
+static void write_svg(const char *path, const bench_scene *sc, int n_sc) {
+    FILE *f = fopen(path, "w");
+    int i, k, cols = n_sc > 1 ? 2 : 1, rows = (n_sc + cols - 1) / cols;
+    double pw = 520, ph = 330, mx = 70, my = 50;
+    if (!f) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        return;
+    }
+    fprintf(f, "<svg xmlns='http://www.w3.org/2000/svg' width='%.0f' height='%.0f' font-family='sans-serif'>\n",
+            cols * (pw + mx + 20) + 10, rows * (ph + my + 40) + 60);
+    fprintf(f, "<rect width='100%%' height='100%%' fill='#fafafa'/>\n");
+    fprintf(f, "<text x='10' y='16' font-size='11'>Mean min/max mass IoU against the explicit reference, against "
+               "wall seconds per simulated second (log).</text>\n<text x='10' y='30' font-size='11'>Black: explicit "
+               "(square: fair baseline); blue: implicit PlasticityNet; orange: implicit lagged.</text>\n"
+               "<text x='10' y='44' font-size='11'>Labels: dt x fixed-point passes; grey (!): failed or stopped "
+               "(figures of the frames it completed).</text>\n");
+    for (i = 0; i < n_sc; ++i) {
+        svg_panel p;
+        svg_labels placed;
+        double lo = 1e300, hi = 0, ymin = 1;
+        char title[64];
+        const bench_scene *s = &sc[i];
+        placed.n = 0;
+        for (k = 0; k < s->n_runs; ++k) {
+            double x = wall_per_sim(&s->runs[k]);
+            if (x <= 0 || !s->runs[k].frames_done) continue;
+            if (x < lo) lo = x;
+            if (x > hi) hi = x;
+            if (s->runs[k].mm_mean < ymin) ymin = s->runs[k].mm_mean;
+        }
+        if (hi <= 0) lo = hi = 1;
+        p.ox = 10 + mx + (i % cols) * (pw + mx + 20);
+        p.oy = 60 + my + (i / cols) * (ph + my + 40);
+        p.w = pw;
+        p.h = ph;
+        svg_log_range(lo, hi, &p.x0, &p.x1);
+        p.y0 = floor(ymin * 10) / 10;
+        if (p.y0 > 0.9) p.y0 = 0.9;
+        if (p.y0 < 0) p.y0 = 0;
+        p.y1 = 1;
+        p.logy = 0;
+        snprintf(title, sizeof title, "%s %dD", s->name, s->dim);
+        svg_axes(f, &p, title, "wall seconds per simulated second", "mean min/max mass IoU");
+        for (k = 0; k < s->n_runs; ++k) {
+            const bench_run *r = &s->runs[k];
+            char label[64];
+            const char *color = !r->implicit ? "#111" : r->energy == PN_MPM_ENERGY_PNET ? "#1f5fbf" : "#e07b00";
+            if (wall_per_sim(r) <= 0 || !r->frames_done) continue;
+            if (r->implicit) snprintf(label, sizeof label, "%g x%d%s", r->dt, r->fp, r->status == RUN_OK ? "" : " (!)");
+            else snprintf(label, sizeof label, "%s %.2g", r->role, r->dt);
+            if (r->status != RUN_OK) color = "#bbb";
+            svg_marker(f, &p, &placed, wall_per_sim(r), r->mm_mean < p.y0 ? p.y0 : r->mm_mean, color,
+                       !r->implicit && !strcmp(r->role, "fair"), label);
+        }
+    }
+    fprintf(f, "</svg>\n");
+    fclose(f);
+}
+
+static void write_sweep_svg(const char *path, const sweep_row *rows, int n) {
+    FILE *f = fopen(path, "w");
+    svg_panel p;
+    svg_labels placed;
+    double lo = 1e300, hi = 0;
+    int i, s;
+    placed.n = 0;
+    if (!f) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        return;
+    }
+    for (i = 0; i < n; ++i) {
+        double v[2];
+        v[0] = rows[i].found ? wall_per_sim(&rows[i].fair) : 0;
+        v[1] = wall_per_sim(&rows[i].imp);
+        for (s = 0; s < 2; ++s)
+            if (v[s] > 0) {
+                if (v[s] < lo) lo = v[s];
+                if (v[s] > hi) hi = v[s];
+            }
+    }
+    if (hi <= 0) lo = hi = 1;
+    p.ox = 80;
+    p.oy = 60;
+    p.w = 520;
+    p.h = 330;
+    p.x0 = log10(rows[0].E) - 0.3; /* room for the labels right of the last point */
+    p.x1 = log10(rows[n - 1].E) + 0.7;
+    svg_log_range(lo, hi, &p.y0, &p.y1);
+    p.logy = 1;
+    fprintf(f, "<svg xmlns='http://www.w3.org/2000/svg' width='700' height='480' font-family='sans-serif'>\n");
+    fprintf(f, "<rect width='100%%' height='100%%' fill='#fafafa'/>\n");
+    svg_axes(f, &p, "sand 2D: wall seconds per simulated second against Young's modulus", "Young's modulus E (Pa)",
+             "wall s / simulated s");
+    for (s = 0; s < 2; ++s) { /* 0: explicit at its fair step, 1: implicit dt 1e-3 */
+        const char *color = s ? "#1f5fbf" : "#111";
+        int first = 1;
+        fprintf(f, "<polyline fill='none' stroke='%s' points='", color);
+        for (i = 0; i < n; ++i) {
+            const bench_run *r = s ? &rows[i].imp : &rows[i].fair;
+            if ((!s && !rows[i].found) || wall_per_sim(r) <= 0) continue;
+            fprintf(f, "%s%.1f,%.1f", first ? "" : " ", svg_px(&p, rows[i].E), svg_py(&p, wall_per_sim(r)));
+            first = 0;
+        }
+        fprintf(f, "'/>\n");
+        for (i = 0; i < n; ++i) {
+            const bench_run *r = s ? &rows[i].imp : &rows[i].fair;
+            char label[64];
+            if ((!s && !rows[i].found) || wall_per_sim(r) <= 0) continue;
+            if (s && rows[i].found)
+                snprintf(label, sizeof label, "%.3g x explicit, IoU %.2f%s",
+                         wall_per_sim(r) / wall_per_sim(&rows[i].fair), r->mm_mean, r->status == RUN_OK ? "" : " (!)");
+            else snprintf(label, sizeof label, "dt %.2g", r->dt);
+            svg_marker(f, &p, &placed, rows[i].E, wall_per_sim(r), r->status == RUN_OK ? color : "#bbb", !s, label);
+        }
+    }
+    fprintf(f, "<text x='20' y='446' font-size='11'>Black squares: explicit at its largest stable step (dt shown). "
+               "Blue: implicit PlasticityNet, dt 1e-3 s,</text>\n<text x='20' y='462' font-size='11'>1 fixed-point "
+               "pass (time over explicit; min/max mass IoU against the explicit run). Grey (!): failed or "
+               "stopped.</text>\n</svg>\n");
+    fclose(f);
+}
+
+static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *sc, int n_sc, const sweep_row *rows,
+                     int n_rows) {
+    FILE *f = fopen(path, "w");
+    int i, k;
+    if (!f) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        return;
+    }
+    fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm)%s -->\n", cfg->quick ? ", --quick" : "");
+    fprintf(f, "Scenes of shared/design/VALIDATION.md (examples/pn_example.h): 2D res %d over 1 m, 3D res %d over 0.5 m; "
+               "%.2f s (2D) and %.2f s (3D) simulated, compared at %d frames per second. Mass IoU against the "
+               "explicit reference, mean / min over frames: *soft* is sum(ab) / sum(a + b - ab) of the max-normalized "
+               "mass fields (VALIDATION.md), below 1 even for identical fields (the reference row shows its ceiling); "
+               "*min/max* is sum(min(a, b)) / sum(max(a, b)), 1 for identical fields; *binary*: occupancy above "
+               "%.0f%% of the maximum. *x fair*: wall time per simulated second over the explicit run at its largest "
+               "stable step. *it/step*: Newton / CG / fixed-point passes per step. *LS fails / halved*: Newton "
+               "steps whose line search failed / implicit steps retried as substeps. *max FP residual*: largest "
+               "max_q |F0_new - F0| (not measured with one pass). Wall time from CLOCK_MONOTONIC.\n\n",
+            cfg->res[2], cfg->res[3], cfg->duration[2], cfg->duration[3], BENCH_FPS, 100 * PN_EX_OCCUPIED);
+    for (i = 0; i < n_sc; ++i) {
+        const bench_scene *s = &sc[i];
+        double fair_wps = wall_per_sim(&s->runs[s->fair_index]);
+        if (s->n_runs < 3) {
+            fprintf(f, "**%s %dD**: no stable explicit step found; nothing measured.\n\n", s->name, s->dim);
+            continue;
+        }
+        fprintf(f, "**%s %dD** (%lu particles): reference = explicit at dt %.3g s (fair step / %d); halving it "
+                   "moves the mean min/max IoU %.4f from 1 (soft: %.3f against the reference's own %.3f). Fair "
+                   "explicit baseline: dt %.3g s.%s\n\n",
+                s->name, s->dim, (unsigned long)s->runs[0].particles, s->runs[1].dt, BENCH_REF_DIV, s->ref_convergence,
+                s->runs[2].iou_mean, s->runs[1].iou_mean, s->runs[0].dt,
+                s->runs[1].status == RUN_OK ? "" : " **The reference itself failed: the IoUs are meaningless.**");
+        fprintf(f, "| scene | dim | role | integrator | energy | dt (s) | FP iters | soft IoU mean / min | "
+                   "min/max IoU mean / min | binary IoU | wall s / sim s | x fair | it/step N / CG / FP | "
+                   "LS fails / halved | max FP residual | finite |\n");
+        fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        for (k = 0; k < s->n_runs; ++k) md_row(f, s->name, s->dim, &s->runs[k], fair_wps);
+        fprintf(f, "\n");
+    }
+    if (n_rows) {
+        fprintf(f, "**Young's modulus sweep**, sand 2D: implicit PlasticityNet (dt 1e-3 s, 1 fixed-point pass) "
+                   "against the explicit run at its largest stable step at each E (IoU against that run).\n\n");
+        fprintf(f, "| E (Pa) | explicit dt (s) | explicit wall s / sim s | implicit wall s / sim s | implicit / explicit | "
+                   "soft IoU mean / min | min/max IoU mean / min | Newton / CG per step | implicit finite |\n"
+                   "|---|---|---|---|---|---|---|---|---|\n");
+        for (i = 0; i < n_rows; ++i) {
+            const sweep_row *w = &rows[i];
+            double st = w->imp.tally.steps ? (double)w->imp.tally.steps : 1;
+            if (!w->found) {
+                fprintf(f, "| %.0e | none stable | | %.3g | | | | %.1f / %.0f | %s |\n", w->E, wall_per_sim(&w->imp),
+                        w->imp.tally.newton / st, w->imp.tally.cg / st, status_name(&w->imp));
+                continue;
+            }
+            fprintf(f, "| %.0e | %.3g | %.3g | %.3g | %.2f | %.3f / %.3f | %.3f / %.3f | %.1f / %.0f | %s |\n", w->E,
+                    w->fair.dt, wall_per_sim(&w->fair), wall_per_sim(&w->imp),
+                    wall_per_sim(&w->imp) / wall_per_sim(&w->fair), w->imp.iou_mean, w->imp.iou_min, w->imp.mm_mean,
+                    w->imp.mm_min, w->imp.tally.newton / st, w->imp.tally.cg / st,
+                    status_name(&w->imp));
+        }
+    }
+    fclose(f);
+}
+
+static void usage(void) {
+    fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
+                    "       [--max-run-seconds S] [--out DIR]\n");
+}
+
+int main(int argc, char **argv) {
+    static const double dts_full[] = {1e-4, 1e-3, 1e-2}, dts_quick[] = {1e-3, 1e-2};
+    static const int fp_full[] = {1, 2, 4}, fp_quick[] = {1, 2};
+    static const double Es_full[] = {1e5, 1e6, 1e7, 1e8}, Es_quick[] = {1e6, 1e7};
+    bench_cfg cfg;
+    int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0;
+    double duration = 0;
+    char path[1024];
+    FILE *csv, *esw;
+    static bench_scene scenes[4]; /* large: kept off the stack */
+    static sweep_row rows[8];
+    memset(&cfg, 0, sizeof cfg);
+    cfg.out = "build";
+    cfg.res[2] = 64;
+    cfg.res[3] = 16;
+    cfg.duration[2] = 1.0;
+    cfg.duration[3] = 0.5;
+    for (k = 1; k < argc; ++k) {
+        const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
+        if (!strcmp(a, "--quick")) cfg.quick = 1;
+        else if (!v) { usage(); return 2; }
+        else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
+        else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
+        else if (!strcmp(a, "--duration")) duration = atof(v), ++k;
+        else if (!strcmp(a, "--res2")) cfg.res[2] = atoi(v), ++k;
+        else if (!strcmp(a, "--res3")) cfg.res[3] = atoi(v), ++k;
+        else if (!strcmp(a, "--max-run-seconds")) cfg.max_run_s = atof(v), ++k;
+        else if (!strcmp(a, "--out")) cfg.out = v, ++k;
+        else { usage(); return 2; }
+    }
+    if (only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || cfg.res[2] < 16 || cfg.res[3] < 16) {
+        usage();
+        return 2;
+    }
+    if (cfg.quick) { /* smoke test: coarse, 2 frames, 2D unless asked, fewer combinations */
+        if (cfg.res[2] == 64) cfg.res[2] = 32;
+        cfg.duration[2] = cfg.duration[3] = 2.0 / BENCH_FPS;
+        if (!dim_only) dim_only = 2;
+    }
+    if (duration > 0) cfg.duration[2] = cfg.duration[3] = duration;
+    cfg.dts = cfg.quick ? dts_quick : dts_full;
+    cfg.n_dts = cfg.quick ? 2 : 3;
+    cfg.fps_iters = cfg.quick ? fp_quick : fp_full;
+    cfg.n_fps = cfg.quick ? 2 : 3;
+    cfg.Es = cfg.quick ? Es_quick : Es_full;
+    cfg.n_Es = cfg.quick ? 2 : 4;
+    snprintf(path, sizeof path, "%s/bench_mpm.csv", cfg.out);
+    if (!(csv = fopen(path, "w"))) {
+        fprintf(stderr, "bench_mpm: cannot write %s (does the folder exist?)\n", path);
+        return 1;
+    }
+    csv_header(csv);
+    for (kind = 0; kind < 2; ++kind)
+        for (d = 2; d <= 3; ++d) {
+            if ((only >= 0 && only != kind) || (dim_only && dim_only != d)) continue;
+            bench_one(&cfg, (pn_ex_scene_kind)kind, d, &scenes[n_sc++], csv);
+        }
+    fclose(csv);
+    snprintf(path, sizeof path, "%s/bench_mpm_esweep.csv", cfg.out);
+    if ((only < 0 || only == 0) && (!dim_only || dim_only == 2)) {
+        if (!(esw = fopen(path, "w"))) {
+            fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+            return 1;
+        }
+        bench_sweep(&cfg, rows, esw);
+        n_rows = cfg.n_Es;
+        fclose(esw);
+        snprintf(path, sizeof path, "%s/bench_mpm_esweep.svg", cfg.out);
+        write_sweep_svg(path, rows, n_rows);
+    }
+    snprintf(path, sizeof path, "%s/bench_mpm.svg", cfg.out);
+    write_svg(path, scenes, n_sc);
+    snprintf(path, sizeof path, "%s/bench_mpm.md", cfg.out);
+    write_md(path, &cfg, scenes, n_sc, rows, n_rows);
+    fprintf(stderr, "wrote %s/bench_mpm.{csv,svg,md}%s\n", cfg.out, n_rows ? " and bench_mpm_esweep.{csv,svg}" : "");
+    return 0;
+}
