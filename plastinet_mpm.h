@@ -1075,7 +1075,8 @@ static void pn__mpm_gather_pmat(const pn_mpm_world *w, size_t k, pn_real *out) {
         }
 }
 
-/* E(v); with_derivs: also the gradient (w->grad) and each particle's P and dP/dF. A failed
+/* E(v); with_derivs: also the gradient (w->grad) and each particle's P, and with_derivs == 2
+   each particle's PSD dP/dF for the Hessian. A failed
    particle evaluation (an inverted F, say) gives *E = +inf without derivatives, else its
    error (w->error_particle says which). */
 static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt, int with_derivs,
@@ -1094,7 +1095,7 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
         pn__mpm_grad_v(w, p, v, dt, G);
         for (i = 0; i < d; ++i) G[i * d + i] += 1;
         pn_mat_mul(d, G, w->F + p * (size_t)dd, F);
-        w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs ? H : NULL);
+        w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs > 1 ? H : NULL);
         w->pscal[p] = w->vol0[p] * psi;
         if (with_derivs && w->pstat[p] == PN_OK) /* pmat = V dt P F^nT */
             pn__mpm_mul_abt(d, w->vol0[p] * dt, P, w->F + p * (size_t)dd, w->pmat + p * (size_t)dd);
@@ -1403,7 +1404,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         st->fixed_point_iters++;
         if (has_sep) { /* the contact's normal impulse at the start v, then stick or slide */
             for (k = 0; k < w->n_act; ++k) w->clam[k] = 0;
-            r = pn__mpm_objective(w, w->vsol, dt, 1, &fp_res);
+            r = pn__mpm_objective(w, w->vsol, dt, 1, &fp_res); /* the gradient is enough */
             if (r != PN_OK) return r;
             pn__mpm_friction_init(w, w->vsol);
         }
@@ -1411,7 +1412,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
             int it;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0;
-                r = pn__mpm_objective(w, w->vsol, dt, 1, &E0);
+                r = pn__mpm_objective(w, w->vsol, dt, 2, &E0);
                 if (r != PN_OK) return r;
                 st->cg_iters += pn__mpm_pcg(w, dt, o->cg_max, o->cg_rel_tol);
                 st->newton_iters++;
