@@ -3,9 +3,10 @@
    Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
                     [--max-run-seconds S] [--out DIR]
-   Defaults: both scenes, 2D at res 64 (1 m) for 1 s and 3D at res 16 (0.5 m) for 0.5 s
-   simulated, no time limit per run, DIR = build. --quick: 2D only (unless --dim), res 32,
-   2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2 passes, sweep E 1e6 and 1e7.
+   Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
+   simulated, at most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
+   --quick: 2D only (unless --dim), res 32, 2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2
+   passes, sweep E 1e6 and 1e7.
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -684,8 +685,9 @@ int main(int argc, char **argv) {
     cfg.out = "build";
     cfg.res[2] = 64;
     cfg.res[3] = 16;
-    cfg.duration[2] = 1.0;
-    cfg.duration[3] = 0.5;
+    cfg.duration[2] = 0.5;
+    cfg.duration[3] = 0.3;
+    cfg.max_run_s = 120;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) cfg.quick = 1;

@@ -422,6 +422,57 @@ PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double 
     return PN_OK;
 }
 
+/* One frame of an example: the steps, then DIR/frame_NNNN.png and .ply when asked. Says what
+   failed on stderr (prog: the program's name) and returns 0 then. */
+PN_EX_UNUSED static int pn_ex_frame(const char *prog, pn_mpm_world *w, int implicit, double dt_s,
+                                    const pn_mpm_implicit_desc *id, long steps, pn_ex_tally *t,
+                                    const char *out, int frame, int png, int ply) {
+    char path[1024];
+    pn_result r = pn_ex_steps(w, implicit, dt_s, id, steps, t);
+    if (r != PN_OK) {
+        fprintf(stderr, "\n%s: step %ld failed at particle %lu: %s\n", prog, t->steps,
+                (unsigned long)w->error_particle, pn_result_string(r));
+        return 0;
+    }
+    snprintf(path, sizeof path, "%s/frame_%04d.png", out, frame);
+    if (png && !pn_ex_render_png(path, w, 400)) {
+        fprintf(stderr, "\n%s: cannot write %s (does the folder exist?)\n", prog, path);
+        return 0;
+    }
+    snprintf(path, sizeof path, "%s/frame_%04d.ply", out, frame);
+    if (ply && !pn_ex_write_ply(path, w)) {
+        fprintf(stderr, "\n%s: cannot write %s (does the folder exist?)\n", prog, path);
+        return 0;
+    }
+    return 1;
+}
+
+/* An example's whole run: frames of 1/fps s at dt_s (fp fixed-point passes when implicit),
+   the outputs of pn_ex_frame, a progress line on stderr unless quiet; *wall_s gets the wall
+   seconds. Returns 0 after a failure (said on stderr). */
+PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implicit, double dt_s, int fp,
+                                  int frames, int fps, const char *out, int png, int ply, int quiet,
+                                  pn_ex_tally *tally, double *wall_s) {
+    pn_mpm_implicit_desc id;
+    long steps_per_frame = (long)(1.0 / fps / dt_s + 0.5);
+    double t0 = pn_ex_seconds();
+    int frame;
+    memset(&id, 0, sizeof id);
+    id.fixed_point_iters = fp;
+    memset(tally, 0, sizeof *tally);
+    if (steps_per_frame < 1) steps_per_frame = 1;
+    for (frame = 1; frame <= frames; ++frame) {
+        if (!pn_ex_frame(prog, w, implicit, dt_s, &id, steps_per_frame, tally, out, frame, png, ply)) return 0;
+        *wall_s = pn_ex_seconds() - t0;
+        if (!quiet)
+            fprintf(stderr, "\rframe %d/%d  t = %.3f s  wall %.1f s  Newton/step %.1f  CG/step %.0f   ", frame, frames,
+                    (double)w->time_s, *wall_s, (double)tally->newton / (double)tally->steps,
+                    (double)tally->cg / (double)tally->steps);
+    }
+    if (!quiet) fprintf(stderr, "\n");
+    return 1;
+}
+
 /* Bounding box of the active particles (lo, hi: dim values); 0 when none is active. */
 PN_EX_UNUSED static int pn_ex_bounds(const pn_mpm_world *w, double *lo, double *hi) {
     size_t p;

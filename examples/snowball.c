@@ -28,14 +28,13 @@ static void usage(void) {
 int main(int argc, char **argv) {
     static const char *const walls[] = {"sticky", "slip", "separate"};
     int dim = 2, implicit = 1, fp = 1, frames = 30, fps = 30, res = 0, png = 0, ply = 0, quiet = 0, lagged = 0;
-    int boundary = 2, k, frame, steps_per_frame;
-    double dt = 1e-3, E = 1e6, speed = 3, angle = 45, h0 = -0.01, friction = 0.5, t0, wall = 0;
+    int boundary = 2, k;
+    double dt = 1e-3, E = 1e6, speed = 3, angle = 45, h0 = -0.01, friction = 0.5, wall = 0;
     double lo0[3] = {0, 0, 0}, hi0[3] = {0, 0, 0}, lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
     const char *out = "build/snowball_frames", *why;
     pn_ex_scene sc;
     pn_ex_tally tally;
     pn_mpm_world *w;
-    pn_mpm_implicit_desc id;
     pn_result r;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
@@ -83,39 +82,10 @@ int main(int argc, char **argv) {
         return 1;
     }
     pn_ex_bounds(w, lo0, hi0);
-    memset(&id, 0, sizeof id);
-    id.fixed_point_iters = fp;
-    memset(&tally, 0, sizeof tally);
-    steps_per_frame = (int)(1.0 / fps / dt + 0.5);
-    if (steps_per_frame < 1) steps_per_frame = 1;
-    t0 = pn_ex_seconds();
-    for (frame = 1; frame <= frames; ++frame) {
-        char path[1024];
-        if ((r = pn_ex_steps(w, implicit, dt, &id, steps_per_frame, &tally)) != PN_OK) {
-            fprintf(stderr, "\nsnowball: step %ld failed at particle %lu: %s\n", tally.steps,
-                    (unsigned long)w->error_particle, pn_result_string(r));
-            pn_mpm_destroy(w);
-            return 1;
-        }
-        snprintf(path, sizeof path, "%s/frame_%04d.png", out, frame);
-        if (png && !pn_ex_render_png(path, w, 400)) {
-            fprintf(stderr, "\nsnowball: cannot write %s (does the folder exist?)\n", path);
-            pn_mpm_destroy(w);
-            return 1;
-        }
-        snprintf(path, sizeof path, "%s/frame_%04d.ply", out, frame);
-        if (ply && !pn_ex_write_ply(path, w)) {
-            fprintf(stderr, "\nsnowball: cannot write %s (does the folder exist?)\n", path);
-            pn_mpm_destroy(w);
-            return 1;
-        }
-        wall = pn_ex_seconds() - t0;
-        if (!quiet)
-            fprintf(stderr, "\rframe %d/%d  t = %.3f s  wall %.1f s  Newton/step %.1f  CG/step %.0f   ", frame, frames,
-                    (double)w->time_s, wall, (double)tally.newton / (double)tally.steps,
-                    (double)tally.cg / (double)tally.steps);
+    if (!pn_ex_run("snowball", w, implicit, dt, fp, frames, fps, out, png, ply, quiet, &tally, &wall)) {
+        pn_mpm_destroy(w);
+        return 1;
     }
-    if (!quiet) fprintf(stderr, "\n");
     pn_ex_bounds(w, lo, hi);
     printf("{\"scene\": \"snowball\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
            "\"fixed_point_iters\": %d, \"E\": %g, \"speed\": %g, \"angle\": %g, \"h0\": %g, \"boundary\": \"%s\", "
