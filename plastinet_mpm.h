@@ -129,6 +129,12 @@ typedef struct pn_mpm_implicit_desc {
                                     stick / slip / release set; 1: the set is corrected once
                                     per pass, for the next one (lagged, like the friction
                                     impulse) [1]                                            */
+    /* optional trace: called at every Newton iteration with the incremental potential E (J)
+       at the current iterate and max |dv| dt / dx of the step it takes next; `solve` counts
+       the minimizations of the step (each fixed-point pass, contact round and substep starts
+       a new one, with a new objective) */
+    void (*trace)(void *user, int solve, int iteration, pn_real energy_j, pn_real residual);
+    void *trace_user;
     int max_halvings;            /* a step that fails is retried as 2, 4, ... substeps, at
                                     most this many halvings [3]; < 0: never                 */
 } pn_mpm_implicit_desc;
@@ -146,6 +152,7 @@ typedef struct pn_mpm_stats {
     int active_set_rounds;       /* re-solves after separating contact changed its set
                                     (contact_rounds > 1)                                    */
     int line_search_failures;    /* Newton steps whose line search found no decrease        */
+    int solves;                  /* minimizations (passes x contact rounds x substeps)      */
     pn_real newton_residual;     /* largest final max |dv| dt / dx over the passes           */
     pn_real fixed_point_residual;/* largest max_q |F0_new - F0| at the last pass             */
 } pn_mpm_stats;
@@ -1410,6 +1417,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         }
         for (round = 0; round < o->contact_rounds; ++round) {
             int it;
+            st->solves++;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0;
                 r = pn__mpm_objective(w, w->vsol, dt, 2, &E0);
@@ -1418,6 +1426,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 st->newton_iters++;
                 for (k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
                 last_res = dmax / (w->desc.dx_m / dt);
+                if (o->trace) o->trace(o->trace_user, st->solves, it, E0, last_res);
                 if (!pn__finite(dmax)) return PN_ERROR_OVERFLOW;
                 if (dmax <= vscale) break;
                 gd = pn__mpm_sum(w, nd, w->grad, w->dir);
@@ -1502,6 +1511,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
             for (s = 0; s < n_sub; ++s) {
                 pn_mpm_stats sub;
                 memset(&sub, 0, sizeof sub);
+                sub.solves = st.solves; /* numbered on through the substeps */
                 r = pn__mpm_implicit_once(w, dt / (pn_real)n_sub, &o, &sub);
                 if (r != PN_OK) break;
                 st.particles = sub.particles;
@@ -1514,6 +1524,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                 st.cg_iters += sub.cg_iters;
                 st.active_set_rounds += sub.active_set_rounds;
                 st.line_search_failures += sub.line_search_failures;
+                st.solves = sub.solves;
                 st.newton_residual = PN__MAX(st.newton_residual, sub.newton_residual);
                 st.fixed_point_residual = PN__MAX(st.fixed_point_residual, sub.fixed_point_residual);
             }

@@ -520,6 +520,63 @@ PN_TEST(mpm_implicit_fallback) {
     pn_mpm_destroy(b);
 }
 
+/* trace of the implicit solve: the incremental potential at each Newton iterate */
+typedef struct t_mpm_trace {
+    int solve, calls, rises, solves;
+    double last, worst_rise;
+} t_mpm_trace;
+
+static void t_mpm_on_newton(void *user, int solve, int iteration, pn_real energy, pn_real residual) {
+    t_mpm_trace *t = (t_mpm_trace *)user;
+    (void)residual;
+    if (t->calls > 0 && solve == t->solve && iteration > 0 && energy > t->last) {
+        t->rises++;
+        t->worst_rise = fmax(t->worst_rise, (energy - t->last) / fabs(t->last));
+    }
+    if (iteration == 0) t->solves++;
+    t->solve = solve;
+    t->last = energy;
+    t->calls++;
+}
+
+/* Every step the line search accepts lowers the incremental potential: within one
+   minimization the traced energies never rise (sand column on a Coulomb floor, PlasticityNet
+   where the models ship, else the lagged energy; 1 and 4 fixed-point passes; 1e-3 and 1e-2 s). */
+PN_TEST(mpm_line_search_descends) {
+    int g, s, k;
+    for (k = 0; k < 4; ++k) {
+        pn_mpm_world *w = t_mpm_sand_world(32, 0.5, &g);
+        double lo[2] = {0.4, 3.0 / 32}, sz[2] = {0.12, 0.24}, dt = k & 1 ? 1e-2 : 1e-3;
+        pn_mpm_implicit_desc id;
+        t_mpm_trace tr;
+        const char *energy = "lagged";
+        memset(&id, 0, sizeof id);
+        memset(&tr, 0, sizeof tr);
+        id.fixed_point_iters = k < 2 ? 1 : 4;
+        id.trace = t_mpm_on_newton;
+        id.trace_user = &tr;
+        t_mpm_block(w, g, lo, sz, NULL);
+#ifdef PN_TEST_HAVE_MODELS
+        {
+            pn_material m;
+            pn_pnet net;
+            pn_pnet_desc nd;
+            pn_model_material(pn_model_sand_2d(), 1e6, &m);
+            w->groups[g].material = m;
+            memset(&nd, 0, sizeof nd);
+            nd.energy = pn_model_sand_2d();
+            if (pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK && pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net) == PN_OK)
+                energy = "PlasticityNet";
+        }
+#endif
+        for (s = 0; s < (int)(0.2 / dt + 0.5); ++s) PN_CHECK(pn_mpm_step_implicit(w, dt, &id, NULL) == PN_OK);
+        PN_CHECK(tr.calls > tr.solves && tr.rises == 0);
+        PN_REPORT("%s, dt %g, %d passes: %d Newton iterates in %d minimizations, %d rises (worst %.1e relative)",
+                  energy, dt, id.fixed_point_iters, tr.calls, tr.solves, tr.rises, tr.worst_rise);
+        pn_mpm_destroy(w);
+    }
+}
+
 static const pn_test_case pn_tests_mpm[] = {
     {"mpm_transfer_conserves_mass_momentum", mpm_transfer_conserves_mass_momentum},
     {"mpm_elastic_block_at_rest", mpm_elastic_block_at_rest},
@@ -534,4 +591,5 @@ static const pn_test_case pn_tests_mpm[] = {
     {"mpm_settled_layer_stays", mpm_settled_layer_stays},
     {"mpm_colliders", mpm_colliders},
     {"mpm_implicit_fallback", mpm_implicit_fallback},
+    {"mpm_line_search_descends", mpm_line_search_descends},
 };
