@@ -136,6 +136,17 @@ static void smoke_mpm(int d) {
     CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
     g = pn_mpm_add_group(w, &m, 1000);
     CHECK(pn_mpm_add_particles(w, g, 1, x, NULL, (pn_real)1e-4) == PN_OK);
+    {
+        pn_real h0 = 0;
+        pn_mpm_collider c;
+        memset(&c, 0, sizeof c);
+        c.shape = PN_MPM_SHAPE_HALF_SPACE;
+        c.boundary = PN_MPM_BOUNDARY_SEPARATE;
+        c.center_m[1] = (pn_real)0.25;
+        c.normal[1] = 1;
+        CHECK(pn_mpm_set_state(w, 0, 1, &h0) == PN_OK);
+        CHECK(pn_mpm_add_collider(w, &c, NULL) == PN_OK);
+    }
     for (k = 0; k < 3; ++k) CHECK(pn_mpm_step_explicit(w, (pn_real)1e-3, &st) == PN_OK);
     CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_LAGGED, NULL) == PN_OK);
     CHECK(pn_mpm_step_implicit(w, (pn_real)1e-3, NULL, &st) == PN_OK);
