@@ -447,6 +447,71 @@ PN_EX_UNUSED static int pn_ex_frame(const char *prog, pn_mpm_world *w, int impli
     return 1;
 }
 
+/* ---- the command line every example shares --------------------------------------------- */
+
+static const char *const pn_ex_walls[] = {"sticky", "slip", "separate"};
+
+typedef struct pn_ex_cli {
+    int dim, implicit, fp, frames, fps, res, png, ply, quiet, boundary;
+    double dt, E, friction;
+    const char *energy, *out;    /* the energy's name as given; the example maps it        */
+} pn_ex_cli;
+
+/* defaults: 2D, implicit, pnet, dt 1e-3 s, 1 pass, 30 frames at 30 fps, the scene's res and
+   E (0: the scene's default), separate walls with friction 0.5, frames into out */
+PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
+    memset(c, 0, sizeof *c);
+    c->dim = 2;
+    c->implicit = 1;
+    c->fp = 1;
+    c->frames = c->fps = 30;
+    c->boundary = PN_MPM_BOUNDARY_SEPARATE;
+    c->dt = 1e-3;
+    c->friction = 0.5;
+    c->energy = "pnet";
+    c->out = out;
+}
+
+/* If flag a (with its value v, NULL at the end) is a shared one, take it: returns how many
+   arguments it used (1 or 2); 0 for a flag the example must handle, -1 for a missing value. */
+PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *v) {
+    if (!strcmp(a, "--png")) return c->png = 1;
+    if (!strcmp(a, "--ply")) return c->ply = 1;
+    if (!strcmp(a, "--quiet")) return c->quiet = 1;
+    if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--dt|--fixed-point|"
+                                       "--frames|--fps|--E|--res|--out|", a))
+        return 0;
+    if (!v) return -1;
+    if (!strcmp(a, "--dim")) c->dim = atoi(v);
+    else if (!strcmp(a, "--integrator")) c->implicit = !strcmp(v, "implicit") ? 1 : !strcmp(v, "explicit") ? 0 : -1;
+    else if (!strcmp(a, "--energy")) c->energy = v;
+    else if (!strcmp(a, "--boundary"))
+        for (c->boundary = 0; c->boundary < 3 && strcmp(v, pn_ex_walls[c->boundary]); ++c->boundary) {}
+    else if (!strcmp(a, "--friction")) c->friction = atof(v);
+    else if (!strcmp(a, "--dt")) c->dt = atof(v);
+    else if (!strcmp(a, "--fixed-point")) c->fp = atoi(v);
+    else if (!strcmp(a, "--frames")) c->frames = atoi(v);
+    else if (!strcmp(a, "--fps")) c->fps = atoi(v);
+    else if (!strcmp(a, "--E")) c->E = atof(v);
+    else if (!strcmp(a, "--res")) c->res = atoi(v);
+    else c->out = v;
+    return 2;
+}
+
+/* The shared flags in range, and scene s (made with pn_ex_scene_default for c->dim) set
+   from them. Returns 0 when a value is out of range. */
+PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
+    if ((c->dim != 2 && c->dim != 3) || c->implicit < 0 || c->boundary > 2 || !(c->friction >= 0) ||
+        !(c->dt > 0) || c->fp < 1 || c->frames < 1 || c->fps < 1 || !(c->E >= 0) ||
+        (c->res && (c->res < 16 || c->res > 1024)))
+        return 0;
+    if (c->res) s->res = c->res;
+    if (c->E > 0) s->E_pa = c->E;
+    s->boundary = (pn_mpm_boundary)c->boundary;
+    s->friction = c->friction;
+    return 1;
+}
+
 /* An example's whole run: frames of 1/fps s at dt_s (fp fixed-point passes when implicit),
    the outputs of pn_ex_frame, a progress line on stderr unless quiet; *wall_s gets the wall
    seconds. Returns 0 after a failure (said on stderr). */

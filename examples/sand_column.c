@@ -25,65 +25,42 @@ static void usage(void) {
 int main(int argc, char **argv) {
     static const char *const energies[] = {"pnet", "lagged", "elastic"};
     static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_ELASTIC};
-    static const char *const walls[] = {"sticky", "slip", "separate"};
-    int dim = 2, implicit = 1, fp = 1, frames = 30, fps = 30, res = 0, png = 0, ply = 0, quiet = 0;
-    int energy = 0, boundary = 2, k, i;
-    double dt = 1e-3, aspect = 2, E = 1e7, friction = 0.5, wall = 0, runout = 0;
+    int energy, k, i;
+    double aspect = 2, wall = 0, runout = 0;
     double lo0[3] = {0, 0, 0}, hi0[3] = {0, 0, 0}, lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-    const char *out = "build/sand_column_frames", *why;
+    const char *why;
+    pn_ex_cli c;
     pn_ex_scene sc;
     pn_ex_tally tally;
     pn_mpm_world *w;
     pn_result r;
+    pn_ex_cli_default(&c, "build/sand_column_frames");
     for (k = 1; k < argc; ++k) {
-        const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
-        if (!strcmp(a, "--png")) png = 1;
-        else if (!strcmp(a, "--ply")) ply = 1;
-        else if (!strcmp(a, "--quiet")) quiet = 1;
-        else if (!v) { usage(); return 2; }
-        else if (!strcmp(a, "--dim")) dim = atoi(v), ++k;
-        else if (!strcmp(a, "--integrator")) implicit = !strcmp(v, "implicit") ? 1 : (!strcmp(v, "explicit") ? 0 : -1), ++k;
-        else if (!strcmp(a, "--energy")) {
-            for (energy = 0; energy < 3 && strcmp(v, energies[energy]); ++energy) {}
-            ++k;
-        } else if (!strcmp(a, "--boundary")) {
-            for (boundary = 0; boundary < 3 && strcmp(v, walls[boundary]); ++boundary) {}
-            ++k;
-        }
-        else if (!strcmp(a, "--friction")) friction = atof(v), ++k;
-        else if (!strcmp(a, "--dt")) dt = atof(v), ++k;
-        else if (!strcmp(a, "--fixed-point")) fp = atoi(v), ++k;
-        else if (!strcmp(a, "--frames")) frames = atoi(v), ++k;
-        else if (!strcmp(a, "--fps")) fps = atoi(v), ++k;
-        else if (!strcmp(a, "--aspect")) aspect = atof(v), ++k;
-        else if (!strcmp(a, "--E")) E = atof(v), ++k;
-        else if (!strcmp(a, "--res")) res = atoi(v), ++k;
-        else if (!strcmp(a, "--out")) out = v, ++k;
+        const char *v = k + 1 < argc ? argv[k + 1] : NULL;
+        int used = pn_ex_cli_flag(&c, argv[k], v);
+        if (used > 0) k += used - 1;
+        else if (used == 0 && v && !strcmp(argv[k], "--aspect")) aspect = atof(v), ++k;
         else { usage(); return 2; }
     }
-    if ((dim != 2 && dim != 3) || implicit < 0 || energy > 2 || boundary > 2 || !(friction >= 0) || !(dt > 0) ||
-        fp < 1 || frames < 1 || fps < 1 || !(aspect > 0) || !(E > 0) || (res && (res < 16 || res > 1024))) {
+    for (energy = 0; energy < 3 && strcmp(c.energy, energies[energy]); ++energy) {}
+    pn_ex_scene_default(&sc, PN_EX_SAND_COLUMN, c.dim);
+    if (!pn_ex_cli_apply(&c, &sc) || energy > 2 || !(aspect > 0)) {
         usage();
         return 2;
     }
-    pn_ex_scene_default(&sc, PN_EX_SAND_COLUMN, dim);
-    if (res) sc.res = res;
-    sc.E_pa = E;
     sc.aspect = aspect;
-    sc.boundary = (pn_mpm_boundary)boundary;
-    sc.friction = friction;
     sc.energy = energy_of[energy];
     if ((r = pn_ex_scene_create(&sc, &w, &why)) != PN_OK) {
         fprintf(stderr, "sand_column: %s (%s)\n", why, pn_result_string(r));
         return 1;
     }
     pn_ex_bounds(w, lo0, hi0);
-    if (!pn_ex_run("sand_column", w, implicit, dt, fp, frames, fps, out, png, ply, quiet, &tally, &wall)) {
+    if (!pn_ex_run("sand_column", w, c.implicit, c.dt, c.fp, c.frames, c.fps, c.out, c.png, c.ply, c.quiet, &tally, &wall)) {
         pn_mpm_destroy(w);
         return 1;
     }
     pn_ex_bounds(w, lo, hi);
-    for (i = 0; i < dim; ++i) /* front travel along the horizontal axes, either side */
+    for (i = 0; i < c.dim; ++i) /* front travel along the horizontal axes, either side */
         if (i != 1) runout = fmax(runout, fmax(hi[i] - hi0[i], lo0[i] - lo[i]));
     printf("{\"scene\": \"sand_column\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
            "\"fixed_point_iters\": %d, \"E\": %g, \"aspect\": %g, \"boundary\": \"%s\", \"friction\": %g, "
@@ -91,8 +68,8 @@ int main(int argc, char **argv) {
            "\"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
            "\"line_search_failures\": %ld, \"runout_m\": %.4f, "
            "\"final_height_m\": %.4f, \"max_fixed_point_residual\": %.3e, \"left_domain\": %lu}\n",
-           dim, implicit ? "implicit" : "explicit", implicit ? energies[energy] : "return_mapping", dt, fp, E, aspect,
-           walls[boundary], friction, sc.res, (unsigned long)w->n, frames, (double)w->time_s, wall, tally.steps,
+           c.dim, c.implicit ? "implicit" : "explicit", c.implicit ? energies[energy] : "return_mapping", c.dt, c.fp,
+           sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)w->n, c.frames, (double)w->time_s, wall, tally.steps,
            (double)tally.newton / (double)tally.steps, (double)tally.cg / (double)tally.steps,
            (double)tally.fixed_point / (double)tally.steps, tally.line_search_failures, runout, hi[1] - pn_ex_scene_floor(&sc), tally.max_fixed_point_residual,
            (unsigned long)w->left_total);

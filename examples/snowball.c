@@ -26,63 +26,42 @@ static void usage(void) {
 }
 
 int main(int argc, char **argv) {
-    static const char *const walls[] = {"sticky", "slip", "separate"};
-    int dim = 2, implicit = 1, fp = 1, frames = 30, fps = 30, res = 0, png = 0, ply = 0, quiet = 0, lagged = 0;
-    int boundary = 2, k;
-    double dt = 1e-3, E = 1e6, speed = 3, angle = 45, h0 = -0.01, friction = 0.5, wall = 0;
+    int lagged, k;
+    double speed = 3, angle = 45, h0 = -0.01, wall = 0;
     double lo0[3] = {0, 0, 0}, hi0[3] = {0, 0, 0}, lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-    const char *out = "build/snowball_frames", *why;
+    const char *why;
+    pn_ex_cli c;
     pn_ex_scene sc;
     pn_ex_tally tally;
     pn_mpm_world *w;
     pn_result r;
+    pn_ex_cli_default(&c, "build/snowball_frames");
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
-        if (!strcmp(a, "--png")) png = 1;
-        else if (!strcmp(a, "--ply")) ply = 1;
-        else if (!strcmp(a, "--quiet")) quiet = 1;
-        else if (!v) { usage(); return 2; }
-        else if (!strcmp(a, "--dim")) dim = atoi(v), ++k;
-        else if (!strcmp(a, "--integrator")) implicit = !strcmp(v, "implicit") ? 1 : (!strcmp(v, "explicit") ? 0 : -1), ++k;
-        else if (!strcmp(a, "--energy")) lagged = !strcmp(v, "lagged") ? 1 : (!strcmp(v, "pnet") ? 0 : -1), ++k;
-        else if (!strcmp(a, "--boundary")) {
-            for (boundary = 0; boundary < 3 && strcmp(v, walls[boundary]); ++boundary) {}
-            ++k;
-        }
-        else if (!strcmp(a, "--friction")) friction = atof(v), ++k;
-        else if (!strcmp(a, "--dt")) dt = atof(v), ++k;
-        else if (!strcmp(a, "--fixed-point")) fp = atoi(v), ++k;
-        else if (!strcmp(a, "--frames")) frames = atoi(v), ++k;
-        else if (!strcmp(a, "--fps")) fps = atoi(v), ++k;
-        else if (!strcmp(a, "--E")) E = atof(v), ++k;
-        else if (!strcmp(a, "--res")) res = atoi(v), ++k;
+        int used = pn_ex_cli_flag(&c, a, v);
+        if (used > 0) k += used - 1;
+        else if (used < 0 || !v) { usage(); return 2; }
         else if (!strcmp(a, "--speed")) speed = atof(v), ++k;
         else if (!strcmp(a, "--angle")) angle = atof(v), ++k;
         else if (!strcmp(a, "--h0")) h0 = atof(v), ++k;
-        else if (!strcmp(a, "--out")) out = v, ++k;
         else { usage(); return 2; }
     }
-    if ((dim != 2 && dim != 3) || implicit < 0 || lagged < 0 || boundary > 2 || !(friction >= 0) || !(dt > 0) ||
-        fp < 1 || frames < 1 || fps < 1 || !(E > 0) || !(speed >= 0) || !(angle >= -90 && angle <= 90) ||
-        !(h0 <= 0) || (res && (res < 16 || res > 1024))) {
+    lagged = !strcmp(c.energy, "lagged") ? 1 : !strcmp(c.energy, "pnet") ? 0 : -1;
+    pn_ex_scene_default(&sc, PN_EX_SNOWBALL, c.dim);
+    if (!pn_ex_cli_apply(&c, &sc) || lagged < 0 || !(speed >= 0) || !(angle >= -90 && angle <= 90) || !(h0 <= 0)) {
         usage();
         return 2;
     }
-    pn_ex_scene_default(&sc, PN_EX_SNOWBALL, dim);
-    if (res) sc.res = res;
-    sc.E_pa = E;
     sc.speed_m_s = speed;
     sc.angle_deg = angle;
     sc.h0 = h0;
-    sc.boundary = (pn_mpm_boundary)boundary;
-    sc.friction = friction;
     sc.energy = lagged ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_PNET;
     if ((r = pn_ex_scene_create(&sc, &w, &why)) != PN_OK) {
         fprintf(stderr, "snowball: %s (%s)\n", why, pn_result_string(r));
         return 1;
     }
     pn_ex_bounds(w, lo0, hi0);
-    if (!pn_ex_run("snowball", w, implicit, dt, fp, frames, fps, out, png, ply, quiet, &tally, &wall)) {
+    if (!pn_ex_run("snowball", w, c.implicit, c.dt, c.fp, c.frames, c.fps, c.out, c.png, c.ply, c.quiet, &tally, &wall)) {
         pn_mpm_destroy(w);
         return 1;
     }
@@ -93,8 +72,9 @@ int main(int argc, char **argv) {
            "\"steps\": %ld, \"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
            "\"line_search_failures\": %ld, \"spread_m\": %.4f, \"runout_m\": %.4f, \"final_height_m\": %.4f, "
            "\"max_fixed_point_residual\": %.3e, \"left_domain\": %lu}\n",
-           dim, implicit ? "implicit" : "explicit", !implicit ? "return_mapping" : lagged ? "lagged" : "pnet", dt, fp,
-           E, speed, angle, h0, walls[boundary], friction, sc.res, (unsigned long)w->n, frames, (double)w->time_s,
+           c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "return_mapping" : lagged ? "lagged" : "pnet", c.dt,
+           c.fp, sc.E_pa, speed, angle, h0, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)w->n, c.frames,
+           (double)w->time_s,
            wall, tally.steps, (double)tally.newton / (double)tally.steps, (double)tally.cg / (double)tally.steps,
            (double)tally.fixed_point / (double)tally.steps, tally.line_search_failures, hi[0] - lo[0],
            hi[0] - hi0[0], hi[1] - pn_ex_scene_floor(&sc), tally.max_fixed_point_residual,
