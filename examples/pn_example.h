@@ -554,6 +554,35 @@ PN_EX_UNUSED static int pn_ex_bounds(const pn_mpm_world *w, double *lo, double *
     return any;
 }
 
+/* An example's simulation: the scene's world, run as the command line says (pn_ex_run), with
+   the particles' bounding box before and after. */
+typedef struct pn_ex_outcome {
+    pn_mpm_world *w;             /* the caller destroys it                                  */
+    pn_ex_tally tally;
+    double wall_s, lo0[3], hi0[3], lo[3], hi[3];
+} pn_ex_outcome;
+
+/* Returns 0 after a failure (said on stderr; nothing left to destroy). */
+PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, const pn_ex_scene *sc,
+                                       pn_ex_outcome *o) {
+    const char *why = "";
+    pn_result r;
+    memset(o, 0, sizeof *o);
+    if ((r = pn_ex_scene_create(sc, &o->w, &why)) != PN_OK) {
+        fprintf(stderr, "%s: %s (%s)\n", prog, why, pn_result_string(r));
+        return 0;
+    }
+    pn_ex_bounds(o->w, o->lo0, o->hi0);
+    if (!pn_ex_run(prog, o->w, c->implicit, c->dt, c->fp, c->frames, c->fps, c->out, c->png, c->ply, c->quiet,
+                   &o->tally, &o->wall_s)) {
+        pn_mpm_destroy(o->w);
+        o->w = NULL;
+        return 0;
+    }
+    pn_ex_bounds(o->w, o->lo, o->hi);
+    return 1;
+}
+
 /* ---- mass IoU (PlasticityNet Fig. 5a-b; VALIDATION.md) -----------------------------------
 
    Each run's particle mass is spread onto the simulation grid's nodes with the quadratic

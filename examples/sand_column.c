@@ -26,14 +26,10 @@ int main(int argc, char **argv) {
     static const char *const energies[] = {"pnet", "lagged", "elastic"};
     static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_ELASTIC};
     int energy, k, i;
-    double aspect = 2, wall = 0, runout = 0;
-    double lo0[3] = {0, 0, 0}, hi0[3] = {0, 0, 0}, lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-    const char *why;
+    double aspect = 2, runout = 0;
     pn_ex_cli c;
     pn_ex_scene sc;
-    pn_ex_tally tally;
-    pn_mpm_world *w;
-    pn_result r;
+    pn_ex_outcome o;
     pn_ex_cli_default(&c, "build/sand_column_frames");
     for (k = 1; k < argc; ++k) {
         const char *v = k + 1 < argc ? argv[k + 1] : NULL;
@@ -50,18 +46,9 @@ int main(int argc, char **argv) {
     }
     sc.aspect = aspect;
     sc.energy = energy_of[energy];
-    if ((r = pn_ex_scene_create(&sc, &w, &why)) != PN_OK) {
-        fprintf(stderr, "sand_column: %s (%s)\n", why, pn_result_string(r));
-        return 1;
-    }
-    pn_ex_bounds(w, lo0, hi0);
-    if (!pn_ex_run("sand_column", w, c.implicit, c.dt, c.fp, c.frames, c.fps, c.out, c.png, c.ply, c.quiet, &tally, &wall)) {
-        pn_mpm_destroy(w);
-        return 1;
-    }
-    pn_ex_bounds(w, lo, hi);
+    if (!pn_ex_simulate("sand_column", &c, &sc, &o)) return 1;
     for (i = 0; i < c.dim; ++i) /* front travel along the horizontal axes, either side */
-        if (i != 1) runout = fmax(runout, fmax(hi[i] - hi0[i], lo0[i] - lo[i]));
+        if (i != 1) runout = fmax(runout, fmax(o.hi[i] - o.hi0[i], o.lo0[i] - o.lo[i]));
     printf("{\"scene\": \"sand_column\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
            "\"fixed_point_iters\": %d, \"E\": %g, \"aspect\": %g, \"boundary\": \"%s\", \"friction\": %g, "
            "\"res\": %d, \"particles\": %lu, \"frames\": %d, \"simulated_s\": %.4f, \"wall_s\": %.3f, \"steps\": %ld, "
@@ -69,10 +56,11 @@ int main(int argc, char **argv) {
            "\"line_search_failures\": %ld, \"runout_m\": %.4f, "
            "\"final_height_m\": %.4f, \"max_fixed_point_residual\": %.3e, \"left_domain\": %lu}\n",
            c.dim, c.implicit ? "implicit" : "explicit", c.implicit ? energies[energy] : "return_mapping", c.dt, c.fp,
-           sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)w->n, c.frames, (double)w->time_s, wall, tally.steps,
-           (double)tally.newton / (double)tally.steps, (double)tally.cg / (double)tally.steps,
-           (double)tally.fixed_point / (double)tally.steps, tally.line_search_failures, runout, hi[1] - pn_ex_scene_floor(&sc), tally.max_fixed_point_residual,
-           (unsigned long)w->left_total);
-    pn_mpm_destroy(w);
+           sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
+           (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
+           (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,
+           o.tally.line_search_failures, runout, o.hi[1] - pn_ex_scene_floor(&sc), o.tally.max_fixed_point_residual,
+           (unsigned long)o.w->left_total);
+    pn_mpm_destroy(o.w);
     return 0;
 }

@@ -27,14 +27,10 @@ static void usage(void) {
 
 int main(int argc, char **argv) {
     int lagged, k;
-    double speed = 3, angle = 45, h0 = -0.01, wall = 0;
-    double lo0[3] = {0, 0, 0}, hi0[3] = {0, 0, 0}, lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
-    const char *why;
+    double speed = 3, angle = 45, h0 = -0.01;
     pn_ex_cli c;
     pn_ex_scene sc;
-    pn_ex_tally tally;
-    pn_mpm_world *w;
-    pn_result r;
+    pn_ex_outcome o;
     pn_ex_cli_default(&c, "build/snowball_frames");
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
@@ -56,16 +52,7 @@ int main(int argc, char **argv) {
     sc.angle_deg = angle;
     sc.h0 = h0;
     sc.energy = lagged ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_PNET;
-    if ((r = pn_ex_scene_create(&sc, &w, &why)) != PN_OK) {
-        fprintf(stderr, "snowball: %s (%s)\n", why, pn_result_string(r));
-        return 1;
-    }
-    pn_ex_bounds(w, lo0, hi0);
-    if (!pn_ex_run("snowball", w, c.implicit, c.dt, c.fp, c.frames, c.fps, c.out, c.png, c.ply, c.quiet, &tally, &wall)) {
-        pn_mpm_destroy(w);
-        return 1;
-    }
-    pn_ex_bounds(w, lo, hi);
+    if (!pn_ex_simulate("snowball", &c, &sc, &o)) return 1;
     printf("{\"scene\": \"snowball\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
            "\"fixed_point_iters\": %d, \"E\": %g, \"speed\": %g, \"angle\": %g, \"h0\": %g, \"boundary\": \"%s\", "
            "\"friction\": %g, \"res\": %d, \"particles\": %lu, \"frames\": %d, \"simulated_s\": %.4f, \"wall_s\": %.3f, "
@@ -73,12 +60,12 @@ int main(int argc, char **argv) {
            "\"line_search_failures\": %ld, \"spread_m\": %.4f, \"runout_m\": %.4f, \"final_height_m\": %.4f, "
            "\"max_fixed_point_residual\": %.3e, \"left_domain\": %lu}\n",
            c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "return_mapping" : lagged ? "lagged" : "pnet", c.dt,
-           c.fp, sc.E_pa, speed, angle, h0, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)w->n, c.frames,
-           (double)w->time_s,
-           wall, tally.steps, (double)tally.newton / (double)tally.steps, (double)tally.cg / (double)tally.steps,
-           (double)tally.fixed_point / (double)tally.steps, tally.line_search_failures, hi[0] - lo[0],
-           hi[0] - hi0[0], hi[1] - pn_ex_scene_floor(&sc), tally.max_fixed_point_residual,
-           (unsigned long)w->left_total);
-    pn_mpm_destroy(w);
+           c.fp, sc.E_pa, speed, angle, h0, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
+           (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
+           (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,
+           o.tally.line_search_failures, o.hi[0] - o.lo[0],
+           o.hi[0] - o.hi0[0], o.hi[1] - pn_ex_scene_floor(&sc), o.tally.max_fixed_point_residual,
+           (unsigned long)o.w->left_total);
+    pn_mpm_destroy(o.w);
     return 0;
 }
