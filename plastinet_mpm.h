@@ -199,6 +199,10 @@ typedef struct pn_mpm_world {
     pn_pnet_point *ppt;
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
     unsigned char *bactive;
+    /* contact memory of the last implicit step: the nodes a separating contact held, ascending,
+       and their normal force L/dt (N; negative: the node stuck) */
+    size_t *lnode, *blnode, n_lag, bn_lag;
+    pn_real *lval, *blval;
 } pn_mpm_world;
 
 /* Create a world (*out set on success). PN_ERROR_INVALID_ARGUMENT for a bad dim, res outside
@@ -297,7 +301,8 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(ppt) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(ppt) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
+    X(lnode) X(blnode) X(lval) X(blval)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
     pn_allocator a;
@@ -995,6 +1000,10 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     PN__MPM_A(bF, cap * (size_t)dd, pn_real);
     PN__MPM_A(bh, cap, pn_real);
     PN__MPM_A(bactive, cap, unsigned char);
+    PN__MPM_A(lnode, w->nodes, size_t);
+    PN__MPM_A(blnode, w->nodes, size_t);
+    PN__MPM_A(lval, w->nodes, pn_real);
+    PN__MPM_A(blval, w->nodes, pn_real);
     if (!fail) return PN_OK;
     { /* leave the world as it was: free what this call allocated */
         void **r[] = {(void **)&w->vstar, (void **)&w->vsol, (void **)&w->vtry, (void **)&w->grad,
@@ -1002,7 +1011,8 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
                       (void **)&w->cg_q, (void **)&w->diag, (void **)&w->pP, (void **)&w->pH,
                       (void **)&w->pG, (void **)&w->phG, (void **)&w->pF0, (void **)&w->ppt,
                       (void **)&w->bx, (void **)&w->bv, (void **)&w->bC, (void **)&w->bF,
-                      (void **)&w->bh, (void **)&w->bactive};
+                      (void **)&w->bh, (void **)&w->bactive, (void **)&w->lnode, (void **)&w->blnode,
+                      (void **)&w->lval, (void **)&w->blval};
         size_t i;
         for (i = 0; i < sizeof r / sizeof r[0]; ++i) {
             pn_free(&desc->allocator, *r[i]);
@@ -1282,38 +1292,118 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
     return pn__mpm_first_error(w);
 }
 
-/* Friction for the coming solve (grad at the start v, computed with no friction): the held
-   normal components of grad are the contact's normal impulse L (kg m/s, lagged: fixed for the
-   pass). A node sticks (every component held) when mu L could stop its tangential momentum,
-   else it slides with the Coulomb force mu L against its tangential velocity t. */
-static void pn__mpm_friction_init(pn_mpm_world *w, pn_real *v) {
-    int d = w->dim;
-    size_t k;
-    for (k = 0; k < w->n_act; ++k) {
-        const pn_real *dir = w->cdir + k * 9, *vel = w->cvel + k * 3, *g = w->grad + k * (size_t)d;
-        pn_real *vk = v + k * (size_t)d, L = 0, u[3], ut = 0;
-        int b, i;
+/* >>friction: Coulomb friction of separating contacts, lagged as in IPC. The normal impulse L
+   of a node is fixed for a solve; the node sticks (every component held) or slides against
+   the constant force mu L t, t its tangential direction. Where L comes from:
+   - a solution of this step (later passes and contact rounds): the held normal reaction;
+   - the first solve of a step: the reaction at the end of the last implicit step (w->lnode,
+     as a force, times dt), else, for a new contact, the impulse that stops the node's own
+     approach, m max(0, -u_n), as the explicit projection uses.
+   The start value of L matters: the gradient at v* overstates it (the elastic push of the
+   material still falling onto a held node), a sliding block then stops several times short. */
+
+/* the node's held normal reaction in gradient g (kg m/s), 0 where nothing holds it */
+static pn_real pn__mpm_reaction(const pn_mpm_world *w, size_t k, const pn_real *g) {
+    const pn_real *dir = w->cdir + k * 9;
+    pn_real L = 0;
+    int b, i;
+    for (b = 0; b < w->cn[k]; ++b) {
+        pn_real gn = 0;
+        if (!(w->chold[k] >> b & 1)) continue;
+        for (i = 0; i < w->dim; ++i) gn += g[i] * dir[3 * b + i];
+        L += PN__MAX(gn, 0);
+    }
+    return L;
+}
+
+static int pn__mpm_has_friction(const pn_mpm_world *w, size_t k) {
+    return w->ckind[k] == PN_MPM_BOUNDARY_SEPARATE && (w->chold[k] & 0x7f) && w->cmu[k] > 0;
+}
+
+/* node k with normal impulse L: stick (when lagged_stick, or for a new friction state when
+   mu L can stop its tangential momentum) or slide along its tangential velocity in v */
+static void pn__mpm_stick_or_slide(pn_mpm_world *w, size_t k, pn_real *v, pn_real L, int fresh, int stick) {
+    int d = w->dim, i;
+    pn_real *vk = v + k * (size_t)d, u[3], ut = 0;
+    w->clam[k] = L;
+    if (!(L > 0)) {
         w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
         w->clam[k] = 0;
-        if (w->ckind[k] != PN_MPM_BOUNDARY_SEPARATE || !w->chold[k] || !(w->cmu[k] > 0)) continue;
-        for (b = 0; b < w->cn[k]; ++b) {
-            pn_real gn = 0;
+        return;
+    }
+    for (i = 0; i < d; ++i) u[i] = vk[i] - w->cvel[k * 3 + (size_t)i];
+    pn__mpm_filter(w, k, u);
+    for (i = 0; i < d; ++i) ut += u[i] * u[i];
+    ut = PN__SQRT(ut);
+    if (fresh) stick = w->grid_m[k] * ut <= w->cmu[k] * L;
+    if (stick || !(ut > 0)) {
+        w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
+        pn__mpm_hold(w, k, vk);
+        return;
+    }
+    w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
+    for (i = 0; i < d; ++i) w->ctan[k * 3 + (size_t)i] = u[i] / ut;
+}
+
+/* friction for the first solve of a step at start velocities v (v*: w->vstar) */
+static void pn__mpm_friction_start(pn_mpm_world *w, pn_real *v, pn_real dt) {
+    int d = w->dim, b, i;
+    size_t k, j;
+    for (k = 0; k < w->n_act; ++k) {
+        w->clam[k] = -1; /* not set yet */
+        w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
+    }
+    for (j = 0; j < w->n_lag; ++j) { /* the contact held at the end of the last step holds on */
+        long kk = w->dof[w->lnode[j]];
+        if (kk < 0 || w->ckind[kk] != PN_MPM_BOUNDARY_SEPARATE || !w->cn[kk]) continue;
+        w->chold[kk] = (unsigned char)(w->chold[kk] | ((1 << w->cn[kk]) - 1));
+        pn__mpm_hold(w, (size_t)kk, v + (size_t)kk * (size_t)d);
+        if (pn__mpm_has_friction(w, (size_t)kk))
+            pn__mpm_stick_or_slide(w, (size_t)kk, v, PN__FABS(w->lval[j]) * dt, 0, w->lval[j] < 0);
+    }
+    for (k = 0; k < w->n_act; ++k) {
+        pn_real L = 0;
+        if (w->clam[k] >= 0) continue;
+        w->clam[k] = 0;
+        if (!pn__mpm_has_friction(w, k)) continue;
+        for (b = 0; b < w->cn[k]; ++b) { /* the node's own approach */
+            pn_real un = 0;
             if (!(w->chold[k] >> b & 1)) continue;
-            for (i = 0; i < d; ++i) gn += g[i] * dir[3 * b + i];
-            L += PN__MAX(gn, 0);
+            for (i = 0; i < d; ++i)
+                un += (w->vstar[k * (size_t)d + (size_t)i] - w->cvel[k * 3 + (size_t)i]) * w->cdir[k * 9 + (size_t)(3 * b + i)];
+            L += w->grid_m[k] * PN__MAX(-un, 0);
         }
+        pn__mpm_stick_or_slide(w, k, v, L, 1, 0);
+    }
+}
+
+/* friction for a later solve: L from the reaction at the last solution (w->grad at v); the
+   stick flags are those the active set left, a node with no friction before starts afresh */
+static void pn__mpm_friction_update(pn_mpm_world *w, pn_real *v) {
+    size_t k;
+    for (k = 0; k < w->n_act; ++k) {
+        int fresh = !(w->clam[k] > 0);
+        if (!pn__mpm_has_friction(w, k)) {
+            w->clam[k] = 0;
+            continue;
+        }
+        pn__mpm_stick_or_slide(w, k, v, pn__mpm_reaction(w, k, w->grad + k * (size_t)w->dim), fresh,
+                               (w->chold[k] & PN__MPM_STICK) != 0);
+    }
+}
+
+/* the contact memory for the next step: the nodes a separating contact held with a positive
+   reaction, their reaction force and stick flag at the solution */
+static void pn__mpm_friction_record(pn_mpm_world *w, pn_real dt) {
+    size_t k;
+    w->n_lag = 0;
+    for (k = 0; k < w->n_act; ++k) {
+        pn_real L;
+        if (w->ckind[k] != PN_MPM_BOUNDARY_SEPARATE || !(w->chold[k] & 0x7f)) continue;
+        L = pn__mpm_reaction(w, k, w->grad + k * (size_t)w->dim);
         if (!(L > 0)) continue;
-        w->clam[k] = L;
-        for (i = 0; i < d; ++i) u[i] = vk[i] - vel[i];
-        pn__mpm_filter(w, k, u);
-        for (i = 0; i < d; ++i) ut += u[i] * u[i];
-        ut = PN__SQRT(ut);
-        if (w->grid_m[k] * ut <= w->cmu[k] * L) {
-            w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
-            pn__mpm_hold(w, k, vk);
-        } else {
-            for (i = 0; i < d; ++i) w->ctan[k * 3 + (size_t)i] = u[i] / ut;
-        }
+        w->lnode[w->n_lag] = w->act[k];
+        w->lval[w->n_lag++] = (w->chold[k] & PN__MPM_STICK ? -L : L) / dt;
     }
 }
 
@@ -1402,6 +1492,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     }
     memcpy(w->vsol, w->vstar, sizeof(pn_real) * nd);
     for (k = 0; k < w->n_act; ++k) pn__mpm_hold(w, k, w->vsol + k * (size_t)d);
+    if (has_sep) pn__mpm_friction_start(w, w->vsol, dt);
     for (pass = 0; pass < o->fixed_point_iters; ++pass) {
         pn_real fp_res = 0;
         int round;
@@ -1409,14 +1500,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         if (r != PN_OK) return r;
         if (pass > 0) st->fixed_point_residual = PN__MAX(st->fixed_point_residual, fp_res);
         st->fixed_point_iters++;
-        if (has_sep) { /* the contact's normal impulse at the start v, then stick or slide */
-            for (k = 0; k < w->n_act; ++k) w->clam[k] = 0;
-            r = pn__mpm_objective(w, w->vsol, dt, 1, &fp_res); /* the gradient is enough */
-            if (r != PN_OK) return r;
-            pn__mpm_friction_init(w, w->vsol);
-        }
         for (round = 0; round < o->contact_rounds; ++round) {
             int it;
+            if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->vsol);
             st->solves++;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0;
@@ -1451,6 +1537,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (!(last_res <= 100 * o->newton_tol)) return PN_ERROR_NOT_CONVERGED;
     r = pn__mpm_g2p(w, w->vsol, dt, 1, st);
     if (r != PN_OK) return r;
+    pn__mpm_friction_record(w, dt);
     pn__mpm_commit(w, dt, st);
     return PN_OK;
 }
@@ -1465,6 +1552,10 @@ static void pn__mpm_backup(pn_mpm_world *w, int restore) {
     PN__MPM_COPY(F, bF, n * (size_t)dd, pn_real);
     PN__MPM_COPY(h, bh, n, pn_real);
     PN__MPM_COPY(active, bactive, n, unsigned char);
+    PN__MPM_COPY(lnode, blnode, restore ? w->bn_lag : w->n_lag, size_t);
+    PN__MPM_COPY(lval, blval, restore ? w->bn_lag : w->n_lag, pn_real);
+    if (restore) w->n_lag = w->bn_lag;
+    else w->bn_lag = w->n_lag;
 #undef PN__MPM_COPY
 }
 
@@ -1593,6 +1684,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     r = pn__mpm_g2p(w, w->grid_v, dt, 0, &st);
     if (r != PN_OK) return r;
     pn__mpm_commit(w, dt, &st);
+    w->n_lag = 0; /* the implicit friction memory is stale now */
     if (stats) *stats = st;
     return PN_OK;
 }
