@@ -12,7 +12,8 @@
      >>world     creation, particle groups, particles (structure of arrays), colliders
      >>bin       per step: each particle's quadratic B-spline stencil, particles sorted by
                  stencil base node (counting sort), the list of active grid nodes
-     >>transfer  particle-to-grid as a gather per node, grid-to-particle per particle (APIC)
+     >>transfer  particle-to-grid as a gather per node, grid-to-particle per particle (APIC,
+                 or AFLIP with a transfer filter per simulated second: filter_time_s)
      >>contact   domain walls and analytic colliders (half-spaces, boxes, spheres, moving):
                  sticky, slip, separate with Coulomb friction
      >>implicit  optimization time integration: Newton + filtered PCG + line search on the
@@ -78,6 +79,14 @@ typedef struct pn_mpm_desc {
     pn_real gravity[3];          /* m/s^2                                                   */
     pn_mpm_boundary boundary;    /* domain walls                                            */
     pn_real friction;            /* Coulomb coefficient of SEPARATE walls, >= 0             */
+    pn_real filter_time_s;       /* time scale of the transfer filter, >= 0 [0: APIC]. APIC
+                                    filters the particle velocities at every grid round trip,
+                                    a loss per step, so its damping per simulated second grows
+                                    as dt shrinks and results do not converge in dt (near
+                                    walls that hold material, noticeably). > 0: each step keeps
+                                    the FLIP share 1 - s of the particle's own velocity change,
+                                    s = min(1, dt / filter_time_s) (AFLIP, Fei et al. 2021, with
+                                    the same filtering per simulated second at any dt)     */
     int wall_cells;              /* thickness of the walls in cells; 0 = 3                  */
     size_t max_particles;        /* capacity, > 0                                           */
     pn_allocator allocator;
@@ -185,7 +194,7 @@ typedef struct pn_mpm_world {
     long *dof;                   /* node -> index into act, or -1                            */
     unsigned char *mark;
     /* compact grid (index into act) and per-particle scratch */
-    pn_real *grid_m, *grid_v;
+    pn_real *grid_m, *grid_v, *grid_v0; /* grid_v0: velocity of the transfer alone (AFLIP) */
     pn_real *pmat, *pscal, *part;
     int *pstat;
     pn_real *sx, *sv, *sC, *sF, *sh;
@@ -207,7 +216,7 @@ typedef struct pn_mpm_world {
 
 /* Create a world (*out set on success). PN_ERROR_INVALID_ARGUMENT for a bad dim, res outside
    8 .. 16384, dx <= 0, non-finite gravity, friction < 0, capacity 0, a bad boundary or half an
-   allocator; PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). */
+   allocator, a negative or non-finite filter_time_s; PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). */
 PN_API pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out);
 PN_API void pn_mpm_destroy(pn_mpm_world *w);
 
@@ -232,7 +241,7 @@ PN_API pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, const
    negative friction. */
 PN_API pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c, int *index);
 
-/* One explicit step of dt_s seconds (symplectic Euler, APIC, return mapping after the F
+/* One explicit step of dt_s seconds (symplectic Euler, APIC or AFLIP, return mapping after the F
    update). On failure the world is unchanged and w->error_particle names the culprit. */
 PN_API pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt_s, pn_mpm_stats *stats);
 
@@ -298,7 +307,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
 /* every array the world owns (X-macro: one list for destroy) */
 #define PN__MPM_ARRAYS(X)                                                                       \
     X(x) X(v) X(C) X(F) X(h) X(vol0) X(mass) X(group) X(active) X(pbase) X(pw) X(pdw) X(pfx)    \
-    X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(pmat) X(pscal) X(part)        \
+    X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
     X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(ppt) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
@@ -338,7 +347,8 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
     d = desc->dim;
     if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
     if (!pn__finite(desc->dx_m) || !(desc->dx_m > 0) || !pn__finite(desc->friction) ||
-        !(desc->friction >= 0) || desc->max_particles == 0 || desc->wall_cells < 0 ||
+        !(desc->friction >= 0) || !pn__finite(desc->filter_time_s) || !(desc->filter_time_s >= 0) ||
+        desc->max_particles == 0 || desc->wall_cells < 0 ||
         desc->boundary < PN_MPM_BOUNDARY_STICKY || desc->boundary > PN_MPM_BOUNDARY_SEPARATE ||
         (desc->allocator.alloc == NULL) != (desc->allocator.free == NULL))
         return PN_ERROR_INVALID_ARGUMENT;
@@ -383,6 +393,7 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
     PN__MPM_A(mark, nodes, unsigned char);
     PN__MPM_A(grid_m, nodes, pn_real);
     PN__MPM_A(grid_v, nodes * (size_t)d, pn_real);
+    PN__MPM_A(grid_v0, nodes * (size_t)d, pn_real);
     PN__MPM_A(pmat, cap * (size_t)dd, pn_real);
     PN__MPM_A(pscal, cap > nodes ? cap : nodes, pn_real);
     PN__MPM_A(part, nparts, pn_real);
@@ -686,7 +697,8 @@ static void pn__mpm_bin(pn_mpm_world *w) {
    >>transfer: APIC with D^-1 = 4 / dx^2 (quadratic splines). Particle to grid is a gather
    per active node: mass, momentum m_p (v_p + C_p (x_i - x_p)) and, for the explicit step,
    the stress impulse A_p (x_i - x_p) with A_p = -dt V0 (4/dx^2) tau_p (MLS-MPM, Hu et al.
-   2018). grid_v holds momentum after this.
+   2018). grid_v holds momentum after this; with filter_time_s > 0, grid_v0 holds the velocity of the
+   transfer alone (no stress), the v_i^n of the FLIP update.
    ====================================================================================== */
 
 static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
@@ -696,7 +708,7 @@ static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
     for (lk = 0; lk < (long)w->n_act; ++lk) {
         size_t k = (size_t)lk, base[27], s;
         int o[27][3], nb = pn__mpm_node_bases(w, w->act[k], base, o), b, i, j;
-        pn_real m = 0, mom[3] = {0, 0, 0};
+        pn_real m = 0, mom[3] = {0, 0, 0}, mom0[3] = {0, 0, 0};
         for (b = 0; b < nb; ++b)
             for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
                 size_t p = w->order[s];
@@ -709,10 +721,14 @@ static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
                     if (with_stress)
                         for (j = 0; j < d; ++j) st += A[i * d + j] * dpos[j];
                     mom[i] += wm * acc + wt * st;
+                    mom0[i] += wm * acc;
                 }
             }
         w->grid_m[k] = m;
-        for (i = 0; i < d; ++i) w->grid_v[k * (size_t)d + (size_t)i] = mom[i];
+        for (i = 0; i < d; ++i) {
+            w->grid_v[k * (size_t)d + (size_t)i] = mom[i];
+            if (w->desc.filter_time_s > 0) w->grid_v0[k * (size_t)d + (size_t)i] = m > 0 ? mom0[i] / m : 0;
+        }
     }
 }
 
@@ -729,7 +745,8 @@ static void pn__mpm_grad_v(const pn_mpm_world *w, size_t p, const pn_real *v, pn
     }
 }
 
-/* Grid to particles into scratch: APIC v, C; x += dt v; F from gradF (0: (I + dt C) F as in
+/* Grid to particles into scratch: APIC v, C (with filter_time_s > 0, AFLIP: v = v_PIC +
+   (1 - s)(v_p - sum_i w_ip v_i^n), v_i^n the transfer's own velocity); x += dt v_PIC; F from gradF (0: (I + dt C) F as in
    the explicit step, 1: (I + dt sum v grad w^T) F, as the implicit energy saw it); then the
    return mapping. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid. */
 static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt, int gradF,
@@ -737,13 +754,14 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
     int d = w->dim, dd = d * d;
     long lp;
     size_t p;
-    pn_real inv_dx = 1 / w->desc.dx_m;
+    pn_real inv_dx = 1 / w->desc.dx_m, tf = w->desc.filter_time_s;
+    pn_real flip = tf > 0 && dt < tf ? 1 - dt / tf : 0; /* the FLIP share 1 - s */
     pn_result r;
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp) {
         size_t q = (size_t)lp;
         const pn_mpm_group *g = &w->groups[w->group[q]];
-        pn_real nv[3] = {0, 0, 0}, nC[9] = {0}, G[9], Fn[9], Z[9], hn;
+        pn_real nv[3] = {0, 0, 0}, ov[3] = {0, 0, 0}, nC[9] = {0}, G[9], Fn[9], Z[9], hn;
         pn_real *xp = w->x + q * (size_t)d;
         int i, j, s, stat;
         w->sactive[q] = w->active[q];
@@ -757,10 +775,12 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
             continue;
         }
         for (s = 0; s < w->ns; ++s) {
-            const pn_real *gv = gv_all + (size_t)w->dof[w->pbase[q] + w->slot_off[s]] * (size_t)d;
+            size_t node = (size_t)w->dof[w->pbase[q] + w->slot_off[s]] * (size_t)d;
+            const pn_real *gv = gv_all + node;
             pn_real gw[3], dpos[3], wt = pn__mpm_weight(w, q, w->slot[s], gw, dpos);
             for (i = 0; i < d; ++i) {
                 nv[i] += wt * gv[i];
+                if (flip > 0) ov[i] += wt * w->grid_v0[node + (size_t)i];
                 for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * wt * gv[i] * dpos[j];
             }
         }
@@ -779,7 +799,7 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
         }
         if (hn != w->h[q] || memcmp(Z, Fn, sizeof(pn_real) * (size_t)dd) != 0) stat |= 0x100;
         for (i = 0; i < d; ++i) {
-            w->sv[q * (size_t)d + (size_t)i] = nv[i];
+            w->sv[q * (size_t)d + (size_t)i] = nv[i] + flip * (w->v[q * (size_t)d + (size_t)i] - ov[i]);
             w->sx[q * (size_t)d + (size_t)i] = xp[i] + dt * nv[i];
         }
         memcpy(w->sC + q * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);

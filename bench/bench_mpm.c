@@ -2,11 +2,13 @@
    and the snowball of shared/design/VALIDATION.md (scenes in examples/pn_example.h).
    Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
-                    [--max-run-seconds S] [--out DIR]
+                    [--max-run-seconds S] [--filter S] [--references] [--out DIR]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated, at most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
    --quick: 2D only (unless --dim), res 32, 2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2
-   passes, sweep E 1e6 and 1e7.
+   passes, sweep E 1e6 and 1e7. --filter S: the scenes' transfer filter time
+   (pn_mpm_desc.filter_time_s; 0: plain APIC) instead of their default. --references: only
+   the fair baseline, the reference and its check (how converged the reference is), no sweep.
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -66,6 +68,8 @@ typedef struct bench_cfg {
     int res[4];           /* cells per axis, by dimension                          */
     double max_run_s;     /* stop a run after this many wall seconds (0: never)     */
     int quick;
+    int refs_only;        /* only the fair baseline, the reference and its check     */
+    double filter;        /* the scenes' transfer filter time (< 0: their default)  */
     const double *dts;    /* implicit steps                                        */
     int n_dts;
     const int *fps_iters; /* fixed-point passes                                    */
@@ -367,6 +371,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     static const pn_mpm_energy energies_run[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED};
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
+    if (cfg->filter >= 0) s.filter_s = cfg->filter;
     frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5);
     if (frames < 1) frames = 1;
     if (frames > BENCH_MAX_FRAMES) frames = BENCH_MAX_FRAMES;
@@ -412,7 +417,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     out->n_runs = 3;
     for (i = 0; i < 3; ++i) bench_progress(out->name, dim, &out->runs[i]);
     /* 3. implicit */
-    for (e = 0; e < 2; ++e)
+    for (e = 0; e < 2 && !cfg->refs_only; ++e)
         for (i = 0; i < cfg->n_dts; ++i)
             for (j = 0; j < cfg->n_fps; ++j) {
                 r = &out->runs[out->n_runs++];
@@ -454,6 +459,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
         double st;
         pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
         s.res = cfg->res[2];
+        if (cfg->filter >= 0) s.filter_s = cfg->filter;
         s.E_pa = cfg->Es[i];
         w->E = s.E_pa;
         fprintf(stderr, "E sweep, E = %.0e Pa\n", w->E);
@@ -667,7 +673,7 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
 
 static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
-                    "       [--max-run-seconds S] [--out DIR]\n");
+                    "       [--max-run-seconds S] [--filter S] [--references] [--out DIR]\n");
 }
 
 int main(int argc, char **argv) {
@@ -688,9 +694,11 @@ int main(int argc, char **argv) {
     cfg.duration[2] = 0.5;
     cfg.duration[3] = 0.3;
     cfg.max_run_s = 120;
+    cfg.filter = -1;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) cfg.quick = 1;
+        else if (!strcmp(a, "--references")) cfg.refs_only = 1;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
         else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
@@ -699,9 +707,10 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--res3")) cfg.res[3] = atoi(v), ++k;
         else if (!strcmp(a, "--max-run-seconds")) cfg.max_run_s = atof(v), ++k;
         else if (!strcmp(a, "--out")) cfg.out = v, ++k;
+        else if (!strcmp(a, "--filter")) cfg.filter = atof(v), ++k;
         else { usage(); return 2; }
     }
-    if (only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || cfg.res[2] < 16 || cfg.res[3] < 16) {
+    if (only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16) {
         usage();
         return 2;
     }
@@ -730,7 +739,7 @@ int main(int argc, char **argv) {
         }
     fclose(csv);
     snprintf(path, sizeof path, "%s/bench_mpm_esweep.csv", cfg.out);
-    if ((only < 0 || only == 0) && (!dim_only || dim_only == 2)) {
+    if ((only < 0 || only == 0) && (!dim_only || dim_only == 2) && !cfg.refs_only) {
         if (!(esw = fopen(path, "w"))) {
             fprintf(stderr, "bench_mpm: cannot write %s\n", path);
             return 1;

@@ -210,6 +210,7 @@ typedef struct pn_ex_scene {
     double density_kg_m3;        /* [sand 1600, snow 400]                                   */
     pn_mpm_boundary boundary;    /* domain walls [SEPARATE]                                 */
     double friction;             /* Coulomb coefficient of SEPARATE walls [0.5]             */
+    double filter_s;             /* transfer filter time (pn_mpm_desc.filter_time_s) [2e-3]  */
     pn_mpm_energy energy;        /* what implicit steps minimize [PNET]; ignored by explicit */
     double width_m, aspect;      /* sand column: W [0.12], a = H / W [2]                    */
     double radius_m;             /* snowball: [0.1 in 2D, 0.08 in 3D]                       */
@@ -229,6 +230,7 @@ PN_EX_UNUSED static void pn_ex_scene_default(pn_ex_scene *s, pn_ex_scene_kind ki
     s->density_kg_m3 = sand ? 1600 : 400;
     s->boundary = PN_MPM_BOUNDARY_SEPARATE;
     s->friction = 0.5;
+    s->filter_s = 2e-3;
     s->energy = PN_MPM_ENERGY_PNET;
     s->width_m = 0.12;
     s->aspect = 2;
@@ -329,6 +331,7 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
     wd.gravity[1] = (pn_real)-9.81;
     wd.boundary = s->boundary;
     wd.friction = (pn_real)s->friction;
+    wd.filter_time_s = (pn_real)s->filter_s;
     wd.wall_cells = PN_EX_WALL_CELLS;
     wd.max_particles = n;
     if ((r = pn_mpm_create(&wd, &w)) != PN_OK) {
@@ -453,7 +456,7 @@ static const char *const pn_ex_walls[] = {"sticky", "slip", "separate"};
 
 typedef struct pn_ex_cli {
     int dim, implicit, fp, frames, fps, res, png, ply, quiet, boundary;
-    double dt, E, friction;
+    double dt, E, friction, filter;  /* filter < 0: the scene's default                  */
     const char *energy, *out;    /* the energy's name as given; the example maps it        */
 } pn_ex_cli;
 
@@ -468,6 +471,7 @@ PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
     c->boundary = PN_MPM_BOUNDARY_SEPARATE;
     c->dt = 1e-3;
     c->friction = 0.5;
+    c->filter = -1;
     c->energy = "pnet";
     c->out = out;
 }
@@ -478,7 +482,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     if (!strcmp(a, "--png")) return c->png = 1;
     if (!strcmp(a, "--ply")) return c->ply = 1;
     if (!strcmp(a, "--quiet")) return c->quiet = 1;
-    if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--dt|--fixed-point|"
+    if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--filter|--dt|--fixed-point|"
                                        "--frames|--fps|--E|--res|--out|", a))
         return 0;
     if (!v) return -1;
@@ -488,6 +492,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     else if (!strcmp(a, "--boundary"))
         for (c->boundary = 0; c->boundary < 3 && strcmp(v, pn_ex_walls[c->boundary]); ++c->boundary) {}
     else if (!strcmp(a, "--friction")) c->friction = atof(v);
+    else if (!strcmp(a, "--filter")) c->filter = atof(v);
     else if (!strcmp(a, "--dt")) c->dt = atof(v);
     else if (!strcmp(a, "--fixed-point")) c->fp = atoi(v);
     else if (!strcmp(a, "--frames")) c->frames = atoi(v);
@@ -503,8 +508,9 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
 PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
     if ((c->dim != 2 && c->dim != 3) || c->implicit < 0 || c->boundary > 2 || !(c->friction >= 0) ||
         !(c->dt > 0) || c->fp < 1 || c->frames < 1 || c->fps < 1 || !(c->E >= 0) ||
-        (c->res && (c->res < 16 || c->res > 1024)))
+        (c->res && (c->res < 16 || c->res > 1024)) || !(c->filter >= 0 || c->filter == -1))
         return 0;
+    if (c->filter >= 0) s->filter_s = c->filter;
     if (c->res) s->res = c->res;
     if (c->E > 0) s->E_pa = c->E;
     s->boundary = (pn_mpm_boundary)c->boundary;
