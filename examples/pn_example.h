@@ -211,6 +211,7 @@ typedef struct pn_ex_scene {
     pn_mpm_boundary boundary;    /* domain walls [SEPARATE]                                 */
     double friction;             /* Coulomb coefficient of SEPARATE walls [0.5]             */
     double filter_s;             /* transfer filter time (pn_mpm_desc.filter_time_s) [2e-3]  */
+    double regularizer;          /* PlasticityNet's w (pn_pnet_desc.regularizer) [0: 1]     */
     pn_mpm_energy energy;        /* what implicit steps minimize [PNET]; ignored by explicit */
     double width_m, aspect;      /* sand column: W [0.12], a = H / W [2]                    */
     double radius_m;             /* snowball: [0.1 in 2D, 0.08 in 3D]                       */
@@ -371,6 +372,7 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
         pn_pnet_desc nd;
         memset(&nd, 0, sizeof nd);
         nd.energy = model;
+        nd.regularizer = (pn_real)s->regularizer;
         if ((r = pn_pnet_init(&net, &nd, &m, d, why)) != PN_OK) goto fail;
         r = pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net);
     } else {
@@ -457,6 +459,7 @@ static const char *const pn_ex_walls[] = {"sticky", "slip", "separate"};
 typedef struct pn_ex_cli {
     int dim, implicit, fp, frames, fps, res, png, ply, quiet, boundary;
     double dt, E, friction, filter;  /* filter < 0: the scene's default                  */
+    double regularizer;          /* PlasticityNet's w (0: 1, < 0: off)                     */
     const char *energy, *out;    /* the energy's name as given; the example maps it        */
 } pn_ex_cli;
 
@@ -482,8 +485,8 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     if (!strcmp(a, "--png")) return c->png = 1;
     if (!strcmp(a, "--ply")) return c->ply = 1;
     if (!strcmp(a, "--quiet")) return c->quiet = 1;
-    if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--filter|--dt|--fixed-point|"
-                                       "--frames|--fps|--E|--res|--out|", a))
+    if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--filter|--regularizer|"
+                                       "--dt|--fixed-point|--frames|--fps|--E|--res|--out|", a))
         return 0;
     if (!v) return -1;
     if (!strcmp(a, "--dim")) c->dim = atoi(v);
@@ -493,6 +496,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
         for (c->boundary = 0; c->boundary < 3 && strcmp(v, pn_ex_walls[c->boundary]); ++c->boundary) {}
     else if (!strcmp(a, "--friction")) c->friction = atof(v);
     else if (!strcmp(a, "--filter")) c->filter = atof(v);
+    else if (!strcmp(a, "--regularizer")) c->regularizer = atof(v);
     else if (!strcmp(a, "--dt")) c->dt = atof(v);
     else if (!strcmp(a, "--fixed-point")) c->fp = atoi(v);
     else if (!strcmp(a, "--frames")) c->frames = atoi(v);
@@ -511,6 +515,7 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
         (c->res && (c->res < 16 || c->res > 1024)) || !(c->filter >= 0 || c->filter == -1))
         return 0;
     if (c->filter >= 0) s->filter_s = c->filter;
+    s->regularizer = c->regularizer;
     if (c->res) s->res = c->res;
     if (c->E > 0) s->E_pa = c->E;
     s->boundary = (pn_mpm_boundary)c->boundary;

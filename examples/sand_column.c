@@ -5,10 +5,11 @@
    Usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|elastic]
                       [--dt S] [--fixed-point N] [--frames N] [--fps N] [--aspect A] [--E PA]
                       [--res N] [--boundary sticky|slip|separate] [--friction MU]
-                      [--filter S] [--out DIR] [--png] [--ply] [--quiet]
+                      [--filter S] [--regularizer W] [--out DIR] [--png] [--ply] [--quiet]
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps, a = 2,
    E = 1e7 Pa, res 64 (2D) / 24 (3D) cells over 1 m (2D) / 0.5 m (3D), walls separate with
-   Coulomb friction 0.5, transfer filter time 2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC).
+   Coulomb friction 0.5, transfer filter time 2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC),
+   PlasticityNet regularizer w = 1 (Eq. 11; --regularizer -1: off).
    Writes DIR/frame_NNNN.png (--png) and DIR/frame_NNNN.ply (--ply, ASCII point clouds); a
    progress line on stderr; a one-line JSON summary on stdout: frames, wall seconds (monotonic
    clock), iterations per step, runout (how far the front moved past the column's initial edge),
@@ -19,8 +20,8 @@
 static void usage(void) {
     fprintf(stderr, "usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|elastic]\n"
                     "       [--dt S] [--fixed-point N] [--frames N] [--fps N] [--aspect A] [--E PA] [--res N]\n"
-                    "       [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--out DIR] [--png] [--ply]\n"
-                    "       [--quiet]\n");
+                    "       [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
+                    "       [--out DIR] [--png] [--ply] [--quiet]\n");
 }
 
 int main(int argc, char **argv) {

@@ -6,12 +6,13 @@
    Usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]
                    [--fixed-point N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S]
                    [--angle DEG] [--h0 LOGJP] [--boundary sticky|slip|separate] [--friction MU]
-                   [--filter S] [--out DIR] [--png] [--ply] [--quiet]
+                   [--filter S] [--regularizer W] [--out DIR] [--png] [--ply] [--quiet]
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps,
    E = 1e6 Pa, res 64 (2D) / 24 (3D) cells over 1 m (2D) / 0.5 m (3D), radius 0.1 m (2D) /
    0.08 m (3D), 3 m/s at 45 degrees below the horizontal, initial log J_p = -0.01 (inside the
    model's trained range [-0.15, 0]), walls separate with Coulomb friction 0.5, transfer
-   filter time 2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC).
+   filter time 2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC), PlasticityNet regularizer w = 1
+   (Eq. 11; --regularizer -1: off).
    Writes DIR/frame_NNNN.png (--png) and DIR/frame_NNNN.ply (--ply); a progress line on
    stderr; a one-line JSON summary on stdout: frames, wall seconds (monotonic clock),
    iterations per step, spread (extent of the snow along the throw), runout (how far its front
@@ -22,8 +23,8 @@
 static void usage(void) {
     fprintf(stderr, "usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]\n"
                     "       [--fixed-point N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S] [--angle DEG]\n"
-                    "       [--h0 LOGJP] [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--out DIR]\n"
-                    "       [--png] [--ply] [--quiet]\n");
+                    "       [--h0 LOGJP] [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
+                    "       [--out DIR] [--png] [--ply] [--quiet]\n");
 }
 
 int main(int argc, char **argv) {
