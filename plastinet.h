@@ -354,7 +354,7 @@ PN_API pn_result pn_lagged_energy(const pn_material *m, int dim, const pn_real *
 #define PN_MODEL_FORMAT_VERSION 1
 #define PN_MLP_MAX_LAYERS 8     /* linear layers */
 #define PN_MLP_MAX_WIDTH 64     /* units per layer (inputs and outputs included) */
-#define PN_MLP_MAX_DIFF 4       /* inputs an evaluation can differentiate with respect to */
+#define PN_MLP_MAX_DIFF 8       /* inputs an evaluation can differentiate with respect to */
 
 typedef enum pn_activation {
     PN_ACTIVATION_SILU = 1,     /* z / (1 + exp(-z)) */
@@ -2107,8 +2107,15 @@ static void pn__features_eval(int d, const pn_real *F, int level, pn__features *
 
 static int pn__model_nf(const pn_model *mo) { return mo->dim == 2 ? 2 : 3; }
 
+/* An energy network has 2 nf + 1 inputs (raw encoding) or 2 nf + 2 (scaled encoding: the
+   strain scale s is the extra input, see >>pnet). */
+static int pn__model_scaled(const pn_model *mo) {
+    return mo->kind == PN_MODEL_ENERGY && mo->n_inputs == 2 * pn__model_nf(mo) + 2;
+}
+
 static int pn__model_inputs(const pn_model *mo) {
-    return mo->kind == PN_MODEL_ENERGY ? 2 * pn__model_nf(mo) + 1 : (mo->dim == 2 ? 3 : 4);
+    return mo->kind == PN_MODEL_ENERGY ? 2 * pn__model_nf(mo) + 1 + pn__model_scaled(mo)
+                                       : (mo->dim == 2 ? 3 : 4);
 }
 
 static int pn__model_normalisation_ok(const pn_model *mo) {
@@ -2245,6 +2252,88 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
     return PN_OK;
 }
 
+/* Scaled encoding (gen/pn_torch.py, scaled_raw): with y = x(F), y0 = x(F0),
+     q(y) = y1^2 / d + c y2 (c = 1 in 2D, 3/2 in 3D),  S = s^2 = q(y) + q(y0) + eps^2,
+     raw = [(y - y0) s^-p, y0 s^-p, s, h],  N = S M(raw),
+   p = 1 for log J and 2 for the others: the 3D cubic feature (~|e_hat|^3, the Lode angle) over
+   s^2 fades at small strains instead of amplifying its rounding (it is a difference of two
+   logarithms, exact to ~1e-16 only); Drucker-Prager and Hencky do not depend on it.
+   Cohesionless Drucker-Prager is positively homogeneous in the Hencky strain, so M sees every
+   strain scale alike; a network of the raw features is only its linearisation at strains far
+   below the training box (a sand column at E = 1e7 Pa strains ~1e-4). Gives N / (E-scale)
+   and its y-gradient and y-Hessian (nf x nf), by the chain rule through S and raw(y). */
+#define PN__SCALED_EPS 1e-6
+static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_real *y0, pn_real h,
+                                 int level, pn_real *N, pn_real *gN, pn_real *HN) {
+    int nf = pn__model_nf(mo), nr = 2 * nf + 1, d = mo->dim, i, j, l, k;
+    pn_real c = d == 2 ? 1 : (pn_real)1.5, q0, S, s, qj[3], qjl[3][3], sj[3], sjl[3][3];
+    pn_real a[3], a1[3], a2[3], raw[8], u[8], J[7][3], K[7][3][3], m, gm[7], hm[7 * 7];
+    pn_real gr[7], Mj[3], Mjl[3][3];
+    pn_result r;
+    q0 = y0[0] * y0[0] / d + c * y0[1];
+    S = y[0] * y[0] / d + c * y[1] + q0 + (pn_real)(PN__SCALED_EPS * PN__SCALED_EPS);
+    s = PN__SQRT(S);
+    for (j = 0; j < nf; ++j) {
+        qj[j] = j == 0 ? 2 * y[0] / d : (j == 1 ? c : 0);
+        for (l = 0; l < nf; ++l) qjl[j][l] = j == 0 && l == 0 ? (pn_real)2 / d : 0;
+    }
+    for (j = 0; j < nf; ++j) sj[j] = qj[j] / (2 * s);
+    for (j = 0; j < nf; ++j)
+        for (l = 0; l < nf; ++l) sjl[j][l] = qjl[j][l] / (2 * s) - qj[j] * qj[l] / (4 * S * s);
+    for (k = 0; k < nf; ++k) { /* a_k = s^-p and its derivatives in s */
+        int p = k == 0 ? 1 : 2;
+        a[k] = PN__POW(s, (pn_real)-p);
+        a1[k] = -p * a[k] / s;
+        a2[k] = p * (p + 1) * a[k] / S;
+    }
+    for (k = 0; k < nf; ++k) {
+        raw[k] = (y[k] - y0[k]) * a[k];
+        raw[nf + k] = y0[k] * a[k];
+    }
+    raw[2 * nf] = s;
+    raw[2 * nf + 1] = PN__MIN(PN__MAX(h, (pn_real)mo->h_min), (pn_real)mo->h_max);
+    for (i = 0; i < nr + 1; ++i) u[i] = (raw[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
+    r = pn_mlp_eval(&mo->mlp, u, level > 0 ? nr : 0, &m, gm, level > 1 ? hm : NULL);
+    if (r != PN_OK) return r;
+    *N = S * m;
+    if (level < 1) return PN_OK;
+    for (i = 0; i < nr; ++i) gr[i] = gm[i] * (pn_real)mo->in_scale[i];
+    for (k = 0; k < nf; ++k)
+        for (j = 0; j < nf; ++j) {
+            J[k][j] = (k == j ? a[k] : 0) + (y[k] - y0[k]) * a1[k] * sj[j];
+            J[nf + k][j] = y0[k] * a1[k] * sj[j];
+        }
+    for (j = 0; j < nf; ++j) J[2 * nf][j] = sj[j];
+    for (j = 0; j < nf; ++j) {
+        Mj[j] = 0;
+        for (i = 0; i < nr; ++i) Mj[j] += gr[i] * J[i][j];
+        gN[j] = qj[j] * m + S * Mj[j];
+    }
+    if (level < 2) return PN_OK;
+    for (k = 0; k < nf; ++k)
+        for (j = 0; j < nf; ++j)
+            for (l = 0; l < nf; ++l) {
+                pn_real da = a2[k] * sj[j] * sj[l] + a1[k] * sjl[j][l];
+                K[k][j][l] = (k == j ? a1[k] * sj[l] : 0) + (k == l ? a1[k] * sj[j] : 0) + (y[k] - y0[k]) * da;
+                K[nf + k][j][l] = y0[k] * da;
+            }
+    for (j = 0; j < nf; ++j)
+        for (l = 0; l < nf; ++l) K[2 * nf][j][l] = sjl[j][l];
+    for (j = 0; j < nf; ++j)
+        for (l = 0; l < nf; ++l) {
+            pn_real acc = 0;
+            for (i = 0; i < nr; ++i) {
+                pn_real t = 0;
+                for (k = 0; k < nr; ++k) t += hm[i * nr + k] * (pn_real)mo->in_scale[k] * J[k][l];
+                acc += (pn_real)mo->in_scale[i] * J[i][j] * t + gr[i] * K[i][j][l];
+            }
+            Mjl[j][l] = acc;
+        }
+    for (j = 0; j < nf; ++j)
+        for (l = 0; l < nf; ++l) HN[j * nf + l] = qjl[j][l] * m + qj[j] * Mj[l] + qj[l] * Mj[j] + S * Mjl[j][l];
+    return PN_OK;
+}
+
 /* N and its derivatives with respect to F at F (features f, level as in pn__features_eval). */
 static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, int d,
                                   const pn__features *f, int level, pn_real *N, pn_real *gN,
@@ -2254,18 +2343,27 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
     int nf = f->nf, i, k, l, a, b, n = d * d;
     pn_result r;
     h = PN__MIN(PN__MAX(pt->h, (pn_real)mo->h_min), (pn_real)mo->h_max);
-    for (i = 0; i < nf; ++i) {
-        u[i] = (f->x[i] - pt->x0[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
-        u[nf + i] = (pt->x0[i] - (pn_real)mo->in_shift[nf + i]) * (pn_real)mo->in_scale[nf + i];
-    }
-    u[2 * nf] = (h - (pn_real)mo->in_shift[2 * nf]) * (pn_real)mo->in_scale[2 * nf];
-    r = pn_mlp_eval(&mo->mlp, u, level > 0 ? nf : 0, &out, g, level > 1 ? H : NULL);
-    if (r != PN_OK) return r;
     s = net->scale * (pn_real)mo->out_scale;
-    *N = s * out;
-    if (level > 0) {
+    if (pn__model_scaled(mo)) {
+        r = pn__pnet_scaled(mo, f->x, pt->x0, pt->h, level, &out, g, H);
+        if (r != PN_OK) return r;
+        for (k = 0; k < nf; ++k) g[k] *= s;
+        for (k = 0; k < nf * nf; ++k) H[k] *= s;
+    } else {
+        for (i = 0; i < nf; ++i) {
+            u[i] = (f->x[i] - pt->x0[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
+            u[nf + i] = (pt->x0[i] - (pn_real)mo->in_shift[nf + i]) * (pn_real)mo->in_scale[nf + i];
+        }
+        u[2 * nf] = (h - (pn_real)mo->in_shift[2 * nf]) * (pn_real)mo->in_scale[2 * nf];
+        r = pn_mlp_eval(&mo->mlp, u, level > 0 ? nf : 0, &out, g, level > 1 ? H : NULL);
+        if (r != PN_OK) return r;
         /* chain rule through u_k = (x_k - x0_k - shift_k) scale_k */
         for (k = 0; k < nf; ++k) g[k] *= s * (pn_real)mo->in_scale[k];
+        for (k = 0; k < nf; ++k)
+            for (l = 0; l < nf; ++l) H[k * nf + l] *= s * (pn_real)(mo->in_scale[k] * mo->in_scale[l]);
+    }
+    *N = s * out;
+    if (level > 0) {
         for (a = 0; a < n; ++a) {
             pn_real acc = 0;
             for (k = 0; k < nf; ++k) acc += g[k] * f->dx[k][a];
@@ -2273,9 +2371,6 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
         }
     }
     if (level > 1) {
-        for (k = 0; k < nf; ++k)
-            for (l = 0; l < nf; ++l)
-                H[k * nf + l] *= s * (pn_real)(mo->in_scale[k] * mo->in_scale[l]);
         for (a = 0; a < n; ++a)
             for (b = a; b < n; ++b) {
                 pn_real acc = 0;

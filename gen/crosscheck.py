@@ -123,6 +123,9 @@ class CModel:
     def energy_N(self, F, F0, h):
         x, x0 = pt.features_F(F), pt.features_F(F0)
         hc = torch.clamp(h, self.h[0], self.h[1])
+        if len(self.shift) == 2 * x.shape[-1] + 2:   # scaled encoding (pn_torch.scaled_raw)
+            raw, S = pt.scaled_raw(x, x0)
+            return self.out_scale * S * self.mlp((torch.cat([raw, hc], -1) - self.shift) * self.scale)
         raw = torch.cat([x - x0, x0, hc], -1)
         return self.out_scale * self.mlp((raw - self.shift) * self.scale)
 

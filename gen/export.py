@@ -63,8 +63,12 @@ def export(cfg, quality_path=None):
     n_params = sum(m.weight.numel() + m.bias.numel() for m in lin)
     if cfg["kind"] == "energy":
         nf = 2 if d == 2 else 3
-        shift = [0.0] * nf + model.m0.tolist() + model.mh.tolist()
-        scale = model.sd.tolist() + model.s0.tolist() + model.sh.tolist()
+        if cfg.get("encoding") == "scaled":   # raw = [(x - x0)/s^p, x0/s^p, s, h]
+            shift = model.m0.tolist() + model.mh.tolist()
+            scale = model.s0.tolist() + model.sh.tolist()
+        else:
+            shift = [0.0] * nf + model.m0.tolist() + model.mh.tolist()
+            scale = model.sd.tolist() + model.s0.tolist() + model.sh.tolist()
         out_scale = float(model.out_scale)
         kind = "PN_MODEL_ENERGY"
     else:
@@ -91,7 +95,14 @@ def export(cfg, quality_path=None):
         "   Hessian to any E), nu = %g, %s." % (mat.nu, plast),
         "   Hardening state h in [%g, %g]: %s." % (cfg["h"][0], cfg["h"][1], H_MEANING[material]),
     ]
-    if cfg["kind"] == "energy":
+    if cfg["kind"] == "energy" and cfg.get("encoding") == "scaled":
+        banner += [
+            "   Sampling (Section 5.1, every strain scale alike): log singular values of F0 uniform in",
+            "   [-r0, r0]^%d, r0 log-uniform over %g decades below %g; those of F within r1 of them," % (d, tr.SCALE_DECADES, cfg["e_box"]),
+            "   r1 / r0 log-uniform in [%g, %g] and r1 <= %g; independent random rotations, h uniform." % (
+                10 ** tr.RATIO_DECADES[0], 10 ** tr.RATIO_DECADES[1], cfg["de"]),
+            "   Scaled encoding (plastinet.h >>pnet): N = s^2 M(features / s^p, s); errors relative to s."]
+    elif cfg["kind"] == "energy":
         banner += [
             "   Sampling (Section 5.1): log singular values of F0 uniform in [-%g, %g]^%d, those of F" % (cfg["e_box"], cfg["e_box"], d),
             "   within %g of them, independent random rotations of F and F0, h uniform." % cfg["de"]]

@@ -32,17 +32,17 @@ MODELS = {}
 
 
 def _add(name, material, dim, kind="energy", hidden=(32, 32, 32), iters=20000, batch=2048,
-         lr=2e-3, activation="silu", seed=1, return_map=None):
+         lr=2e-3, activation="silu", seed=1, return_map=None, encoding="raw"):
     m = MATERIALS[material]
     MODELS[name] = dict(name=name, material=material, mat=m["mat"], dim=dim, kind=kind,
                         hidden=tuple(hidden), iters=iters, batch=batch, lr=lr,
                         activation=activation, seed=seed, h=m["h"], de=m["de"], e_box=1.0,
-                        return_map=return_map)
+                        return_map=return_map, encoding=encoding)
 
 
-_add("sand_2d", "sand", 2)
+_add("sand_2d", "sand", 2, encoding="scaled")
 _add("sand_2d_small", "sand", 2, hidden=(16, 16))
-_add("sand_3d", "sand", 3)
+_add("sand_3d", "sand", 3, encoding="scaled")
 _add("snow_2d", "snow", 2)
 _add("snow_3d", "snow", 3)
 _add("metal_2d", "metal", 2)

@@ -277,3 +277,27 @@ def features_F(F):
     a = torch.log(I1 / 3) - 2.0 / 3.0 * logJ
     c = torch.log(II / 3) - 4.0 / 3.0 * logJ
     return torch.cat([logJ, (a + c) / 2, a - c], -1)
+
+
+# ---- scale-normalised inputs of the energy network ("scaled" encoding) --------------------------
+# Cohesionless Drucker-Prager on StVK-Hencky is positively homogeneous: scaling every Hencky strain
+# by k scales the projected stress by k. A sand column at E = 1e7 Pa lives at strains ~1e-4..1e-3,
+# where a smooth network of raw features is just its linearisation at F0 = I (an elastic response,
+# no better than the lagged energy). So the network sees the features divided by a strain scale s
+# of the pair (F, F0), to the power that makes each degree 0, plus s itself, and N = s^2 M(u):
+#   q(x) = x1^2 / d + c x2  (~ |e|^2, c = 1 in 2D, 3/2 in 3D),  s^2 = q(x) + q(x0) + EPS^2,
+#   raw = [(x - x0) / s^p, x0 / s^p, s, h],  p = (1, 2, 2) for (log J, quadratic, cubic): the cubic
+#   one (the Lode angle, a difference of two logarithms exact to ~1e-16 only) fades at small
+#   strains rather than amplify its rounding; Drucker-Prager and Hencky do not depend on it.
+SCALED_EPS = 1e-6
+
+
+def scaled_raw(x, x0):
+    """raw inputs of the scaled encoding and s^2 (see above)."""
+    d = 2 if x.shape[-1] == 2 else 3
+    c = 1.0 if d == 2 else 1.5
+    q = lambda v: v[:, 0:1] ** 2 / d + c * v[:, 1:2]  # noqa: E731
+    S = q(x) + q(x0) + SCALED_EPS ** 2
+    s = torch.sqrt(S)
+    pw = torch.cat([s, S] + ([S] if d == 3 else []), -1)
+    return torch.cat([(x - x0) / pw, x0 / pw, s], -1), S

@@ -40,12 +40,24 @@ def mlp(n_in, hidden, activation):
 
 # ---- sampling ----------------------------------------------------------------------------------
 
+SCALE_DECADES = 4.0              # scaled encoding: |e0| from e_box down to 1e-4 e_box
+RATIO_DECADES = (-1.0, 2.0)      # and |de| / |e0| from 0.1 to 100 (capped at de)
+
+
 def sample_box(cfg, n, gen):
     """PlasticityNet Section 5.1: F0 = R1 diag(exp(e)) R2, F = R3 diag(exp(e + de)) R4. Only the
     relative rotations A = R3^T R1 and B = R2 R4^T matter (both Haar-random)."""
     d = cfg["dim"]
     e = (torch.rand(n, d, dtype=DT, generator=gen) * 2 - 1) * cfg["e_box"]
     de = (torch.rand(n, d, dtype=DT, generator=gen) * 2 - 1) * cfg["de"]
+    if cfg.get("encoding") == "scaled":
+        # every strain scale alike: |e| log-uniform over SCALE_DECADES below e_box, the step de
+        # RATIO_DECADES around it (a flowing material takes steps far above its elastic strain)
+        lo0, (lo1, hi1) = SCALE_DECADES, RATIO_DECADES
+        r0 = cfg["e_box"] * 10.0 ** (-lo0 * torch.rand(n, 1, dtype=DT, generator=gen))
+        r1 = r0 * 10.0 ** (lo1 + (hi1 - lo1) * torch.rand(n, 1, dtype=DT, generator=gen))
+        e = e / cfg["e_box"] * r0
+        de = de / cfg["de"] * torch.clamp(r1, max=cfg["de"])
     lo, hi = cfg["h"]
     h = lo + (hi - lo) * torch.rand(n, 1, dtype=DT, generator=gen)
     A = pt.random_rotations(n, d, gen)
@@ -137,12 +149,16 @@ class EnergyNet(torch.nn.Module):
         super().__init__()
         self.cfg = cfg
         nx = cfg["dim"] if cfg["dim"] == 3 else 2
-        self.net = mlp(2 * nx + 1, cfg["hidden"], cfg["activation"])
+        self.net = mlp(2 * nx + 1 + (cfg.get("encoding") == "scaled"), cfg["hidden"], cfg["activation"])
         for k, v in stats.items():
             self.register_buffer(k, v)
 
     def forward(self, s, s0, h):
         x, x0 = pt.features(s), pt.features(s0)
+        if self.cfg.get("encoding") == "scaled":
+            raw, S = pt.scaled_raw(x, x0)
+            u = torch.cat([(raw - self.m0) * self.s0, (h - self.mh) * self.sh], -1)
+            return self.out_scale * S * self.net(u)
         u = torch.cat([(x - x0) * self.sd, (x0 - self.m0) * self.s0, (h - self.mh) * self.sh], -1)
         return self.out_scale * self.net(u)
 
@@ -160,6 +176,14 @@ def energy_stats(cfg, mat, learned):
     x, x0 = pt.features(s), pt.features(s0)
     lo, hi = cfg["h"]
     t = pt.target_principal(mat, s, h, learned)
+    if cfg.get("encoding") == "scaled":
+        # raw = [(x - x0)/s^p, x0/s^p, s]: one shift and scale per column; errors relative to s
+        raw, S = pt.scaled_raw(x, x0)
+        w = (t * t).sum(-1, keepdim=True) / S
+        return dict(m0=raw.mean(0), s0=1 / raw.std(0),
+                    mh=torch.tensor([(lo + hi) / 2], dtype=DT),
+                    sh=torch.tensor([2 / (hi - lo) if hi > lo else 0.0], dtype=DT),
+                    out_scale=torch.sqrt(w.mean()).reshape(1), t_rms=torch.sqrt(w.mean()).reshape(1))
     return dict(sd=1 / (x - x0).std(0), m0=x0.mean(0), s0=1 / x0.std(0),
                 mh=torch.tensor([(lo + hi) / 2], dtype=DT),
                 sh=torch.tensor([2 / (hi - lo) if hi > lo else 0.0], dtype=DT),
@@ -175,7 +199,11 @@ def energy_error(model, mat, learned, s0, s, h, A, B, create_graph=False):
     diff = model.grad_s(s, s0, h, create_graph) - t
     c = model.grad_s(s0, s0, h, create_graph) - t0
     cross = torch.einsum("bi,bij,bj,bji->b", diff, A, c, B)
-    return (diff * diff).sum(-1) + (c * c).sum(-1) - 2 * cross, t
+    err2 = (diff * diff).sum(-1) + (c * c).sum(-1) - 2 * cross
+    if model.cfg.get("encoding") == "scaled":   # relative to the strain scale of the pair
+        _, S = pt.scaled_raw(pt.features(s), pt.features(s0))
+        err2, t = err2 / S[:, 0], t / torch.sqrt(S)
+    return err2, t
 
 
 def lagged_and_constant_error(mat, learned, s0, s, h, A, B):
@@ -319,6 +347,9 @@ def evaluate(cfg, model, learned, n=100000, seed=777):
         s0, s, h, A, B = sample_box(cfg, 10000, gen)
         e2, t = energy_error(model, mat, learned, s0, s, h, A, B)
         lag, const = lagged_and_constant_error(mat, learned, s0, s, h, A, B)
+        if cfg.get("encoding") == "scaled":   # the same relative measure as energy_error
+            _, S = pt.scaled_raw(pt.features(s), pt.features(s0))
+            lag, const = lag / torch.sqrt(S[:, 0]), const / torch.sqrt(S[:, 0])
         errs.append(torch.sqrt(torch.clamp(e2.detach(), min=0)))
         lags.append(lag)
         consts.append(const)
