@@ -146,6 +146,9 @@ typedef struct pn_mpm_implicit_desc {
     void *trace_user;
     int max_halvings;            /* a step that fails is retried as 2, 4, ... substeps, at
                                     most this many halvings [3]; < 0: never                 */
+    int measure_force_error;     /* nonzero: at each converged step, compare the energy's
+                                    force density with the return mapping's T(F) (one return
+                                    mapping per particle; see pn_mpm_stats.force_error)    */
 } pn_mpm_implicit_desc;
 
 /* Statistics of the last step. */
@@ -164,6 +167,14 @@ typedef struct pn_mpm_stats {
     int solves;                  /* minimizations (passes x contact rounds x substeps)      */
     pn_real newton_residual;     /* largest final max |dv| dt / dx over the passes           */
     pn_real fixed_point_residual;/* largest max_q |F0_new - F0| at the last pass             */
+    /* measure_force_error only: over the particles of plastic groups, at the solution,
+       sum V |dPsi/dF(F) - T(F)| / sum V |T(F)|, T the return mapping's force density (how far
+       the minimized energy is from the plastic forces it stands for; 0 for an exact energy),
+       the part of it the PlasticityNet regularizer makes (sum V |w mu (F - F0)| over the
+       same denominator), and the share of those particles where T = 0 (sand at the
+       Drucker-Prager apex: in tension, free to separate). Largest over substeps; -1 when off
+       (and for explicit steps).                                                            */
+    pn_real force_error, force_error_regularizer, apex_fraction;
 } pn_mpm_stats;
 
 /* The world. Particle arrays (structure of arrays, read-only for users): x, v (dim per
@@ -1480,6 +1491,50 @@ static int pn__mpm_active_set(pn_mpm_world *w, pn_real *v, pn_real vtol) {
     return changed;
 }
 
+/* zeroed stats of one step; the force-error fields -1 unless measured */
+static void pn__mpm_stats_clear(pn_mpm_stats *st, int measure) {
+    memset(st, 0, sizeof *st);
+    st->substeps = 1;
+    st->force_error = st->force_error_regularizer = st->apex_fraction = measure ? 0 : -1;
+}
+
+/* pn_mpm_stats.force_error and its parts at the grid velocities v (serial: a diagnostic). */
+static void pn__mpm_force_error(pn_mpm_world *w, const pn_real *v, pn_real dt, pn_mpm_stats *st) {
+    int d = w->dim, dd = d * d, i;
+    size_t p;
+    double err = 0, reg = 0, tot = 0, n = 0, apex = 0;
+    for (p = 0; p < w->n; ++p) {
+        const pn_mpm_group *g = &w->groups[w->group[p]];
+        pn_real G[9], F[9], P[9], T[9], psi;
+        double e = 0, r = 0, t = 0;
+        if (!w->active[p] || g->material.plastic == PN_PLASTIC_NONE) continue;
+        pn__mpm_grad_v(w, p, v, dt, G);
+        for (i = 0; i < d; ++i) G[i * d + i] += 1;
+        pn_mat_mul(d, G, w->F + p * (size_t)dd, F);
+        if (pn__mpm_psi(w, p, F, &psi, P, NULL) != PN_OK ||
+            pn_return_map(&g->material, d, F, w->h[p], NULL, NULL, T) != PN_OK)
+            continue;
+        for (i = 0; i < dd; ++i) {
+            e += (double)((P[i] - T[i]) * (P[i] - T[i]));
+            t += (double)(T[i] * T[i]);
+            if (pn__mpm_energy_of(g) == PN_MPM_ENERGY_PNET) {
+                double df = (double)(g->pnet.reg * (F[i] - w->ppt[p].F0[i]));
+                r += df * df;
+            }
+        }
+        err += (double)w->vol0[p] * sqrt(e);
+        reg += (double)w->vol0[p] * sqrt(r);
+        tot += (double)w->vol0[p] * sqrt(t);
+        n += 1;
+        apex += t == 0;
+    }
+    if (n > 0 && tot > 0) {
+        st->force_error = PN__MAX(st->force_error, (pn_real)(err / tot));
+        st->force_error_regularizer = PN__MAX(st->force_error_regularizer, (pn_real)(reg / tot));
+        st->apex_fraction = PN__MAX(st->apex_fraction, (pn_real)(apex / n));
+    }
+}
+
 /* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
 static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
                                        pn_mpm_stats *st) {
@@ -1555,6 +1610,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     }
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
     if (!(last_res <= 100 * o->newton_tol)) return PN_ERROR_NOT_CONVERGED;
+    if (o->measure_force_error) pn__mpm_force_error(w, w->vsol, dt, st);
     r = pn__mpm_g2p(w, w->vsol, dt, 1, st);
     if (r != PN_OK) return r;
     pn__mpm_friction_record(w, dt);
@@ -1603,8 +1659,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
     if (r != PN_OK) return r;
-    memset(&st, 0, sizeof st);
-    st.substeps = 1;
+    pn__mpm_stats_clear(&st, o.measure_force_error);
     first = pn__mpm_implicit_once(w, dt, &o, &st);
     if (first == PN_OK) {
         if (stats) *stats = st;
@@ -1618,10 +1673,10 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         pn__mpm_backup(w, 0);
         for (level = 1; level <= o.max_halvings; ++level) {
             int s, n_sub = 1 << level;
-            memset(&st, 0, sizeof st);
+            pn__mpm_stats_clear(&st, o.measure_force_error);
             for (s = 0; s < n_sub; ++s) {
                 pn_mpm_stats sub;
-                memset(&sub, 0, sizeof sub);
+                pn__mpm_stats_clear(&sub, o.measure_force_error);
                 sub.solves = st.solves; /* numbered on through the substeps */
                 r = pn__mpm_implicit_once(w, dt / (pn_real)n_sub, &o, &sub);
                 if (r != PN_OK) break;
@@ -1638,6 +1693,9 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                 st.solves = sub.solves;
                 st.newton_residual = PN__MAX(st.newton_residual, sub.newton_residual);
                 st.fixed_point_residual = PN__MAX(st.fixed_point_residual, sub.fixed_point_residual);
+                st.force_error = PN__MAX(st.force_error, sub.force_error);
+                st.force_error_regularizer = PN__MAX(st.force_error_regularizer, sub.force_error_regularizer);
+                st.apex_fraction = PN__MAX(st.apex_fraction, sub.apex_fraction);
             }
             if (r == PN_OK) {
                 st.substeps = n_sub;
@@ -1674,8 +1732,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     d = w->dim;
     dd = d * d;
     inv_dx = 1 / w->desc.dx_m;
-    memset(&st, 0, sizeof st);
-    st.substeps = 1;
+    pn__mpm_stats_clear(&st, 0);
     pn__mpm_bin(w);
     PN__OMP_FOR
     for (l = 0; l < (long)w->n; ++l) {

@@ -401,6 +401,8 @@ typedef struct pn_ex_tally {
     long halved;                     /* implicit steps retried as substeps (the fallback)    */
     double max_fixed_point_residual; /* max_q |F0_new - F0| at the end of a step, worst step  */
     double max_speed_m_s;            /* fastest particle after any step                      */
+    /* pn_mpm_implicit_desc.measure_force_error: per-step values summed (mean = sum / steps) */
+    double force_error, force_error_regularizer, apex_fraction;
 } pn_ex_tally;
 
 /* n steps of dt_s seconds, implicit (with id, which may be NULL for its defaults) or explicit;
@@ -423,8 +425,21 @@ PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double 
         if ((double)st.fixed_point_residual > t->max_fixed_point_residual)
             t->max_fixed_point_residual = (double)st.fixed_point_residual;
         if ((double)st.max_speed_m_s > t->max_speed_m_s) t->max_speed_m_s = (double)st.max_speed_m_s;
+        t->force_error += (double)st.force_error;
+        t->force_error_regularizer += (double)st.force_error_regularizer;
+        t->apex_fraction += (double)st.apex_fraction;
     }
     return PN_OK;
+}
+
+/* Ends an example's JSON line: the means over the steps of the force-error statistics when they
+   were measured (--force-error, implicit), then the closing brace. */
+PN_EX_UNUSED static void pn_ex_json_end(const pn_ex_tally *t, int measured) {
+    if (measured && t->steps > 0)
+        printf(", \"force_error\": %.4f, \"force_error_regularizer\": %.4f, \"apex_fraction\": %.3f",
+               t->force_error / (double)t->steps, t->force_error_regularizer / (double)t->steps,
+               t->apex_fraction / (double)t->steps);
+    printf("}\n");
 }
 
 /* One frame of an example: the steps, then DIR/frame_NNNN.png and .ply when asked. Says what
@@ -458,6 +473,7 @@ static const char *const pn_ex_walls[] = {"sticky", "slip", "separate"};
 
 typedef struct pn_ex_cli {
     int dim, implicit, fp, frames, fps, res, png, ply, quiet, boundary;
+    int force_error;             /* --force-error: measure pn_mpm_stats.force_error        */
     double dt, E, friction, filter;  /* filter < 0: the scene's default                  */
     double regularizer;          /* PlasticityNet's w (0: 1, < 0: off)                     */
     const char *energy, *out;    /* the energy's name as given; the example maps it        */
@@ -485,6 +501,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     if (!strcmp(a, "--png")) return c->png = 1;
     if (!strcmp(a, "--ply")) return c->ply = 1;
     if (!strcmp(a, "--quiet")) return c->quiet = 1;
+    if (!strcmp(a, "--force-error")) return c->force_error = 1;
     if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--filter|--regularizer|"
                                        "--dt|--fixed-point|--frames|--fps|--E|--res|--out|", a))
         return 0;
@@ -528,13 +545,14 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
    seconds. Returns 0 after a failure (said on stderr). */
 PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implicit, double dt_s, int fp,
                                   int frames, int fps, const char *out, int png, int ply, int quiet,
-                                  pn_ex_tally *tally, double *wall_s) {
+                                  int force_error, pn_ex_tally *tally, double *wall_s) {
     pn_mpm_implicit_desc id;
     long steps_per_frame = (long)(1.0 / fps / dt_s + 0.5);
     double t0 = pn_ex_seconds();
     int frame;
     memset(&id, 0, sizeof id);
     id.fixed_point_iters = fp;
+    id.measure_force_error = force_error;
     memset(tally, 0, sizeof *tally);
     if (steps_per_frame < 1) steps_per_frame = 1;
     for (frame = 1; frame <= frames; ++frame) {
@@ -585,7 +603,7 @@ PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, con
     }
     pn_ex_bounds(o->w, o->lo0, o->hi0);
     if (!pn_ex_run(prog, o->w, c->implicit, c->dt, c->fp, c->frames, c->fps, c->out, c->png, c->ply, c->quiet,
-                   &o->tally, &o->wall_s)) {
+                   c->force_error, &o->tally, &o->wall_s)) {
         pn_mpm_destroy(o->w);
         o->w = NULL;
         return 0;

@@ -6,7 +6,7 @@
    Usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]
                    [--fixed-point N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S]
                    [--angle DEG] [--h0 LOGJP] [--boundary sticky|slip|separate] [--friction MU]
-                   [--filter S] [--regularizer W] [--out DIR] [--png] [--ply] [--quiet]
+                   [--filter S] [--regularizer W] [--force-error] [--out DIR] [--png] [--ply] [--quiet]
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps,
    E = 1e6 Pa, res 64 (2D) / 24 (3D) cells over 1 m (2D) / 0.5 m (3D), radius 0.1 m (2D) /
    0.08 m (3D), 3 m/s at 45 degrees below the horizontal, initial log J_p = -0.01 (inside the
@@ -24,7 +24,7 @@ static void usage(void) {
     fprintf(stderr, "usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]\n"
                     "       [--fixed-point N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S] [--angle DEG]\n"
                     "       [--h0 LOGJP] [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
-                    "       [--out DIR] [--png] [--ply] [--quiet]\n");
+                    "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n");
 }
 
 int main(int argc, char **argv) {
@@ -60,7 +60,7 @@ int main(int argc, char **argv) {
            "\"friction\": %g, \"res\": %d, \"particles\": %lu, \"frames\": %d, \"simulated_s\": %.4f, \"wall_s\": %.3f, "
            "\"steps\": %ld, \"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
            "\"line_search_failures\": %ld, \"spread_m\": %.4f, \"runout_m\": %.4f, \"final_height_m\": %.4f, "
-           "\"max_fixed_point_residual\": %.3e, \"left_domain\": %lu}\n",
+           "\"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
            c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "return_mapping" : lagged ? "lagged" : "pnet", c.dt,
            c.fp, sc.E_pa, speed, angle, h0, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
            (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
@@ -68,6 +68,7 @@ int main(int argc, char **argv) {
            o.tally.line_search_failures, o.hi[0] - o.lo[0],
            o.hi[0] - o.hi0[0], o.hi[1] - pn_ex_scene_floor(&sc), o.tally.max_fixed_point_residual,
            (unsigned long)o.w->left_total);
+    pn_ex_json_end(&o.tally, c.force_error && c.implicit);
     pn_mpm_destroy(o.w);
     return 0;
 }
