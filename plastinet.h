@@ -81,7 +81,8 @@
    MEMORY
    ======================================================================================
    The core allocates nothing: every function works on caller-provided arrays (pn_mlp_eval
-   keeps its work arrays on the stack: about 4700 reals, 38 KB in double;
+   keeps its work arrays on the stack: about 10500 reals, 82 KB in double, since
+   PN_MLP_MAX_DIFF is 8 for the scaled encoding (a 64 KB thread stack is too small);
    model weights are static const data in the model headers). Solvers built
    on it take a pn_allocator (both callbacks or neither, with a user pointer) and store it with
    the object they allocate.
