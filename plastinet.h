@@ -337,6 +337,24 @@ PN_API pn_result pn_yield_function(const pn_material *m, int dim, const pn_real 
 PN_API pn_result pn_von_mises_energy(const pn_material *m, int dim, const pn_real *F, pn_real h,
                                      pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags);
 
+/* Drucker-Prager energy with the yield stress frozen at F0, for DRUCKER_PRAGER on
+   STVK_HENCKY (PN_ERROR_UNSUPPORTED otherwise). The Klar et al. cone |dev tau| <= -alpha tr tau
+   is a von Mises cylinder whose radius tau_y = -d kappa alpha tr e follows the volumetric strain,
+   and the non-associative return keeps tr e; so with tau_y held fixed,
+       Psi_dp(e) = kappa/2 min(tr e, 0)^2 + d kappa c tr e + psi_dev(|dev e|; tau_y),
+       psi_dev = mu r^2 (2 mu r <= tau_y), tau_y r - tau_y^2 / (4 mu) (beyond),
+   in the shifted Hencky strain e = log s - c + v/d (c the cohesion strain, v the volume
+   credit h with the volume correction), is an exact potential of the return-mapped stress:
+   its gradient is T(F) of pn_return_map wherever tr e equals that of the point tau_y was
+   taken at, and the apex (tr e >= 0) is stress free (up to the cohesion's d kappa c). The
+   error elsewhere is alpha d kappa |tr e - tr e0|, a friction lag, not an elastic stiffness
+   against the flow: plastic shear is free within the step. C1, convex in e; prepare tau_y at
+   F0 once, then evaluate at any F. */
+PN_API pn_result pn_dp_prepare(const pn_material *m, int dim, const pn_real *F0, pn_real h,
+                               pn_real *tau_y);
+PN_API pn_result pn_dp_energy(const pn_material *m, int dim, const pn_real *F, pn_real h,
+                              pn_real tau_y, pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags);
+
 /* Lagged-plasticity energy Psi_lag(F; F0) = psi_el(F G, h_G), G = F0^-1 Z(F0, h0): the
    no-network baseline whose gradient at F = F0 is exactly T(F0). Prepare G and h_G once per
    F0, then evaluate at any F. With PN_EVAL_PROJECT_PSD the elastic Hessian at F G is projected
@@ -1741,6 +1759,68 @@ PN__DEF pn_result pn_von_mises_energy(const pn_material *m, int d, const pn_real
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j)
                 Ae[i * 3 + j] = kappa + c * ((i == j ? 1 : 0) - 1 / dd - n[i] * n[j]);
+    }
+    pn__hencky_to_s(d, s, ge, Ae, c, &pr);
+    return pn__energy_out(d, U, V, &pr, psi, P, dPdF, flags);
+}
+
+/* >>energy-dp: the frozen-yield Drucker-Prager energy (see the declaration) */
+
+static pn_result pn__dp_check(const pn_material *m, int d, const pn_real *F, pn_real h) {
+    pn_result r = pn__check_F(d, F);
+    if (r != PN_OK) return r;
+    if (!pn__finite(h)) return PN_ERROR_NONFINITE;
+    if (m->plastic != PN_PLASTIC_DRUCKER_PRAGER || m->elastic != PN_ELASTIC_STVK_HENCKY)
+        return PN_ERROR_UNSUPPORTED;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_dp_prepare(const pn_material *m, int d, const pn_real *F0, pn_real h,
+                                pn_real *tau_y) {
+    pn_real U[9], s[3], V[9], e[3], tr, rr, kappa = m->lambda + 2 * m->mu / (pn_real)d;
+    pn_result r;
+    PN_ASSERT(m && F0 && tau_y);
+    r = pn__dp_check(m, d, F0, h);
+    if (r != PN_OK) return r;
+    pn__svd(d, F0, U, s, V);
+    if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    pn__hencky_split(d, s, m->cohesion_strain, m->volume_correction ? h : 0, e, NULL, &tr, &rr);
+    *tau_y = PN__MAX(-(pn_real)d * kappa * pn__dp_alpha(m->sin_phi) * tr, 0);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_dp_energy(const pn_material *m, int d, const pn_real *F, pn_real h,
+                               pn_real tau_y, pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags) {
+    pn_real U[9], s[3], V[9], e[3], tr, rr, n[3], ge[3], Ae[9], kappa, trm, kv, c, dd = (pn_real)d;
+    pn__principal pr;
+    int i, j;
+    pn_result res;
+    PN_ASSERT(m && F);
+    res = pn__dp_check(m, d, F, h);
+    if (res != PN_OK) return res;
+    if (!pn__finite(tau_y) || !(tau_y >= 0)) return PN_ERROR_INVALID_ARGUMENT;
+    pn__svd(d, F, U, s, V);
+    if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+    kappa = m->lambda + 2 * m->mu / dd;
+    pn__hencky_split(d, s, m->cohesion_strain, m->volume_correction ? h : 0, e, n, &tr, &rr);
+    /* volumetric part: stress kappa (min(tr, 0) + d c), stiffness kappa on the compressed side */
+    trm = PN__MIN(tr, 0);
+    kv = tr < 0 ? kappa : 0;
+    memset(&pr, 0, sizeof pr);
+    pr.psi = kappa / 2 * trm * trm + dd * kappa * m->cohesion_strain * tr;
+    if (2 * m->mu * rr <= tau_y) { /* deviatoric part elastic */
+        pr.psi += m->mu * rr * rr;
+        c = 2 * m->mu;
+        for (i = 0; i < d; ++i) ge[i] = kappa * (trm + dd * m->cohesion_strain) + c * n[i];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) Ae[i * 3 + j] = kv + c * ((i == j ? 1 : 0) - 1 / dd);
+    } else { /* on the cylinder: |dev tau| = tau_y, no stiffness along the flow */
+        pr.psi += tau_y * rr - tau_y * tau_y / (4 * m->mu);
+        c = tau_y / rr;
+        for (i = 0; i < d; ++i) n[i] /= rr;
+        for (i = 0; i < d; ++i) ge[i] = kappa * (trm + dd * m->cohesion_strain) + tau_y * n[i];
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) Ae[i * 3 + j] = kv + c * ((i == j ? 1 : 0) - 1 / dd - n[i] * n[j]);
     }
     pn__hencky_to_s(d, s, ge, Ae, c, &pr);
     return pn__energy_out(d, U, V, &pr, psi, P, dPdF, flags);

@@ -117,7 +117,9 @@ typedef enum pn_mpm_energy {
     PN_MPM_ENERGY_ELASTIC,       /* psi_el(F): plasticity ignored inside the solve          */
     PN_MPM_ENERGY_LAGGED,        /* psi_el(F G), G = F0^-1 Z(F0): the no-network baseline   */
     PN_MPM_ENERGY_EXACT_VM,      /* exact StVK-Hencky + von Mises energy (no fixed point)   */
-    PN_MPM_ENERGY_PNET           /* PlasticityNet (set with pn_mpm_group_set_energy)         */
+    PN_MPM_ENERGY_PNET,          /* PlasticityNet (set with pn_mpm_group_set_energy)         */
+    PN_MPM_ENERGY_DP             /* Drucker-Prager with the yield stress frozen at F0
+                                    (pn_dp_energy): plastic shear free within the step      */
 } pn_mpm_energy;
 
 typedef struct pn_mpm_group {
@@ -215,7 +217,7 @@ typedef struct pn_mpm_world {
     pn_real *cdir, *cvel, *cmu, *clam, *ctan;
     /* implicit solver storage, allocated by the first implicit step */
     pn_real *vstar, *vsol, *vtry, *grad, *dir, *cg_r, *cg_z, *cg_p, *cg_q, *diag;
-    pn_real *pP, *pH, *pG, *phG, *pF0;
+    pn_real *pP, *pH, *pG, *phG, *pF0, *pty;
     pn_pnet_point *ppt;
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
     unsigned char *bactive;
@@ -258,7 +260,7 @@ PN_API pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt_s, pn_mpm_stat
 
 /* Choose the energy group g's particles use in implicit steps. PN_MPM_ENERGY_PNET needs net
    (a bound pn_pnet for the group's material, copied). PN_ERROR_INVALID_ARGUMENT or
-   PN_ERROR_UNSUPPORTED (exact von Mises for another material) otherwise. */
+   PN_ERROR_UNSUPPORTED (exact von Mises or DP for another material) otherwise. */
 PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
                                          const pn_pnet *net);
 
@@ -321,7 +323,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(ppt) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
     X(lnode) X(blnode) X(lval) X(blval)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -1024,6 +1026,7 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     PN__MPM_A(pG, cap * (size_t)dd, pn_real);
     PN__MPM_A(phG, cap, pn_real);
     PN__MPM_A(pF0, cap * (size_t)dd, pn_real);
+    PN__MPM_A(pty, cap, pn_real);
     PN__MPM_A(ppt, cap, pn_pnet_point);
     PN__MPM_A(bx, cap * (size_t)d, pn_real);
     PN__MPM_A(bv, cap * (size_t)d, pn_real);
@@ -1040,7 +1043,8 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
         void **r[] = {(void **)&w->vstar, (void **)&w->vsol, (void **)&w->vtry, (void **)&w->grad,
                       (void **)&w->dir, (void **)&w->cg_r, (void **)&w->cg_z, (void **)&w->cg_p,
                       (void **)&w->cg_q, (void **)&w->diag, (void **)&w->pP, (void **)&w->pH,
-                      (void **)&w->pG, (void **)&w->phG, (void **)&w->pF0, (void **)&w->ppt,
+                      (void **)&w->pG, (void **)&w->phG, (void **)&w->pF0, (void **)&w->pty,
+                      (void **)&w->ppt,
                       (void **)&w->bx, (void **)&w->bv, (void **)&w->bC, (void **)&w->bF,
                       (void **)&w->bh, (void **)&w->bactive, (void **)&w->lnode, (void **)&w->blnode,
                       (void **)&w->lval, (void **)&w->blval};
@@ -1058,7 +1062,7 @@ PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy 
                                           const pn_pnet *net) {
     pn_mpm_group *gr;
     PN_ASSERT(w);
-    if (g < 0 || g >= w->n_groups || energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_PNET)
+    if (g < 0 || g >= w->n_groups || energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_DP)
         return PN_ERROR_INVALID_ARGUMENT;
     gr = &w->groups[g];
     if (energy == PN_MPM_ENERGY_PNET) {
@@ -1069,6 +1073,9 @@ PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy 
     }
     if (energy == PN_MPM_ENERGY_EXACT_VM && (gr->material.plastic != PN_PLASTIC_VON_MISES ||
                                              gr->material.elastic != PN_ELASTIC_STVK_HENCKY))
+        return PN_ERROR_UNSUPPORTED;
+    if (energy == PN_MPM_ENERGY_DP && (gr->material.plastic != PN_PLASTIC_DRUCKER_PRAGER ||
+                                       gr->material.elastic != PN_ELASTIC_STVK_HENCKY))
         return PN_ERROR_UNSUPPORTED;
     gr->energy = energy;
     return PN_OK;
@@ -1092,6 +1099,8 @@ static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, 
         return pn_von_mises_energy(&g->material, d, F, w->h[p], psi, P, H, PN_EVAL_PROJECT_PSD);
     case PN_MPM_ENERGY_PNET:
         return pn_pnet_energy(&g->pnet, &w->ppt[p], F, psi, P, H, PN_EVAL_PROJECT_PSD);
+    case PN_MPM_ENERGY_DP:
+        return pn_dp_energy(&g->material, d, F, w->h[p], w->pty[p], psi, P, H, PN_EVAL_PROJECT_PSD);
     default:
         return pn_elastic_energy(&g->material, d, F, w->h[p], psi, P, H, PN_EVAL_PROJECT_PSD);
     }
@@ -1317,6 +1326,8 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
             w->pstat[q] = (int)pn_lagged_prepare(&g->material, d, F0, w->h[q], w->pG + q * (size_t)dd, &w->phG[q]);
         else if (en == PN_MPM_ENERGY_PNET)
             w->pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->ppt[q], NULL, NULL);
+        else if (en == PN_MPM_ENERGY_DP)
+            w->pstat[q] = (int)pn_dp_prepare(&g->material, d, F0, w->h[q], &w->pty[q]);
     }
     for (p = 0; p < w->n; ++p) worst = PN__MAX(worst, w->pscal[p]);
     *res = worst;

@@ -19,7 +19,8 @@
    2. the explicit reference at a quarter of that step, and the same at an eighth: how far
       their mean min/max mass IoU is from 1 says how converged the reference is;
    3. implicit at dt 1e-4, 1e-3, 1e-2 s with 1, 2 and 4 fixed-point passes, with the
-      PlasticityNet energy and with the lagged energy.
+      PlasticityNet energy and with the lagged energy, and for sand also with the frozen-yield
+      Drucker-Prager energy (pn_dp_energy).
    Every run is compared with the reference frame by frame (25 fps, so that every dt above
    divides a frame) by the mass IoUs of examples/pn_example.h: soft (the formula of
    VALIDATION.md; below 1 even for identical fields, so the reference's score against itself
@@ -81,7 +82,10 @@ typedef struct bench_cfg {
 
 static const char *energy_name(const bench_run *r) {
     if (!r->implicit) return "return_mapping";
-    return r->energy == PN_MPM_ENERGY_PNET ? "pnet" : r->energy == PN_MPM_ENERGY_LAGGED ? "lagged" : "other";
+    return r->energy == PN_MPM_ENERGY_PNET     ? "pnet"
+           : r->energy == PN_MPM_ENERGY_LAGGED ? "lagged"
+           : r->energy == PN_MPM_ENERGY_DP     ? "dp"
+                                               : "other";
 }
 
 static const char *status_name(const bench_run *r) {
@@ -368,7 +372,8 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     pn_mpm_world *w;
     const char *why;
     bench_run *r;
-    static const pn_mpm_energy energies_run[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED};
+    static const pn_mpm_energy energies_run[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP};
+    int n_energies = kind == PN_EX_SAND_COLUMN ? 3 : 2; /* the DP energy is for Drucker-Prager */
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
     if (cfg->filter >= 0) s.filter_s = cfg->filter;
@@ -417,7 +422,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     out->n_runs = 3;
     for (i = 0; i < 3; ++i) bench_progress(out->name, dim, &out->runs[i]);
     /* 3. implicit */
-    for (e = 0; e < 2 && !cfg->refs_only; ++e)
+    for (e = 0; e < n_energies && !cfg->refs_only; ++e)
         for (i = 0; i < cfg->n_dts; ++i)
             for (j = 0; j < cfg->n_fps; ++j) {
                 r = &out->runs[out->n_runs++];
@@ -499,7 +504,7 @@ static void write_svg(const char *path, const bench_scene *sc, int n_sc) {
     fprintf(f, "<rect width='100%%' height='100%%' fill='#fafafa'/>\n");
     fprintf(f, "<text x='10' y='16' font-size='11'>Mean min/max mass IoU against the explicit reference, against "
                "wall seconds per simulated second (log).</text>\n<text x='10' y='30' font-size='11'>Black: explicit "
-               "(square: fair baseline); blue: implicit PlasticityNet; orange: implicit lagged.</text>\n"
+               "(square: fair baseline); blue: implicit PlasticityNet; orange: implicit lagged; green: implicit frozen-yield DP.</text>\n"
                "<text x='10' y='44' font-size='11'>Labels: dt x fixed-point passes; grey (!): failed or stopped "
                "(figures of the frames it completed).</text>\n");
     for (i = 0; i < n_sc; ++i) {
@@ -532,7 +537,10 @@ static void write_svg(const char *path, const bench_scene *sc, int n_sc) {
         for (k = 0; k < s->n_runs; ++k) {
             const bench_run *r = &s->runs[k];
             char label[64];
-            const char *color = !r->implicit ? "#111" : r->energy == PN_MPM_ENERGY_PNET ? "#1f5fbf" : "#e07b00";
+            const char *color = !r->implicit                       ? "#111"
+                                : r->energy == PN_MPM_ENERGY_PNET ? "#1f5fbf"
+                                : r->energy == PN_MPM_ENERGY_DP   ? "#2a9d3a"
+                                                                  : "#e07b00";
             if (wall_per_sim(r) <= 0 || !r->frames_done) continue;
             if (r->implicit) snprintf(label, sizeof label, "%g x%d%s", r->dt, r->fp, r->status == RUN_OK ? "" : " (!)");
             else snprintf(label, sizeof label, "%s %.2g", r->role, r->dt);

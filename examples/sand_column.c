@@ -1,8 +1,9 @@
 /* sand_column: a column of sand (aspect ratio a = H / W) collapsing on a frictional floor,
    simulated by plastinet_mpm.h, explicit (the reference) or implicit with the PlasticityNet
-   sand model. The scene is the one of shared/design/VALIDATION.md (examples/pn_example.h).
+   sand model, the lagged energy or the frozen-yield Drucker-Prager energy (dp). The scene is
+   the one of shared/design/VALIDATION.md (examples/pn_example.h).
    Build: cc -std=c99 -O2 examples/sand_column.c -lm -o sand_column
-   Usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|elastic]
+   Usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|dp|elastic]
                       [--dt S] [--fixed-point N] [--frames N] [--fps N] [--aspect A] [--E PA]
                       [--res N] [--boundary sticky|slip|separate] [--friction MU]
                       [--filter S] [--regularizer W] [--force-error] [--out DIR] [--png] [--ply] [--quiet]
@@ -18,15 +19,16 @@
 #include "pn_example.h"
 
 static void usage(void) {
-    fprintf(stderr, "usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|elastic]\n"
+    fprintf(stderr, "usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|dp|elastic]\n"
                     "       [--dt S] [--fixed-point N] [--frames N] [--fps N] [--aspect A] [--E PA] [--res N]\n"
                     "       [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
                     "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n");
 }
 
 int main(int argc, char **argv) {
-    static const char *const energies[] = {"pnet", "lagged", "elastic"};
-    static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_ELASTIC};
+    static const char *const energies[] = {"pnet", "lagged", "dp", "elastic"};
+    static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP,
+                                              PN_MPM_ENERGY_ELASTIC};
     int energy, k, i;
     double aspect = 2, runout = 0;
     pn_ex_cli c;
@@ -40,9 +42,9 @@ int main(int argc, char **argv) {
         else if (used == 0 && v && !strcmp(argv[k], "--aspect")) aspect = atof(v), ++k;
         else { usage(); return 2; }
     }
-    for (energy = 0; energy < 3 && strcmp(c.energy, energies[energy]); ++energy) {}
+    for (energy = 0; energy < 4 && strcmp(c.energy, energies[energy]); ++energy) {}
     pn_ex_scene_default(&sc, PN_EX_SAND_COLUMN, c.dim);
-    if (!pn_ex_cli_apply(&c, &sc) || energy > 2 || !(aspect > 0)) {
+    if (!pn_ex_cli_apply(&c, &sc) || energy > 3 || !(aspect > 0)) {
         usage();
         return 2;
     }

@@ -103,7 +103,7 @@ static double t_en_lagged_h0(pn_test_rng *rng, int which) {
 
 /* ---- one interface over the three evaluators ------------------------------------------------ */
 
-enum { T_EN_ELASTIC, T_EN_VM, T_EN_LAGGED, T_EN_PNET };
+enum { T_EN_ELASTIC, T_EN_VM, T_EN_LAGGED, T_EN_PNET, T_EN_DP };
 typedef struct t_en_fn {
     int kind;
     const pn_material *m;
@@ -111,6 +111,7 @@ typedef struct t_en_fn {
     const double *G; /* lagged only */
     const pn_pnet *net;          /* PlasticityNet only (test_pnet.c) */
     const pn_pnet_point *pt;
+    double tau_y;                /* frozen-yield Drucker-Prager only */
 } t_en_fn;
 
 static pn_result t_en_eval(const t_en_fn *f, int dim, const double *F, double *psi, double *P,
@@ -119,6 +120,7 @@ static pn_result t_en_eval(const t_en_fn *f, int dim, const double *F, double *p
     case T_EN_ELASTIC: return pn_elastic_energy(f->m, dim, F, f->h, psi, P, dPdF, flags);
     case T_EN_VM: return pn_von_mises_energy(f->m, dim, F, f->h, psi, P, dPdF, flags);
     case T_EN_PNET: return pn_pnet_energy(f->net, f->pt, F, psi, P, dPdF, flags);
+    case T_EN_DP: return pn_dp_energy(f->m, dim, F, f->h, f->tau_y, psi, P, dPdF, flags);
     default: return pn_lagged_energy(f->m, dim, F, f->G, f->h, psi, P, dPdF, flags);
     }
 }
@@ -686,6 +688,110 @@ PN_TEST(energy_fd_von_mises) {
     PN_CHECK(n_el > 100 && n_pl > 100);
 }
 
+/* The frozen-yield Drucker-Prager energy (pn_dp_energy). Sample F = R1 diag(exp e) R2 with a
+   volumetric strain tr e of either sign over 1e-5..1e-1 and a deviator 0.1..10 times the cone's
+   radius there. (1) With tau_y prepared at F itself its gradient is T(F) of pn_return_map, the
+   independent return-mapping code: apex, cone and inside alike, with cohesion and with a
+   volume credit. (2) With tau_y frozen at another point: FD of psi and P, symmetry and the PSD
+   projection, with stencils kept 20x away from the two kinks (the cylinder and tr e = 0). */
+PN_TEST(energy_dp_frozen_yield) {
+    t_en_stats st;
+    pn_test_rng rng;
+    double worst = 0, worst_lag = -1;
+    long n_reg[3] = {0, 0, 0}; /* apex, cone, inside */
+    int k, fails = 0;
+    memset(&st, 0, sizeof st);
+    rng.s = 212;
+    for (k = 0; k < 3000; ++k) {
+        pn_material_desc d;
+        pn_material m;
+        t_en_fn f;
+        int dim = 2 + (k & 1), n2 = dim * dim, i, variant = (k / 2) % 3;
+        double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_mu(E, nu), lam = t_lambda(E, nu);
+        double kappa = lam + 2 * mu / dim, alpha, c, h, v, tr, rcone, r, e[3], dir[3], nd = 0, s[3];
+        double R1[9], R2[9], F[9], P[9], T[9], Z[9], hn, nT, tau_y, eg, eh, dist, step;
+        t_en_desc(&d, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, E, nu);
+        d.friction_angle_deg = pn_test_rng_range(&rng, 20, 40);
+        d.cohesion_strain = variant == 1 ? 1e-3 : 0;
+        d.volume_correction = variant == 2;
+        if (!t_en_init(pn__t, &m, &d)) return;
+        alpha = sqrt(2.0 / 3.0) * 2 * sin(d.friction_angle_deg * 3.14159265358979323846 / 180) / (3 - sin(d.friction_angle_deg * 3.14159265358979323846 / 180));
+        c = d.cohesion_strain;
+        h = variant == 2 ? pn_test_rng_range(&rng, 0, 1e-3) : 0;
+        v = variant == 2 ? h : 0;
+        /* shifted strain e - c + v/d has trace tr (30% on the apex side) and deviator r */
+        tr = pow(10.0, pn_test_rng_range(&rng, -5, -1)) * (pn_test_rng_range(&rng, 0, 1) < 0.3 ? 1 : -1);
+        rcone = tr < 0 ? -dim * kappa * alpha * tr / (2 * mu) : 1e-3 * fabs(tr);
+        r = rcone * pow(10.0, pn_test_rng_range(&rng, -1, 1));
+        for (i = 0; i < dim; ++i) nd += (dir[i] = pn_test_rng_range(&rng, -1, 1));
+        for (i = 0; i < dim; ++i) dir[i] -= nd / dim;
+        nd = 0;
+        for (i = 0; i < dim; ++i) nd += dir[i] * dir[i];
+        nd = sqrt(nd);
+        for (i = 0; i < dim; ++i) {
+            e[i] = tr / dim + r * dir[i] / nd;
+            s[i] = exp(e[i] + c - v / dim);
+        }
+        t_rand_rot(&rng, dim, R1);
+        t_rand_rot(&rng, dim, R2);
+        t_adb(dim, R1, s, R2, F);
+        /* (1) tau_y at F: the gradient is the return-mapped force */
+        if (pn_dp_prepare(&m, dim, F, h, &tau_y) != PN_OK || pn_dp_energy(&m, dim, F, h, tau_y, NULL, P, NULL, 0) != PN_OK ||
+            pn_return_map(&m, dim, F, h, Z, &hn, T) != PN_OK) {
+            ++fails;
+            continue;
+        }
+        n_reg[tr >= 0 ? 0 : r > rcone ? 1 : 2]++;
+        nT = t_norm(n2, T);
+        t_en_maxto(&worst, t_dist(n2, P, T) / (nT > 1e-9 * E ? nT : 1e-9 * E));
+        /* (2) frozen at a point of another volumetric strain: FD away from the kinks */
+        tau_y *= pn_test_rng_range(&rng, 0.5, 2);
+        if (tr >= 0 && k % 4 == 0) tau_y = dim * kappa * alpha * 1e-3; /* apex with a stale cone */
+        {   /* the force error is the friction lag: |P - T| <= |tau_y - tau_y(F)| / s_min, and
+               |tau_y - tau_y(F)| <= d kappa alpha |tr e0 - tr e| for tau_y = -d kappa alpha tr e0 */
+            double smin = s[0], lag;
+            for (i = 1; i < dim; ++i) smin = s[i] < smin ? s[i] : smin;
+            lag = fabs(tau_y - (tr < 0 ? -dim * kappa * alpha * tr : 0)) / smin;
+            if (pn_dp_energy(&m, dim, F, h, tau_y, NULL, P, NULL, 0) != PN_OK) ++fails;
+            else t_en_maxto(&worst_lag, (t_dist(n2, P, T) - lag) / (nT > 1e-9 * E ? nT : 1e-9 * E));
+        }
+        f.kind = T_EN_DP;
+        f.m = &m;
+        f.h = h;
+        f.G = NULL;
+        f.tau_y = tau_y;
+        dist = fabs(2 * mu * r - tau_y) / (2 * mu);
+        if (fabs(tr) < dist) dist = fabs(tr);
+        step = dist / 20 < 1e-4 ? dist / 20 : 1e-4;
+        t_en_check_sample(&st, &f, dim, F, E * (fabs(tr) + r), step, dist >= 2e-6, &eg, &eh);
+    }
+    PN_REPORT("tau_y at F: |P - T| / max(|T|, 1e-9 E) worst %.2e over %ld apex, %ld cone, %ld inside samples",
+              worst, n_reg[0], n_reg[1], n_reg[2]);
+    PN_REPORT("tau_y frozen elsewhere: worst (|P - T| - lag bound) / |T| %.2e", worst_lag);
+    t_en_finish(pn__t, &st, 0);
+    PN_CHECK(fails == 0);
+    PN_CHECK_LE(worst_lag, 1e-9);
+    PN_CHECK(n_reg[0] > 300 && n_reg[1] > 300 && n_reg[2] > 300);
+    PN_CHECK_LE(worst, 1e-8);
+    {   /* contract: another material is refused, a bad tau_y too, outputs untouched */
+        pn_material_desc d;
+        pn_material vm, sand;
+        double F[4] = {1.01, 0.002, 0, 0.98}, P[4] = {7, 7, 7, 7}, psi = 7, ty = 0;
+        t_en_desc(&d, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e7, 0.3);
+        d.yield_stress_pa = 1e4;
+        if (!t_en_init(pn__t, &vm, &d)) return;
+        t_en_desc(&d, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e7, 0.3);
+        d.friction_angle_deg = 30;
+        if (!t_en_init(pn__t, &sand, &d)) return;
+        PN_CHECK(pn_dp_prepare(&vm, 2, F, 0, &ty) == PN_ERROR_UNSUPPORTED);
+        PN_CHECK(pn_dp_energy(&vm, 2, F, 0, 1e4, &psi, P, NULL, 0) == PN_ERROR_UNSUPPORTED);
+        PN_CHECK(pn_dp_energy(&sand, 2, F, 0, -1, &psi, P, NULL, 0) == PN_ERROR_INVALID_ARGUMENT);
+        PN_CHECK(pn_dp_energy(&sand, 2, F, 0, NAN, &psi, P, NULL, 0) == PN_ERROR_INVALID_ARGUMENT);
+        PN_CHECK(pn_dp_energy(&sand, 4, F, 0, 1e4, &psi, P, NULL, 0) == PN_ERROR_DIMENSION);
+        PN_CHECK(psi == 7 && P[0] == 7 && P[3] == 7 && ty == 0);
+    }
+}
+
 /* At K = 0 the energy's gradient is the return-mapped force density T of pn_return_map. */
 PN_TEST(energy_von_mises_matches_return_map) {
     pn_test_rng rng;
@@ -1156,6 +1262,7 @@ static const pn_test_case pn_tests_energy[] = {
     {"energy_stomakhin_hardening", energy_stomakhin_hardening},
     {"energy_fd_von_mises", energy_fd_von_mises},
     {"energy_von_mises_matches_return_map", energy_von_mises_matches_return_map},
+    {"energy_dp_frozen_yield", energy_dp_frozen_yield},
     {"energy_fd_lagged_sand", energy_fd_lagged_sand},
     {"energy_fd_lagged_metal", energy_fd_lagged_metal},
     {"energy_fd_lagged_camclay", energy_fd_lagged_camclay},

@@ -363,6 +363,9 @@ PN_TEST(mpm_implicit_bad_input) {
     PN_CHECK(memcmp(copy, w->x, bytes) == 0 && memcmp(copy + n * 2, w->v, bytes) == 0 && w->steps == 1);
     PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_ERROR_UNSUPPORTED);
     PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(pn_mpm_group_set_energy(w, g, (pn_mpm_energy)99, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_NONE, 1e6); /* DP needs a DP material */
+    PN_CHECK(g >= 0 && pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_DP, NULL) == PN_ERROR_UNSUPPORTED);
     free(copy);
     pn_mpm_destroy(w);
 }
@@ -708,10 +711,11 @@ static void t_mpm_on_newton(void *user, int solve, int iteration, pn_real energy
 
 /* Every step the line search accepts lowers the incremental potential: within one
    minimization the traced energies never rise (sand column on a Coulomb floor, PlasticityNet
-   where the models ship, else the lagged energy; 1 and 4 fixed-point passes; 1e-3 and 1e-2 s). */
+   where the models ship, else the lagged energy, 1 and 4 fixed-point passes; the frozen-yield
+   Drucker-Prager energy, 2 passes; 1e-3 and 1e-2 s). */
 PN_TEST(mpm_line_search_descends) {
     int g, s, k;
-    for (k = 0; k < 4; ++k) {
+    for (k = 0; k < 6; ++k) {
         pn_mpm_world *w = t_mpm_sand_world(32, 0.5, &g);
         double lo[2] = {0.4, 3.0 / 32}, sz[2] = {0.12, 0.24}, dt = k & 1 ? 1e-2 : 1e-3;
         pn_mpm_implicit_desc id;
@@ -719,12 +723,16 @@ PN_TEST(mpm_line_search_descends) {
         const char *energy = "lagged";
         memset(&id, 0, sizeof id);
         memset(&tr, 0, sizeof tr);
-        id.fixed_point_iters = k < 2 ? 1 : 4;
+        id.fixed_point_iters = k < 2 ? 1 : k < 4 ? 4 : 2;
         id.trace = t_mpm_on_newton;
         id.trace_user = &tr;
         t_mpm_block(w, g, lo, sz, NULL);
+        if (k >= 4) {
+            PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_DP, NULL) == PN_OK);
+            energy = "frozen-yield DP";
+        }
 #ifdef PN_TEST_HAVE_MODELS
-        {
+        if (k < 4) {
             pn_material m;
             pn_pnet net;
             pn_pnet_desc nd;
