@@ -219,6 +219,12 @@ typedef struct pn_mpm_world {
     pn_real *vstar, *vsol, *vtry, *grad, *dir, *cg_r, *cg_z, *cg_p, *cg_q, *diag;
     pn_real *pP, *pH, *pG, *phG, *pF0, *pty;
     pn_pnet_point *ppt;
+    /* per step (>>implicit setup): q_ps = F_p^nT grad w_ps for each stencil slot s, the
+       slot's compact node, and each active node's (particle, slot) incidences in the fixed
+       gather order, so the Hessian product touches no spline and no sort */
+    pn_real *pq;
+    long *pdof;
+    size_t *inc, *inc_start;
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
     unsigned char *bactive;
     /* contact memory of the last implicit step: the nodes a separating contact held, ascending,
@@ -323,7 +329,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(pq) X(pdof) X(inc) X(inc_start) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
     X(lnode) X(blnode) X(lval) X(blval)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -659,8 +665,9 @@ static void pn__mpm_node_index(const pn_mpm_world *w, size_t node, int *idx) {
     }
 }
 
-/* The base nodes (and the slot each is seen from) whose particles reach node `node`. */
-static int pn__mpm_node_bases(const pn_mpm_world *w, size_t node, size_t *base, int (*o)[3]) {
+/* The base nodes (and the slot each is seen from: its offsets o, its index sl) whose
+   particles reach node `node`. */
+static int pn__mpm_node_bases(const pn_mpm_world *w, size_t node, size_t *base, int (*o)[3], int *sl) {
     int idx[3], s, i, n = 0;
     pn__mpm_node_index(w, node, idx);
     for (s = 0; s < w->ns; ++s) {
@@ -668,6 +675,7 @@ static int pn__mpm_node_bases(const pn_mpm_world *w, size_t node, size_t *base, 
         for (i = 0; i < w->dim; ++i) ok &= idx[i] >= w->slot[s][i];
         if (!ok) continue;
         for (i = 0; i < 3; ++i) o[n][i] = w->slot[s][i];
+        sl[n] = s;
         base[n++] = node - w->slot_off[s];
     }
     return n;
@@ -720,7 +728,7 @@ static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
     PN__OMP_FOR
     for (lk = 0; lk < (long)w->n_act; ++lk) {
         size_t k = (size_t)lk, base[27], s;
-        int o[27][3], nb = pn__mpm_node_bases(w, w->act[k], base, o), b, i, j;
+        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->act[k], base, o, sl), b, i, j;
         pn_real m = 0, mom[3] = {0, 0, 0}, mom0[3] = {0, 0, 0};
         for (b = 0; b < nb; ++b)
             for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
@@ -745,22 +753,35 @@ static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
     }
 }
 
-/* dt sum_i v_i grad w_ip^T over particle p's stencil (v: compact grid vector) */
-static void pn__mpm_grad_v(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt, pn_real *G) {
-    int d = w->dim, s, i, j;
-    for (i = 0; i < d * d; ++i) G[i] = 0;
-    for (s = 0; s < w->ns; ++s) {
-        const pn_real *vi = v + (size_t)w->dof[w->pbase[p] + w->slot_off[s]] * (size_t)d;
-        pn_real gw[3], dpos[3];
-        pn__mpm_weight(w, p, w->slot[s], gw, dpos);
-        for (i = 0; i < d; ++i)
-            for (j = 0; j < d; ++j) G[i * d + j] += dt * vi[i] * gw[j];
+/* out = base + dt sum_s v_(node of slot s) q_ps^T (base NULL: 0). With base F_p^n this is
+   F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p^n; q and the slots' nodes come from
+   pn__mpm_implicit_setup, so only implicit steps use it. */
+#define PN__MPM_PUSH(D)                                                                         \
+    static void pn__mpm_push##D(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt,             \
+                     const pn_real *base, pn_real *out) {                                       \
+        int ns = w->ns, s, i, j;                                                                \
+        const pn_real *q = w->pq + p * (size_t)(ns * D);                                        \
+        const long *dof = w->pdof + p * (size_t)ns;                                             \
+        pn_real acc[D * D] = {0};                                                               \
+        for (s = 0; s < ns; ++s) {                                                              \
+            const pn_real *vi = v + (size_t)dof[s] * D, *qs = q + s * D;                        \
+            for (i = 0; i < D; ++i)                                                             \
+                for (j = 0; j < D; ++j) acc[i * D + j] += vi[i] * qs[j];                        \
+        }                                                                                       \
+        for (i = 0; i < D * D; ++i) out[i] = (base ? base[i] : 0) + dt * acc[i];                \
     }
+PN__MPM_PUSH(2) /* the dimension a constant, so the small loops unroll */
+PN__MPM_PUSH(3)
+#undef PN__MPM_PUSH
+static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt,
+                         const pn_real *base, pn_real *out) {
+    if (w->dim == 2) pn__mpm_push2(w, p, v, dt, base, out);
+    else pn__mpm_push3(w, p, v, dt, base, out);
 }
 
 /* Grid to particles into scratch: APIC v, C (with filter_time_s > 0, AFLIP: v = v_PIC +
    (1 - s)(v_p - sum_i w_ip v_i^n), v_i^n the transfer's own velocity); x += dt v_PIC; F from gradF (0: (I + dt C) F as in
-   the explicit step, 1: (I + dt sum v grad w^T) F, as the implicit energy saw it); then the
+   the explicit step, 1: F + dt sum v q^T, as the implicit energy saw it); then the
    return mapping. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid. */
 static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt, int gradF,
                              pn_mpm_stats *st) {
@@ -798,12 +819,12 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
             }
         }
         if (gradF) {
-            pn__mpm_grad_v(w, q, gv_all, dt, G);
+            pn__mpm_push(w, q, gv_all, dt, w->F + q * (size_t)dd, Fn);
         } else {
             for (i = 0; i < dd; ++i) G[i] = dt * nC[i];
+            for (i = 0; i < d; ++i) G[i * d + i] += 1;
+            pn_mat_mul(d, G, w->F + q * (size_t)dd, Fn);
         }
-        for (i = 0; i < d; ++i) G[i * d + i] += 1;
-        pn_mat_mul(d, G, w->F + q * (size_t)dd, Fn);
         stat = (int)pn_return_map(&g->material, d, Fn, w->h[q], Z, &hn, NULL);
         if (stat == PN_OK && (!pn__all_finite(d, nv) || !pn__all_finite(dd, nC))) stat = PN_ERROR_OVERFLOW;
         if (stat != PN_OK) {
@@ -1028,6 +1049,10 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     PN__MPM_A(pF0, cap * (size_t)dd, pn_real);
     PN__MPM_A(pty, cap, pn_real);
     PN__MPM_A(ppt, cap, pn_pnet_point);
+    PN__MPM_A(pq, cap * (size_t)(w->ns * d), pn_real);
+    PN__MPM_A(pdof, cap * (size_t)w->ns, long);
+    PN__MPM_A(inc, cap * (size_t)w->ns, size_t);
+    PN__MPM_A(inc_start, w->nodes + 1, size_t);
     PN__MPM_A(bx, cap * (size_t)d, pn_real);
     PN__MPM_A(bv, cap * (size_t)d, pn_real);
     PN__MPM_A(bC, cap * (size_t)dd, pn_real);
@@ -1044,7 +1069,8 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
                       (void **)&w->dir, (void **)&w->cg_r, (void **)&w->cg_z, (void **)&w->cg_p,
                       (void **)&w->cg_q, (void **)&w->diag, (void **)&w->pP, (void **)&w->pH,
                       (void **)&w->pG, (void **)&w->phG, (void **)&w->pF0, (void **)&w->pty,
-                      (void **)&w->ppt,
+                      (void **)&w->ppt, (void **)&w->pq, (void **)&w->pdof, (void **)&w->inc,
+                      (void **)&w->inc_start,
                       (void **)&w->bx, (void **)&w->bv, (void **)&w->bC, (void **)&w->bF,
                       (void **)&w->bh, (void **)&w->bactive, (void **)&w->lnode, (void **)&w->blnode,
                       (void **)&w->lval, (void **)&w->blval};
@@ -1106,30 +1132,86 @@ static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, 
     }
 }
 
-/* out (d x d) = s A B^T */
-static void pn__mpm_mul_abt(int d, pn_real s, const pn_real *A, const pn_real *B, pn_real *out) {
-    int i, j, l;
-    for (i = 0; i < d; ++i)
-        for (j = 0; j < d; ++j) {
-            pn_real acc = 0;
-            for (l = 0; l < d; ++l) acc += A[i * d + l] * B[j * d + l];
-            out[i * d + j] = s * acc;
+/* Per implicit step, after >>bin: each particle's q_ps = F_p^nT grad w_ps and the compact
+   node of each slot s, and each active node k's incidences inc[inc_start[k] ..] = p ns + s
+   in the order of a gather over pn__mpm_node_bases (base nodes by slot, particles sorted),
+   so every per-node sum keeps one fixed order whatever the thread count. */
+static void pn__mpm_implicit_setup(pn_mpm_world *w) {
+    int d = w->dim, dd = d * d, ns = w->ns;
+    long l;
+    size_t k;
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n; ++l) {
+        size_t p = (size_t)l;
+        const pn_real *Fn = w->F + p * (size_t)dd;
+        int s, i, j;
+        if (!w->active[p]) continue;
+        for (s = 0; s < ns; ++s) {
+            pn_real gw[3], dpos[3], *q = w->pq + (p * (size_t)ns + (size_t)s) * (size_t)d;
+            pn__mpm_weight(w, p, w->slot[s], gw, dpos);
+            for (j = 0; j < d; ++j) {
+                q[j] = 0;
+                for (i = 0; i < d; ++i) q[j] += Fn[i * d + j] * gw[i];
+            }
+            w->pdof[p * (size_t)ns + (size_t)s] = w->dof[w->pbase[p] + w->slot_off[s]];
         }
+    }
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n_act; ++l) { /* counts, then offsets, then the lists */
+        size_t base[27], c = 0;
+        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->act[l], base, o, sl), b;
+        for (b = 0; b < nb; ++b) c += w->start[base[b] + 1] - w->start[base[b]];
+        w->inc_start[l + 1] = c;
+    }
+    w->inc_start[0] = 0;
+    for (k = 0; k < w->n_act; ++k) w->inc_start[k + 1] += w->inc_start[k];
+    PN__OMP_FOR
+    for (l = 0; l < (long)w->n_act; ++l) {
+        size_t base[27], e = w->inc_start[l], s;
+        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->act[l], base, o, sl), b;
+        for (b = 0; b < nb; ++b)
+            for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s)
+                w->inc[e++] = w->order[s] * (size_t)ns + (size_t)sl[b];
+    }
 }
 
-/* node vector out_k += sum_p pmat_p grad w_kp over the particles that reach node k */
+/* node vector out_k += sum_p pmat_p q_kp over node k's incidences (pmat = V dt P, so this
+   is dt V P F^nT grad w) */
+#define PN__MPM_GATHER(D)                                                                       \
+    static void pn__mpm_gather##D(const pn_mpm_world *w, size_t k, pn_real *out) {                           \
+        int i, j;                                                                               \
+        size_t e, ns = (size_t)w->ns;                                                           \
+        pn_real acc[D] = {0};                                                                   \
+        for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {                               \
+            size_t ps = w->inc[e];                                                              \
+            const pn_real *A = w->pmat + ps / ns * (D * D), *q = w->pq + ps * D;                \
+            for (i = 0; i < D; ++i)                                                             \
+                for (j = 0; j < D; ++j) acc[i] += A[i * D + j] * q[j];                          \
+        }                                                                                       \
+        for (i = 0; i < D; ++i) out[i] += acc[i];                                               \
+    }
+/* particle p's part of a Hessian product: pmat = V dt dP/dF : dF, dF = dt sum x_i q_ip^T */
+#define PN__MPM_HMUL(D)                                                                         \
+    static void pn__mpm_hmul##D(pn_mpm_world *w, size_t p, const pn_real *x, pn_real dt) {      \
+        pn_real dF[D * D], s = w->vol0[p] * dt, *out = w->pmat + p * (D * D);                   \
+        const pn_real *H = w->pH + p * (D * D * D * D);                                         \
+        int i, j;                                                                               \
+        pn__mpm_push##D(w, p, x, dt, NULL, dF);                                                 \
+        for (i = 0; i < D * D; ++i) {                                                           \
+            pn_real acc = 0;                                                                    \
+            for (j = 0; j < D * D; ++j) acc += H[i * D * D + j] * dF[j];                        \
+            out[i] = s * acc;                                                                   \
+        }                                                                                       \
+    }
+PN__MPM_GATHER(2)
+PN__MPM_GATHER(3)
+PN__MPM_HMUL(2)
+PN__MPM_HMUL(3)
+#undef PN__MPM_GATHER
+#undef PN__MPM_HMUL
 static void pn__mpm_gather_pmat(const pn_mpm_world *w, size_t k, pn_real *out) {
-    size_t base[27], s;
-    int o[27][3], nb = pn__mpm_node_bases(w, w->act[k], base, o), b, i, j, d = w->dim, dd = d * d;
-    for (b = 0; b < nb; ++b)
-        for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
-            size_t p = w->order[s];
-            const pn_real *A = w->pmat + p * (size_t)dd;
-            pn_real gw[3], dpos[3];
-            pn__mpm_weight(w, p, o[b], gw, dpos);
-            for (i = 0; i < d; ++i)
-                for (j = 0; j < d; ++j) out[i] += A[i * d + j] * gw[j];
-        }
+    if (w->dim == 2) pn__mpm_gather2(w, k, out);
+    else pn__mpm_gather3(w, k, out);
 }
 
 /* E(v); with_derivs: also the gradient (w->grad) and each particle's P, and with_derivs == 2
@@ -1144,18 +1226,16 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
     PN__OMP_FOR
     for (l = 0; l < (long)w->n; ++l) {
         size_t p = (size_t)l;
-        pn_real G[9], F[9], psi = 0, *P = w->pP + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
+        pn_real F[9], psi = 0, *P = w->pP + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
         int i;
         w->pscal[p] = 0;
         w->pstat[p] = 0;
         if (!w->active[p]) continue;
-        pn__mpm_grad_v(w, p, v, dt, G);
-        for (i = 0; i < d; ++i) G[i * d + i] += 1;
-        pn_mat_mul(d, G, w->F + p * (size_t)dd, F);
+        pn__mpm_push(w, p, v, dt, w->F + p * (size_t)dd, F);
         w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs > 1 ? H : NULL);
         w->pscal[p] = w->vol0[p] * psi;
-        if (with_derivs && w->pstat[p] == PN_OK) /* pmat = V dt P F^nT */
-            pn__mpm_mul_abt(d, w->vol0[p] * dt, P, w->F + p * (size_t)dd, w->pmat + p * (size_t)dd);
+        if (with_derivs && w->pstat[p] == PN_OK) /* pmat = V dt P */
+            for (i = 0; i < dd; ++i) w->pmat[p * (size_t)dd + (size_t)i] = w->vol0[p] * dt * P[i];
     }
     r = pn__mpm_first_error(w);
     if (r != PN_OK) {
@@ -1190,23 +1270,13 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
 
 /* out = S H x (S: the contact filter) */
 static void pn__mpm_hess_vec(pn_mpm_world *w, const pn_real *x, pn_real dt, pn_real *out) {
-    int d = w->dim, dd = d * d;
+    int d = w->dim;
     long l;
     PN__OMP_FOR
     for (l = 0; l < (long)w->n; ++l) {
-        size_t p = (size_t)l;
-        pn_real Gx[9], dF[9], dP[9];
-        const pn_real *Fn = w->F + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
-        int i, j;
-        if (!w->active[p]) continue;
-        pn__mpm_grad_v(w, p, x, dt, Gx);
-        pn_mat_mul(d, Gx, Fn, dF);
-        for (i = 0; i < dd; ++i) {
-            pn_real acc = 0;
-            for (j = 0; j < dd; ++j) acc += H[i * dd + j] * dF[j];
-            dP[i] = acc;
-        }
-        pn__mpm_mul_abt(d, w->vol0[p] * dt, dP, Fn, w->pmat + p * (size_t)dd);
+        if (!w->active[l]) continue;
+        if (d == 2) pn__mpm_hmul2(w, (size_t)l, x, dt);
+        else pn__mpm_hmul3(w, (size_t)l, x, dt);
     }
     PN__OMP_FOR
     for (l = 0; l < (long)w->n_act; ++l) {
@@ -1226,27 +1296,20 @@ static void pn__mpm_diagonal(pn_mpm_world *w, pn_real dt) {
     long l;
     PN__OMP_FOR
     for (l = 0; l < (long)w->n_act; ++l) {
-        size_t k = (size_t)l, base[27], s;
-        int o[27][3], nb = pn__mpm_node_bases(w, w->act[k], base, o), b, i, j, a, c;
+        size_t k = (size_t)l, e;
+        int i, a, c;
         pn_real *dg = w->diag + k * (size_t)d;
         for (i = 0; i < d; ++i) dg[i] = w->grid_m[k];
-        for (b = 0; b < nb; ++b)
-            for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
-                size_t p = w->order[s];
-                const pn_real *Fn = w->F + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
-                pn_real gw[3], dpos[3], q[3];
-                pn__mpm_weight(w, p, o[b], gw, dpos);
-                for (j = 0; j < d; ++j) { /* q = F^nT grad w */
-                    q[j] = 0;
-                    for (a = 0; a < d; ++a) q[j] += Fn[a * d + j] * gw[a];
-                }
-                for (i = 0; i < d; ++i) {
-                    pn_real acc = 0; /* sum_ac H[(i a),(i c)] q_a q_c */
-                    for (a = 0; a < d; ++a)
-                        for (c = 0; c < d; ++c) acc += H[(i * d + a) * dd + i * d + c] * q[a] * q[c];
-                    dg[i] += w->vol0[p] * dt * dt * acc;
-                }
+        for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
+            size_t ps = w->inc[e], p = ps / (size_t)w->ns;
+            const pn_real *H = w->pH + p * (size_t)(dd * dd), *q = w->pq + ps * (size_t)d;
+            for (i = 0; i < d; ++i) {
+                pn_real acc = 0; /* sum_ac H[(i a),(i c)] q_a q_c, q = F^nT grad w */
+                for (a = 0; a < d; ++a)
+                    for (c = 0; c < d; ++c) acc += H[(i * d + a) * dd + i * d + c] * q[a] * q[c];
+                dg[i] += w->vol0[p] * dt * dt * acc;
             }
+        }
         for (i = 0; i < d; ++i)
             if (!(dg[i] > 0)) dg[i] = 1;
     }
@@ -1308,15 +1371,13 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
     for (l = 0; l < (long)w->n; ++l) {
         size_t q = (size_t)l;
         const pn_mpm_group *g = &w->groups[w->group[q]];
-        pn_real G[9], F0[9], *old = w->pF0 + q * (size_t)dd, diff = 0;
+        pn_real F0[9], *old = w->pF0 + q * (size_t)dd, diff = 0;
         pn_mpm_energy en;
         int i;
         w->pstat[q] = 0;
         w->pscal[q] = 0;
         if (!w->active[q]) continue;
-        pn__mpm_grad_v(w, q, v, dt, G);
-        for (i = 0; i < d; ++i) G[i * d + i] += 1;
-        pn_mat_mul(d, G, w->F + q * (size_t)dd, F0);
+        pn__mpm_push(w, q, v, dt, w->F + q * (size_t)dd, F0);
         if (!first)
             for (i = 0; i < dd; ++i) diff = PN__MAX(diff, PN__FABS(F0[i] - old[i]));
         w->pscal[q] = diff;
@@ -1516,12 +1577,10 @@ static void pn__mpm_force_error(pn_mpm_world *w, const pn_real *v, pn_real dt, p
     double err = 0, reg = 0, tot = 0, n = 0, apex = 0;
     for (p = 0; p < w->n; ++p) {
         const pn_mpm_group *g = &w->groups[w->group[p]];
-        pn_real G[9], F[9], P[9], T[9], psi;
+        pn_real F[9], P[9], T[9], psi;
         double e = 0, r = 0, t = 0;
         if (!w->active[p] || g->material.plastic == PN_PLASTIC_NONE) continue;
-        pn__mpm_grad_v(w, p, v, dt, G);
-        for (i = 0; i < d; ++i) G[i * d + i] += 1;
-        pn_mat_mul(d, G, w->F + p * (size_t)dd, F);
+        pn__mpm_push(w, p, v, dt, w->F + p * (size_t)dd, F);
         if (pn__mpm_psi(w, p, F, &psi, P, NULL) != PN_OK ||
             pn_return_map(&g->material, d, F, w->h[p], NULL, NULL, T) != PN_OK)
             continue;
@@ -1554,6 +1613,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     pn_result r;
     pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
     pn__mpm_bin(w);
+    pn__mpm_implicit_setup(w);
     pn__mpm_p2g(w, 0);
     pn__mpm_contact(w, w->time_s);
     nd = w->n_act * (size_t)d;
