@@ -219,12 +219,13 @@ typedef struct pn_mpm_world {
     pn_real *vstar, *vsol, *vtry, *grad, *dir, *cg_r, *cg_z, *cg_p, *cg_q, *diag;
     pn_real *pP, *pH, *pG, *phG, *pF0, *pty;
     pn_pnet_point *ppt;
-    /* per step (>>implicit setup): q_ps = F_p^nT grad w_ps for each stencil slot s, the
-       slot's compact node, and each active node's (particle, slot) incidences in the fixed
-       gather order, so the Hessian product touches no spline and no sort */
+    /* per step (>>implicit setup), by sorted index j (particle order[j], j = prank[p]):
+       q_js = F^nT grad w for each stencil slot s and the slot's compact node; each active
+       node's (j, slot) incidences in the fixed gather order. The Hessian product then
+       touches no spline and no sort, and reads neighbours from nearby memory. */
     pn_real *pq;
     long *pdof;
-    size_t *inc, *inc_start;
+    size_t *inc, *inc_start, *prank;
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
     unsigned char *bactive;
     /* contact memory of the last implicit step: the nodes a separating contact held, ascending,
@@ -329,7 +330,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(pq) X(pdof) X(inc) X(inc_start) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(pq) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
     X(lnode) X(blnode) X(lval) X(blval)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -756,27 +757,53 @@ static void pn__mpm_p2g(pn_mpm_world *w, int with_stress) {
 /* out = base + dt sum_s v_(node of slot s) q_ps^T (base NULL: 0). With base F_p^n this is
    F_p(v) = (I + dt sum_i v_i grad w_ip^T) F_p^n; q and the slots' nodes come from
    pn__mpm_implicit_setup, so only implicit steps use it. */
-#define PN__MPM_PUSH(D)                                                                         \
-    static void pn__mpm_push##D(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt,             \
-                     const pn_real *base, pn_real *out) {                                       \
-        int ns = w->ns, s, i, j;                                                                \
-        const pn_real *q = w->pq + p * (size_t)(ns * D);                                        \
-        const long *dof = w->pdof + p * (size_t)ns;                                             \
-        pn_real acc[D * D] = {0};                                                               \
-        for (s = 0; s < ns; ++s) {                                                              \
-            const pn_real *vi = v + (size_t)dof[s] * D, *qs = q + s * D;                        \
-            for (i = 0; i < D; ++i)                                                             \
-                for (j = 0; j < D; ++j) acc[i * D + j] += vi[i] * qs[j];                        \
-        }                                                                                       \
-        for (i = 0; i < D * D; ++i) out[i] = (base ? base[i] : 0) + dt * acc[i];                \
+/* The dimension is spelled out in the two kernels: with loops of a runtime (or even a
+   constant) length of 2 or 3, gcc -O2 keeps the accumulators in memory and this product,
+   the inner loop of every Hessian product, runs several times slower. */
+static void pn__mpm_push2(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
+                          const pn_real *base, pn_real *out) {
+    const pn_real *q = w->pq + j * 18;
+    const long *dof = w->pdof + j * 9;
+    pn_real a00 = 0, a01 = 0, a10 = 0, a11 = 0;
+    int s;
+    for (s = 0; s < 9; ++s, q += 2) {
+        const pn_real *vi = v + (size_t)dof[s] * 2;
+        a00 += vi[0] * q[0];
+        a01 += vi[0] * q[1];
+        a10 += vi[1] * q[0];
+        a11 += vi[1] * q[1];
     }
-PN__MPM_PUSH(2) /* the dimension a constant, so the small loops unroll */
-PN__MPM_PUSH(3)
-#undef PN__MPM_PUSH
+    out[0] = (base ? base[0] : 0) + dt * a00;
+    out[1] = (base ? base[1] : 0) + dt * a01;
+    out[2] = (base ? base[2] : 0) + dt * a10;
+    out[3] = (base ? base[3] : 0) + dt * a11;
+}
+static void pn__mpm_push3(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
+                          const pn_real *base, pn_real *out) {
+    const pn_real *q = w->pq + j * 81;
+    const long *dof = w->pdof + j * 27;
+    pn_real a[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
+    pn_real a00 = 0, a01 = 0, a02 = 0, a10 = 0, a11 = 0, a12 = 0, a20 = 0, a21 = 0, a22 = 0;
+    int s, i;
+    for (s = 0; s < 27; ++s, q += 3) {
+        const pn_real *vi = v + (size_t)dof[s] * 3;
+        a00 += vi[0] * q[0];
+        a01 += vi[0] * q[1];
+        a02 += vi[0] * q[2];
+        a10 += vi[1] * q[0];
+        a11 += vi[1] * q[1];
+        a12 += vi[1] * q[2];
+        a20 += vi[2] * q[0];
+        a21 += vi[2] * q[1];
+        a22 += vi[2] * q[2];
+    }
+    a[0] = a00, a[1] = a01, a[2] = a02, a[3] = a10, a[4] = a11, a[5] = a12, a[6] = a20, a[7] = a21, a[8] = a22;
+    for (i = 0; i < 9; ++i) out[i] = (base ? base[i] : 0) + dt * a[i];
+}
 static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt,
-                         const pn_real *base, pn_real *out) {
-    if (w->dim == 2) pn__mpm_push2(w, p, v, dt, base, out);
-    else pn__mpm_push3(w, p, v, dt, base, out);
+                         const pn_real *base, pn_real *out) { /* by particle index p */
+    if (w->dim == 2) pn__mpm_push2(w, w->prank[p], v, dt, base, out);
+    else pn__mpm_push3(w, w->prank[p], v, dt, base, out);
 }
 
 /* Grid to particles into scratch: APIC v, C (with filter_time_s > 0, AFLIP: v = v_PIC +
@@ -1053,6 +1080,7 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     PN__MPM_A(pdof, cap * (size_t)w->ns, long);
     PN__MPM_A(inc, cap * (size_t)w->ns, size_t);
     PN__MPM_A(inc_start, w->nodes + 1, size_t);
+    PN__MPM_A(prank, cap, size_t);
     PN__MPM_A(bx, cap * (size_t)d, pn_real);
     PN__MPM_A(bv, cap * (size_t)d, pn_real);
     PN__MPM_A(bC, cap * (size_t)dd, pn_real);
@@ -1070,7 +1098,7 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
                       (void **)&w->cg_q, (void **)&w->diag, (void **)&w->pP, (void **)&w->pH,
                       (void **)&w->pG, (void **)&w->phG, (void **)&w->pF0, (void **)&w->pty,
                       (void **)&w->ppt, (void **)&w->pq, (void **)&w->pdof, (void **)&w->inc,
-                      (void **)&w->inc_start,
+                      (void **)&w->inc_start, (void **)&w->prank,
                       (void **)&w->bx, (void **)&w->bv, (void **)&w->bC, (void **)&w->bF,
                       (void **)&w->bh, (void **)&w->bactive, (void **)&w->lnode, (void **)&w->blnode,
                       (void **)&w->lval, (void **)&w->blval};
@@ -1132,28 +1160,29 @@ static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, 
     }
 }
 
-/* Per implicit step, after >>bin: each particle's q_ps = F_p^nT grad w_ps and the compact
-   node of each slot s, and each active node k's incidences inc[inc_start[k] ..] = p ns + s
-   in the order of a gather over pn__mpm_node_bases (base nodes by slot, particles sorted),
-   so every per-node sum keeps one fixed order whatever the thread count. */
+/* Per implicit step, after >>bin, by sorted index j (particle p = order[j]): q_js =
+   F_p^nT grad w_ps and the compact node of each slot s, and each active node k's incidences
+   inc[inc_start[k] ..] = j ns + s in the order of a gather over pn__mpm_node_bases (base
+   nodes by slot, particles sorted), so every per-node sum keeps one fixed order whatever
+   the thread count. */
 static void pn__mpm_implicit_setup(pn_mpm_world *w) {
     int d = w->dim, dd = d * d, ns = w->ns;
     long l;
     size_t k;
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n; ++l) {
-        size_t p = (size_t)l;
+    for (l = 0; l < (long)w->start[w->nodes]; ++l) {
+        size_t j = (size_t)l, p = w->order[j];
         const pn_real *Fn = w->F + p * (size_t)dd;
-        int s, i, j;
-        if (!w->active[p]) continue;
+        int s, a, b;
+        w->prank[p] = j;
         for (s = 0; s < ns; ++s) {
-            pn_real gw[3], dpos[3], *q = w->pq + (p * (size_t)ns + (size_t)s) * (size_t)d;
+            pn_real gw[3], dpos[3], *q = w->pq + (j * (size_t)ns + (size_t)s) * (size_t)d;
             pn__mpm_weight(w, p, w->slot[s], gw, dpos);
-            for (j = 0; j < d; ++j) {
-                q[j] = 0;
-                for (i = 0; i < d; ++i) q[j] += Fn[i * d + j] * gw[i];
+            for (b = 0; b < d; ++b) {
+                q[b] = 0;
+                for (a = 0; a < d; ++a) q[b] += Fn[a * d + b] * gw[a];
             }
-            w->pdof[p * (size_t)ns + (size_t)s] = w->dof[w->pbase[p] + w->slot_off[s]];
+            w->pdof[j * (size_t)ns + (size_t)s] = w->dof[w->pbase[p] + w->slot_off[s]];
         }
     }
     PN__OMP_FOR
@@ -1171,44 +1200,61 @@ static void pn__mpm_implicit_setup(pn_mpm_world *w) {
         int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->act[l], base, o, sl), b;
         for (b = 0; b < nb; ++b)
             for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s)
-                w->inc[e++] = w->order[s] * (size_t)ns + (size_t)sl[b];
+                w->inc[e++] = s * (size_t)ns + (size_t)sl[b];
     }
 }
 
-/* node vector out_k += sum_p pmat_p q_kp over node k's incidences (pmat = V dt P, so this
-   is dt V P F^nT grad w) */
-#define PN__MPM_GATHER(D)                                                                       \
-    static void pn__mpm_gather##D(const pn_mpm_world *w, size_t k, pn_real *out) {                           \
-        int i, j;                                                                               \
-        size_t e, ns = (size_t)w->ns;                                                           \
-        pn_real acc[D] = {0};                                                                   \
-        for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {                               \
-            size_t ps = w->inc[e];                                                              \
-            const pn_real *A = w->pmat + ps / ns * (D * D), *q = w->pq + ps * D;                \
-            for (i = 0; i < D; ++i)                                                             \
-                for (j = 0; j < D; ++j) acc[i] += A[i * D + j] * q[j];                          \
-        }                                                                                       \
-        for (i = 0; i < D; ++i) out[i] += acc[i];                                               \
+/* node vector out_k += sum_j pmat_j q_jk over node k's incidences (pmat by sorted index:
+   V dt P, so this is dt V P F^nT grad w) */
+/* (spelled out per dimension for the reason given at pn__mpm_push2; ns a constant, so
+   p = ps / ns is no division instruction) */
+static void pn__mpm_gather2(const pn_mpm_world *w, size_t k, pn_real *out) {
+    size_t e;
+    pn_real a0 = 0, a1 = 0;
+    for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
+        size_t ps = w->inc[e];
+        const pn_real *A = w->pmat + ps / 9 * 4, *q = w->pq + ps * 2; /* ps = j ns + s */
+        a0 += A[0] * q[0] + A[1] * q[1];
+        a1 += A[2] * q[0] + A[3] * q[1];
     }
-/* particle p's part of a Hessian product: pmat = V dt dP/dF : dF, dF = dt sum x_i q_ip^T */
-#define PN__MPM_HMUL(D)                                                                         \
-    static void pn__mpm_hmul##D(pn_mpm_world *w, size_t p, const pn_real *x, pn_real dt) {      \
-        pn_real dF[D * D], s = w->vol0[p] * dt, *out = w->pmat + p * (D * D);                   \
-        const pn_real *H = w->pH + p * (D * D * D * D);                                         \
-        int i, j;                                                                               \
-        pn__mpm_push##D(w, p, x, dt, NULL, dF);                                                 \
-        for (i = 0; i < D * D; ++i) {                                                           \
-            pn_real acc = 0;                                                                    \
-            for (j = 0; j < D * D; ++j) acc += H[i * D * D + j] * dF[j];                        \
-            out[i] = s * acc;                                                                   \
-        }                                                                                       \
+    out[0] += a0;
+    out[1] += a1;
+}
+static void pn__mpm_gather3(const pn_mpm_world *w, size_t k, pn_real *out) {
+    size_t e;
+    pn_real a0 = 0, a1 = 0, a2 = 0;
+    for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
+        size_t ps = w->inc[e];
+        const pn_real *A = w->pmat + ps / 27 * 9, *q = w->pq + ps * 3;
+        a0 += A[0] * q[0] + A[1] * q[1] + A[2] * q[2];
+        a1 += A[3] * q[0] + A[4] * q[1] + A[5] * q[2];
+        a2 += A[6] * q[0] + A[7] * q[1] + A[8] * q[2];
     }
-PN__MPM_GATHER(2)
-PN__MPM_GATHER(3)
-PN__MPM_HMUL(2)
-PN__MPM_HMUL(3)
-#undef PN__MPM_GATHER
-#undef PN__MPM_HMUL
+    out[0] += a0;
+    out[1] += a1;
+    out[2] += a2;
+}
+/* particle p's part of a Hessian product: pmat = V dt dP/dF : dF, dF = dt sum x_i q_ip^T
+   (rows summed in independent parts: one long chain of dependent additions per row is what
+   limited the 3D product) */
+static void pn__mpm_hmul2(pn_mpm_world *w, size_t j, const pn_real *x, pn_real dt) {
+    size_t p = w->order[j];
+    pn_real dF[4], s = w->vol0[p] * dt, *out = w->pmat + j * 4;
+    const pn_real *H = w->pH + p * 16;
+    int i;
+    pn__mpm_push2(w, j, x, dt, NULL, dF);
+    for (i = 0; i < 4; ++i, H += 4) out[i] = s * ((H[0] * dF[0] + H[1] * dF[1]) + (H[2] * dF[2] + H[3] * dF[3]));
+}
+static void pn__mpm_hmul3(pn_mpm_world *w, size_t j, const pn_real *x, pn_real dt) {
+    size_t p = w->order[j];
+    pn_real dF[9], s = w->vol0[p] * dt, *out = w->pmat + j * 9;
+    const pn_real *H = w->pH + p * 81;
+    int i;
+    pn__mpm_push3(w, j, x, dt, NULL, dF);
+    for (i = 0; i < 9; ++i, H += 9)
+        out[i] = s * ((H[0] * dF[0] + H[1] * dF[1] + H[2] * dF[2]) + (H[3] * dF[3] + H[4] * dF[4] + H[5] * dF[5]) +
+                      (H[6] * dF[6] + H[7] * dF[7] + H[8] * dF[8]));
+}
 static void pn__mpm_gather_pmat(const pn_mpm_world *w, size_t k, pn_real *out) {
     if (w->dim == 2) pn__mpm_gather2(w, k, out);
     else pn__mpm_gather3(w, k, out);
@@ -1234,8 +1280,8 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
         pn__mpm_push(w, p, v, dt, w->F + p * (size_t)dd, F);
         w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs > 1 ? H : NULL);
         w->pscal[p] = w->vol0[p] * psi;
-        if (with_derivs && w->pstat[p] == PN_OK) /* pmat = V dt P */
-            for (i = 0; i < dd; ++i) w->pmat[p * (size_t)dd + (size_t)i] = w->vol0[p] * dt * P[i];
+        if (with_derivs && w->pstat[p] == PN_OK) /* pmat (by sorted index) = V dt P */
+            for (i = 0; i < dd; ++i) w->pmat[w->prank[p] * (size_t)dd + (size_t)i] = w->vol0[p] * dt * P[i];
     }
     r = pn__mpm_first_error(w);
     if (r != PN_OK) {
@@ -1273,8 +1319,7 @@ static void pn__mpm_hess_vec(pn_mpm_world *w, const pn_real *x, pn_real dt, pn_r
     int d = w->dim;
     long l;
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n; ++l) {
-        if (!w->active[l]) continue;
+    for (l = 0; l < (long)w->start[w->nodes]; ++l) { /* the active particles, sorted */
         if (d == 2) pn__mpm_hmul2(w, (size_t)l, x, dt);
         else pn__mpm_hmul3(w, (size_t)l, x, dt);
     }
@@ -1301,7 +1346,7 @@ static void pn__mpm_diagonal(pn_mpm_world *w, pn_real dt) {
         pn_real *dg = w->diag + k * (size_t)d;
         for (i = 0; i < d; ++i) dg[i] = w->grid_m[k];
         for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
-            size_t ps = w->inc[e], p = ps / (size_t)w->ns;
+            size_t ps = w->inc[e], p = w->order[ps / (size_t)w->ns];
             const pn_real *H = w->pH + p * (size_t)(dd * dd), *q = w->pq + ps * (size_t)d;
             for (i = 0; i < d; ++i) {
                 pn_real acc = 0; /* sum_ac H[(i a),(i c)] q_a q_c, q = F^nT grad w */
