@@ -3,12 +3,15 @@
    Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
                     [--max-run-seconds S] [--filter S] [--references] [--out DIR]
+                    [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated, at most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
    --quick: 2D only (unless --dim), res 32, 2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2
    passes, sweep E 1e6 and 1e7. --filter S: the scenes' transfer filter time
    (pn_mpm_desc.filter_time_s; 0: plain APIC) instead of their default. --references: only
    the fair baseline, the reference and its check (how converged the reference is), no sweep.
+   --dts, --passes, --energies: only these implicit steps, fixed-point passes and energies
+   (lists of up to 8, comma separated) instead of the full grid; --no-sweep: skip the sweep.
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -75,6 +78,7 @@ typedef struct bench_cfg {
     int n_dts;
     const int *fps_iters; /* fixed-point passes                                    */
     int n_fps;
+    unsigned energy_mask; /* bit e: run energies_run[e] (bench_one)                 */
     const double *Es;     /* the sweep                                             */
     int n_Es;
     const char *out;
@@ -423,7 +427,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     for (i = 0; i < 3; ++i) bench_progress(out->name, dim, &out->runs[i]);
     /* 3. implicit */
     for (e = 0; e < n_energies && !cfg->refs_only; ++e)
-        for (i = 0; i < cfg->n_dts; ++i)
+        for (i = 0; i < cfg->n_dts && (cfg->energy_mask >> e & 1); ++i)
             for (j = 0; j < cfg->n_fps; ++j) {
                 r = &out->runs[out->n_runs++];
                 strcpy(r->role, "implicit");
@@ -681,7 +685,39 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
 
 static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
-                    "       [--max-run-seconds S] [--filter S] [--references] [--out DIR]\n");
+                    "       [--max-run-seconds S] [--filter S] [--references] [--out DIR]\n"
+                    "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n");
+}
+
+/* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
+static int parse_list(const char *v, double *out) {
+    int n = 0;
+    char *end;
+    while (n < 8) {
+        out[n] = strtod(v, &end);
+        if (end == v || !(out[n] > 0)) return 0;
+        ++n;
+        if (*end == 0) return n;
+        if (*end != ',') return 0;
+        v = end + 1;
+    }
+    return 0;
+}
+
+/* energies by name into a mask over bench_one's energies_run (pnet, lagged, dp); 0 if unknown */
+static unsigned parse_energies(const char *v) {
+    static const char *names[] = {"pnet", "lagged", "dp"};
+    unsigned mask = 0;
+    while (*v) {
+        size_t len = strcspn(v, ",");
+        int e, hit = 0;
+        for (e = 0; e < 3; ++e)
+            if (strlen(names[e]) == len && !strncmp(v, names[e], len)) mask |= 1u << e, hit = 1;
+        if (!hit) return 0;
+        v += len;
+        if (*v == ',') ++v;
+    }
+    return mask;
 }
 
 int main(int argc, char **argv) {
@@ -689,7 +725,10 @@ int main(int argc, char **argv) {
     static const int fp_full[] = {1, 2, 4}, fp_quick[] = {1, 2};
     static const double Es_full[] = {1e5, 1e6, 1e7, 1e8}, Es_quick[] = {1e6, 1e7};
     bench_cfg cfg;
-    int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0;
+    int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0, n_dts = 0, n_passes = 0, sweep = 1, bad = 0;
+    static double dts_arg[8], passes_arg[8];
+    static int passes_int[8];
+    unsigned mask = 7;
     double duration = 0;
     char path[1024];
     FILE *csv, *esw;
@@ -707,6 +746,7 @@ int main(int argc, char **argv) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) cfg.quick = 1;
         else if (!strcmp(a, "--references")) cfg.refs_only = 1;
+        else if (!strcmp(a, "--no-sweep")) sweep = 0;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
         else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
@@ -716,9 +756,12 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--max-run-seconds")) cfg.max_run_s = atof(v), ++k;
         else if (!strcmp(a, "--out")) cfg.out = v, ++k;
         else if (!strcmp(a, "--filter")) cfg.filter = atof(v), ++k;
+        else if (!strcmp(a, "--dts")) bad |= !(n_dts = parse_list(v, dts_arg)), ++k;
+        else if (!strcmp(a, "--passes")) bad |= !(n_passes = parse_list(v, passes_arg)), ++k;
+        else if (!strcmp(a, "--energies")) bad |= !(mask = parse_energies(v)), ++k;
         else { usage(); return 2; }
     }
-    if (only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16) {
+    if (bad || only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16) {
         usage();
         return 2;
     }
@@ -732,6 +775,10 @@ int main(int argc, char **argv) {
     cfg.n_dts = cfg.quick ? 2 : 3;
     cfg.fps_iters = cfg.quick ? fp_quick : fp_full;
     cfg.n_fps = cfg.quick ? 2 : 3;
+    if (n_dts) cfg.dts = dts_arg, cfg.n_dts = n_dts;
+    for (k = 0; k < n_passes; ++k) passes_int[k] = (int)passes_arg[k];
+    if (n_passes) cfg.fps_iters = passes_int, cfg.n_fps = n_passes;
+    cfg.energy_mask = mask;
     cfg.Es = cfg.quick ? Es_quick : Es_full;
     cfg.n_Es = cfg.quick ? 2 : 4;
     snprintf(path, sizeof path, "%s/bench_mpm.csv", cfg.out);
@@ -747,7 +794,7 @@ int main(int argc, char **argv) {
         }
     fclose(csv);
     snprintf(path, sizeof path, "%s/bench_mpm_esweep.csv", cfg.out);
-    if ((only < 0 || only == 0) && (!dim_only || dim_only == 2) && !cfg.refs_only) {
+    if ((only < 0 || only == 0) && (!dim_only || dim_only == 2) && !cfg.refs_only && sweep) {
         if (!(esw = fopen(path, "w"))) {
             fprintf(stderr, "bench_mpm: cannot write %s\n", path);
             return 1;
