@@ -134,7 +134,8 @@ typedef struct pn_mpm_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (PlasticityNet Eq. 10) [2]  */
     int newton_max;              /* Newton iterations per pass [50]                          */
     int cg_max;                  /* conjugate-gradient iterations per Newton step [500]      */
-    pn_real newton_tol;          /* stop when max |dv| < newton_tol dx / dt [1e-5]          */
+    pn_real newton_tol;          /* stop when max |dv| < newton_tol dx / dt [1e-5]: about
+                                    newton_tol dx of position error per step               */
     pn_real cg_rel_tol;          /* relative residual of the linear solve [1e-3]            */
     int contact_rounds;          /* solves per pass while separating contact changes its
                                     stick / slip / release set; 1: the set is corrected once
@@ -276,7 +277,10 @@ PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy e
        E(v) = 1/2 |v - v*|_M^2 + sum_p V_p Psi_p(F_p(v))
    by Newton with PSD-projected per-particle Hessians, Jacobi-preconditioned conjugate
    gradients filtered by the contact constraints, and a backtracking (Armijo) line search,
-   stopping when max |dv| < newton_tol dx / dt. Around it the fixed point on F0 = F(v) and the
+   stopping when max |dv| < newton_tol dx / dt (positions then carry about newton_tol dx of
+   solver error per step; long runs at small steps may want it tighter). F_p(v) = (I + dt
+   C_p(v)) F_p^n with C the APIC (MLS) velocity gradient of the explicit step, so the two
+   integrators share one discretization in space. Around it the fixed point on F0 = F(v) and the
    plastic state. Contact: sticky and slip hold velocity components at the obstacle's;
    separate holds the normal component while the contact pushes and sticks (all components
    held) or slides against the Coulomb force mu L t, L the normal impulse at the start of the
