@@ -4,6 +4,7 @@
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
                     [--max-run-seconds S] [--filter S] [--references] [--out DIR]
                     [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
+                    [--contact-rounds N]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated, at most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
    --quick: 2D only (unless --dim), res 32, 2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2
@@ -12,6 +13,8 @@
    the fair baseline, the reference and its check (how converged the reference is), no sweep.
    --dts, --passes, --energies: only these implicit steps, fixed-point passes and energies
    (lists of up to 8, comma separated) instead of the full grid; --no-sweep: skip the sweep.
+   --contact-rounds N: every implicit run with pn_mpm_implicit_desc.contact_rounds = N (up
+   to N solves per fixed-point pass while separating contact changes its set) [1].
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -79,6 +82,7 @@ typedef struct bench_cfg {
     const int *fps_iters; /* fixed-point passes                                    */
     int n_fps;
     unsigned energy_mask; /* bit e: run energies_run[e] (bench_one)                 */
+    int contact_rounds;   /* pn_mpm_implicit_desc.contact_rounds of implicit runs   */
     const double *Es;     /* the sweep                                             */
     int n_Es;
     const char *out;
@@ -146,8 +150,8 @@ static void bench_score(bench_run *r, int f, const double *a, const double *b, s
 
 /* Run scene s as r describes for `frames` frames. fields (frames x nodes, may be NULL) gets
    each frame's normalized mass field; ref (may be NULL) is the reference's, for the IoU. */
-static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, double max_run_s, double *fields,
-                            const double *ref) {
+static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, double max_run_s, int rounds,
+                            double *fields, const double *ref) {
     pn_ex_scene s = *s0;
     pn_mpm_world *w;
     pn_mpm_implicit_desc id;
@@ -174,6 +178,7 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     vmax = 2 * (s.kind == PN_EX_SNOWBALL ? s.speed_m_s : 0) + 2 * sqrt(2 * 9.81 * s.domain_m);
     memset(&id, 0, sizeof id);
     id.fixed_point_iters = r->fp;
+    id.contact_rounds = rounds;
     for (f = 0; f < frames; ++f) {
         double t0 = pn_ex_seconds(), c0 = (double)clock() / CLOCKS_PER_SEC;
         pn_result e = pn_ex_steps(w, r->implicit, r->dt, &id, per_frame, &r->tally);
@@ -231,7 +236,7 @@ static int bench_fair(const pn_ex_scene *s, int frames, bench_run *r, double *fi
         memset(r, 0, sizeof *r);
         strcpy(r->role, "fair");
         r->dt = frame_dt / (double)n;
-        bench_run_scene(s, r, frames, 0, fields, NULL);
+        bench_run_scene(s, r, frames, 0, 1, fields, NULL);
         fprintf(stderr, "    search dt %.4g: %s\n", r->dt, status_name(r));
         if (r->status == RUN_OK) return 1;
     }
@@ -414,14 +419,14 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     r = &out->runs[1];
     strcpy(r->role, "reference");
     r->dt = out->runs[0].dt / BENCH_REF_DIV;
-    bench_run_scene(&s, r, frames, 0, ref, NULL);
+    bench_run_scene(&s, r, frames, 0, 1, ref, NULL);
     if (r->status != RUN_OK) fprintf(stderr, "bench_mpm: the reference failed (%s)\n", status_name(r));
     bench_compare(r, ref, ref, nodes);
     bench_compare(&out->runs[0], tmp, ref, nodes);
     r = &out->runs[2];
     strcpy(r->role, "ref_check");
     r->dt = out->runs[0].dt / (2 * BENCH_REF_DIV);
-    bench_run_scene(&s, r, frames, 0, NULL, ref);
+    bench_run_scene(&s, r, frames, 0, 1, NULL, ref);
     out->ref_convergence = 1 - r->mm_mean;
     out->n_runs = 3;
     for (i = 0; i < 3; ++i) bench_progress(out->name, dim, &out->runs[i]);
@@ -435,7 +440,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
                 r->energy = energies_run[e];
                 r->dt = cfg->dts[i];
                 r->fp = cfg->fps_iters[j];
-                bench_run_scene(&s, r, frames, cfg->max_run_s, NULL, ref);
+                bench_run_scene(&s, r, frames, cfg->max_run_s, cfg->contact_rounds, NULL, ref);
                 bench_progress(out->name, dim, r);
             }
     fair_wps = wall_per_sim(&out->runs[0]);
@@ -479,7 +484,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
         w->imp.energy = PN_MPM_ENERGY_PNET;
         w->imp.dt = 1e-3;
         w->imp.fp = 1;
-        bench_run_scene(&s, &w->imp, frames, cfg->max_run_s, NULL, w->found ? fair : NULL);
+        bench_run_scene(&s, &w->imp, frames, cfg->max_run_s, cfg->contact_rounds, NULL, w->found ? fair : NULL);
         bench_progress("sand", 2, &w->fair);
         bench_progress("sand", 2, &w->imp);
         st = w->imp.tally.steps ? (double)w->imp.tally.steps : 1;
@@ -639,6 +644,9 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
                "steps whose line search failed / implicit steps retried as substeps. *max FP residual*: largest "
                "max_q |F0_new - F0| (not measured with one pass). Wall time from CLOCK_MONOTONIC.\n\n",
             cfg->res[2], cfg->res[3], cfg->duration[2], cfg->duration[3], BENCH_FPS, 100 * PN_EX_OCCUPIED);
+    if (cfg->contact_rounds != 1)
+        fprintf(f, "Implicit runs with up to %d contact solves per fixed-point pass (--contact-rounds).\n\n",
+                cfg->contact_rounds);
     for (i = 0; i < n_sc; ++i) {
         const bench_scene *s = &sc[i];
         double fair_wps = wall_per_sim(&s->runs[s->fair_index]);
@@ -686,7 +694,8 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
 static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR]\n"
-                    "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n");
+                    "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
+                    "       [--contact-rounds N]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -742,6 +751,7 @@ int main(int argc, char **argv) {
     cfg.duration[3] = 0.3;
     cfg.max_run_s = 120;
     cfg.filter = -1;
+    cfg.contact_rounds = 1;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) cfg.quick = 1;
@@ -759,6 +769,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--dts")) bad |= !(n_dts = parse_list(v, dts_arg)), ++k;
         else if (!strcmp(a, "--passes")) bad |= !(n_passes = parse_list(v, passes_arg)), ++k;
         else if (!strcmp(a, "--energies")) bad |= !(mask = parse_energies(v)), ++k;
+        else if (!strcmp(a, "--contact-rounds")) bad |= (cfg.contact_rounds = atoi(v)) < 1, ++k;
         else { usage(); return 2; }
     }
     if (bad || only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16) {

@@ -473,6 +473,7 @@ static const char *const pn_ex_walls[] = {"sticky", "slip", "separate"};
 
 typedef struct pn_ex_cli {
     int dim, implicit, fp, frames, fps, res, png, ply, quiet, boundary;
+    int rounds;                  /* --contact-rounds: pn_mpm_implicit_desc.contact_rounds   */
     int force_error;             /* --force-error: measure pn_mpm_stats.force_error        */
     double dt, E, friction, filter;  /* filter < 0: the scene's default                  */
     double regularizer;          /* PlasticityNet's w (0: 1, < 0: off)                     */
@@ -486,6 +487,7 @@ PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
     c->dim = 2;
     c->implicit = 1;
     c->fp = 1;
+    c->rounds = 1;
     c->frames = c->fps = 30;
     c->boundary = PN_MPM_BOUNDARY_SEPARATE;
     c->dt = 1e-3;
@@ -503,7 +505,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     if (!strcmp(a, "--quiet")) return c->quiet = 1;
     if (!strcmp(a, "--force-error")) return c->force_error = 1;
     if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--filter|--regularizer|"
-                                       "--dt|--fixed-point|--frames|--fps|--E|--res|--out|", a))
+                                       "--dt|--fixed-point|--contact-rounds|--frames|--fps|--E|--res|--out|", a))
         return 0;
     if (!v) return -1;
     if (!strcmp(a, "--dim")) c->dim = atoi(v);
@@ -516,6 +518,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     else if (!strcmp(a, "--regularizer")) c->regularizer = atof(v);
     else if (!strcmp(a, "--dt")) c->dt = atof(v);
     else if (!strcmp(a, "--fixed-point")) c->fp = atoi(v);
+    else if (!strcmp(a, "--contact-rounds")) c->rounds = atoi(v);
     else if (!strcmp(a, "--frames")) c->frames = atoi(v);
     else if (!strcmp(a, "--fps")) c->fps = atoi(v);
     else if (!strcmp(a, "--E")) c->E = atof(v);
@@ -528,7 +531,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
    from them. Returns 0 when a value is out of range. */
 PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
     if ((c->dim != 2 && c->dim != 3) || c->implicit < 0 || c->boundary > 2 || !(c->friction >= 0) ||
-        !(c->dt > 0) || c->fp < 1 || c->frames < 1 || c->fps < 1 || !(c->E >= 0) ||
+        !(c->dt > 0) || c->fp < 1 || c->rounds < 1 || c->frames < 1 || c->fps < 1 || !(c->E >= 0) ||
         (c->res && (c->res < 16 || c->res > 1024)) || !(c->filter >= 0 || c->filter == -1))
         return 0;
     if (c->filter >= 0) s->filter_s = c->filter;
@@ -540,11 +543,12 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
     return 1;
 }
 
-/* An example's whole run: frames of 1/fps s at dt_s (fp fixed-point passes when implicit),
+/* An example's whole run: frames of 1/fps s at dt_s (fp fixed-point passes of up to rounds
+   contact solves each when implicit),
    the outputs of pn_ex_frame, a progress line on stderr unless quiet; *wall_s gets the wall
    seconds. Returns 0 after a failure (said on stderr). */
 PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implicit, double dt_s, int fp,
-                                  int frames, int fps, const char *out, int png, int ply, int quiet,
+                                  int rounds, int frames, int fps, const char *out, int png, int ply, int quiet,
                                   int force_error, pn_ex_tally *tally, double *wall_s) {
     pn_mpm_implicit_desc id;
     long steps_per_frame = (long)(1.0 / fps / dt_s + 0.5);
@@ -552,6 +556,7 @@ PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implici
     int frame;
     memset(&id, 0, sizeof id);
     id.fixed_point_iters = fp;
+    id.contact_rounds = rounds;
     id.measure_force_error = force_error;
     memset(tally, 0, sizeof *tally);
     if (steps_per_frame < 1) steps_per_frame = 1;
@@ -602,7 +607,7 @@ PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, con
         return 0;
     }
     pn_ex_bounds(o->w, o->lo0, o->hi0);
-    if (!pn_ex_run(prog, o->w, c->implicit, c->dt, c->fp, c->frames, c->fps, c->out, c->png, c->ply, c->quiet,
+    if (!pn_ex_run(prog, o->w, c->implicit, c->dt, c->fp, c->rounds, c->frames, c->fps, c->out, c->png, c->ply, c->quiet,
                    c->force_error, &o->tally, &o->wall_s)) {
         pn_mpm_destroy(o->w);
         o->w = NULL;

@@ -4,7 +4,7 @@
    the one of shared/design/VALIDATION.md (examples/pn_example.h).
    Build: cc -std=c99 -O2 examples/sand_column.c -lm -o sand_column
    Usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|dp|elastic]
-                      [--dt S] [--fixed-point N] [--frames N] [--fps N] [--aspect A] [--E PA]
+                      [--dt S] [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--aspect A] [--E PA]
                       [--res N] [--boundary sticky|slip|separate] [--friction MU]
                       [--filter S] [--regularizer W] [--force-error] [--out DIR] [--png] [--ply] [--quiet]
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps, a = 2,
@@ -20,7 +20,7 @@
 
 static void usage(void) {
     fprintf(stderr, "usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|dp|elastic]\n"
-                    "       [--dt S] [--fixed-point N] [--frames N] [--fps N] [--aspect A] [--E PA] [--res N]\n"
+                    "       [--dt S] [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--aspect A] [--E PA] [--res N]\n"
                     "       [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
                     "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n");
 }
@@ -54,12 +54,12 @@ int main(int argc, char **argv) {
     for (i = 0; i < c.dim; ++i) /* front travel along the horizontal axes, either side */
         if (i != 1) runout = fmax(runout, fmax(o.hi[i] - o.hi0[i], o.lo0[i] - o.lo[i]));
     printf("{\"scene\": \"sand_column\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
-           "\"fixed_point_iters\": %d, \"E\": %g, \"aspect\": %g, \"boundary\": \"%s\", \"friction\": %g, "
+           "\"fixed_point_iters\": %d, \"contact_rounds\": %d, \"E\": %g, \"aspect\": %g, \"boundary\": \"%s\", \"friction\": %g, "
            "\"res\": %d, \"particles\": %lu, \"frames\": %d, \"simulated_s\": %.4f, \"wall_s\": %.3f, \"steps\": %ld, "
            "\"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
            "\"line_search_failures\": %ld, \"runout_m\": %.4f, "
            "\"final_height_m\": %.4f, \"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
-           c.dim, c.implicit ? "implicit" : "explicit", c.implicit ? energies[energy] : "return_mapping", c.dt, c.fp,
+           c.dim, c.implicit ? "implicit" : "explicit", c.implicit ? energies[energy] : "return_mapping", c.dt, c.fp, c.rounds,
            sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
            (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
            (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,

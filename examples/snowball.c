@@ -4,7 +4,7 @@
    no exact energy). The scene is the one of shared/design/VALIDATION.md (examples/pn_example.h).
    Build: cc -std=c99 -O2 examples/snowball.c -lm -o snowball
    Usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]
-                   [--fixed-point N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S]
+                   [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S]
                    [--angle DEG] [--h0 LOGJP] [--boundary sticky|slip|separate] [--friction MU]
                    [--filter S] [--regularizer W] [--force-error] [--out DIR] [--png] [--ply] [--quiet]
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps,
@@ -22,7 +22,7 @@
 
 static void usage(void) {
     fprintf(stderr, "usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]\n"
-                    "       [--fixed-point N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S] [--angle DEG]\n"
+                    "       [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S] [--angle DEG]\n"
                     "       [--h0 LOGJP] [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
                     "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n");
 }
@@ -56,13 +56,13 @@ int main(int argc, char **argv) {
     sc.energy = lagged ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_PNET;
     if (!pn_ex_simulate("snowball", &c, &sc, &o)) return 1;
     printf("{\"scene\": \"snowball\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
-           "\"fixed_point_iters\": %d, \"E\": %g, \"speed\": %g, \"angle\": %g, \"h0\": %g, \"boundary\": \"%s\", "
+           "\"fixed_point_iters\": %d, \"contact_rounds\": %d, \"E\": %g, \"speed\": %g, \"angle\": %g, \"h0\": %g, \"boundary\": \"%s\", "
            "\"friction\": %g, \"res\": %d, \"particles\": %lu, \"frames\": %d, \"simulated_s\": %.4f, \"wall_s\": %.3f, "
            "\"steps\": %ld, \"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
            "\"line_search_failures\": %ld, \"spread_m\": %.4f, \"runout_m\": %.4f, \"final_height_m\": %.4f, "
            "\"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
            c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "return_mapping" : lagged ? "lagged" : "pnet", c.dt,
-           c.fp, sc.E_pa, speed, angle, h0, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
+           c.fp, c.rounds, sc.E_pa, speed, angle, h0, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
            (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
            (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,
            o.tally.line_search_failures, o.hi[0] - o.lo[0],
