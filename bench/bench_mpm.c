@@ -4,7 +4,7 @@
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
                     [--max-run-seconds S] [--filter S] [--references] [--out DIR]
                     [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
-                    [--contact-rounds N]
+                    [--contact-rounds N] [--cg-forcing X] [--no-hardening]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated, at most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
    --quick: 2D only (unless --dim), res 32, 2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2
@@ -15,6 +15,9 @@
    (lists of up to 8, comma separated) instead of the full grid; --no-sweep: skip the sweep.
    --contact-rounds N: every implicit run with pn_mpm_implicit_desc.contact_rounds = N (up
    to N solves per fixed-point pass while separating contact changes its set) [1].
+   --cg-forcing X: pn_mpm_implicit_desc.cg_forcing_max (the loosest CG residual of the
+   Eisenstat-Walker forcing, e.g. 0.5) [0: off]. --no-hardening: the snow's Cam-Clay without
+   hardening (pn_ex_scene.no_hardening), to see what its fracture does to the reference.
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -23,7 +26,9 @@
       particle leaving the domain, max particle speed <= 2 (v0 + sqrt(2 g L)) and kinetic
       energy <= 1.5 (initial kinetic + potential energy above the floor);
    2. the explicit reference at a quarter of that step, and the same at an eighth: how far
-      their mean min/max mass IoU is from 1 says how converged the reference is;
+      their mean min/max mass IoU is from 1 says how converged the reference is; and the
+      reference's step with E larger by 1e-6: how far that is from 1 says how chaotic the
+      scene is, a floor under any integrator's distance from the reference;
    3. implicit at dt 1e-4, 1e-3, 1e-2 s with 1, 2 and 4 fixed-point passes, with the
       PlasticityNet energy and with the lagged energy, and for sand also with the frozen-yield
       Drucker-Prager energy (pn_dp_energy).
@@ -47,13 +52,14 @@
 #define BENCH_FPS 25 /* 0.04 s frames: 1e-4, 1e-3 and 1e-2 s all divide them */
 #define BENCH_MAX_FRAMES 1000
 #define BENCH_MAX_RUNS 64
+#define BENCH_PERTURB 1e-6 /* relative change of E for the reference's sensitivity */
 #define BENCH_REF_DIV 4 /* the reference runs at the fair step / 4, its check at / 8 */
 
 typedef enum { RUN_OK = 0, RUN_STEP_FAILED, RUN_UNBOUNDED, RUN_TIMEOUT } run_status;
 
 /* one row: what was run and what it gave */
 typedef struct bench_run {
-    char role[16];        /* reference, ref_check, fair, implicit                   */
+    char role[16];        /* reference, ref_check, ref_perturbed, fair, implicit    */
     int implicit, fp;     /* fixed-point passes (implicit)                          */
     pn_mpm_energy energy; /* implicit only                                          */
     double dt;
@@ -77,12 +83,14 @@ typedef struct bench_cfg {
     int quick;
     int refs_only;        /* only the fair baseline, the reference and its check     */
     double filter;        /* the scenes' transfer filter time (< 0: their default)  */
+    int no_hardening;     /* the snow without Cam-Clay hardening                    */
     const double *dts;    /* implicit steps                                        */
     int n_dts;
     const int *fps_iters; /* fixed-point passes                                    */
     int n_fps;
     unsigned energy_mask; /* bit e: run energies_run[e] (bench_one)                 */
-    int contact_rounds;   /* pn_mpm_implicit_desc.contact_rounds of implicit runs   */
+    pn_mpm_implicit_desc solver; /* implicit runs: contact_rounds, cg_forcing_max;
+                                    fixed_point_iters is set per run              */
     const double *Es;     /* the sweep                                             */
     int n_Es;
     const char *out;
@@ -150,8 +158,8 @@ static void bench_score(bench_run *r, int f, const double *a, const double *b, s
 
 /* Run scene s as r describes for `frames` frames. fields (frames x nodes, may be NULL) gets
    each frame's normalized mass field; ref (may be NULL) is the reference's, for the IoU. */
-static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, double max_run_s, int rounds,
-                            double *fields, const double *ref) {
+static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, double max_run_s,
+                            const pn_mpm_implicit_desc *solver, double *fields, const double *ref) {
     pn_ex_scene s = *s0;
     pn_mpm_world *w;
     pn_mpm_implicit_desc id;
@@ -177,8 +185,8 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     energies(w, pn_ex_scene_floor(&s), &kin0, &pot0);
     vmax = 2 * (s.kind == PN_EX_SNOWBALL ? s.speed_m_s : 0) + 2 * sqrt(2 * 9.81 * s.domain_m);
     memset(&id, 0, sizeof id);
+    if (solver) id = *solver;
     id.fixed_point_iters = r->fp;
-    id.contact_rounds = rounds;
     for (f = 0; f < frames; ++f) {
         double t0 = pn_ex_seconds(), c0 = (double)clock() / CLOCKS_PER_SEC;
         pn_result e = pn_ex_steps(w, r->implicit, r->dt, &id, per_frame, &r->tally);
@@ -236,7 +244,7 @@ static int bench_fair(const pn_ex_scene *s, int frames, bench_run *r, double *fi
         memset(r, 0, sizeof *r);
         strcpy(r->role, "fair");
         r->dt = frame_dt / (double)n;
-        bench_run_scene(s, r, frames, 0, 1, fields, NULL);
+        bench_run_scene(s, r, frames, 0, NULL, fields, NULL);
         fprintf(stderr, "    search dt %.4g: %s\n", r->dt, status_name(r));
         if (r->status == RUN_OK) return 1;
     }
@@ -371,10 +379,11 @@ typedef struct bench_scene {
     bench_run runs[BENCH_MAX_RUNS];
     int n_runs, fair_index;
     double ref_convergence; /* 1 - mean min/max IoU(reference at dt/2, reference)       */
+    double ref_sensitivity; /* 1 - mean min/max IoU(reference with E (1 + BENCH_PERTURB)) */
 } bench_scene;
 
 static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, bench_scene *out, FILE *csv) {
-    pn_ex_scene s;
+    pn_ex_scene s, sp;
     int frames, i, j, e, k;
     size_t nodes;
     double *ref, *tmp, fair_wps;
@@ -386,6 +395,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
     if (cfg->filter >= 0) s.filter_s = cfg->filter;
+    s.no_hardening = cfg->no_hardening && kind == PN_EX_SNOWBALL;
     frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5);
     if (frames < 1) frames = 1;
     if (frames > BENCH_MAX_FRAMES) frames = BENCH_MAX_FRAMES;
@@ -419,17 +429,27 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     r = &out->runs[1];
     strcpy(r->role, "reference");
     r->dt = out->runs[0].dt / BENCH_REF_DIV;
-    bench_run_scene(&s, r, frames, 0, 1, ref, NULL);
+    bench_run_scene(&s, r, frames, 0, NULL, ref, NULL);
     if (r->status != RUN_OK) fprintf(stderr, "bench_mpm: the reference failed (%s)\n", status_name(r));
     bench_compare(r, ref, ref, nodes);
     bench_compare(&out->runs[0], tmp, ref, nodes);
     r = &out->runs[2];
     strcpy(r->role, "ref_check");
     r->dt = out->runs[0].dt / (2 * BENCH_REF_DIV);
-    bench_run_scene(&s, r, frames, 0, 1, NULL, ref);
+    bench_run_scene(&s, r, frames, 0, NULL, NULL, ref);
     out->ref_convergence = 1 - r->mm_mean;
-    out->n_runs = 3;
-    for (i = 0; i < 3; ++i) bench_progress(out->name, dim, &out->runs[i]);
+    /* the reference's step with E off by BENCH_PERTURB: a chaotic scene (one that fragments)
+       loses IoU to a change far below any measurement, and then no integrator can score
+       near 1 against it */
+    r = &out->runs[3];
+    strcpy(r->role, "ref_perturbed");
+    r->dt = out->runs[1].dt;
+    sp = s;
+    sp.E_pa *= 1 + BENCH_PERTURB;
+    bench_run_scene(&sp, r, frames, 0, NULL, NULL, ref);
+    out->ref_sensitivity = 1 - r->mm_mean;
+    out->n_runs = 4;
+    for (i = 0; i < 4; ++i) bench_progress(out->name, dim, &out->runs[i]);
     /* 3. implicit */
     for (e = 0; e < n_energies && !cfg->refs_only; ++e)
         for (i = 0; i < cfg->n_dts && (cfg->energy_mask >> e & 1); ++i)
@@ -440,7 +460,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
                 r->energy = energies_run[e];
                 r->dt = cfg->dts[i];
                 r->fp = cfg->fps_iters[j];
-                bench_run_scene(&s, r, frames, cfg->max_run_s, cfg->contact_rounds, NULL, ref);
+                bench_run_scene(&s, r, frames, cfg->max_run_s, &cfg->solver, NULL, ref);
                 bench_progress(out->name, dim, r);
             }
     fair_wps = wall_per_sim(&out->runs[0]);
@@ -484,7 +504,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
         w->imp.energy = PN_MPM_ENERGY_PNET;
         w->imp.dt = 1e-3;
         w->imp.fp = 1;
-        bench_run_scene(&s, &w->imp, frames, cfg->max_run_s, cfg->contact_rounds, NULL, w->found ? fair : NULL);
+        bench_run_scene(&s, &w->imp, frames, cfg->max_run_s, &cfg->solver, NULL, w->found ? fair : NULL);
         bench_progress("sand", 2, &w->fair);
         bench_progress("sand", 2, &w->imp);
         st = w->imp.tally.steps ? (double)w->imp.tally.steps : 1;
@@ -644,9 +664,13 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
                "steps whose line search failed / implicit steps retried as substeps. *max FP residual*: largest "
                "max_q |F0_new - F0| (not measured with one pass). Wall time from CLOCK_MONOTONIC.\n\n",
             cfg->res[2], cfg->res[3], cfg->duration[2], cfg->duration[3], BENCH_FPS, 100 * PN_EX_OCCUPIED);
-    if (cfg->contact_rounds != 1)
+    if (cfg->solver.contact_rounds != 1)
         fprintf(f, "Implicit runs with up to %d contact solves per fixed-point pass (--contact-rounds).\n\n",
-                cfg->contact_rounds);
+                cfg->solver.contact_rounds);
+    if (cfg->no_hardening) fprintf(f, "Snow without Cam-Clay hardening (--no-hardening).\n\n");
+    if (cfg->solver.cg_forcing_max != 0)
+        fprintf(f, "Implicit runs with pn_mpm_implicit_desc.cg_forcing_max = %g (--cg-forcing).\n\n",
+                (double)cfg->solver.cg_forcing_max);
     for (i = 0; i < n_sc; ++i) {
         const bench_scene *s = &sc[i];
         double fair_wps = wall_per_sim(&s->runs[s->fair_index]);
@@ -655,10 +679,10 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
             continue;
         }
         fprintf(f, "**%s %dD** (%lu particles): reference = explicit at dt %.3g s (fair step / %d); halving it "
-                   "moves the mean min/max IoU %.4f from 1 (soft: %.3f against the reference's own %.3f). Fair "
-                   "explicit baseline: dt %.3g s.%s\n\n",
+                   "moves the mean min/max IoU %.4f from 1 (soft: %.3f against the reference's own %.3f); E off by "
+                   "%g at the same step moves it %.4f. Fair explicit baseline: dt %.3g s.%s\n\n",
                 s->name, s->dim, (unsigned long)s->runs[0].particles, s->runs[1].dt, BENCH_REF_DIV, s->ref_convergence,
-                s->runs[2].iou_mean, s->runs[1].iou_mean, s->runs[0].dt,
+                s->runs[2].iou_mean, s->runs[1].iou_mean, BENCH_PERTURB, s->ref_sensitivity, s->runs[0].dt,
                 s->runs[1].status == RUN_OK ? "" : " **The reference itself failed: the IoUs are meaningless.**");
         fprintf(f, "| scene | dim | role | integrator | energy | dt (s) | FP iters | soft IoU mean / min | "
                    "min/max IoU mean / min | binary IoU | wall s / sim s | x fair | it/step N / CG / FP | "
@@ -695,7 +719,7 @@ static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
-                    "       [--contact-rounds N]\n");
+                    "       [--contact-rounds N] [--cg-forcing X] [--no-hardening]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -751,12 +775,13 @@ int main(int argc, char **argv) {
     cfg.duration[3] = 0.3;
     cfg.max_run_s = 120;
     cfg.filter = -1;
-    cfg.contact_rounds = 1;
+    cfg.solver.contact_rounds = 1;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) cfg.quick = 1;
         else if (!strcmp(a, "--references")) cfg.refs_only = 1;
         else if (!strcmp(a, "--no-sweep")) sweep = 0;
+        else if (!strcmp(a, "--no-hardening")) cfg.no_hardening = 1;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
         else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
@@ -769,7 +794,8 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--dts")) bad |= !(n_dts = parse_list(v, dts_arg)), ++k;
         else if (!strcmp(a, "--passes")) bad |= !(n_passes = parse_list(v, passes_arg)), ++k;
         else if (!strcmp(a, "--energies")) bad |= !(mask = parse_energies(v)), ++k;
-        else if (!strcmp(a, "--contact-rounds")) bad |= (cfg.contact_rounds = atoi(v)) < 1, ++k;
+        else if (!strcmp(a, "--contact-rounds")) bad |= (cfg.solver.contact_rounds = atoi(v)) < 1, ++k;
+        else if (!strcmp(a, "--cg-forcing")) bad |= !((cfg.solver.cg_forcing_max = (pn_real)atof(v)) >= 0 && cfg.solver.cg_forcing_max < 1), ++k;
         else { usage(); return 2; }
     }
     if (bad || only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16) {

@@ -217,6 +217,7 @@ typedef struct pn_ex_scene {
     double radius_m;             /* snowball: [0.1 in 2D, 0.08 in 3D]                       */
     double speed_m_s, angle_deg; /* snowball: throw speed [3] and angle below horizontal [45] */
     double h0;                   /* snowball: initial log J_p [-0.01]                       */
+    int no_hardening;            /* snowball: Cam-Clay with h held (no hardening) [0]        */
 } pn_ex_scene;
 
 /* Fill s with the defaults above for a scene kind and dimension. */
@@ -320,6 +321,7 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
         *why = "bad Young's modulus";
         return r;
     }
+    if (s->no_hardening) m.camclay_hardening = 0;
     n = pn_ex__lattice(s, NULL, 0);
     if (n == 0) {
         *why = "the scene has no particles (size below half a cell)";
@@ -472,9 +474,9 @@ PN_EX_UNUSED static int pn_ex_frame(const char *prog, pn_mpm_world *w, int impli
 static const char *const pn_ex_walls[] = {"sticky", "slip", "separate"};
 
 typedef struct pn_ex_cli {
-    int dim, implicit, fp, frames, fps, res, png, ply, quiet, boundary;
-    int rounds;                  /* --contact-rounds: pn_mpm_implicit_desc.contact_rounds   */
-    int force_error;             /* --force-error: measure pn_mpm_stats.force_error        */
+    int dim, implicit, frames, fps, res, png, ply, quiet, boundary;
+    pn_mpm_implicit_desc solver; /* --fixed-point, --contact-rounds, --newton-tol, --cg-tol,
+                                    --cg-forcing, --force-error                            */
     double dt, E, friction, filter;  /* filter < 0: the scene's default                  */
     double regularizer;          /* PlasticityNet's w (0: 1, < 0: off)                     */
     const char *energy, *out;    /* the energy's name as given; the example maps it        */
@@ -486,8 +488,8 @@ PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
     memset(c, 0, sizeof *c);
     c->dim = 2;
     c->implicit = 1;
-    c->fp = 1;
-    c->rounds = 1;
+    c->solver.fixed_point_iters = 1;
+    c->solver.contact_rounds = 1;
     c->frames = c->fps = 30;
     c->boundary = PN_MPM_BOUNDARY_SEPARATE;
     c->dt = 1e-3;
@@ -503,9 +505,10 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     if (!strcmp(a, "--png")) return c->png = 1;
     if (!strcmp(a, "--ply")) return c->ply = 1;
     if (!strcmp(a, "--quiet")) return c->quiet = 1;
-    if (!strcmp(a, "--force-error")) return c->force_error = 1;
+    if (!strcmp(a, "--force-error")) return c->solver.measure_force_error = 1;
     if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--filter|--regularizer|"
-                                       "--dt|--fixed-point|--contact-rounds|--frames|--fps|--E|--res|--out|", a))
+                                       "--dt|--fixed-point|--contact-rounds|--newton-tol|--cg-tol|--cg-forcing|"
+                                       "--frames|--fps|--E|--res|--out|", a))
         return 0;
     if (!v) return -1;
     if (!strcmp(a, "--dim")) c->dim = atoi(v);
@@ -517,8 +520,11 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
     else if (!strcmp(a, "--filter")) c->filter = atof(v);
     else if (!strcmp(a, "--regularizer")) c->regularizer = atof(v);
     else if (!strcmp(a, "--dt")) c->dt = atof(v);
-    else if (!strcmp(a, "--fixed-point")) c->fp = atoi(v);
-    else if (!strcmp(a, "--contact-rounds")) c->rounds = atoi(v);
+    else if (!strcmp(a, "--fixed-point")) c->solver.fixed_point_iters = atoi(v);
+    else if (!strcmp(a, "--contact-rounds")) c->solver.contact_rounds = atoi(v);
+    else if (!strcmp(a, "--newton-tol")) c->solver.newton_tol = (pn_real)atof(v);
+    else if (!strcmp(a, "--cg-tol")) c->solver.cg_rel_tol = (pn_real)atof(v);
+    else if (!strcmp(a, "--cg-forcing")) c->solver.cg_forcing_max = (pn_real)atof(v);
     else if (!strcmp(a, "--frames")) c->frames = atoi(v);
     else if (!strcmp(a, "--fps")) c->fps = atoi(v);
     else if (!strcmp(a, "--E")) c->E = atof(v);
@@ -531,7 +537,9 @@ PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *
    from them. Returns 0 when a value is out of range. */
 PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
     if ((c->dim != 2 && c->dim != 3) || c->implicit < 0 || c->boundary > 2 || !(c->friction >= 0) ||
-        !(c->dt > 0) || c->fp < 1 || c->rounds < 1 || c->frames < 1 || c->fps < 1 || !(c->E >= 0) ||
+        !(c->dt > 0) || c->solver.fixed_point_iters < 1 || c->solver.contact_rounds < 1 || !(c->solver.newton_tol >= 0) ||
+        !(c->solver.cg_rel_tol >= 0 && c->solver.cg_rel_tol < 1) || !(c->solver.cg_forcing_max >= 0 && c->solver.cg_forcing_max < 1) || c->frames < 1 ||
+        c->fps < 1 || !(c->E >= 0) ||
         (c->res && (c->res < 16 || c->res > 1024)) || !(c->filter >= 0 || c->filter == -1))
         return 0;
     if (c->filter >= 0) s->filter_s = c->filter;
@@ -543,25 +551,19 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
     return 1;
 }
 
-/* An example's whole run: frames of 1/fps s at dt_s (fp fixed-point passes of up to rounds
-   contact solves each when implicit),
+/* An example's whole run: frames of 1/fps s at dt_s (implicit steps with the settings id),
    the outputs of pn_ex_frame, a progress line on stderr unless quiet; *wall_s gets the wall
    seconds. Returns 0 after a failure (said on stderr). */
-PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implicit, double dt_s, int fp,
-                                  int rounds, int frames, int fps, const char *out, int png, int ply, int quiet,
-                                  int force_error, pn_ex_tally *tally, double *wall_s) {
-    pn_mpm_implicit_desc id;
+PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implicit, double dt_s,
+                                  const pn_mpm_implicit_desc *id, int frames, int fps, const char *out, int png,
+                                  int ply, int quiet, pn_ex_tally *tally, double *wall_s) {
     long steps_per_frame = (long)(1.0 / fps / dt_s + 0.5);
     double t0 = pn_ex_seconds();
     int frame;
-    memset(&id, 0, sizeof id);
-    id.fixed_point_iters = fp;
-    id.contact_rounds = rounds;
-    id.measure_force_error = force_error;
     memset(tally, 0, sizeof *tally);
     if (steps_per_frame < 1) steps_per_frame = 1;
     for (frame = 1; frame <= frames; ++frame) {
-        if (!pn_ex_frame(prog, w, implicit, dt_s, &id, steps_per_frame, tally, out, frame, png, ply)) return 0;
+        if (!pn_ex_frame(prog, w, implicit, dt_s, id, steps_per_frame, tally, out, frame, png, ply)) return 0;
         *wall_s = pn_ex_seconds() - t0;
         if (!quiet)
             fprintf(stderr, "\rframe %d/%d  t = %.3f s  wall %.1f s  Newton/step %.1f  CG/step %.0f   ", frame, frames,
@@ -607,8 +609,8 @@ PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, con
         return 0;
     }
     pn_ex_bounds(o->w, o->lo0, o->hi0);
-    if (!pn_ex_run(prog, o->w, c->implicit, c->dt, c->fp, c->rounds, c->frames, c->fps, c->out, c->png, c->ply, c->quiet,
-                   c->force_error, &o->tally, &o->wall_s)) {
+    if (!pn_ex_run(prog, o->w, c->implicit, c->dt, &c->solver, c->frames, c->fps, c->out, c->png, c->ply, c->quiet,
+                   &o->tally, &o->wall_s)) {
         pn_mpm_destroy(o->w);
         o->w = NULL;
         return 0;

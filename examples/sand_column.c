@@ -7,6 +7,7 @@
                       [--dt S] [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--aspect A] [--E PA]
                       [--res N] [--boundary sticky|slip|separate] [--friction MU]
                       [--filter S] [--regularizer W] [--force-error] [--out DIR] [--png] [--ply] [--quiet]
+                      [--newton-tol X] [--cg-tol X] [--cg-forcing X] (pn_mpm_implicit_desc)
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps, a = 2,
    E = 1e7 Pa, res 64 (2D) / 24 (3D) cells over 1 m (2D) / 0.5 m (3D), walls separate with
    Coulomb friction 0.5, transfer filter time 2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC),
@@ -22,7 +23,8 @@ static void usage(void) {
     fprintf(stderr, "usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|dp|elastic]\n"
                     "       [--dt S] [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--aspect A] [--E PA] [--res N]\n"
                     "       [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
-                    "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n");
+                    "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n"
+                    "       [--newton-tol X] [--cg-tol X] [--cg-forcing X] (pn_mpm_implicit_desc; 0: its default)\n");
 }
 
 int main(int argc, char **argv) {
@@ -59,13 +61,13 @@ int main(int argc, char **argv) {
            "\"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
            "\"line_search_failures\": %ld, \"runout_m\": %.4f, "
            "\"final_height_m\": %.4f, \"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
-           c.dim, c.implicit ? "implicit" : "explicit", c.implicit ? energies[energy] : "return_mapping", c.dt, c.fp, c.rounds,
+           c.dim, c.implicit ? "implicit" : "explicit", c.implicit ? energies[energy] : "return_mapping", c.dt, c.solver.fixed_point_iters, c.solver.contact_rounds,
            sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
            (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
            (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,
            o.tally.line_search_failures, runout, o.hi[1] - pn_ex_scene_floor(&sc), o.tally.max_fixed_point_residual,
            (unsigned long)o.w->left_total);
-    pn_ex_json_end(&o.tally, c.force_error && c.implicit);
+    pn_ex_json_end(&o.tally, c.solver.measure_force_error && c.implicit);
     pn_mpm_destroy(o.w);
     return 0;
 }

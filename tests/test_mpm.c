@@ -801,6 +801,43 @@ PN_TEST(mpm_line_search_descends) {
     }
 }
 
+/* Eisenstat-Walker forcing (pn_mpm_implicit_desc.cg_forcing_max) only changes how the
+   Newton iterates get to the minimum: a sand column on a Coulomb floor with the frozen-yield
+   Drucker-Prager energy (kinks, where the linear model often fails) ends where every solve
+   to cg_rel_tol puts it, to the Newton tolerance, with looser solves on the way. */
+PN_TEST(mpm_newton_forcing) {
+    pn_mpm_world *w[2];
+    double lo[2] = {0.4, 3.0 / 32}, sz[2] = {0.12, 0.24}, worst = 0;
+    long cg[2] = {0, 0}, newton[2] = {0, 0};
+    int g, k, s;
+    size_t n = 0, p;
+    for (k = 0; k < 2; ++k) {
+        pn_mpm_implicit_desc id;
+        pn_mpm_stats st;
+        w[k] = t_mpm_sand_world(32, 0.5, &g);
+        PN_CHECK(w[k] != NULL);
+        if (!w[k]) return;
+        n = t_mpm_block(w[k], g, lo, sz, NULL);
+        PN_CHECK(pn_mpm_group_set_energy(w[k], g, PN_MPM_ENERGY_DP, NULL) == PN_OK);
+        memset(&id, 0, sizeof id);
+        id.fixed_point_iters = 1;
+        id.newton_tol = 1e-9;
+        id.cg_forcing_max = k ? 0 : 0.5; /* 0: off, the default */
+        for (s = 0; s < 100; ++s) {
+            PN_CHECK(pn_mpm_step_implicit(w[k], 1e-3, &id, &st) == PN_OK);
+            cg[k] += st.cg_iters;
+            newton[k] += st.newton_iters;
+        }
+    }
+    for (p = 0; p < 2 * n; ++p) worst = fmax(worst, fabs(w[0]->x[p] - w[1]->x[p]));
+    PN_CHECK_LE(worst * 32, 1e-5); /* in cells: 100 steps of 1e-9 dx, with room for the kinks */
+    PN_CHECK(cg[0] * newton[1] < cg[1] * newton[0]); /* looser solves: fewer CG per Newton step */
+    PN_REPORT("0.1 s: positions agree to %.1e dx; Newton / CG iterations %ld / %ld with forcing, %ld / %ld without",
+              worst * 32, newton[0], cg[0], newton[1], cg[1]);
+    pn_mpm_destroy(w[0]);
+    pn_mpm_destroy(w[1]);
+}
+
 static const pn_test_case pn_tests_mpm[] = {
     {"mpm_transfer_conserves_mass_momentum", mpm_transfer_conserves_mass_momentum},
     {"mpm_transfer_filter_per_second", mpm_transfer_filter_per_second},
@@ -819,4 +856,5 @@ static const pn_test_case pn_tests_mpm[] = {
     {"mpm_colliders", mpm_colliders},
     {"mpm_implicit_fallback", mpm_implicit_fallback},
     {"mpm_line_search_descends", mpm_line_search_descends},
+    {"mpm_newton_forcing", mpm_newton_forcing},
 };
