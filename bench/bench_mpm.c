@@ -4,7 +4,7 @@
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
                     [--max-run-seconds S] [--filter S] [--references] [--out DIR]
                     [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
-                    [--contact-rounds N] [--cg-forcing X] [--no-hardening]
+                    [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated, at most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
    --quick: 2D only (unless --dim), res 32, 2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2
@@ -18,6 +18,10 @@
    --cg-forcing X: pn_mpm_implicit_desc.cg_forcing_max (the loosest CG residual of the
    Eisenstat-Walker forcing, e.g. 0.5) [0: off]. --no-hardening: the snow's Cam-Clay without
    hardening (pn_ex_scene.no_hardening), to see what its fracture does to the reference.
+   --cost: instead of the runs, DIR/bench_mpm_cost.md: per step, the fair explicit step, the
+   least an implicit step at 1e-3 s can cost (one Newton and one CG iteration), each further
+   CG iteration, and a real step, against the budget VALIDATION.md's time bar leaves a step
+   (sand: half the fair explicit time, snow: the same).
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -470,6 +474,98 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     free(tmp);
 }
 
+/* ---- what an implicit step costs (--cost) ------------------------------------------------ */
+
+#define COST_REPS 3   /* each timing: the least of this many repeats (the machine is noisy) */
+#define COST_STEPS 40 /* steps per timing                                               */
+
+/* wall ms per call of one step of w (explicit, or implicit with id at dt); the least over
+   COST_REPS blocks of COST_STEPS; failing implicit steps leave w as it was (measured again) */
+static double cost_ms(pn_mpm_world *w, int implicit, double dt, const pn_mpm_implicit_desc *id, pn_ex_tally *t) {
+    double best = 1e300;
+    int rep, k;
+    for (rep = 0; rep < COST_REPS; ++rep) {
+        double t0 = pn_ex_seconds();
+        for (k = 0; k < COST_STEPS; ++k) {
+            pn_mpm_stats st;
+            pn_result r = implicit ? pn_mpm_step_implicit(w, (pn_real)dt, id, &st) : pn_mpm_step_explicit(w, (pn_real)dt, &st);
+            if (r == PN_OK && t) {
+                t->steps++;
+                t->newton += st.newton_iters;
+                t->cg += st.cg_iters;
+            }
+        }
+        best = fmin(best, (pn_ex_seconds() - t0) * 1e3 / COST_STEPS);
+    }
+    return best;
+}
+
+/* For a scene: the fair explicit step's cost, and for each implicit energy at dt 1e-3 s with
+   one pass what a step costs at the least (one Newton iteration with one CG iteration: a
+   step that cannot converge, so it fails and leaves the world as it was), what each further
+   CG iteration adds, and what a real step costs; against the budget a step has for the
+   implicit run to meet the time bar (sand 0.5, snow 1.0 of the fair explicit time). The state: the scene after warm_s of
+   explicit stepping (the column collapsing, the ball hitting the floor). */
+static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FILE *md) {
+    static const pn_mpm_energy en[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP};
+    static const char *const names[] = {"pnet", "lagged", "dp"};
+    pn_ex_scene s;
+    bench_run fair;
+    double warm_s = 0.4 * cfg->duration[dim], dt = 1e-3, expl = 0, budget;
+    double bar = kind == PN_EX_SAND_COLUMN ? 0.5 : 1.0; /* VALIDATION.md: time over fair explicit */
+    int frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5), e;
+    pn_ex_scene_default(&s, kind, dim);
+    s.res = cfg->res[dim];
+    if (cfg->filter >= 0) s.filter_s = cfg->filter;
+    if (!bench_fair(&s, frames < 1 ? 1 : frames, &fair, NULL)) {
+        fprintf(md, "**%s %dD**: no stable explicit step found.\n\n", kind == PN_EX_SAND_COLUMN ? "sand" : "snow", dim);
+        return;
+    }
+    fprintf(md, "**%s %dD**, after %.2f s of explicit steps; fair explicit dt %.3g s. Budget: the wall time an "
+                "implicit step of %g s may take for the run to cost %g times the fair explicit one (VALIDATION.md), "
+                "%g (%g / %.3g) explicit steps.\n\n",
+            kind == PN_EX_SAND_COLUMN ? "sand" : "snow", dim, warm_s, fair.dt, dt, bar, bar, dt, fair.dt);
+    fprintf(md, "| energy | explicit step (ms) | budget (ms) | 1 Newton + 1 CG (ms) | each more CG (ms) | "
+                "real step (ms) | its Newton / CG | real / budget |\n|---|---|---|---|---|---|---|---|\n");
+    for (e = 0; e < (kind == PN_EX_SAND_COLUMN ? 3 : 2); ++e) {
+        pn_mpm_world *w;
+        pn_mpm_implicit_desc id;
+        pn_ex_tally t;
+        const char *why;
+        double one, more, real;
+        long k;
+        if (!(cfg->energy_mask >> e & 1)) continue;
+        s.energy = en[e];
+        if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+            fprintf(stderr, "bench_mpm: %s\n", why);
+            exit(1);
+        }
+        for (k = 0; k < (long)floor(warm_s / fair.dt + 0.5); ++k)
+            if (pn_mpm_step_explicit(w, (pn_real)fair.dt, NULL) != PN_OK) break;
+        memset(&id, 0, sizeof id);
+        id.fixed_point_iters = 1;
+        id.newton_max = 1;
+        id.cg_max = 1;
+        id.cg_rel_tol = (pn_real)1e-12; /* CG runs all of cg_max */
+        id.max_halvings = -1;
+        one = cost_ms(w, 1, dt, &id, NULL);
+        id.cg_max = 21;
+        more = (cost_ms(w, 1, dt, &id, NULL) - one) / 20;
+        memset(&t, 0, sizeof t);
+        id = cfg->solver;
+        id.fixed_point_iters = 1;
+        real = cost_ms(w, 1, dt, &id, &t);
+        expl = cost_ms(w, 0, fair.dt, NULL, NULL); /* now, on the same world */
+        budget = bar * dt / fair.dt * expl;
+        fprintf(md, "| %s | %.3f | %.3f | %.3f | %.4f | %.3f | %.1f / %.0f | %.1f |\n", names[e], expl, budget, one, more,
+                real, t.steps ? (double)t.newton / (double)t.steps : 0, t.steps ? (double)t.cg / (double)t.steps : 0,
+                real / budget);
+        fflush(md);
+        pn_mpm_destroy(w);
+    }
+    fprintf(md, "\n");
+}
+
 /* ---- the Young's-modulus sweep (2D sand) ----------------------------------------------------- */
 
 typedef struct sweep_row {
@@ -719,7 +815,7 @@ static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
-                    "       [--contact-rounds N] [--cg-forcing X] [--no-hardening]\n");
+                    "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -758,7 +854,7 @@ int main(int argc, char **argv) {
     static const int fp_full[] = {1, 2, 4}, fp_quick[] = {1, 2};
     static const double Es_full[] = {1e5, 1e6, 1e7, 1e8}, Es_quick[] = {1e6, 1e7};
     bench_cfg cfg;
-    int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0, n_dts = 0, n_passes = 0, sweep = 1, bad = 0;
+    int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0, n_dts = 0, n_passes = 0, sweep = 1, bad = 0, cost = 0;
     static double dts_arg[8], passes_arg[8];
     static int passes_int[8];
     unsigned mask = 7;
@@ -782,6 +878,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--references")) cfg.refs_only = 1;
         else if (!strcmp(a, "--no-sweep")) sweep = 0;
         else if (!strcmp(a, "--no-hardening")) cfg.no_hardening = 1;
+        else if (!strcmp(a, "--cost")) cost = 1;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
         else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
@@ -818,6 +915,22 @@ int main(int argc, char **argv) {
     cfg.energy_mask = mask;
     cfg.Es = cfg.quick ? Es_quick : Es_full;
     cfg.n_Es = cfg.quick ? 2 : 4;
+    if (cost) { /* the cost table only */
+        snprintf(path, sizeof path, "%s/bench_mpm_cost.md", cfg.out);
+        if (!(csv = fopen(path, "w"))) {
+            fprintf(stderr, "bench_mpm: cannot write %s (does the folder exist?)\n", path);
+            return 1;
+        }
+        fprintf(csv, "<!-- written by bench/bench_mpm.c --cost -->\nWall milliseconds per step, the least of %d "
+                     "blocks of %d steps.\n\n", COST_REPS, COST_STEPS);
+        for (kind = 0; kind < 2; ++kind)
+            for (d = 2; d <= 3; ++d)
+                if ((only < 0 || only == kind) && (!dim_only || dim_only == d))
+                    bench_cost(&cfg, (pn_ex_scene_kind)kind, d, csv);
+        fclose(csv);
+        fprintf(stderr, "wrote %s\n", path);
+        return 0;
+    }
     snprintf(path, sizeof path, "%s/bench_mpm.csv", cfg.out);
     if (!(csv = fopen(path, "w"))) {
         fprintf(stderr, "bench_mpm: cannot write %s (does the folder exist?)\n", path);
