@@ -158,6 +158,11 @@ typedef enum pn_result {
     PN_ERROR_FORMAT,            /* a model of an unknown format version                    */
     PN_ERROR_OVERFLOW,          /* finite inputs, but the result overflowed (NaN or inf):
                                    the deformation is too extreme for the model          */
+    PN_ERROR_STEP_TOO_LARGE,    /* a time step beyond what the solver can take honestly
+                                   (material would move more than the advection limit)   */
+    PN_ERROR_OUTSIDE_DOMAIN,    /* material would leave the simulation domain (through a
+                                   wall) where outflow is not allowed                     */
+    PN_ERROR_CAPACITY,          /* a fixed capacity (particles, groups, colliders) is full  */
     PN_RESULT_COUNT
 } pn_result;
 
@@ -369,8 +374,9 @@ PN_API pn_result pn_lagged_energy(const pn_material *m, int dim, const pn_real *
 /* ---- learned models: MLP inference, PlasticityNet energies, learned return mapping ---------- */
 
 /* Layout version of the pn_model structs written by gen/export.py; a model of another version
-   is refused with PN_ERROR_FORMAT. */
-#define PN_MODEL_FORMAT_VERSION 1
+   is refused with PN_ERROR_FORMAT. Version 2 added the array lengths of pn_mlp (weight_count,
+   bias_count), checked against the layer sizes (gen/upgrade_format.py converts version 1). */
+#define PN_MODEL_FORMAT_VERSION 2
 #define PN_MLP_MAX_LAYERS 8     /* linear layers */
 #define PN_MLP_MAX_WIDTH 64     /* units per layer (inputs and outputs included) */
 #define PN_MLP_MAX_DIFF 8       /* inputs an evaluation can differentiate with respect to */
@@ -390,6 +396,9 @@ typedef struct pn_mlp {
     pn_activation activation;
     const float *weight[PN_MLP_MAX_LAYERS];
     const float *bias[PN_MLP_MAX_LAYERS];
+    /* lengths of the weight and bias arrays (size[l+1] x size[l] and size[l+1]): a network
+       whose sizes disagree with them is refused instead of read past */
+    int weight_count[PN_MLP_MAX_LAYERS], bias_count[PN_MLP_MAX_LAYERS];
 } pn_mlp;
 
 /* Evaluate out = mlp(in) and, when n_diff > 0, the derivatives with respect to the first n_diff
@@ -434,12 +443,14 @@ typedef struct pn_model {
     const char *summary;             /* training and quality summary, one line             */
 } pn_model;
 
-/* Check a model's format version, kind, layout and dimension (dim = 0: any). On failure *why
+/* Check a model's format version, kind, layout and dimension (dim = 0: any), that its array
+   lengths (format 2) match its layer sizes, and that every weight is finite. On failure *why
    (if not NULL) names the problem. */
 PN_API pn_result pn_model_check(const pn_model *model, int dim, const char **why);
 
-/* The material a model was trained for, at Young's modulus E (Pa). */
-PN_API pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m);
+/* The material a model was trained for, at Young's modulus E (Pa). On failure (a bad E, a
+   malformed model) m is untouched and *why (optional) says why. */
+PN_API pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m, const char **why);
 
 /* PlasticityNet (Li et al. 2022): the energy
      Psi(F; F0, h) = N(F, F0, h) - (grad_F N(F0, F0, h) - T(F0)) : F + w mu/2 |F - F0|^2
@@ -577,6 +588,9 @@ PN__DEF const char *pn_result_string(pn_result r) {
     case PN_ERROR_DIMENSION: return "unsupported dimension (not 2 or 3, compiled out, or a model of another dimension)";
     case PN_ERROR_FORMAT: return "unknown model format version";
     case PN_ERROR_OVERFLOW: return "the result overflowed (NaN or infinity) although the inputs are finite: the deformation is too extreme for the model";
+    case PN_ERROR_STEP_TOO_LARGE: return "time step too large: material would move more than the advection limit in one step (use a smaller step or substeps)";
+    case PN_ERROR_OUTSIDE_DOMAIN: return "material would leave the simulation domain through a wall (outflow not allowed)";
+    case PN_ERROR_CAPACITY: return "capacity exceeded (particles, groups or colliders)";
     case PN_RESULT_COUNT: break;
     }
     return "unknown pn_result";
@@ -1970,8 +1984,25 @@ static int pn__mlp_ok(const pn_mlp *n) {
     if (n->activation < PN_ACTIVATION_SILU || n->activation > PN_ACTIVATION_SOFTPLUS) return 0;
     for (l = 0; l <= n->n_layers; ++l)
         if (n->size[l] < 1 || n->size[l] > PN_MLP_MAX_WIDTH) return 0;
-    for (l = 0; l < n->n_layers; ++l)
+    for (l = 0; l < n->n_layers; ++l) {
         if (!n->weight[l] || !n->bias[l]) return 0;
+        /* declared lengths (format 2) must match: otherwise the dots would read past them */
+        if ((n->weight_count[l] || n->bias_count[l]) &&
+            (n->weight_count[l] != n->size[l] * n->size[l + 1] || n->bias_count[l] != n->size[l + 1]))
+            return 0;
+    }
+    return 1;
+}
+
+/* every weight and bias finite (a corrupt or hand-made network is refused before use) */
+static int pn__mlp_finite(const pn_mlp *n) {
+    int l, i;
+    for (l = 0; l < n->n_layers; ++l) {
+        for (i = 0; i < n->size[l] * n->size[l + 1]; ++i)
+            if (!pn__finite((pn_real)n->weight[l][i])) return 0;
+        for (i = 0; i < n->size[l + 1]; ++i)
+            if (!pn__finite((pn_real)n->bias[l][i])) return 0;
+    }
     return 1;
 }
 
@@ -2211,7 +2242,12 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
     pn_result r = PN_OK;
     PN_ASSERT(mo);
     if (mo->format_version != PN_MODEL_FORMAT_VERSION) {
-        w = "model format version differs from PN_MODEL_FORMAT_VERSION: regenerate it (make models)";
+        w = "model format version differs from PN_MODEL_FORMAT_VERSION: regenerate it (make models; "
+            "gen/upgrade_format.py for format 1)";
+        r = PN_ERROR_FORMAT;
+    } else if (mo->mlp.n_layers >= 1 && mo->mlp.n_layers <= PN_MLP_MAX_LAYERS &&
+               (mo->mlp.weight_count[0] == 0 || mo->mlp.bias_count[0] == 0)) {
+        w = "model network without its array lengths (pn_mlp.weight_count, bias_count)";
         r = PN_ERROR_FORMAT;
     } else if (mo->kind != PN_MODEL_ENERGY && mo->kind != PN_MODEL_RETURN_MAP) {
         w = "unknown model kind";
@@ -2224,7 +2260,10 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
         r = PN_ERROR_DIMENSION;
     } else if (!pn__mlp_ok(&mo->mlp) || mo->n_inputs != mo->mlp.size[0] ||
                mo->n_inputs != pn__model_inputs(mo) || mo->mlp.size[mo->mlp.n_layers] != 1) {
-        w = "model network layout is malformed";
+        w = "model network layout is malformed (layer sizes, array lengths or input count disagree)";
+        r = PN_ERROR_FORMAT;
+    } else if (!pn__mlp_finite(&mo->mlp)) {
+        w = "model network has a NaN or infinite weight";
         r = PN_ERROR_FORMAT;
     } else if (!(mo->youngs_modulus_train_pa > 0) || !(mo->h_min <= mo->h_max) ||
                !pn__finite((pn_real)mo->out_scale) || !pn__model_normalisation_ok(mo)) {
@@ -2235,9 +2274,11 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
     return r;
 }
 
-PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *m) {
+PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *m, const char **why) {
     pn_material_desc d;
+    pn_result r;
     PN_ASSERT(mo && m);
+    if ((r = pn_model_check(mo, 0, why)) != PN_OK) return r;
     memset(&d, 0, sizeof d);
     d.elastic = mo->elastic;
     d.plastic = mo->plastic;
@@ -2249,7 +2290,7 @@ PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *
     d.hardening_modulus_pa = (pn_real)(mo->hardening_ratio * E);
     d.camclay_beta = (pn_real)mo->camclay_beta;
     d.camclay_xi = (pn_real)mo->camclay_xi;
-    return pn_material_init(m, &d, NULL);
+    return pn_material_init(m, &d, why);
 }
 
 static int pn__close(double a, double b) { return fabs(a - b) <= 1e-6 * (fabs(a) + fabs(b)) + 1e-12; }

@@ -270,6 +270,14 @@ PN_API pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, const
    negative friction. */
 PN_API pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c, int *index);
 
+/* Move collider `index` (a mouse-driven pusher, a kinematic body driven by a game): from now
+   (w->time_s) it is at center_m and translates at velocity_m_s (NULL: at rest). The velocity
+   is what contact imposes on the material it holds, so pass the collider's real velocity
+   (displacement since the last frame / frame time) to push material rather than teleport
+   through it. PN_ERROR_INVALID_ARGUMENT for a bad index, PN_ERROR_NONFINITE for NaN or inf. */
+PN_API pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real *center_m,
+                                      const pn_real *velocity_m_s);
+
 /* One explicit step of dt_s seconds (symplectic Euler, APIC or AFLIP, return mapping after the F
    update). On failure the world is unchanged and w->error_particle names the culprit. */
 PN_API pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt_s, pn_mpm_stats *stats);
@@ -562,6 +570,23 @@ PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c,
     w->colliders[w->n_colliders] = k;
     if (index) *index = w->n_colliders;
     w->n_colliders++;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real *center_m,
+                                       const pn_real *velocity_m_s) {
+    pn_mpm_collider *c;
+    int i, d;
+    PN_ASSERT(w && center_m);
+    d = w->dim;
+    if (index < 0 || index >= w->n_colliders) return PN_ERROR_INVALID_ARGUMENT;
+    if (!pn__all_finite(d, center_m) || (velocity_m_s && !pn__all_finite(d, velocity_m_s)))
+        return PN_ERROR_NONFINITE;
+    c = &w->colliders[index];
+    for (i = 0; i < d; ++i) { /* center(t) = center + t velocity passes center_m at time_s */
+        c->velocity_m_s[i] = velocity_m_s ? velocity_m_s[i] : 0;
+        c->center_m[i] = center_m[i] - w->time_s * c->velocity_m_s[i];
+    }
     return PN_OK;
 }
 

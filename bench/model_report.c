@@ -83,7 +83,7 @@ static void energy_report(const pn_model *mo, int n, int timing, energy_figures 
     double *cst = (double *)malloc(sizeof(double) * (size_t)n);
     double tsum = 0, al_net = 0, al_lag = 0, ex_rel = 0, ex_abs = 0;
     memset(fg, 0, sizeof *fg);
-    pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m);
+    pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL);
     memset(&desc, 0, sizeof desc);
     desc.energy = mo;
     desc.return_map = NULL;
@@ -236,7 +236,7 @@ static void return_report(const pn_model *mo, int n, int timing, return_figures 
     bench_rng rng;
     double sl = 0, st = 0;
     memset(fg, 0, sizeof *fg);
-    pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m);
+    pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL);
     rng.s = 777u + (unsigned)d;
     for (k = 0; k < n; ++k) {
         pn_real F0[9], F[9], Fa[9], h, Z[9], Zr[9], T[9], Tr[9], hn, hr, U[9], s[3], V[9], sr[3];

@@ -317,7 +317,7 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
         return PN_ERROR_INVALID_ARGUMENT;
     }
     model = pn_ex_scene_model(s);
-    if ((r = pn_model_material(model, (pn_real)s->E_pa, &m)) != PN_OK) {
+    if ((r = pn_model_material(model, (pn_real)s->E_pa, &m, NULL)) != PN_OK) {
         *why = "bad Young's modulus";
         return r;
     }

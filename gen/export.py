@@ -19,7 +19,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from models import MODELS  # noqa: E402
 import train as tr  # noqa: E402
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: pn_mlp carries its array lengths (weight_count, bias_count)
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MODELS_DIR = os.path.join(ROOT, "models")
 ENUM_E = {"stvk_hencky": "PN_ELASTIC_STVK_HENCKY", "neo_hookean": "PN_ELASTIC_NEO_HOOKEAN",
@@ -156,8 +156,11 @@ def export(cfg, quality_path=None):
         "{" + ", ".join(g17(v) for v in pad(shift, 16, 0.0)) + "}",
         "{" + ", ".join(g17(v) for v in pad(scale, 16, 0.0)) + "}",
         g17(out_scale),
-        "{%d, {%s}, %s, {%s}, {%s}}" % (len(lin), ", ".join(str(v) for v in pad(sizes, 9, 0)), ENUM_A[cfg["activation"]],
-                                         ", ".join(pad(wn, 8, "0")), ", ".join(pad(bn, 8, "0"))),
+        "{%d, {%s}, %s, {%s}, {%s}, {%s}, {%s}}" % (
+            len(lin), ", ".join(str(v) for v in pad(sizes, 9, 0)), ENUM_A[cfg["activation"]],
+            ", ".join(pad(wn, 8, "0")), ", ".join(pad(bn, 8, "0")),
+            ", ".join(str(v) for v in pad([m.weight.numel() for m in lin], 8, 0)),
+            ", ".join(str(v) for v in pad([m.bias.numel() for m in lin], 8, 0))),
         c_string(summary),
     ]
     out.append("PN__DEF const pn_model *pn_model_%s(void) {\n" % name)

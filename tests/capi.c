@@ -79,7 +79,7 @@ int capi_energy(int i, int n, const double *F0, const double *F, const double *h
     desc.regularizer = -1;
     for (j = 0; mo->return_map && pn_models_all[j]; ++j)
         if (!strcmp(pn_models_all[j]()->name, mo->return_map)) desc.return_map = pn_models_all[j]();
-    if (pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m) != PN_OK ||
+    if (pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL) != PN_OK ||
         pn_pnet_init(&net, &desc, &m, d, NULL) != PN_OK)
         return n;
     for (k = 0; k < n; ++k) {
@@ -96,7 +96,7 @@ int capi_learned_T(int i, int n, const double *F, const double *h, double *T) {
     const pn_model *mo = pn_models_all[i]();
     pn_material m;
     int k, d = mo->dim, fails = 0;
-    if (pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m) != PN_OK) return n;
+    if (pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL) != PN_OK) return n;
     for (k = 0; k < n; ++k)
         if (pn_learned_return_map(mo, &m, d, F + k * d * d, h[k], NULL, NULL, T + k * d * d) != PN_OK) fails++;
     return fails;

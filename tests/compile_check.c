@@ -82,7 +82,7 @@ static void smoke_models(void) {
 #endif
         CHECK(pn_model_check(mo, 0, &why) == (ok_dim ? PN_OK : PN_ERROR_DIMENSION));
         if (!ok_dim) continue;
-        CHECK(pn_model_material(mo, 1e6, &m) == PN_OK);
+        CHECK(pn_model_material(mo, 1e6, &m, NULL) == PN_OK);
         for (i = 0; i < d; ++i) F[i * d + i] = (pn_real)(1 + 0.05 * i);
         F[1] = (pn_real)0.02;
         if (mo->kind == PN_MODEL_RETURN_MAP) {

@@ -434,7 +434,7 @@ PN_TEST(mpm_implicit_pnet_sand_column) {
     int step, ge, gi;
     PN_CHECK(e && im);
     if (!e || !im) return;
-    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e5, &m) == PN_OK);
+    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e5, &m, NULL) == PN_OK);
     memset(&nd, 0, sizeof nd);
     nd.energy = pn_model_sand_2d();
     PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK);
@@ -785,7 +785,7 @@ PN_TEST(mpm_line_search_descends) {
             pn_material m;
             pn_pnet net;
             pn_pnet_desc nd;
-            pn_model_material(pn_model_sand_2d(), 1e6, &m);
+            pn_model_material(pn_model_sand_2d(), 1e6, &m, NULL);
             w->groups[g].material = m;
             memset(&nd, 0, sizeof nd);
             nd.energy = pn_model_sand_2d();

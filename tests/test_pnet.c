@@ -93,6 +93,8 @@ static void t_pn_mlp_random(pn_mlp *mlp, float *buf, int n_layers, const int *si
         for (i = 0; i < size[l] * size[l + 1]; ++i) buf[k++] = (float)(sigma * t_gauss(rng));
         mlp->bias[l] = buf + k;
         for (i = 0; i < size[l + 1]; ++i) buf[k++] = (float)(sigma * t_gauss(rng));
+        mlp->weight_count[l] = size[l] * size[l + 1]; /* the lengths format 2 declares */
+        mlp->bias_count[l] = size[l + 1];
     }
 }
 static double t_pn_act(pn_activation a, double z) {
@@ -125,6 +127,21 @@ typedef struct t_pn_model {
     pn_model model; /* points into buf: never copy a t_pn_model */
     float buf[T_PN_BUF];
 } t_pn_model;
+
+/* dst = a copy of src with its own weights (rebased), one of them set to value: weight 5 of
+   layer 1 (which = 1) or bias 3 of layer 1 (which = 0) */
+static int t_pn_model_poison(t_pn_model *dst, const t_pn_model *src, int which, double value) {
+    int l;
+    dst->model = src->model;
+    memcpy(dst->buf, src->buf, sizeof dst->buf);
+    for (l = 0; l < src->model.mlp.n_layers; ++l) {
+        dst->model.mlp.weight[l] = dst->buf + (src->model.mlp.weight[l] - src->buf);
+        dst->model.mlp.bias[l] = dst->buf + (src->model.mlp.bias[l] - src->buf);
+    }
+    if (which) dst->buf[dst->model.mlp.weight[1] - dst->buf + 5] = (float)value;
+    else dst->buf[dst->model.mlp.bias[1] - dst->buf + 3] = (float)value;
+    return 0;
+}
 
 /* The materials: Drucker-Prager sand and von Mises metal with Neo-Hookean elasticity. */
 enum { T_PN_SAND, T_PN_METAL };
@@ -1088,6 +1105,13 @@ PN_TEST(pnet_bad_input) {
     T_PN_BROKEN("E_train 0", bad.model.youngs_modulus_train_pa = 0, PN_ERROR_FORMAT);
     T_PN_BROKEN("E_train NaN", bad.model.youngs_modulus_train_pa = nan, PN_ERROR_FORMAT);
     T_PN_BROKEN("h_min > h_max", bad.model.h_min = 2, PN_ERROR_FORMAT);
+    /* layer sizes that disagree with the arrays: pn_mlp_eval would read past them (ASan) */
+    T_PN_BROKEN("hidden size 9, arrays of 8", bad.model.mlp.size[1] = 9, PN_ERROR_FORMAT);
+    T_PN_BROKEN("weight_count short", bad.model.mlp.weight_count[2] -= 1, PN_ERROR_FORMAT);
+    T_PN_BROKEN("format 2 without lengths", (bad.model.mlp.weight_count[0] = 0, bad.model.mlp.bias_count[0] = 0),
+                PN_ERROR_FORMAT);
+    T_PN_BROKEN("NaN weight", t_pn_model_poison(&bad, &sand2.energy, 1, nan), PN_ERROR_FORMAT);
+    T_PN_BROKEN("inf bias", t_pn_model_poison(&bad, &sand2.energy, 0, inf), PN_ERROR_FORMAT);
 #undef T_PN_BROKEN
     desc.energy = NULL;
     t_pn_expect_init(&b, "energy NULL", &desc, &sand2.m, 2, PN_ERROR_INVALID_ARGUMENT, NULL, &sand2.net);
@@ -1469,7 +1493,7 @@ static void t_pn_shipped_return(pn_test_ctx *pn__t, const pn_model *mo) {
     pn_test_rng rng;
     int i, k;
     rng.s = 9100;
-    if (pn_model_material(mo, 1, &m) != PN_OK) {
+    if (pn_model_material(mo, 1, &m, NULL) != PN_OK) {
         PN_CHECK(!"pn_model_material");
         return;
     }
@@ -1549,7 +1573,7 @@ static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
     pn_result r;
     int i, k;
     rng.s = 9200;
-    if (pn_model_material(mo, 1, &m) != PN_OK) {
+    if (pn_model_material(mo, 1, &m, NULL) != PN_OK) {
         PN_CHECK(!"pn_model_material");
         return;
     }

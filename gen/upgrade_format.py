@@ -1,0 +1,48 @@
+#!/usr/bin/python3
+"""Rewrite format-1 model headers (models/pn_model_*.h) as format 2, from their own arrays.
+
+    /usr/bin/python3 gen/upgrade_format.py models/pn_model_*.h
+
+Format 2 adds the lengths of the weight and bias arrays to the pn_mlp initializer (plastinet.h
+checks them against the layer sizes, so a malformed network is refused instead of read past).
+The weights, the banner and everything else stay byte for byte; the lengths are read from the
+arrays' declarations and must equal the products of the layer sizes. The result is what
+gen/export.py (FORMAT_VERSION 2) writes from the same trained network, without retraining.
+Needs no torch. Headers already at format 2 are left alone.
+"""
+import re
+import sys
+
+
+def upgrade(path):
+    src = open(path).read()
+    if "Format version 2 (PN_MODEL_FORMAT_VERSION)" in src:
+        return "already format 2"
+    decl = {m.group(1): int(m.group(2)) for m in re.finditer(r"static const float (\w+)\[(\d+)\]", src)}
+    init = re.search(r"\{(\d+), \{([\d, ]+)\}, (PN_ACTIVATION_\w+), \{([\w, ]+)\}, \{([\w, ]+)\}\}", src)
+    if not init or "Format version 1 (PN_MODEL_FORMAT_VERSION)" not in src:
+        raise SystemExit("%s: not a format-1 model header" % path)
+    n_layers = int(init.group(1))
+    sizes = [int(v) for v in init.group(2).split(",")]
+    weights = [v.strip() for v in init.group(4).split(",")][:n_layers]
+    biases = [v.strip() for v in init.group(5).split(",")][:n_layers]
+    wc, bc = [], []
+    for l in range(n_layers):
+        if decl[weights[l]] != sizes[l] * sizes[l + 1] or decl[biases[l]] != sizes[l + 1]:
+            raise SystemExit("%s: layer %d arrays disagree with the sizes" % (path, l))
+        wc.append(decl[weights[l]])
+        bc.append(decl[biases[l]])
+    pad = lambda xs: ", ".join(str(v) for v in xs + [0] * (8 - len(xs)))  # noqa: E731
+    new_init = init.group(0)[:-1] + ", {%s}, {%s}}" % (pad(wc), pad(bc))
+    out = src.replace(init.group(0), new_init)
+    out = out.replace("Format version 1 (PN_MODEL_FORMAT_VERSION)", "Format version 2 (PN_MODEL_FORMAT_VERSION)")
+    head, sep, tail = out.partition("static const pn_model m = {\n        1,")
+    if not sep:
+        raise SystemExit("%s: pn_model initializer not found" % path)
+    open(path, "w").write(head + "static const pn_model m = {\n        2," + tail)
+    return "format 2 (%d layers)" % n_layers
+
+
+if __name__ == "__main__":
+    for p in sys.argv[1:]:
+        print(p, upgrade(p))
