@@ -109,7 +109,15 @@
    ======================================================================================
    No global state: every function is reentrant and may run on any number of threads at once.
    Results depend only on the inputs (no randomness, no thread-count dependence). For bitwise
-   identical results across compilers compile without -ffast-math and with -ffp-contract=off.
+   identical results across compilers and optimization levels compile without -ffast-math
+   and with -ffp-contract=off (where the target has fma, clang fuses a * b + c within a
+   statement by default, gcc anywhere in its GNU modes). Checked on x86-64 (SSE2; 32-bit x87
+   builds round differently) for gcc 12, g++ 12, clang 14 and clang++ 14 at -O0 to -O3 with
+   every MPM integrator and energy (tests/cross_compiler.sh). The bits also depend on the C
+   library: sqrt is correctly rounded, but exp, log, log1p, pow, sin, sinh and tanh come from
+   libm, so compare builds linked against the same libm. The code never calls pow with an
+   exponent that may become -1 or 0.5 (or 2): compilers replace those by 1 / x or sqrt (x * x),
+   at some -O levels and not others, while libm's pow is not always correctly rounded.
 
    ======================================================================================
    VERSION HISTORY
@@ -277,6 +285,11 @@ typedef struct pn_material {
 /* Validate desc and fill m. On failure m is untouched, and *why (if why is not NULL) points to
    a static sentence naming the offending parameter. */
 PN_API pn_result pn_material_init(pn_material *m, const pn_material_desc *desc, const char **why);
+
+/* Check a pn_material that did not come from pn_material_init (a copy, a file, a tweak of a
+   field): the models and their combination, mu and lambda consistent with E and nu, and the
+   plastic parameters in the ranges pn_material_init enforces. *why names the field. */
+PN_API pn_result pn_material_check(const pn_material *m, const char **why);
 
 /* Lame constants from Young's modulus and Poisson ratio (PN_ERROR_INVALID_PARAMETER if out of
    range; outputs untouched). kappa = lambda + 2 mu / dim is the bulk-like coefficient. */
@@ -557,6 +570,17 @@ PN_API pn_result pn_learned_return_map(const pn_model *model, const pn_material 
 #define PN__MIN(a, b) ((a) < (b) ? (a) : (b))
 
 static int pn__finite(pn_real x) { return x == x && x - x == 0; }
+
+/* x^(k/d) for k = 1 or -2, d = 2 or 3: sqrt(x) and 1 / x in 2D, pow in 3D. Never pow with an
+   exponent that can become 0.5 or -1: compilers fold pow(x, -1.0) to 1 / x (gcc and clang)
+   and pow(x, 0.5) to sqrt (clang with -fno-math-errno) once d is a known constant (inlining,
+   cloning), and libm's pow is not always correctly rounded, so the bits would depend on the
+   compiler and the optimization level (THREADS AND DETERMINISM). */
+static pn_real pn__pow_dim(pn_real x, int k, int d) {
+    PN_ASSERT((k == 1 || k == -2) && (d == 2 || d == 3));
+    if (d == 2) return k == 1 ? PN__SQRT(x) : 1 / x;
+    return PN__POW(x, (pn_real)k / (pn_real)d);
+}
 
 static int pn__all_finite(int n, const pn_real *a) {
     int i;
@@ -1049,6 +1073,54 @@ PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *des
     *out = m;
     return PN_OK;
 }
+
+PN__DEF pn_result pn_material_check(const pn_material *m, const char **why) {
+    pn_real mu, lambda;
+    PN_ASSERT(m);
+    if ((int)m->plastic < 0 || m->plastic >= PN_PLASTIC_MODEL_COUNT)
+        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.plastic: unknown plastic model");
+    if ((int)m->elastic <= 0 || m->elastic >= PN_ELASTIC_MODEL_COUNT)
+        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.elastic: unknown elastic model (use pn_material_init)");
+    if (!pn__finite(m->E) || !(m->E > 0))
+        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.E must be finite and > 0");
+    if (!pn__finite(m->nu) || !(m->nu > -1) || !(m->nu < (pn_real)0.5))
+        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.nu must be in (-1, 0.5)");
+    pn_lame(m->E, m->nu, &mu, &lambda);
+    if (!(PN__FABS(m->mu - mu) <= (pn_real)1e-6 * mu) ||
+        !(PN__FABS(m->lambda - lambda) <= (pn_real)1e-6 * (PN__FABS(lambda) + mu)))
+        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.mu and lambda disagree with E and nu (use pn_material_init)");
+    switch (m->plastic) {
+    case PN_PLASTIC_DRUCKER_PRAGER:
+        if (m->elastic != PN_ELASTIC_STVK_HENCKY)
+            PN__FAIL(PN_ERROR_UNSUPPORTED, "drucker_prager needs stvk_hencky elasticity");
+        if (!pn__finite(m->sin_phi) || !(m->sin_phi >= 0) || !(m->sin_phi < 1))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.sin_phi must be in [0, 1)");
+        if (!pn__finite(m->cohesion_strain) || !(m->cohesion_strain >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.cohesion_strain must be finite and >= 0");
+        break;
+    case PN_PLASTIC_VON_MISES:
+        if (!pn__finite(m->yield_stress) || !(m->yield_stress > 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.yield_stress must be finite and > 0");
+        if (!pn__finite(m->hardening_modulus) || !(m->hardening_modulus >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.hardening_modulus must be finite and >= 0");
+        break;
+    case PN_PLASTIC_CAM_CLAY:
+        if (m->elastic != PN_ELASTIC_NEO_HOOKEAN_SNOW)
+            PN__FAIL(PN_ERROR_UNSUPPORTED, "cam_clay needs neo_hookean_snow elasticity");
+        if (!pn__finite(m->sin_phi) || !(m->sin_phi > 0) || !(m->sin_phi < 1))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.sin_phi must be in (0, 1) for cam_clay");
+        if (!pn__finite(m->beta) || !(m->beta >= 0) || !pn__finite(m->xi) || !(m->xi >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.beta and xi must be finite and >= 0");
+        break;
+    case PN_PLASTIC_SNOW_STOMAKHIN:
+        if (!pn__finite(m->theta_c) || !(m->theta_c > 0) || !(m->theta_c < 1) ||
+            !pn__finite(m->theta_s) || !(m->theta_s >= 0) || !pn__finite(m->snow_xi) || !(m->snow_xi >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.theta_c must be in (0, 1), theta_s and snow_xi >= 0");
+        break;
+    default: break;
+    }
+    return PN_OK;
+}
 #undef PN__FAIL
 
 #ifndef PN_NO_STDIO
@@ -1213,7 +1285,7 @@ static void pn__elastic_principal(pn_elastic_model model, pn_real mu, pn_real la
            g_i = c s_i + q / s_i with c = mu J^(-2/d), q = -c S/d + kappa/2 (J^2 - 1) */
         pn_real kappa = la + 2 * mu / d, S = 0, c, q, dd = (pn_real)d;
         for (i = 0; i < d; ++i) S += s[i] * s[i];
-        c = mu * PN__POW(J, -2 / dd);
+        c = mu * pn__pow_dim(J, -2, d);
         q = -c * S / dd + kappa / 2 * (J * J - 1);
         pr->psi = mu / 2 * (c / mu * S - dd) + kappa / 2 * ((J * J - 1) / 2 - PN__LOG(J));
         for (i = 0; i < d; ++i) pr->g[i] = c * s[i] + q / s[i];
@@ -1408,7 +1480,7 @@ static void pn__camclay_eval(const pn_material *m, int d, const pn_real *s, pn_r
     c->p = -c->kappa / 2 * (c->J * c->J - 1);
     c->p0 = c->kappa * ((pn_real)1e-5 + PN__SINH(m->xi * PN__MAX(-h, 0)));
     c->M = alpha * dd / PN__SQRT(2 / (6 - dd));
-    jm = m->mu * PN__POW(c->J, -2 / dd);
+    jm = m->mu * pn__pow_dim(c->J, -2, d);
     for (i = 0; i < d; ++i) {
         c->shat[i] = jm * (s[i] * s[i] - trb / dd);
         n2 += c->shat[i] * c->shat[i];
@@ -1636,7 +1708,7 @@ static pn_result pn__return_principal(const pn_material *m, int d, const pn_real
             /* tips: compression p -> p0 or tension p -> -beta p0, no shear */
             Jn = c.p > c.p0 ? PN__SQRT(1 - 2 * c.p0 / c.kappa)
                             : PN__SQRT(1 + 2 * beta * c.p0 / c.kappa);
-            for (i = 0; i < d; ++i) z[i] = PN__POW(Jn, 1 / dd);
+            for (i = 0; i < d; ++i) z[i] = pn__pow_dim(Jn, 1, d);
             if (m->camclay_hardening) *h_new = h + PN__LOG(c.J / Jn);
             *plastic = 1;
             return PN_OK;
@@ -1647,7 +1719,7 @@ static pn_result pn__return_principal(const pn_material *m, int d, const pn_real
             /* shear: q onto the ellipse at fixed p */
             pn_real q2t = -c.M * c.M * (c.p + beta * c.p0) * (c.p - c.p0) / (1 + 2 * beta);
             pn_real shat_t = PN__SQRT(PN__MAX(q2t, 0) / ((6 - dd) / 2));
-            pn_real cc = shat_t / (m->mu * PN__POW(c.J, -2 / dd)); /* |dev b_new| */
+            pn_real cc = shat_t / (m->mu * pn__pow_dim(c.J, -2, d)); /* |dev b_new| */
             pn__camclay_shear(d, s, c.J, cc, z);
         }
         if (m->camclay_hardening) {
@@ -2404,7 +2476,11 @@ static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_
         for (l = 0; l < nf; ++l) sjl[j][l] = qjl[j][l] / (2 * s) - qj[j] * qj[l] / (4 * S * s);
     for (k = 0; k < nf; ++k) { /* a_k = s^-p and its derivatives in s */
         int p = k == 0 ? 1 : 2;
-        a[k] = PN__POW(s, (pn_real)-p);
+        /* 1 / s and 1 / S (as gen/pn_torch.py divides), not pow(s, -p): a compiler that peels
+           or unrolls this loop sees pow(s, -1.0) and folds it to 1 / s (clang -O2, gcc -O3),
+           while a libm call is not always correctly rounded, so the bits would depend on the
+           compiler and the optimization level (THREADS AND DETERMINISM). */
+        a[k] = p == 1 ? 1 / s : 1 / S;
         a1[k] = -p * a[k] / s;
         a2[k] = p * (p + 1) * a[k] / S;
     }

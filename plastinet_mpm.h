@@ -49,7 +49,9 @@
    particles sorted by node (no atomics, a fixed summation order) and every reduction sums
    fixed-size chunks in a fixed order. One world must not be stepped from two threads at
    once; different worlds may.
-   DETERMINISM: as for plastinet.h; -ffp-contract=off for the same bits across compilers.
+   DETERMINISM: as for plastinet.h: with -ffp-contract=off (and without -ffast-math) gcc,
+   g++ and clang give the same bits at any -O level for every integrator and energy
+   (tests/cross_compiler.sh).
 */
 #ifndef PLASTINET_MPM_H
 #define PLASTINET_MPM_H
@@ -71,11 +73,13 @@ typedef enum pn_mpm_boundary {
 } pn_mpm_boundary;
 
 /* World description; zeroed fields mean defaults where one is stated. The domain is the box
-   [0, res_i dx]^dim; its walls are wall_cells thick. */
+   origin + [0, res_i dx]^dim; its walls are wall_cells thick, so material lives in
+   origin + [wall dx, (res_i - wall) dx] on each axis. */
 typedef struct pn_mpm_desc {
     int dim;                     /* 2 or 3                                                  */
     int res[3];                  /* grid cells per axis, 8 .. 16384                         */
     pn_real dx_m;                /* cell size (m) > 0                                       */
+    pn_real origin_m[3];         /* the domain's lowest corner (m) [0]                      */
     pn_real gravity[3];          /* m/s^2                                                   */
     pn_mpm_boundary boundary;    /* domain walls                                            */
     pn_real friction;            /* Coulomb coefficient of SEPARATE walls, >= 0             */
@@ -89,6 +93,15 @@ typedef struct pn_mpm_desc {
                                     the same filtering per simulated second at any dt)     */
     int wall_cells;              /* thickness of the walls in cells; 0 = 3                  */
     size_t max_particles;        /* capacity, > 0                                           */
+    int allow_outflow;           /* nonzero: a particle that passes through a wall is retired
+                                    (inactive, counted in left_domain). 0: such a step fails
+                                    with PN_ERROR_OUTSIDE_DOMAIN and the world is unchanged
+                                    (implicit steps first retry as substeps) [0]            */
+    pn_real advection_limit;     /* the most a particle may move in one step, in cells: a
+                                    step that would move one further fails with
+                                    PN_ERROR_STEP_TOO_LARGE, world unchanged (implicit steps
+                                    first retry as substeps; pn_mpm_advance picks steps that
+                                    respect it) [1]                                          */
     pn_allocator allocator;
 } pn_mpm_desc;
 
@@ -131,7 +144,9 @@ typedef struct pn_mpm_group {
 
 /* Implicit step settings; zeroed fields mean the defaults in brackets. */
 typedef struct pn_mpm_implicit_desc {
-    int fixed_point_iters;       /* passes of the F0 fixed point (PlasticityNet Eq. 10) [2]  */
+    int fixed_point_iters;       /* passes of the F0 fixed point (PlasticityNet Eq. 10) [1]:
+                                    at equal cost a smaller step with one pass beats a larger
+                                    one with more (docs/results.md)                         */
     int newton_max;              /* Newton iterations per pass [50]                          */
     int cg_max;                  /* conjugate-gradient iterations per Newton step [500]      */
     pn_real newton_tol;          /* stop when max |dv| < newton_tol dx / dt [1e-5]: about
@@ -190,7 +205,10 @@ typedef struct pn_mpm_stats {
 
 /* The world. Particle arrays (structure of arrays, read-only for users): x, v (dim per
    particle), C (affine velocity, dim^2), F (elastic deformation gradient, dim^2), h (plastic
-   state), vol0 (initial volume m^3), mass (kg), group, active. The rest is internal. */
+   state), vol0 (initial volume m^3), mass (kg), group, active. A step builds the new state in
+   scratch arrays and swaps them in, so x, v, C, F, h and active point elsewhere after every
+   step: read w->x after the step, never keep the pointer across one. Particle p keeps its
+   index for the life of the world. The rest is internal. */
 typedef struct pn_mpm_world {
     pn_mpm_desc desc;
     int dim, wall;
@@ -208,6 +226,7 @@ typedef struct pn_mpm_world {
     long steps;
     size_t error_particle;       /* particle that made the last step fail ((size_t)-1: none) */
     size_t left_total;           /* particles deactivated for leaving the domain, in total  */
+    char error[256];             /* why the last call failed (pn_mpm_error)                 */
     /* >>bin: stencils, sort, active nodes */
     size_t *pbase;               /* flat index of each particle's stencil base node          */
     pn_real *pw, *pfx;           /* per axis: 3 weights and x/dx - base                      */
@@ -243,23 +262,118 @@ typedef struct pn_mpm_world {
     pn_real *lval, *blval;
 } pn_mpm_world;
 
-/* Create a world (*out set on success). PN_ERROR_INVALID_ARGUMENT for a bad dim, res outside
-   8 .. 16384, dx <= 0, non-finite gravity, friction < 0, capacity 0, a bad boundary or half an
-   allocator, a negative or non-finite filter_time_s; PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). */
-PN_API pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out);
+/* Create a world (*out set on success). PN_ERROR_DIMENSION for a dim other than 2 or 3 (or
+   compiled out); PN_ERROR_INVALID_ARGUMENT for res outside 8 .. 16384, walls that leave no
+   room, dx <= 0, a non-finite origin or gravity, friction < 0, capacity 0, a bad boundary or
+   half an allocator, a negative or non-finite filter_time_s or advection_limit;
+   PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). On failure *why (optional)
+   names the field. */
+PN_API pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, const char **why);
 PN_API void pn_mpm_destroy(pn_mpm_world *w);
 
-/* Add a particle group of one material and density; returns its index or -1 (full, or a
-   density that is not positive and finite). */
+/* Why the last failed call on w failed: the field, particle, group or capacity at fault and
+   what to do, in one sentence ("" after a success). Valid until the next call on w. */
+PN_API const char *pn_mpm_error(const pn_mpm_world *w);
+
+/* Add a particle group of one material and density; returns its index, or -1 (the reason in
+   pn_mpm_error: PN_MPM_MAX_GROUPS reached, a density that is not positive and finite, or a
+   material pn_material_check refuses). */
 PN_API int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real density_kg_m3);
 
 /* Add n particles of group g at positions x (dim per particle, m), velocities v (NULL: at
    rest), each of volume volume_m3, F = I, h = the material's initial state (0; for Cam-Clay
-   set it with pn_mpm_set_state). All or nothing: PN_ERROR_NONFINITE or
-   PN_ERROR_INVALID_ARGUMENT (outside the walls, bad group or volume, over capacity) with the
-   world unchanged and error_particle naming the first bad one. */
+   set it with pn_mpm_set_state). All or nothing: PN_ERROR_NONFINITE,
+   PN_ERROR_INVALID_ARGUMENT (outside the walls, bad group, a volume or mass that is not
+   positive and finite) or PN_ERROR_CAPACITY (more than max_particles), with the world
+   unchanged, error_particle naming the first bad one and pn_mpm_error saying why. Most
+   programs use pn_mpm_fill instead. */
 PN_API pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const pn_real *x,
                                       const pn_real *v, pn_real volume_m3);
+
+/* ---- scene helpers: fill shapes with particles ------------------------------------------ */
+
+typedef enum pn_mpm_fill_shape {
+    PN_MPM_FILL_BOX = 0,         /* |x_i - center_i| <= half_extent_i                       */
+    PN_MPM_FILL_SPHERE,          /* |x - center| <= radius (a disk in 2D)                   */
+    PN_MPM_FILL_CYLINDER,        /* |(x - center) . axis| <= half_length and the distance
+                                    from the axis <= radius (in 2D: a rotated rectangle)   */
+    PN_MPM_FILL_MESH             /* inside a closed, consistently oriented triangle mesh
+                                    (3D) or polygon (2D: edges as index pairs)              */
+} pn_mpm_fill_shape;
+
+/* What to fill and how; zeroed fields mean the defaults in brackets. */
+typedef struct pn_mpm_fill_desc {
+    pn_mpm_fill_shape shape;
+    int group;                   /* the particles' group (pn_mpm_add_group)                 */
+    pn_real center_m[3];         /* box, sphere, cylinder                                   */
+    pn_real half_extent_m[3];    /* box                                                      */
+    pn_real radius_m;            /* sphere, cylinder                                         */
+    pn_real axis[3];             /* cylinder, need not be unit [the y axis]                  */
+    pn_real half_length_m;       /* cylinder                                                 */
+    const pn_real *vertices_m;   /* mesh: dim reals per vertex                               */
+    size_t n_vertices;
+    const int *indices;          /* mesh: dim vertex indices per element (3D triangles with
+                                    outward normals by the right-hand rule; 2D edges a -> b
+                                    with the inside on the left, i.e. counter-clockwise)   */
+    size_t n_elements;
+    int per_axis;                /* particles per cell along each axis: per_axis^dim per cell
+                                    [2: 4 in 2D, 8 in 3D]                                   */
+    int jitter;                  /* nonzero: each particle moves to a random point of its
+                                    lattice cell (deterministic from seed) [0: lattice]    */
+    unsigned long seed;          /* jitter's seed [0]                                        */
+    pn_real velocity_m_s[3];     /* initial velocity [0]                                     */
+    pn_real state;               /* initial plastic state h [0] (pn_mpm_set_state)          */
+    int clip;                    /* nonzero: points outside the walls are skipped [0: such a
+                                    shape is refused, naming the first point outside]      */
+} pn_mpm_fill_desc;
+
+/* Fill a shape with particles of group f->group: the points of a lattice of spacing dx /
+   per_axis aligned with the grid (so shapes that touch neither overlap nor leave gaps) that
+   fall inside the shape, each of volume (dx / per_axis)^dim and mass volume x density. The
+   sampled volume converges to the shape's as the lattice refines: its error is at most the
+   volume of the band of half a lattice diagonal about the surface, about area x spacing x
+   sqrt(dim) / 2 (0 for a box aligned with the lattice). *added (optional) gets the count.
+   All or nothing, as pn_mpm_add_particles; PN_ERROR_CAPACITY says how many are needed. */
+PN_API pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t *added);
+
+/* How many particles pn_mpm_fill would add to a world of description wd (to size
+   max_particles before creating it). PN_ERROR_INVALID_ARGUMENT for a bad shape (*why). */
+PN_API pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, size_t *count,
+                                   const char **why);
+
+/* The largest explicit step (s) the current state allows:
+       dt = 0.9 dx / max_p (c_p + |v_p|),   c_p = sqrt(K_p / rho_p),
+   K_p the particle's P-wave modulus (lambda + 2 mu, stiffened by compression: divided by J,
+   times the hardening of Stomakhin snow), rho_p its current density. The factor 0.9 is
+   measured: on sand, rubber, snow and metal scenes in 2D and 3D the largest step found
+   stable by search was 1.25 to 2 times this one (docs/results.md; tests/test_mpm.c,
+   mpm_stable_dt). Without particles, the groups' materials at rest. PN_ERROR_INVALID_ARGUMENT
+   without groups. */
+PN_API pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s);
+
+/* ---- stepping a frame ------------------------------------------------------------------- */
+
+typedef enum pn_mpm_integrator {
+    PN_MPM_EXPLICIT = 0,         /* symplectic Euler at pn_mpm_stable_dt                      */
+    PN_MPM_IMPLICIT              /* optimization time integration at max_step_s              */
+} pn_mpm_integrator;
+
+typedef struct pn_mpm_advance_desc {
+    pn_mpm_integrator integrator;
+    pn_real max_step_s;          /* implicit: the longest step [1e-3]; explicit: an upper
+                                    bound besides pn_mpm_stable_dt [none]                    */
+    pn_real courant;             /* explicit: the fraction of pn_mpm_stable_dt taken [1]     */
+    const pn_mpm_implicit_desc *implicit; /* NULL: the defaults                              */
+} pn_mpm_advance_desc;
+
+/* Advance the world by frame_s seconds in as many steps as it takes: each explicit step at
+   the stable step of the current state, each implicit step at most max_step_s and short
+   enough that no particle moves more than advection_limit cells (from the fastest particle
+   and gravity; a step that still would is retried as substeps). stats (optional) gets the
+   totals, stats->substeps the number of steps. On failure the world is as it was after the
+   last step that succeeded, and pn_mpm_error says why. desc may be NULL (explicit). */
+PN_API pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_advance_desc *desc,
+                                pn_mpm_stats *stats);
 
 /* Set the plastic state h of particles first .. first + n - 1 (e.g. Cam-Clay log Jp < 0 for
    snow with strength). PN_ERROR_NONFINITE / PN_ERROR_INVALID_ARGUMENT with nothing changed. */
@@ -330,6 +444,25 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
 #define PN__OMP_FOR
 #endif
 #define PN__MPM_CHUNK 1024 /* reductions sum chunks of this size, then the chunks in order */
+#include <stdarg.h>
+
+/* Record why a call failed (pn_mpm_error) and return its code. Without stdio the message is
+   the format's text up to its first conversion. */
+static pn_result pn__mpm_fail(pn_mpm_world *w, pn_result r, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+#ifndef PN_NO_STDIO
+    vsnprintf(w->error, sizeof w->error, fmt, ap);
+#else
+    {
+        size_t i;
+        for (i = 0; fmt[i] && fmt[i] != '%' && i + 1 < sizeof w->error; ++i) w->error[i] = fmt[i];
+        w->error[i] = 0;
+    }
+#endif
+    va_end(ap);
+    return r;
+}
 
 /* ======================================================================================
    >>world
@@ -379,32 +512,54 @@ static void pn__mpm_slots(pn_mpm_world *w) {
     }
 }
 
-PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
+#define PN__MPM_REFUSE(msg)                                                                 \
+    do {                                                                                    \
+        if (why) *why = msg;                                                                \
+        return PN_ERROR_INVALID_ARGUMENT;                                                   \
+    } while (0)
+
+PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, const char **why) {
     pn_mpm_world *w;
-    int d, dd, i, fail = 0;
+    int d, dd, i, fail = 0, wall;
     size_t cap, nodes = 1, k, nparts;
     PN_ASSERT(desc && out);
     d = desc->dim;
-    if (!pn__dim_ok(d)) return PN_ERROR_DIMENSION;
-    if (!pn__finite(desc->dx_m) || !(desc->dx_m > 0) || !pn__finite(desc->friction) ||
-        !(desc->friction >= 0) || !pn__finite(desc->filter_time_s) || !(desc->filter_time_s >= 0) ||
-        desc->max_particles == 0 || desc->wall_cells < 0 ||
-        desc->boundary < PN_MPM_BOUNDARY_STICKY || desc->boundary > PN_MPM_BOUNDARY_SEPARATE ||
-        (desc->allocator.alloc == NULL) != (desc->allocator.free == NULL))
-        return PN_ERROR_INVALID_ARGUMENT;
+    if (!pn__dim_ok(d)) {
+        if (why) *why = "pn_mpm_desc.dim must be 2 or 3 (and not compiled out by PN_NO_2D / PN_NO_3D)";
+        return PN_ERROR_DIMENSION;
+    }
+    if (!pn__finite(desc->dx_m) || !(desc->dx_m > 0)) PN__MPM_REFUSE("pn_mpm_desc.dx_m must be finite and > 0");
+    if (!pn__finite(desc->friction) || !(desc->friction >= 0))
+        PN__MPM_REFUSE("pn_mpm_desc.friction must be finite and >= 0");
+    if (!pn__finite(desc->filter_time_s) || !(desc->filter_time_s >= 0))
+        PN__MPM_REFUSE("pn_mpm_desc.filter_time_s must be finite and >= 0");
+    if (!pn__finite(desc->advection_limit) || !(desc->advection_limit >= 0))
+        PN__MPM_REFUSE("pn_mpm_desc.advection_limit must be finite and >= 0 (0: 1 cell)");
+    if (desc->max_particles == 0) PN__MPM_REFUSE("pn_mpm_desc.max_particles must be > 0");
+    if (desc->wall_cells < 0) PN__MPM_REFUSE("pn_mpm_desc.wall_cells must be >= 0 (0: 3)");
+    if (desc->boundary < PN_MPM_BOUNDARY_STICKY || desc->boundary > PN_MPM_BOUNDARY_SEPARATE)
+        PN__MPM_REFUSE("pn_mpm_desc.boundary is not a pn_mpm_boundary");
+    if ((desc->allocator.alloc == NULL) != (desc->allocator.free == NULL))
+        PN__MPM_REFUSE("pn_mpm_desc.allocator needs both alloc and free, or neither");
+    wall = desc->wall_cells ? desc->wall_cells : 3;
     for (i = 0; i < d; ++i) {
-        if (desc->res[i] < 8 || desc->res[i] > 1 << 14 || !pn__finite(desc->gravity[i]))
-            return PN_ERROR_INVALID_ARGUMENT;
+        if (desc->res[i] < 8 || desc->res[i] > 1 << 14)
+            PN__MPM_REFUSE("pn_mpm_desc.res: every axis needs 8 .. 16384 cells");
+        if (!pn__finite(desc->gravity[i])) PN__MPM_REFUSE("pn_mpm_desc.gravity is not finite");
+        if (!pn__finite(desc->origin_m[i])) PN__MPM_REFUSE("pn_mpm_desc.origin_m is not finite");
+        if (wall * 2 + 2 > desc->res[i])
+            PN__MPM_REFUSE("pn_mpm_desc.wall_cells: the walls leave less than 2 cells on some axis of res");
         nodes *= (size_t)(desc->res[i] + 1);
     }
-    if (desc->wall_cells * 2 + 2 > desc->res[0]) return PN_ERROR_INVALID_ARGUMENT;
     dd = d * d;
     cap = desc->max_particles;
     w = (pn_mpm_world *)pn__mpm_alloc(desc, 1, sizeof *w, &fail);
     if (!w) return PN_ERROR_OUT_OF_MEMORY;
     w->desc = *desc;
+    for (i = d; i < 3; ++i) w->desc.origin_m[i] = 0;
+    if (!(w->desc.advection_limit > 0)) w->desc.advection_limit = 1;
     w->dim = d;
-    w->wall = desc->wall_cells ? desc->wall_cells : 3;
+    w->wall = wall;
     w->cap = cap;
     w->nodes = nodes;
     w->error_particle = (size_t)-1;
@@ -453,28 +608,49 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out) {
     PN__MPM_A(ctan, nodes * 3, pn_real);
     if (fail) {
         pn_mpm_destroy(w);
+        if (why) *why = "out of memory for max_particles particles and the grid";
         return PN_ERROR_OUT_OF_MEMORY;
     }
     for (k = 0; k < nodes; ++k) w->dof[k] = -1;
     *out = w;
     return PN_OK;
 }
+#undef PN__MPM_REFUSE
+
+PN__DEF const char *pn_mpm_error(const pn_mpm_world *w) {
+    PN_ASSERT(w);
+    return w->error;
+}
 
 PN__DEF int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real density_kg_m3) {
+    const char *why = "";
     PN_ASSERT(w && m);
-    if (w->n_groups >= PN_MPM_MAX_GROUPS || !pn__finite(density_kg_m3) || !(density_kg_m3 > 0))
+    w->error[0] = 0;
+    if (w->n_groups >= PN_MPM_MAX_GROUPS) {
+        pn__mpm_fail(w, PN_ERROR_CAPACITY, "pn_mpm_add_group: all PN_MPM_MAX_GROUPS = %d groups are in use",
+                     PN_MPM_MAX_GROUPS);
         return -1;
+    }
+    if (!pn__finite(density_kg_m3) || !(density_kg_m3 > 0)) {
+        pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_group: density_kg_m3 = %g must be finite and > 0",
+                     (double)density_kg_m3);
+        return -1;
+    }
+    if (pn_material_check(m, &why) != PN_OK) {
+        pn__mpm_fail(w, PN_ERROR_INVALID_PARAMETER, "pn_mpm_add_group: %s", why);
+        return -1;
+    }
     memset(&w->groups[w->n_groups], 0, sizeof w->groups[0]);
     w->groups[w->n_groups].material = *m;
     w->groups[w->n_groups].density_kg_m3 = density_kg_m3;
     return w->n_groups++;
 }
 
-/* inside the walls: [wall dx, (res - wall) dx] on every axis */
+/* inside the walls: origin + [wall dx, (res - wall) dx] on every axis */
 static int pn__mpm_inside(const pn_mpm_world *w, const pn_real *x) {
     int i;
     for (i = 0; i < w->dim; ++i) {
-        pn_real lo = w->wall * w->desc.dx_m, hi = (w->desc.res[i] - w->wall) * w->desc.dx_m;
+        pn_real o = w->desc.origin_m[i], lo = o + w->wall * w->desc.dx_m, hi = o + (w->desc.res[i] - w->wall) * w->desc.dx_m;
         if (!(x[i] >= lo && x[i] <= hi)) return 0;
     }
     return 1;
@@ -486,7 +662,7 @@ static int pn__mpm_inside(const pn_mpm_world *w, const pn_real *x) {
 static int pn__mpm_in_grid(const pn_mpm_world *w, const pn_real *x) {
     int i;
     for (i = 0; i < w->dim; ++i) {
-        pn_real lo = w->desc.dx_m, hi = (w->desc.res[i] - 1) * w->desc.dx_m;
+        pn_real o = w->desc.origin_m[i], lo = o + w->desc.dx_m, hi = o + (w->desc.res[i] - 1) * w->desc.dx_m;
         if (!(x[i] >= lo && x[i] <= hi)) return 0;
     }
     return 1;
@@ -498,17 +674,31 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
     size_t p;
     PN_ASSERT(w && (x || n == 0));
     d = w->dim;
-    if (g < 0 || g >= w->n_groups || !pn__finite(volume_m3) || !(volume_m3 > 0) ||
-        n > w->cap - w->n)
-        return PN_ERROR_INVALID_ARGUMENT;
+    w->error[0] = 0;
+    if (g < 0 || g >= w->n_groups)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: group %d does not exist (%d groups)",
+                            g, w->n_groups);
+    if (!pn__finite(volume_m3) || !(volume_m3 > 0) || !pn__finite(volume_m3 * w->groups[g].density_kg_m3) ||
+        !(volume_m3 * w->groups[g].density_kg_m3 > 0))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT,
+                            "pn_mpm_add_particles: volume_m3 = %g (mass %g kg at the group's density) must be "
+                            "positive and finite", (double)volume_m3, (double)(volume_m3 * w->groups[g].density_kg_m3));
+    if (n > w->cap - w->n)
+        return pn__mpm_fail(w, PN_ERROR_CAPACITY,
+                            "pn_mpm_add_particles: %lu more particles need max_particles >= %lu (it is %lu, %lu in use)",
+                            (unsigned long)n, (unsigned long)(w->n + n), (unsigned long)w->cap, (unsigned long)w->n);
     for (p = 0; p < n; ++p) {
         if (!pn__all_finite(d, x + p * (size_t)d) || (v && !pn__all_finite(d, v + p * (size_t)d))) {
             w->error_particle = w->n + p;
-            return PN_ERROR_NONFINITE;
+            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_add_particles: particle %lu of the call has a NaN or "
+                                "infinite %s", (unsigned long)p, pn__all_finite(d, x + p * (size_t)d) ? "velocity" : "position");
         }
         if (!pn__mpm_inside(w, x + p * (size_t)d)) {
             w->error_particle = w->n + p;
-            return PN_ERROR_INVALID_ARGUMENT;
+            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: particle %lu of the call at "
+                                "(%g, %g, %g) m is outside the walls (origin_m + [%d dx, (res - %d) dx] on each axis)",
+                                (unsigned long)p, (double)x[p * (size_t)d], (double)x[p * (size_t)d + 1],
+                                d == 3 ? (double)x[p * (size_t)d + 2] : 0.0, w->wall, w->wall);
         }
     }
     for (p = 0; p < n; ++p) {
@@ -532,11 +722,15 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
 PN__DEF pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, const pn_real *h) {
     size_t p;
     PN_ASSERT(w && (h || n == 0));
-    if (first > w->n || n > w->n - first) return PN_ERROR_INVALID_ARGUMENT;
+    w->error[0] = 0;
+    if (first > w->n || n > w->n - first)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_state: particles %lu .. %lu + %lu do not exist "
+                            "(%lu particles)", (unsigned long)first, (unsigned long)first, (unsigned long)n, (unsigned long)w->n);
     for (p = 0; p < n; ++p)
         if (!pn__finite(h[p])) {
             w->error_particle = first + p;
-            return PN_ERROR_NONFINITE;
+            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_set_state: h of particle %lu is NaN or infinite",
+                                (unsigned long)(first + p));
         }
     memcpy(w->h + first, h, sizeof(pn_real) * n);
     return PN_OK;
@@ -549,23 +743,33 @@ PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c,
     PN_ASSERT(w && c);
     d = w->dim;
     k = *c;
-    if (w->n_colliders >= PN_MPM_MAX_COLLIDERS || k.shape < PN_MPM_SHAPE_HALF_SPACE ||
-        k.shape > PN_MPM_SHAPE_SPHERE || k.boundary < PN_MPM_BOUNDARY_STICKY ||
-        k.boundary > PN_MPM_BOUNDARY_SEPARATE || !pn__finite(k.friction) || !(k.friction >= 0) ||
-        !pn__all_finite(d, k.center_m) || !pn__all_finite(d, k.velocity_m_s))
-        return PN_ERROR_INVALID_ARGUMENT;
+    w->error[0] = 0;
+    if (w->n_colliders >= PN_MPM_MAX_COLLIDERS)
+        return pn__mpm_fail(w, PN_ERROR_CAPACITY, "pn_mpm_add_collider: all PN_MPM_MAX_COLLIDERS = %d are in use",
+                            PN_MPM_MAX_COLLIDERS);
+    if (k.shape < PN_MPM_SHAPE_HALF_SPACE || k.shape > PN_MPM_SHAPE_SPHERE)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: shape %d is not a pn_mpm_shape", (int)k.shape);
+    if (k.boundary < PN_MPM_BOUNDARY_STICKY || k.boundary > PN_MPM_BOUNDARY_SEPARATE)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: boundary %d is not a pn_mpm_boundary",
+                            (int)k.boundary);
+    if (!pn__finite(k.friction) || !(k.friction >= 0))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: friction must be finite and >= 0");
+    if (!pn__all_finite(d, k.center_m) || !pn__all_finite(d, k.velocity_m_s))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: center_m or velocity_m_s is not finite");
     for (i = d; i < 3; ++i) k.center_m[i] = k.normal[i] = k.half_extent_m[i] = k.velocity_m_s[i] = 0;
     if (k.shape == PN_MPM_SHAPE_HALF_SPACE) {
-        if (!pn__all_finite(d, k.normal)) return PN_ERROR_INVALID_ARGUMENT;
-        for (i = 0; i < d; ++i) nn += k.normal[i] * k.normal[i];
+        if (pn__all_finite(d, k.normal))
+            for (i = 0; i < d; ++i) nn += k.normal[i] * k.normal[i];
         nn = PN__SQRT(nn);
-        if (!(nn > 0) || !pn__finite(nn)) return PN_ERROR_INVALID_ARGUMENT;
+        if (!(nn > 0) || !pn__finite(nn))
+            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: the half-space normal is zero or not finite");
         for (i = 0; i < d; ++i) k.normal[i] /= nn;
     } else if (k.shape == PN_MPM_SHAPE_BOX) {
         for (i = 0; i < d; ++i)
-            if (!pn__finite(k.half_extent_m[i]) || !(k.half_extent_m[i] > 0)) return PN_ERROR_INVALID_ARGUMENT;
+            if (!pn__finite(k.half_extent_m[i]) || !(k.half_extent_m[i] > 0))
+                return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: half_extent_m must be finite and > 0");
     } else if (!pn__finite(k.radius_m) || !(k.radius_m > 0)) {
-        return PN_ERROR_INVALID_ARGUMENT;
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: radius_m must be finite and > 0");
     }
     w->colliders[w->n_colliders] = k;
     if (index) *index = w->n_colliders;
@@ -579,9 +783,12 @@ PN__DEF pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real
     int i, d;
     PN_ASSERT(w && center_m);
     d = w->dim;
-    if (index < 0 || index >= w->n_colliders) return PN_ERROR_INVALID_ARGUMENT;
+    w->error[0] = 0;
+    if (index < 0 || index >= w->n_colliders)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_move_collider: collider %d does not exist (%d colliders)",
+                            index, w->n_colliders);
     if (!pn__all_finite(d, center_m) || (velocity_m_s && !pn__all_finite(d, velocity_m_s)))
-        return PN_ERROR_NONFINITE;
+        return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_move_collider: center_m or velocity_m_s is NaN or infinite");
     c = &w->colliders[index];
     for (i = 0; i < d; ++i) { /* center(t) = center + t velocity passes center_m at time_s */
         c->velocity_m_s[i] = velocity_m_s ? velocity_m_s[i] : 0;
@@ -592,8 +799,10 @@ PN__DEF pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real
 
 PN__DEF void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentum) {
     size_t p;
-    int i, d = w->dim;
+    int i, d;
     pn_real m = 0, mom[3] = {0, 0, 0};
+    PN_ASSERT(w);
+    d = w->dim;
     for (p = 0; p < w->n; ++p) {
         if (!w->active[p]) continue;
         m += w->mass[p];
@@ -622,13 +831,33 @@ static pn_real pn__mpm_sum(pn_mpm_world *w, size_t n, const pn_real *a, const pn
     return s;
 }
 
-/* The first particle (lowest index) whose pstat holds an error, with its code. */
-static pn_result pn__mpm_first_error(pn_mpm_world *w) {
+/* The first particle (lowest index) whose pstat holds an error, with its code and why: an
+   error code (0xff), else moving past the advection limit (0x400: what makes material tunnel),
+   else passing through a wall where outflow is not allowed (0x800). */
+static pn_result pn__mpm_first_error(pn_mpm_world *w, pn_real dt) {
     size_t p;
-    for (p = 0; p < w->n; ++p)
-        if (w->active[p] && (w->pstat[p] & 0xff)) {
+    int d = w->dim, i, pass;
+    static const int bits[3] = {0xff, 0x400, 0x800};
+    for (pass = 0; pass < 3; ++pass)
+        for (p = 0; p < w->n; ++p) {
+            pn_real far = 0;
+            if (!w->active[p] || !(w->pstat[p] & bits[pass])) continue;
             w->error_particle = p;
-            return (pn_result)(w->pstat[p] & 0xff);
+            if (pass == 0)
+                return pn__mpm_fail(w, (pn_result)(w->pstat[p] & 0xff), "step of %g s: particle %lu (group %d): %s",
+                                    (double)dt, (unsigned long)p, w->group[p],
+                                    pn_result_string((pn_result)(w->pstat[p] & 0xff)));
+            for (i = 0; i < d; ++i)
+                far = PN__MAX(far, PN__FABS(w->sx[p * (size_t)d + (size_t)i] - w->x[p * (size_t)d + (size_t)i]));
+            if (pass == 1)
+                return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "step of %g s: particle %lu would move %.2f cells (the "
+                                    "advection limit is %g): take steps of at most %.3g s (pn_mpm_advance picks them)",
+                                    (double)dt, (unsigned long)p, (double)(far / w->desc.dx_m),
+                                    (double)w->desc.advection_limit, (double)(dt * w->desc.advection_limit * w->desc.dx_m / far));
+            return pn__mpm_fail(w, PN_ERROR_OUTSIDE_DOMAIN, "step of %g s: particle %lu would pass through a wall to "
+                                "(%g, %g, %g) m (smaller steps, or pn_mpm_desc.allow_outflow to let material leave)",
+                                (double)dt, (unsigned long)p, (double)w->sx[p * (size_t)d],
+                                (double)w->sx[p * (size_t)d + 1], d == 3 ? (double)w->sx[p * (size_t)d + 2] : 0.0);
         }
     return PN_OK;
 }
@@ -643,9 +872,431 @@ static pn_result pn__mpm_check_state(pn_mpm_world *w) {
             !pn__all_finite(dd, w->C + p * (size_t)dd) || !pn__all_finite(dd, w->F + p * (size_t)dd) ||
             !pn__finite(w->h[p])) {
             w->error_particle = p;
-            return PN_ERROR_NONFINITE;
+            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x, v, C, F or h (was it "
+                                "written by hand?)", (unsigned long)p);
         }
     }
+    return PN_OK;
+}
+
+#define PN__MPM_FLOOR(x) ((pn_real)floor((double)(x)))
+/* ======================================================================================
+   >>fill: particles on a lattice of spacing dx / per_axis aligned with the grid (points at
+   origin + (i + 1/2) h), kept where they fall inside the shape. Jitter moves each point to
+   a random spot of its lattice cell from a counter-based hash of (seed, i, j, k), so the
+   result does not depend on the order of the walk. Inside a mesh: the winding number of a
+   ray cast along +x, triangles binned by their (y, z) extent (edges by y in 2D); a point
+   on an edge or vertex of the projection is resolved by a symbolic perturbation of the
+   ray (q + (eps, eps^2)), the same for every element, so each crossing counts exactly once.
+   ====================================================================================== */
+
+typedef struct pn__mpm_mesh_bins {
+    int d, nb[2];                /* bins over the projection (y in 2D; y, z in 3D)         */
+    pn_real lo[2], h;            /* first bin's corner and bin size                        */
+    size_t *start, *item;        /* CSR: elements of bin b at item[start[b] .. start[b+1]) */
+} pn__mpm_mesh_bins;
+
+static pn_real pn__mpm_hash01(unsigned long seed, long i, long j, long k, int axis) {
+    unsigned long long z = (unsigned long long)seed * 0x9E3779B97F4A7C15ULL;
+    z ^= (unsigned long long)i * 0xBF58476D1CE4E5B9ULL + (unsigned long long)j * 0x94D049BB133111EBULL +
+         (unsigned long long)k * 0xD6E8FEB86659FD93ULL + (unsigned long long)axis * 0xA0761D6478BD642FULL;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL; /* splitmix64 finalizer */
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    z ^= z >> 31;
+    return (pn_real)((double)(z >> 11) * (1.0 / 9007199254740992.0));
+}
+
+/* orient(u, v, q) in the projection, and its sign under the perturbation q + (eps, eps^2) */
+static int pn__mpm_side(const pn_real *u, const pn_real *v, const pn_real *q) {
+    pn_real e = (v[0] - u[0]) * (q[1] - u[1]) - (v[1] - u[1]) * (q[0] - u[0]);
+    if (e != 0) return e > 0 ? 1 : -1;
+    if (v[1] != u[1]) return v[1] > u[1] ? -1 : 1;
+    return v[0] > u[0] ? 1 : (v[0] < u[0] ? -1 : 0);
+}
+
+/* the projection of vertex a of a mesh element (y or y, z) */
+static void pn__mpm_proj(const pn_mpm_fill_desc *f, int d, int a, pn_real *q) {
+    q[0] = f->vertices_m[(size_t)a * (size_t)d + 1];
+    q[1] = d == 3 ? f->vertices_m[(size_t)a * (size_t)d + 2] : 0;
+}
+
+/* winding of the ray from x along +x (*all: the winding of the whole line, 0 when closed) */
+static int pn__mpm_winding(const pn_mpm_fill_desc *f, const pn__mpm_mesh_bins *b, const pn_real *x, int *all) {
+    int d = b->d, wn = 0, i;
+    long bi[2] = {0, 0};
+    size_t s, bin;
+    *all = 0;
+    for (i = 0; i < d - 1; ++i) {
+        bi[i] = (long)floor((double)((x[i + 1] - b->lo[i]) / b->h));
+        if (bi[i] < 0 || bi[i] >= b->nb[i]) return 0;
+    }
+    bin = (size_t)bi[0] * (size_t)b->nb[1] + (size_t)bi[1];
+    for (s = b->start[bin]; s < b->start[bin + 1]; ++s) {
+        const int *e = f->indices + b->item[s] * (size_t)d;
+        const pn_real *V = f->vertices_m;
+        pn_real xc;
+        int sg;
+        if (d == 2) {
+            pn_real ya = V[(size_t)e[0] * 2 + 1], yb = V[(size_t)e[1] * 2 + 1], xa = V[(size_t)e[0] * 2], xb = V[(size_t)e[1] * 2];
+            if ((ya <= x[1]) == (yb <= x[1])) continue; /* half-open: a vertex counts once */
+            xc = xa + (x[1] - ya) * (xb - xa) / (yb - ya);
+            sg = yb > ya ? 1 : -1;
+        } else {
+            pn_real A[2], B[2], C[2], q[2], wa, wb, wc, area;
+            int s0, s1, s2;
+            pn__mpm_proj(f, 3, e[0], A);
+            pn__mpm_proj(f, 3, e[1], B);
+            pn__mpm_proj(f, 3, e[2], C);
+            q[0] = x[1];
+            q[1] = x[2];
+            s0 = pn__mpm_side(B, C, q);
+            s1 = pn__mpm_side(C, A, q);
+            s2 = pn__mpm_side(A, B, q);
+            if (!((s0 > 0 && s1 > 0 && s2 > 0) || (s0 < 0 && s1 < 0 && s2 < 0))) continue;
+            wa = (C[0] - B[0]) * (q[1] - B[1]) - (C[1] - B[1]) * (q[0] - B[0]);
+            wb = (A[0] - C[0]) * (q[1] - C[1]) - (A[1] - C[1]) * (q[0] - C[0]);
+            wc = (B[0] - A[0]) * (q[1] - A[1]) - (B[1] - A[1]) * (q[0] - A[0]);
+            area = wa + wb + wc;
+            if (area == 0) continue;
+            xc = (wa * V[(size_t)e[0] * 3] + wb * V[(size_t)e[1] * 3] + wc * V[(size_t)e[2] * 3]) / area;
+            sg = s0 > 0 ? 1 : -1; /* the sign of the normal's x component */
+        }
+        *all += sg;
+        if (xc > x[0]) wn += sg;
+    }
+    return wn;
+}
+
+/* a shape's bounding box, and whether x is inside */
+static void pn__mpm_fill_box(const pn_mpm_fill_desc *f, int d, const pn_real *axis, pn_real *lo, pn_real *hi) {
+    int i;
+    size_t v;
+    for (i = 0; i < d; ++i) {
+        pn_real r = 0;
+        if (f->shape == PN_MPM_FILL_BOX) r = f->half_extent_m[i];
+        else if (f->shape == PN_MPM_FILL_SPHERE) r = f->radius_m;
+        else if (f->shape == PN_MPM_FILL_CYLINDER)
+            r = f->half_length_m * PN__FABS(axis[i]) + f->radius_m * PN__SQRT(PN__MAX(0, 1 - axis[i] * axis[i]));
+        lo[i] = f->center_m[i] - r;
+        hi[i] = f->center_m[i] + r;
+    }
+    if (f->shape != PN_MPM_FILL_MESH) return;
+    for (v = 0; v < f->n_vertices; ++v)
+        for (i = 0; i < d; ++i) {
+            pn_real c = f->vertices_m[v * (size_t)d + (size_t)i];
+            if (v == 0 || c < lo[i]) lo[i] = c;
+            if (v == 0 || c > hi[i]) hi[i] = c;
+        }
+}
+
+static int pn__mpm_fill_inside(const pn_mpm_fill_desc *f, const pn__mpm_mesh_bins *b, int d, const pn_real *axis,
+                               const pn_real *x, int *open) {
+    pn_real r[3] = {0, 0, 0}, rr = 0, t = 0;
+    int i, all;
+    for (i = 0; i < d; ++i) r[i] = x[i] - f->center_m[i];
+    switch (f->shape) {
+    case PN_MPM_FILL_BOX:
+        for (i = 0; i < d; ++i)
+            if (!(PN__FABS(r[i]) <= f->half_extent_m[i])) return 0;
+        return 1;
+    case PN_MPM_FILL_SPHERE:
+        for (i = 0; i < d; ++i) rr += r[i] * r[i];
+        return rr <= f->radius_m * f->radius_m;
+    case PN_MPM_FILL_CYLINDER:
+        for (i = 0; i < d; ++i) t += r[i] * axis[i];
+        if (!(PN__FABS(t) <= f->half_length_m)) return 0;
+        for (i = 0; i < d; ++i) rr += (r[i] - t * axis[i]) * (r[i] - t * axis[i]);
+        return rr <= f->radius_m * f->radius_m;
+    default:
+        i = pn__mpm_winding(f, b, x, &all);
+        if (all != 0) *open = 1;
+        return i != 0;
+    }
+}
+
+/* A fill's parameters; *why on failure. */
+static pn_result pn__mpm_fill_valid(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, pn_real *axis, const char **why) {
+    int d = wd->dim, i;
+    pn_real n = 0;
+    size_t e;
+#define PN__MPM_BAD(msg)                                                                    \
+    do {                                                                                    \
+        *why = msg;                                                                         \
+        return PN_ERROR_INVALID_ARGUMENT;                                                   \
+    } while (0)
+    if (f->shape < PN_MPM_FILL_BOX || f->shape > PN_MPM_FILL_MESH) PN__MPM_BAD("pn_mpm_fill_desc.shape is not a pn_mpm_fill_shape");
+    if (f->per_axis < 0 || f->per_axis > 8) PN__MPM_BAD("pn_mpm_fill_desc.per_axis must be in 1 .. 8 (0: 2)");
+    if (!pn__all_finite(d, f->center_m) || !pn__all_finite(d, f->velocity_m_s) || !pn__finite(f->state))
+        PN__MPM_BAD("pn_mpm_fill_desc: center_m, velocity_m_s or state is not finite");
+    if (f->shape == PN_MPM_FILL_BOX)
+        for (i = 0; i < d; ++i)
+            if (!pn__finite(f->half_extent_m[i]) || !(f->half_extent_m[i] >= 0))
+                PN__MPM_BAD("pn_mpm_fill_desc.half_extent_m must be finite and >= 0");
+    if ((f->shape == PN_MPM_FILL_SPHERE || f->shape == PN_MPM_FILL_CYLINDER) &&
+        (!pn__finite(f->radius_m) || !(f->radius_m >= 0)))
+        PN__MPM_BAD("pn_mpm_fill_desc.radius_m must be finite and >= 0");
+    for (i = 0; i < 3; ++i) axis[i] = 0;
+    if (f->shape == PN_MPM_FILL_CYLINDER) {
+        if (!pn__finite(f->half_length_m) || !(f->half_length_m >= 0))
+            PN__MPM_BAD("pn_mpm_fill_desc.half_length_m must be finite and >= 0");
+        if (!pn__all_finite(d, f->axis)) PN__MPM_BAD("pn_mpm_fill_desc.axis is not finite");
+        for (i = 0; i < d; ++i) n += f->axis[i] * f->axis[i];
+        if (n == 0) axis[1] = 1;
+        else
+            for (i = 0; i < d; ++i) axis[i] = f->axis[i] / PN__SQRT(n);
+    }
+    if (f->shape == PN_MPM_FILL_MESH) {
+        if (!f->vertices_m || !f->indices || f->n_vertices == 0 || f->n_elements == 0)
+            PN__MPM_BAD("pn_mpm_fill_desc: a mesh needs vertices_m, indices, n_vertices and n_elements");
+        if (!pn__all_finite(d * (int)PN__MIN(f->n_vertices, (size_t)1 << 20), f->vertices_m))
+            PN__MPM_BAD("pn_mpm_fill_desc.vertices_m has a NaN or infinite coordinate");
+        for (e = 0; e < f->n_elements * (size_t)d; ++e)
+            if (f->indices[e] < 0 || (size_t)f->indices[e] >= f->n_vertices)
+                PN__MPM_BAD("pn_mpm_fill_desc.indices has an index outside 0 .. n_vertices - 1");
+    }
+#undef PN__MPM_BAD
+    return PN_OK;
+}
+
+/* Bin the mesh's elements over the projection, bins of size h (allocated with a). */
+static pn_result pn__mpm_bins_make(pn__mpm_mesh_bins *b, const pn_mpm_fill_desc *f, int d, pn_real h,
+                                   const pn_real *lo, const pn_real *hi, const pn_allocator *a) {
+    size_t e, nbins, total = 0, pass;
+    int i;
+    memset(b, 0, sizeof *b);
+    b->d = d;
+    b->h = h;
+    b->nb[1] = 1;
+    for (i = 0; i < d - 1; ++i) {
+        b->lo[i] = lo[i + 1] - h;
+        b->nb[i] = (int)PN__MIN((pn_real)1e5, PN__MPM_FLOOR((hi[i + 1] - lo[i + 1]) / h) + 3);
+    }
+    nbins = (size_t)b->nb[0] * (size_t)b->nb[1];
+    b->start = (size_t *)pn_alloc(a, sizeof(size_t) * (nbins + 1));
+    if (!b->start) return PN_ERROR_OUT_OF_MEMORY;
+    memset(b->start, 0, sizeof(size_t) * (nbins + 1));
+    for (pass = 0; pass < 2; ++pass) { /* count per bin, then place */
+        for (e = 0; e < f->n_elements; ++e) {
+            pn_real elo[2] = {0, 0}, ehi[2] = {0, 0};
+            long r0[2] = {0, 0}, r1[2] = {0, 0}, y, z;
+            int k;
+            for (k = 0; k < d; ++k) {
+                pn_real q[2];
+                pn__mpm_proj(f, d, f->indices[e * (size_t)d + (size_t)k], q);
+                for (i = 0; i < d - 1; ++i) {
+                    if (k == 0 || q[i] < elo[i]) elo[i] = q[i];
+                    if (k == 0 || q[i] > ehi[i]) ehi[i] = q[i];
+                }
+            }
+            for (i = 0; i < d - 1; ++i) {
+                r0[i] = (long)PN__MAX(0, PN__MPM_FLOOR((elo[i] - b->lo[i]) / h));
+                r1[i] = (long)PN__MIN(b->nb[i] - 1, PN__MPM_FLOOR((ehi[i] - b->lo[i]) / h));
+            }
+            for (y = r0[0]; y <= r1[0]; ++y)
+                for (z = r0[1]; z <= r1[1]; ++z) {
+                    size_t bin = (size_t)y * (size_t)b->nb[1] + (size_t)z;
+                    if (pass == 0) b->start[bin + 1]++;
+                    else b->item[b->start[bin]++] = e;
+                }
+        }
+        if (pass == 0) {
+            for (e = 0; e < nbins; ++e) b->start[e + 1] += b->start[e];
+            total = b->start[nbins];
+            b->item = (size_t *)pn_alloc(a, sizeof(size_t) * (total ? total : 1));
+            if (!b->item) {
+                pn_free(a, b->start);
+                return PN_ERROR_OUT_OF_MEMORY;
+            }
+        } else { /* start[bin] was advanced to the next bin's start: shift back */
+            for (e = nbins; e > 0; --e) b->start[e] = b->start[e - 1];
+            b->start[0] = 0;
+        }
+    }
+    return PN_OK;
+}
+
+/* Walk the lattice points of the fill: count them (x NULL) or write them to x. Returns
+   PN_OK, or the first point outside the walls (*bad) / an open mesh. */
+static pn_result pn__mpm_fill_walk(const pn_mpm_desc *wd, int wall, const pn_mpm_fill_desc *f,
+                                   const pn__mpm_mesh_bins *b, const pn_real *axis, pn_real *x, size_t *count,
+                                   pn_real *bad, int *open) {
+    int d = wd->dim, i, per = f->per_axis ? f->per_axis : 2;
+    pn_real h = wd->dx_m / (pn_real)per, lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+    long i0[3] = {0, 0, 0}, i1[3] = {0, 0, 0}, a, c, e;
+    size_t n = 0;
+    pn__mpm_fill_box(f, d, axis, lo, hi);
+    for (i = 0; i < d; ++i) { /* lattice cells that can hold a point of the shape */
+        i0[i] = (long)PN__MPM_FLOOR((lo[i] - wd->origin_m[i]) / h) - 1;
+        i1[i] = (long)PN__MPM_FLOOR((hi[i] - wd->origin_m[i]) / h) + 1;
+    }
+    for (a = i0[0]; a <= i1[0]; ++a)
+        for (c = i0[1]; c <= i1[1]; ++c)
+            for (e = i0[2]; e <= (d == 3 ? i1[2] : i0[2]); ++e) {
+                long idx[3];
+                pn_real p[3] = {0, 0, 0};
+                int in = 1;
+                idx[0] = a, idx[1] = c, idx[2] = e;
+                for (i = 0; i < d; ++i) {
+                    pn_real u = f->jitter ? pn__mpm_hash01(f->seed, a, c, e, i) : (pn_real)0.5;
+                    p[i] = wd->origin_m[i] + ((pn_real)idx[i] + u) * h;
+                }
+                if (!pn__mpm_fill_inside(f, b, d, axis, p, open)) continue;
+                for (i = 0; i < d; ++i) {
+                    pn_real o = wd->origin_m[i];
+                    in &= p[i] >= o + wall * wd->dx_m && p[i] <= o + (wd->res[i] - wall) * wd->dx_m;
+                }
+                if (!in) {
+                    if (f->clip) continue;
+                    for (i = 0; i < 3; ++i) bad[i] = p[i];
+                    return PN_ERROR_INVALID_ARGUMENT;
+                }
+                if (x)
+                    for (i = 0; i < d; ++i) x[n * (size_t)d + (size_t)i] = p[i];
+                ++n;
+            }
+    *count = n;
+    return *open ? PN_ERROR_INVALID_ARGUMENT : PN_OK;
+}
+
+/* count (x NULL) or fill; the mesh bins live for the call */
+static pn_result pn__mpm_fill_do(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, pn_real *x, size_t *count,
+                                 char *msg, size_t msg_n) {
+    pn__mpm_mesh_bins b;
+    pn_real axis[3], lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, bad[3] = {0, 0, 0};
+    const char *why = "";
+    int open = 0, wall = wd->wall_cells ? wd->wall_cells : 3;
+    pn_result r = pn__mpm_fill_valid(wd, f, axis, &why);
+    *count = 0;
+    memset(&b, 0, sizeof b);
+    if (r == PN_OK && f->shape == PN_MPM_FILL_MESH) {
+        pn__mpm_fill_box(f, wd->dim, axis, lo, hi);
+        r = pn__mpm_bins_make(&b, f, wd->dim, wd->dx_m / (pn_real)(f->per_axis ? f->per_axis : 2), lo, hi, &wd->allocator);
+        if (r != PN_OK) why = "out of memory for the mesh's bins";
+    }
+    if (r == PN_OK) {
+        r = pn__mpm_fill_walk(wd, wall, f, &b, axis, x, count, bad, &open);
+        if (open) why = "pn_mpm_fill_desc: the mesh is not closed (a line crosses it an odd number of times)";
+        else if (r != PN_OK) why = "";
+    }
+    if (b.start) pn_free(&wd->allocator, b.start);
+    if (b.item) pn_free(&wd->allocator, b.item);
+    if (r == PN_OK || !msg) return r;
+#ifndef PN_NO_STDIO
+    if (!*why)
+        snprintf(msg, msg_n, "pn_mpm_fill: the shape reaches outside the walls at (%g, %g, %g) m (move it, or set "
+                 "pn_mpm_fill_desc.clip)", (double)bad[0], (double)bad[1], (double)bad[2]);
+    else
+        snprintf(msg, msg_n, "%s", why);
+#else
+    (void)msg_n;
+    msg[0] = 0;
+#endif
+    return r;
+}
+
+PN__DEF pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, size_t *count, const char **why) {
+    pn__mpm_mesh_bins b;
+    pn_real axis[3], lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, bad[3];
+    int open = 0;
+    pn_result r;
+    const char *w0 = "pn_mpm_fill_count: the shape reaches outside the walls (move it, or set clip)";
+    PN_ASSERT(wd && f && count);
+    *count = 0;
+    if (!pn__dim_ok(wd->dim) || !(wd->dx_m > 0) || !pn__finite(wd->dx_m)) {
+        if (why) *why = "pn_mpm_fill_count: the world description's dim or dx_m is invalid";
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    r = pn__mpm_fill_valid(wd, f, axis, why ? why : &w0);
+    if (r != PN_OK) return r;
+    memset(&b, 0, sizeof b);
+    if (f->shape == PN_MPM_FILL_MESH) {
+        pn__mpm_fill_box(f, wd->dim, axis, lo, hi);
+        r = pn__mpm_bins_make(&b, f, wd->dim, wd->dx_m / (pn_real)(f->per_axis ? f->per_axis : 2), lo, hi, &wd->allocator);
+        if (r != PN_OK) return r;
+    }
+    r = pn__mpm_fill_walk(wd, wd->wall_cells ? wd->wall_cells : 3, f, &b, axis, NULL, count, bad, &open);
+    if (b.start) pn_free(&wd->allocator, b.start);
+    if (b.item) pn_free(&wd->allocator, b.item);
+    if (r != PN_OK && why)
+        *why = open ? "pn_mpm_fill_desc: the mesh is not closed (a line crosses it an odd number of times)" : w0;
+    return r;
+}
+
+PN__DEF pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t *added) {
+    size_t n = 0, p, q;
+    int d, i;
+    pn_real vol, mass;
+    pn_result r;
+    PN_ASSERT(w && f);
+    d = w->dim;
+    w->error[0] = 0;
+    if (added) *added = 0;
+    if (f->group < 0 || f->group >= w->n_groups)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: group %d does not exist (%d groups)", f->group,
+                            w->n_groups);
+    r = pn__mpm_fill_do(&w->desc, f, NULL, &n, w->error, sizeof w->error);
+    if (r != PN_OK) return r;
+    if (n > w->cap - w->n)
+        return pn__mpm_fail(w, PN_ERROR_CAPACITY, "pn_mpm_fill: the shape holds %lu particles; max_particles must be >= %lu "
+                            "(it is %lu, %lu in use; pn_mpm_fill_count tells before creating the world)",
+                            (unsigned long)n, (unsigned long)(w->n + n), (unsigned long)w->cap, (unsigned long)w->n);
+    vol = PN__POW(w->desc.dx_m / (pn_real)(f->per_axis ? f->per_axis : 2), d);
+    mass = vol * w->groups[f->group].density_kg_m3;
+    if (!(vol > 0) || !pn__finite(mass) || !(mass > 0))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: particle volume %g m^3 gives mass %g kg", (double)vol,
+                            (double)mass);
+    /* the walk writes straight into the particle arrays, past the particles in use */
+    r = pn__mpm_fill_do(&w->desc, f, w->x + w->n * (size_t)d, &q, w->error, sizeof w->error);
+    if (r != PN_OK || q != n) return r != PN_OK ? r : PN_ERROR_INVALID_ARGUMENT;
+    for (p = w->n; p < w->n + n; ++p) {
+        for (i = 0; i < d; ++i) w->v[p * (size_t)d + (size_t)i] = f->velocity_m_s[i];
+        memset(w->C + p * (size_t)(d * d), 0, sizeof(pn_real) * (size_t)(d * d));
+        pn__identity(d, w->F + p * (size_t)(d * d));
+        w->h[p] = f->state;
+        w->vol0[p] = vol;
+        w->mass[p] = mass;
+        w->group[p] = f->group;
+        w->active[p] = 1;
+    }
+    w->n += n;
+    if (added) *added = n;
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>stable-dt: the explicit step bound from the P-wave speed and the particle speeds.
+   ====================================================================================== */
+
+/* P-wave modulus of particle p's material in its current state (Pa) */
+static pn_real pn__mpm_pwave(const pn_material *m, pn_real h, pn_real J) {
+    pn_real K = m->lambda + 2 * m->mu;
+    if (m->plastic == PN_PLASTIC_SNOW_STOMAKHIN) K *= PN__EXP(m->snow_xi * (1 - PN__EXP(h)));
+    if (J > 0 && J < 1) K /= J; /* compressed material is stiffer (log-strain models ~ 1/J) */
+    return K;
+}
+
+PN__DEF pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s) {
+    int d, g;
+    size_t p;
+    pn_real worst = 0;
+    PN_ASSERT(w && dt_s);
+    d = w->dim;
+    if (w->n_groups == 0) return PN_ERROR_INVALID_ARGUMENT;
+    for (g = 0; g < w->n_groups; ++g) /* the materials at rest bound it from below */
+        worst = PN__MAX(worst, PN__SQRT(pn__mpm_pwave(&w->groups[g].material, 0, 1) / w->groups[g].density_kg_m3));
+    for (p = 0; p < w->n; ++p) {
+        const pn_mpm_group *gr = &w->groups[w->group[p]];
+        pn_real J, v2 = 0, c;
+        int i;
+        if (!w->active[p]) continue;
+        J = pn_mat_det(d, w->F + p * (size_t)(d * d));
+        for (i = 0; i < d; ++i) v2 += w->v[p * (size_t)d + (size_t)i] * w->v[p * (size_t)d + (size_t)i];
+        /* current density rho0 / J */
+        c = PN__SQRT(pn__mpm_pwave(&gr->material, w->h[p], J) * (J > 0 ? J : 1) / gr->density_kg_m3);
+        worst = PN__MAX(worst, c + PN__SQRT(v2));
+    }
+    if (!pn__finite(worst) || !(worst > 0)) return PN_ERROR_NONFINITE;
+    *dt_s = (pn_real)0.9 * w->desc.dx_m / worst;
     return PN_OK;
 }
 
@@ -662,7 +1313,7 @@ static void pn__mpm_stencil(pn_mpm_world *w, size_t p) {
     pn_real dx = w->desc.dx_m, *W = w->pw + p * 9, *fx = w->pfx + p * 3;
     size_t flat = 0;
     for (i = 0; i < d; ++i) {
-        pn_real xc = w->x[p * (size_t)d + (size_t)i] / dx, f;
+        pn_real xc = (w->x[p * (size_t)d + (size_t)i] - w->desc.origin_m[i]) / dx, f;
         int b = (int)floor((double)(xc - (pn_real)0.5));
         f = xc - (pn_real)b;
         fx[i] = f;
@@ -839,7 +1490,8 @@ static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_r
 /* Grid to particles into scratch: APIC v, C (with filter_time_s > 0, AFLIP: v = v_PIC +
    (1 - s)(v_p - sum_i w_ip v_i^n), v_i^n the transfer's own velocity); x += dt v_PIC; F from gradF (0: (I + dt C) F as in
    the explicit step, 1: F + dt sum v q^T, as the implicit energy saw it); then the
-   return mapping. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid. */
+   return mapping. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid
+   (retired) | 0x400 moved past the advection limit | 0x800 left where outflow is not allowed. */
 static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt, int gradF,
                              pn_mpm_stats *st) {
     int d = w->dim, dd = d * d;
@@ -847,6 +1499,7 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
     size_t p;
     pn_real inv_dx = 1 / w->desc.dx_m, tf = w->desc.filter_time_s;
     pn_real flip = tf > 0 && dt < tf ? 1 - dt / tf : 0; /* the FLIP share 1 - s */
+    pn_real reach = w->desc.advection_limit * w->desc.dx_m / dt; /* the fastest honest speed */
     pn_result r;
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp) {
@@ -892,17 +1545,18 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
         for (i = 0; i < d; ++i) {
             w->sv[q * (size_t)d + (size_t)i] = nv[i] + flip * (w->v[q * (size_t)d + (size_t)i] - ov[i]);
             w->sx[q * (size_t)d + (size_t)i] = xp[i] + dt * nv[i];
+            if (!(PN__FABS(nv[i]) <= reach)) stat |= 0x400; /* more than the limit along an axis */
         }
         memcpy(w->sC + q * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);
         memcpy(w->sF + q * (size_t)dd, Z, sizeof(pn_real) * (size_t)dd);
         w->sh[q] = hn;
-        if (!pn__mpm_in_grid(w, w->sx + q * (size_t)d)) { /* went through a wall: retire it */
+        if (!pn__mpm_in_grid(w, w->sx + q * (size_t)d)) { /* went through a wall */
             w->sactive[q] = 0;
-            stat |= 0x200;
+            stat |= w->desc.allow_outflow ? 0x200 : 0x800;
         }
         w->pstat[q] = stat;
     }
-    r = pn__mpm_first_error(w);
+    r = pn__mpm_first_error(w, dt);
     if (r != PN_OK) return r;
     for (p = 0; p < w->n; ++p) {
         pn_real sp = 0;
@@ -934,6 +1588,7 @@ static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
     w->time_s += dt;
     w->steps++;
     w->error_particle = (size_t)-1;
+    w->error[0] = 0;
 }
 
 /* ======================================================================================
@@ -991,7 +1646,7 @@ static void pn__mpm_contact(pn_mpm_world *w, pn_real t) {
             else if (idx[i] > w->desc.res[i] - w->wall) dir[3 * cn++ + i] = -1;
         }
         if (cn == 0) {
-            for (i = 0; i < d; ++i) xn[i] = (pn_real)idx[i] * w->desc.dx_m;
+            for (i = 0; i < d; ++i) xn[i] = w->desc.origin_m[i] + (pn_real)idx[i] * w->desc.dx_m;
             for (c = 0; c < w->n_colliders; ++c) {
                 const pn_mpm_collider *co = &w->colliders[c];
                 if (pn__mpm_collider_phi(co, d, xn, t, nrm) > 0) continue;
@@ -1152,21 +1807,44 @@ PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy 
                                           const pn_pnet *net) {
     pn_mpm_group *gr;
     PN_ASSERT(w);
-    if (g < 0 || g >= w->n_groups || energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_DP)
-        return PN_ERROR_INVALID_ARGUMENT;
+    w->error[0] = 0;
+    if (g < 0 || g >= w->n_groups)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: group %d does not exist (%d groups)",
+                            g, w->n_groups);
+    if (energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_DP)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: energy %d is not a pn_mpm_energy",
+                            (int)energy);
     gr = &w->groups[g];
     if (energy == PN_MPM_ENERGY_PNET) {
-        if (!net || !net->energy || net->energy->dim != w->dim) return PN_ERROR_INVALID_ARGUMENT;
-        if (net->material.plastic != gr->material.plastic || net->material.elastic != gr->material.elastic)
-            return PN_ERROR_INVALID_ARGUMENT;
+        const pn_material *a, *b = &gr->material;
+        if (!net || !net->energy)
+            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: PN_MPM_ENERGY_PNET needs a "
+                                "pn_pnet bound with pn_pnet_init");
+        if (net->energy->dim != w->dim)
+            return pn__mpm_fail(w, PN_ERROR_DIMENSION, "pn_mpm_group_set_energy: the network %s is %dD, the world %dD",
+                                net->energy->name ? net->energy->name : "", net->energy->dim, w->dim);
+        a = &net->material;
+        /* the solve minimizes the network's energy, the state update return-maps the group's
+           material: they must be the same material, or the two disagree */
+        if (a->plastic != b->plastic || a->elastic != b->elastic || a->E != b->E || a->nu != b->nu ||
+            a->sin_phi != b->sin_phi || a->cohesion_strain != b->cohesion_strain ||
+            a->volume_correction != b->volume_correction || a->yield_stress != b->yield_stress ||
+            a->hardening_modulus != b->hardening_modulus || a->beta != b->beta || a->xi != b->xi ||
+            a->camclay_hardening != b->camclay_hardening)
+            return pn__mpm_fail(w, PN_ERROR_INVALID_PARAMETER, "pn_mpm_group_set_energy: the network is bound to "
+                                "another material (E %g Pa, nu %g) than group %d's (E %g Pa, nu %g, or a plastic "
+                                "parameter): bind it with pn_pnet_init to the group's material",
+                                (double)a->E, (double)a->nu, g, (double)b->E, (double)b->nu);
         gr->pnet = *net;
     }
     if (energy == PN_MPM_ENERGY_EXACT_VM && (gr->material.plastic != PN_PLASTIC_VON_MISES ||
                                              gr->material.elastic != PN_ELASTIC_STVK_HENCKY))
-        return PN_ERROR_UNSUPPORTED;
+        return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_group_set_energy: EXACT_VM needs group %d to be "
+                            "StVK-Hencky + von Mises", g);
     if (energy == PN_MPM_ENERGY_DP && (gr->material.plastic != PN_PLASTIC_DRUCKER_PRAGER ||
                                        gr->material.elastic != PN_ELASTIC_STVK_HENCKY))
-        return PN_ERROR_UNSUPPORTED;
+        return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_group_set_energy: DP needs group %d to be StVK-Hencky + "
+                            "Drucker-Prager", g);
     gr->energy = energy;
     return PN_OK;
 }
@@ -1319,7 +1997,7 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
         if (with_derivs && w->pstat[p] == PN_OK) /* pmat (by sorted index) = V dt P */
             for (i = 0; i < dd; ++i) w->pmat[w->prank[p] * (size_t)dd + (size_t)i] = w->vol0[p] * dt * P[i];
     }
-    r = pn__mpm_first_error(w);
+    r = pn__mpm_first_error(w, dt);
     if (r != PN_OK) {
         if (with_derivs) return r;
         *E = (pn_real)HUGE_VAL;
@@ -1480,7 +2158,7 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
     }
     for (p = 0; p < w->n; ++p) worst = PN__MAX(worst, w->pscal[p]);
     *res = worst;
-    return pn__mpm_first_error(w);
+    return pn__mpm_first_error(w, dt);
 }
 
 /* >>friction: Coulomb friction of separating contacts, lagged as in IPC. The normal impulse L
@@ -1658,6 +2336,26 @@ static void pn__mpm_stats_clear(pn_mpm_stats *st, int measure) {
     st->force_error = st->force_error_regularizer = st->apex_fraction = measure ? 0 : -1;
 }
 
+/* st += a later step's sub: counts add up, the state figures are the later one's, the
+   residuals and errors the worst (substeps and solves are the caller's) */
+static void pn__mpm_stats_add(pn_mpm_stats *st, const pn_mpm_stats *sub) {
+    st->particles = sub->particles;
+    st->plastic += sub->plastic;
+    st->left_domain += sub->left_domain;
+    st->active_nodes = PN__MAX(st->active_nodes, sub->active_nodes);
+    st->max_speed_m_s = sub->max_speed_m_s;
+    st->fixed_point_iters += sub->fixed_point_iters;
+    st->newton_iters += sub->newton_iters;
+    st->cg_iters += sub->cg_iters;
+    st->active_set_rounds += sub->active_set_rounds;
+    st->line_search_failures += sub->line_search_failures;
+    st->newton_residual = PN__MAX(st->newton_residual, sub->newton_residual);
+    st->fixed_point_residual = PN__MAX(st->fixed_point_residual, sub->fixed_point_residual);
+    st->force_error = PN__MAX(st->force_error, sub->force_error);
+    st->force_error_regularizer = PN__MAX(st->force_error_regularizer, sub->force_error_regularizer);
+    st->apex_fraction = PN__MAX(st->apex_fraction, sub->apex_fraction);
+}
+
 /* pn_mpm_stats.force_error and its parts at the grid velocities v (serial: a diagnostic). */
 static void pn__mpm_force_error(pn_mpm_world *w, const pn_real *v, pn_real dt, pn_mpm_stats *st) {
     int d = w->dim, dd = d * d, i;
@@ -1791,7 +2489,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 }
                 last_res = dmax / (w->desc.dx_m / dt);
                 if (o->trace) o->trace(o->trace_user, st->solves, it, E0, last_res);
-                if (!pn__finite(dmax)) return PN_ERROR_OVERFLOW;
+                if (!pn__finite(dmax))
+                    return pn__mpm_fail(w, PN_ERROR_OVERFLOW, "implicit step of %g s: the Newton direction is not finite "
+                                        "(the Hessian overflowed)", (double)dt);
                 if (dmax <= vscale) break;
                 gd = pn__mpm_sum(w, nd, w->grad, w->dir);
                 for (;;) { /* backtracking with the Armijo condition */
@@ -1813,7 +2513,10 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         }
     }
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
-    if (!(last_res <= 100 * o->newton_tol)) return PN_ERROR_NOT_CONVERGED;
+    if (!(last_res <= 100 * o->newton_tol))
+        return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped at max |dv| dt / dx = %.3g "
+                            "(newton_tol %g, newton_max %d; %d line searches failed): a smaller step converges",
+                            (double)dt, (double)last_res, (double)o->newton_tol, o->newton_max, st->line_search_failures);
     if (o->measure_force_error) pn__mpm_force_error(w, w->vsol, dt, st);
     r = pn__mpm_g2p(w, w->vsol, dt, 1, st);
     if (r != PN_OK) return r;
@@ -1846,10 +2549,16 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     pn_result r, first;
     int level;
     PN_ASSERT(w);
-    if (!pn__finite(dt) || !(dt > 0)) return PN_ERROR_INVALID_ARGUMENT;
+    w->error[0] = 0;
+    if (!pn__finite(dt) || !(dt > 0))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_implicit: dt_s = %g must be finite and > 0", (double)dt);
     memset(&o, 0, sizeof o);
     if (desc) o = *desc;
-    if (o.fixed_point_iters <= 0) o.fixed_point_iters = 2;
+    if (!pn__finite(o.newton_tol) || !pn__finite(o.cg_rel_tol) || !pn__finite(o.cg_forcing_max) ||
+        o.newton_tol < 0 || o.cg_rel_tol < 0 || o.cg_forcing_max < 0)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: newton_tol, cg_rel_tol and cg_forcing_max "
+                            "must be finite and >= 0 (0: the default)");
+    if (o.fixed_point_iters <= 0) o.fixed_point_iters = 1;
     if (o.newton_max <= 0) o.newton_max = 50;
     if (o.cg_max <= 0) o.cg_max = 500;
     if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
@@ -1857,12 +2566,10 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (o.contact_rounds <= 0) o.contact_rounds = 1;
     if (o.max_halvings == 0) o.max_halvings = 3;
     if (o.max_halvings > 10) o.max_halvings = 10;
-    if (!pn__finite(o.newton_tol) || !pn__finite(o.cg_rel_tol) || !pn__finite(o.cg_forcing_max))
-        return PN_ERROR_INVALID_ARGUMENT;
     r = pn__mpm_check_state(w);
     if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
-    if (r != PN_OK) return r;
+    if (r != PN_OK) return pn__mpm_fail(w, r, "pn_mpm_step_implicit: out of memory for the solver storage");
     pn__mpm_stats_clear(&st, o.measure_force_error);
     first = pn__mpm_implicit_once(w, dt, &o, &st);
     if (first == PN_OK) {
@@ -1874,6 +2581,8 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         pn_real t0 = w->time_s;
         long steps0 = w->steps;
         size_t left0 = w->left_total, culprit = w->error_particle;
+        char why[sizeof w->error];
+        memcpy(why, w->error, sizeof why);
         pn__mpm_backup(w, 0);
         for (level = 1; level <= o.max_halvings; ++level) {
             int s, n_sub = 1 << level;
@@ -1884,22 +2593,8 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                 sub.solves = st.solves; /* numbered on through the substeps */
                 r = pn__mpm_implicit_once(w, dt / (pn_real)n_sub, &o, &sub);
                 if (r != PN_OK) break;
-                st.particles = sub.particles;
-                st.plastic += sub.plastic;
-                st.left_domain += sub.left_domain;
-                st.active_nodes = PN__MAX(st.active_nodes, sub.active_nodes);
-                st.max_speed_m_s = sub.max_speed_m_s;
-                st.fixed_point_iters += sub.fixed_point_iters;
-                st.newton_iters += sub.newton_iters;
-                st.cg_iters += sub.cg_iters;
-                st.active_set_rounds += sub.active_set_rounds;
-                st.line_search_failures += sub.line_search_failures;
+                pn__mpm_stats_add(&st, &sub);
                 st.solves = sub.solves;
-                st.newton_residual = PN__MAX(st.newton_residual, sub.newton_residual);
-                st.fixed_point_residual = PN__MAX(st.fixed_point_residual, sub.fixed_point_residual);
-                st.force_error = PN__MAX(st.force_error, sub.force_error);
-                st.force_error_regularizer = PN__MAX(st.force_error_regularizer, sub.force_error_regularizer);
-                st.apex_fraction = PN__MAX(st.apex_fraction, sub.apex_fraction);
             }
             if (r == PN_OK) {
                 st.substeps = n_sub;
@@ -1914,6 +2609,12 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
             w->left_total = left0;
         }
         w->error_particle = culprit;
+        memcpy(w->error, why, sizeof why);
+        { /* the first failure says why; add that halving did not help */
+            size_t len = strlen(w->error);
+            const char *tail = " [also as 2^max_halvings substeps]";
+            if (len + strlen(tail) < sizeof w->error) memcpy(w->error + len, tail, strlen(tail) + 1);
+        }
     }
     return first;
 }
@@ -1930,7 +2631,9 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     pn_mpm_stats st;
     pn_result r;
     PN_ASSERT(w);
-    if (!pn__finite(dt) || !(dt > 0)) return PN_ERROR_INVALID_ARGUMENT;
+    w->error[0] = 0;
+    if (!pn__finite(dt) || !(dt > 0))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_explicit: dt_s = %g must be finite and > 0", (double)dt);
     r = pn__mpm_check_state(w);
     if (r != PN_OK) return r;
     d = w->dim;
@@ -1949,7 +2652,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
         w->pstat[p] = (int)pn_kirchhoff_stress(&g->material, d, w->F + p * (size_t)dd, w->h[p], tau);
         for (i = 0; i < dd; ++i) A[i] = -dt * w->vol0[p] * 4 * inv_dx * inv_dx * tau[i];
     }
-    r = pn__mpm_first_error(w);
+    r = pn__mpm_first_error(w, dt);
     if (r != PN_OK) return r;
     pn__mpm_p2g(w, 1);
     pn__mpm_contact(w, w->time_s);
@@ -1967,6 +2670,77 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     pn__mpm_commit(w, dt, &st);
     w->n_lag = 0; /* the implicit friction memory is stale now */
     if (stats) *stats = st;
+    return PN_OK;
+}
+
+
+/* ======================================================================================
+   >>advance: a frame in as many steps as the physics asks for.
+   ====================================================================================== */
+
+PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_advance_desc *desc,
+                                 pn_mpm_stats *stats) {
+    pn_mpm_advance_desc a;
+    pn_mpm_stats tot, st;
+    pn_real done = 0, g2 = 0, courant;
+    long steps = 0;
+    int i, d;
+    PN_ASSERT(w);
+    d = w->dim;
+    w->error[0] = 0;
+    memset(&a, 0, sizeof a);
+    if (desc) a = *desc;
+    if (!pn__finite(frame_s) || !(frame_s > 0))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance: frame_s = %g must be finite and > 0", (double)frame_s);
+    if (a.integrator != PN_MPM_EXPLICIT && a.integrator != PN_MPM_IMPLICIT)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance_desc.integrator %d is not a pn_mpm_integrator",
+                            (int)a.integrator);
+    if (!pn__finite(a.max_step_s) || a.max_step_s < 0 || !pn__finite(a.courant) || a.courant < 0)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance_desc: max_step_s and courant must be finite "
+                            "and >= 0 (0: the default)");
+    courant = a.courant > 0 ? a.courant : 1;
+    if (a.integrator == PN_MPM_IMPLICIT && !(a.max_step_s > 0)) a.max_step_s = (pn_real)1e-3;
+    for (i = 0; i < d; ++i) g2 += w->desc.gravity[i] * w->desc.gravity[i];
+    pn__mpm_stats_clear(&tot, 0);
+    tot.substeps = 0;
+    while (frame_s - done > (pn_real)1e-9 * frame_s) {
+        pn_real dt, left = frame_s - done;
+        pn_result r;
+        if (a.integrator == PN_MPM_EXPLICIT) {
+            if ((r = pn_mpm_stable_dt(w, &dt)) != PN_OK)
+                return pn__mpm_fail(w, r, "pn_mpm_advance: no stable step (no group, or a non-finite state)");
+            dt *= courant;
+            if (a.max_step_s > 0) dt = PN__MIN(dt, a.max_step_s);
+        } else { /* at most max_step_s, and short enough for the fastest particle and gravity */
+            pn_real vmax = 0, reach = (pn_real)0.9 * w->desc.advection_limit * w->desc.dx_m;
+            size_t p;
+            for (p = 0; p < w->n; ++p) {
+                pn_real v2 = 0;
+                if (!w->active[p]) continue;
+                for (i = 0; i < d; ++i) v2 += w->v[p * (size_t)d + (size_t)i] * w->v[p * (size_t)d + (size_t)i];
+                vmax = PN__MAX(vmax, v2);
+            }
+            vmax = PN__SQRT(vmax);
+            dt = a.max_step_s;
+            if ((vmax + PN__SQRT(g2) * dt) * dt > reach) /* solve (vmax + |g| dt) dt = reach */
+                dt = g2 > 0 ? 2 * reach / (vmax + PN__SQRT(vmax * vmax + 4 * PN__SQRT(g2) * reach)) : reach / vmax;
+        }
+        if (!(dt > 0) || !pn__finite(dt))
+            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_advance: the step came out as %g s", (double)dt);
+        if (left <= dt * (pn_real)1.0001) dt = left;
+        else if (left < 2 * dt) dt = left / 2; /* no sliver of a last step */
+        if (++steps > 1000000L)
+            return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_mpm_advance: a frame of %g s needs more than 1e6 steps of "
+                                "%g s (a stiffer material than the frame rate allows explicitly: use the implicit integrator)",
+                                (double)frame_s, (double)dt);
+        r = a.integrator == PN_MPM_EXPLICIT ? pn_mpm_step_explicit(w, dt, &st) : pn_mpm_step_implicit(w, dt, a.implicit, &st);
+        if (r != PN_OK) return r;
+        pn__mpm_stats_add(&tot, &st);
+        tot.solves += st.solves;
+        tot.substeps += st.substeps;
+        done += dt;
+    }
+    if (stats) *stats = tot;
     return PN_OK;
 }
 

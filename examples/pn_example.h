@@ -2,9 +2,10 @@
    one-line build. Include it once, first, in a file that defines PLASTINET_IMPLEMENTATION:
        #define PLASTINET_IMPLEMENTATION
        #include "pn_example.h"      // plastinet.h, plastinet_mpm.h, the sand and snow models
-   Here: a monotonic clock, a PNG writer and a particle renderer, an ASCII PLY writer, the scene
-   builders of shared/design/VALIDATION.md (sand column, snowball), a stepping helper that
-   tallies solver statistics, and the mass IoU metric. Everything is static; no globals. */
+   Here: a monotonic clock, frames (PNG, animated PNG, PLY points, OBJ surfaces: pn_render.h),
+   the scenes of docs/validation.md (sand column, snowball), a stepping helper that tallies
+   solver statistics, the command line the examples share, and the mass IoU metric.
+   Everything is static; no globals. */
 #ifndef PN_EXAMPLE_H
 #define PN_EXAMPLE_H
 /* clock_gettime under -std=c99; must come before the first system header */
@@ -17,11 +18,20 @@
 #include "../models/pn_model_sand_3d.h"
 #include "../models/pn_model_snow_2d.h"
 #include "../models/pn_model_snow_3d.h"
+#include "pn_render.h"
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#ifdef _WIN32
+#include <direct.h>
+#define pn_ex__mkdir(path) _mkdir(path)
+#else
+#include <sys/stat.h>
+#define pn_ex__mkdir(path) mkdir(path, 0777)
+#endif
 
 /* each program uses only some of these helpers */
 #if defined(__GNUC__)
@@ -42,120 +52,76 @@ PN_EX_UNUSED static double pn_ex_seconds(void) {
 #endif
 }
 
-/* ---- PNG: RGB, zlib stored (uncompressed) blocks; no compressor needed ------------------- */
-
-static unsigned long pn_ex__png_crc(unsigned long c, const unsigned char *b, size_t n) {
-    size_t i;
-    int k;
-    for (i = 0; i < n; ++i) {
-        c ^= b[i];
-        for (k = 0; k < 8; ++k) c = (c >> 1) ^ (0xEDB88320UL & (0UL - (c & 1UL)));
-    }
-    return c;
+/* Create folder `path` and its parents (like mkdir -p); 1 when it exists afterwards. */
+PN_EX_UNUSED static int pn_ex_mkdirs(const char *path) {
+    char buf[1024];
+    size_t i, n = strlen(path);
+    if (n == 0 || n >= sizeof buf) return 0;
+    memcpy(buf, path, n + 1);
+    for (i = 1; i <= n; ++i)
+        if (buf[i] == '/' || buf[i] == 0) {
+            char c = buf[i];
+            buf[i] = 0;
+            if (pn_ex__mkdir(buf) != 0 && errno != EEXIST) return 0;
+            buf[i] = c;
+        }
+    return 1;
 }
 
-static void pn_ex__png_u32(unsigned char *p, unsigned long v) {
-    p[0] = (unsigned char)(v >> 24);
-    p[1] = (unsigned char)(v >> 16);
-    p[2] = (unsigned char)(v >> 8);
-    p[3] = (unsigned char)v;
-}
+/* What a frame shows: the scene's box, its floor and colliders, the time, a speed legend. */
+typedef struct pn_ex_view {
+    int width, height;           /* pixels [960 x 540]                                      */
+    double lo[3], hi[3];         /* world box framed (m)                                    */
+    double floor_m;              /* < lo[1]: no floor                                       */
+    double field_hi;             /* the speed (m/s) at the top of the colour scale [1.5]     */
+    const char *title;
+} pn_ex_view;
 
-static void pn_ex__png_chunk(FILE *f, const char *type, const unsigned char *data, size_t n) {
-    unsigned char h[8];
-    unsigned long c;
-    pn_ex__png_u32(h, (unsigned long)n);
-    memcpy(h + 4, type, 4);
-    fwrite(h, 1, 8, f);
-    if (n) fwrite(data, 1, n, f);
-    c = pn_ex__png_crc(0xFFFFFFFFUL, (const unsigned char *)type, 4);
-    c = pn_ex__png_crc(c, data, n) ^ 0xFFFFFFFFUL;
-    pn_ex__png_u32(h, c);
-    fwrite(h, 1, 4, f);
-}
-
-/* Write a w x h RGB image (rows top to bottom); 1 on success. */
-PN_EX_UNUSED static int pn_ex_png_write(const char *path, int w, int h, const unsigned char *rgb) {
-    size_t row = (size_t)w * 3 + 1, raw_n = row * (size_t)h, blocks = (raw_n + 65534) / 65535;
-    size_t z_n = 2 + raw_n + 5 * blocks + 4, i, pos = 0, off = 0;
-    unsigned char *raw = (unsigned char *)malloc(raw_n), *z = (unsigned char *)malloc(z_n), hdr[13];
-    unsigned long a = 1, b = 0;
-    FILE *f;
-    int y, ok;
-    if (!raw || !z || !(f = fopen(path, "wb"))) {
-        free(raw);
-        free(z);
-        return 0;
-    }
-    for (y = 0; y < h; ++y) {
-        raw[(size_t)y * row] = 0; /* filter: none */
-        memcpy(raw + (size_t)y * row + 1, rgb + (size_t)y * (size_t)w * 3, (size_t)w * 3);
-    }
-    z[pos++] = 0x78;
-    z[pos++] = 0x01;
-    while (off < raw_n) {
-        size_t n = raw_n - off > 65535 ? 65535 : raw_n - off;
-        z[pos++] = off + n == raw_n ? 1 : 0;
-        z[pos++] = (unsigned char)(n & 255);
-        z[pos++] = (unsigned char)(n >> 8);
-        z[pos++] = (unsigned char)(~n & 255);
-        z[pos++] = (unsigned char)((~n >> 8) & 255);
-        memcpy(z + pos, raw + off, n);
-        pos += n;
-        off += n;
-    }
-    for (i = 0; i < raw_n; ++i) { /* adler32 */
-        a = (a + raw[i]) % 65521UL;
-        b = (b + a) % 65521UL;
-    }
-    pn_ex__png_u32(z + pos, (b << 16) | a);
-    pos += 4;
-    fwrite("\x89PNG\r\n\x1a\n", 1, 8, f);
-    pn_ex__png_u32(hdr, (unsigned long)w);
-    pn_ex__png_u32(hdr + 4, (unsigned long)h);
-    hdr[8] = 8; /* bit depth */
-    hdr[9] = 2; /* RGB */
-    hdr[10] = hdr[11] = hdr[12] = 0;
-    pn_ex__png_chunk(f, "IHDR", hdr, 13);
-    pn_ex__png_chunk(f, "IDAT", z, pos);
-    pn_ex__png_chunk(f, "IEND", NULL, 0);
-    ok = ferror(f) == 0;
-    ok = (fclose(f) == 0) && ok;
-    free(raw);
-    free(z);
-    return ok;
-}
-
-/* The active particles seen from the front (x right, y up; 3D projects along z) as 3x3-pixel
-   dots coloured by speed (sand colour at rest, blue at 1 m/s and above); 1 on success. */
-PN_EX_UNUSED static int pn_ex_render_png(const char *path, const pn_mpm_world *w, int px) {
-    unsigned char *img = (unsigned char *)malloc((size_t)px * (size_t)px * 3);
-    double L = w->desc.res[0] * (double)w->desc.dx_m;
+/* Render the active particles of w coloured by speed into rgb (width x height x 3). */
+PN_EX_UNUSED static int pn_ex_render(const pn_ex_view *v, const pn_mpm_world *w, unsigned char *rgb) {
+    pn_render_desc d;
+    pn_render_shape shapes[PN_MPM_MAX_COLLIDERS];
+    pn_real *speed = (pn_real *)malloc(sizeof(pn_real) * (w->n ? w->n : 1));
     size_t p;
-    int ok, i;
-    if (!img) return 0;
-    memset(img, 245, (size_t)px * (size_t)px * 3);
+    int i, c, ok;
+    if (!speed) return 0;
     for (p = 0; p < w->n; ++p) {
-        const pn_real *x = w->x + p * (size_t)w->dim, *v = w->v + p * (size_t)w->dim;
-        double sp = 0;
-        int cx = (int)(x[0] / L * px), cy = px - 1 - (int)(x[1] / L * px), dx, dy;
-        if (!w->active[p]) continue;
-        for (i = 0; i < w->dim; ++i) sp += (double)v[i] * (double)v[i];
-        sp = sqrt(sp);
-        if (sp > 1) sp = 1;
-        for (dy = -1; dy <= 1; ++dy)
-            for (dx = -1; dx <= 1; ++dx) {
-                int X = cx + dx, Y = cy + dy;
-                unsigned char *c;
-                if (X < 0 || Y < 0 || X >= px || Y >= px) continue;
-                c = img + ((size_t)Y * (size_t)px + (size_t)X) * 3;
-                c[0] = (unsigned char)(200 - 120 * sp);
-                c[1] = (unsigned char)(160 - 60 * sp);
-                c[2] = (unsigned char)(90 + 150 * sp);
-            }
+        double s2 = 0;
+        for (i = 0; i < w->dim; ++i) s2 += (double)w->v[p * (size_t)w->dim + (size_t)i] * (double)w->v[p * (size_t)w->dim + (size_t)i];
+        speed[p] = (pn_real)sqrt(s2);
     }
-    ok = pn_ex_png_write(path, px, px, img);
-    free(img);
+    memset(&d, 0, sizeof d);
+    d.width = v->width;
+    d.height = v->height;
+    d.dim = w->dim;
+    for (i = 0; i < 3; ++i) d.lo[i] = v->lo[i], d.hi[i] = v->hi[i];
+    d.radius_m = 0.3 * (double)w->desc.dx_m; /* 2 per cell per axis: 0.6 x the spacing */
+    d.has_floor = v->floor_m >= v->lo[1];
+    d.floor_m = v->floor_m;
+    d.yaw_deg = 30;
+    d.pitch_deg = 20;
+    d.field_name = "speed (m/s)";
+    d.field_hi = v->field_hi > 0 ? v->field_hi : 1.5;
+    d.time_s = (double)w->time_s;
+    d.scale_bar = 1;
+    d.title = v->title;
+    for (c = 0; c < w->n_colliders; ++c) { /* where each collider is now */
+        const pn_mpm_collider *k = &w->colliders[c];
+        memset(&shapes[c], 0, sizeof shapes[c]);
+        shapes[c].kind = k->shape == PN_MPM_SHAPE_HALF_SPACE ? PN_RENDER_HALF_SPACE
+                         : k->shape == PN_MPM_SHAPE_BOX       ? PN_RENDER_BOX
+                                                              : PN_RENDER_SPHERE;
+        for (i = 0; i < 3; ++i) {
+            shapes[c].center[i] = (double)(k->center_m[i] + w->time_s * k->velocity_m_s[i]);
+            shapes[c].normal[i] = (double)k->normal[i];
+            shapes[c].half_extent[i] = (double)k->half_extent_m[i];
+        }
+        shapes[c].radius = (double)k->radius_m;
+    }
+    d.shapes = shapes;
+    d.n_shapes = w->n_colliders;
+    ok = pn_render_particles(&d, w->n, w->x, speed, w->active, rgb);
+    free(speed);
     return ok;
 }
 
@@ -180,12 +146,13 @@ PN_EX_UNUSED static int pn_ex_write_ply(const char *path, const pn_mpm_world *w)
     return (fclose(f) == 0) && ok;
 }
 
-/* ---- scenes (shared/design/VALIDATION.md) ------------------------------------------------
+/* ---- scenes (docs/validation.md) ---------------------------------------------------------
 
    Both live in a cube of side domain_m (1 m in 2D, 0.5 m in 3D) cut into res cells per axis,
    with walls 3 cells thick (so the floor is at y = 3 dx), gravity 9.81 m/s^2 along -y, and
-   2 x 2 (x 2) particles per cell placed on a regular lattice. The material is the one the
-   embedded PlasticityNet model was trained for, at Young's modulus E_pa.
+   2 x 2 (x 2) particles per cell (pn_mpm_fill: a lattice aligned with the grid, or jittered).
+   The material is the one the embedded PlasticityNet model was trained for, at Young's
+   modulus E_pa.
    - sand column: StVK-Hencky + Drucker-Prager (nu 0.3, friction angle 30 deg), E 1e7 Pa,
      1600 kg/m^3; a column of width W = 0.12 m (a square prism in 3D) and height a W, a = 2,
      standing on the floor at the centre of the domain, at rest.
@@ -218,6 +185,7 @@ typedef struct pn_ex_scene {
     double speed_m_s, angle_deg; /* snowball: throw speed [3] and angle below horizontal [45] */
     double h0;                   /* snowball: initial log J_p [-0.01]                       */
     int no_hardening;            /* snowball: Cam-Clay with h held (no hardening) [0]        */
+    int jitter;                  /* particles jittered in their lattice cells [0]           */
 } pn_ex_scene;
 
 /* Fill s with the defaults above for a scene kind and dimension. */
@@ -253,62 +221,58 @@ PN_EX_UNUSED static const pn_model *pn_ex_scene_model(const pn_ex_scene *s) {
     return s->dim == 2 ? pn_model_snow_2d() : pn_model_snow_3d();
 }
 
-/* Where the snowball's centre starts (m). */
-static void pn_ex__ball_centre(const pn_ex_scene *s, double *c) {
-    c[0] = pn_ex_scene_floor(s) + 0.05 * s->domain_m + s->radius_m; /* the walls are alike */
-    c[1] = pn_ex_scene_floor(s) + 0.1 * s->domain_m + s->radius_m;
-    c[2] = 0.5 * s->domain_m;
-}
-
-/* Lattice of the scene's particles: writes up to cap positions to x (NULL: count only) and
-   returns how many there are. Spacing dx/2, points at the centres of the lattice cells. */
-static size_t pn_ex__lattice(const pn_ex_scene *s, pn_real *x, size_t cap) {
-    int d = s->dim, i, a, b, c, na, nb, nc;
-    double sp = pn_ex_scene_dx(s) / 2, lo[3], p[3], ctr[3] = {0, 0, 0};
-    size_t n = 0;
+/* The scene's world description and its particles as a pn_mpm_fill (group 0). The column
+   is snapped to whole lattice cells, so it holds floor(W / spacing) particles across. */
+static void pn_ex__scene_setup(const pn_ex_scene *s, pn_mpm_desc *wd, pn_mpm_fill_desc *f) {
+    int d = s->dim, i;
+    double dx = pn_ex_scene_dx(s), sp = dx / 2, fl = pn_ex_scene_floor(s);
+    memset(wd, 0, sizeof *wd);
+    wd->dim = d;
+    for (i = 0; i < d; ++i) wd->res[i] = s->res;
+    wd->dx_m = (pn_real)dx;
+    wd->gravity[1] = (pn_real)-9.81;
+    wd->boundary = s->boundary;
+    wd->friction = (pn_real)s->friction;
+    wd->filter_time_s = (pn_real)s->filter_s;
+    wd->wall_cells = PN_EX_WALL_CELLS;
+    memset(f, 0, sizeof *f);
+    f->per_axis = 2;
+    f->jitter = s->jitter;
+    f->seed = 1;
     if (s->kind == PN_EX_SAND_COLUMN) {
-        na = (int)(s->width_m / sp);
-        nb = (int)(s->aspect * s->width_m / sp);
-        lo[0] = lo[2] = s->domain_m / 2 - na * sp / 2;
-        lo[1] = pn_ex_scene_floor(s);
+        int na = (int)(s->width_m / sp), nb = (int)(s->aspect * s->width_m / sp);
+        double lo = floor((s->domain_m / 2 - na * sp / 2) / sp + 0.5) * sp; /* on a lattice line */
+        f->shape = PN_MPM_FILL_BOX;
+        for (i = 0; i < d; ++i) {
+            f->center_m[i] = (pn_real)(lo + na * sp / 2);
+            f->half_extent_m[i] = (pn_real)(na * sp / 2);
+        }
+        f->center_m[1] = (pn_real)(fl + nb * sp / 2);
+        f->half_extent_m[1] = (pn_real)(nb * sp / 2);
     } else {
-        pn_ex__ball_centre(s, ctr);
-        na = nb = 2 * (int)ceil(s->radius_m / sp) + 2; /* a spare row each side for the snap */
-        for (i = 0; i < 3; ++i) lo[i] = ctr[i] - na * sp / 2;
+        double a = s->angle_deg * 3.14159265358979 / 180;
+        f->shape = PN_MPM_FILL_SPHERE;
+        f->center_m[0] = (pn_real)(fl + 0.05 * s->domain_m + s->radius_m); /* the walls are alike */
+        f->center_m[1] = (pn_real)(fl + 0.1 * s->domain_m + s->radius_m);
+        f->center_m[2] = (pn_real)(0.5 * s->domain_m);
+        f->radius_m = (pn_real)s->radius_m;
+        f->velocity_m_s[0] = (pn_real)(s->speed_m_s * cos(a));
+        f->velocity_m_s[1] = (pn_real)(-s->speed_m_s * sin(a));
+        f->state = (pn_real)s->h0; /* the snow's initial consolidation: h = log J_p = h0 */
     }
-    /* snap the lattice to the grid so every particle sits at a quarter of a cell, as in the
-       usual 2-per-cell seeding (the ball keeps its exact centre: points are chosen by radius) */
-    for (i = 0; i < 3; ++i) lo[i] = floor(lo[i] / sp + 0.5) * sp;
-    nc = d == 3 ? na : 1;
-    for (a = 0; a < na; ++a)
-        for (b = 0; b < nb; ++b)
-            for (c = 0; c < nc; ++c) {
-                double r2 = 0;
-                p[0] = lo[0] + (a + 0.5) * sp;
-                p[1] = lo[1] + (b + 0.5) * sp;
-                p[2] = lo[2] + (c + 0.5) * sp;
-                if (s->kind == PN_EX_SNOWBALL) {
-                    for (i = 0; i < d; ++i) r2 += (p[i] - ctr[i]) * (p[i] - ctr[i]);
-                    if (r2 > s->radius_m * s->radius_m) continue;
-                }
-                if (x && n < cap)
-                    for (i = 0; i < d; ++i) x[n * (size_t)d + (size_t)i] = (pn_real)p[i];
-                ++n;
-            }
-    return n;
 }
 
 /* Create the world of scene s in *out, filled and ready to step, with the energy s->energy
    bound for implicit steps. On failure *out is NULL, *why says what went wrong. */
 PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_world **out, const char **why) {
+    static char msg[320];
     const pn_model *model;
     pn_mpm_desc wd;
+    pn_mpm_fill_desc f;
     pn_mpm_world *w = NULL;
     pn_material m;
-    pn_real *x, *v = NULL;
-    size_t n, p;
-    int g, i, d = s->dim;
-    double sp = pn_ex_scene_dx(s) / 2;
+    size_t n = 0;
+    int g, d = s->dim;
     pn_result r;
     *out = NULL;
     *why = "";
@@ -317,82 +281,63 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
         return PN_ERROR_INVALID_ARGUMENT;
     }
     model = pn_ex_scene_model(s);
-    if ((r = pn_model_material(model, (pn_real)s->E_pa, &m, NULL)) != PN_OK) {
-        *why = "bad Young's modulus";
-        return r;
-    }
+    if ((r = pn_model_material(model, (pn_real)s->E_pa, &m, why)) != PN_OK) return r;
     if (s->no_hardening) m.camclay_hardening = 0;
-    n = pn_ex__lattice(s, NULL, 0);
+    pn_ex__scene_setup(s, &wd, &f);
+    if ((r = pn_mpm_fill_count(&wd, &f, &n, why)) != PN_OK) return r;
     if (n == 0) {
         *why = "the scene has no particles (size below half a cell)";
         return PN_ERROR_INVALID_ARGUMENT;
     }
-    memset(&wd, 0, sizeof wd);
-    wd.dim = d;
-    for (i = 0; i < d; ++i) wd.res[i] = s->res;
-    wd.dx_m = (pn_real)pn_ex_scene_dx(s);
-    wd.gravity[1] = (pn_real)-9.81;
-    wd.boundary = s->boundary;
-    wd.friction = (pn_real)s->friction;
-    wd.filter_time_s = (pn_real)s->filter_s;
-    wd.wall_cells = PN_EX_WALL_CELLS;
     wd.max_particles = n;
-    if ((r = pn_mpm_create(&wd, &w)) != PN_OK) {
-        *why = "cannot create the world (bad friction, or out of memory)";
-        return r;
-    }
-    g = pn_mpm_add_group(w, &m, (pn_real)s->density_kg_m3);
-    x = (pn_real *)malloc(sizeof(pn_real) * n * (size_t)d);
-    if (s->kind == PN_EX_SNOWBALL) v = (pn_real *)malloc(sizeof(pn_real) * n * (size_t)d);
-    if (g < 0 || !x || (s->kind == PN_EX_SNOWBALL && !v)) {
-        *why = g < 0 ? "density must be positive" : "out of memory";
-        r = g < 0 ? PN_ERROR_INVALID_ARGUMENT : PN_ERROR_OUT_OF_MEMORY;
+    if ((r = pn_mpm_create(&wd, &w, why)) != PN_OK) return r;
+    if ((g = pn_mpm_add_group(w, &m, (pn_real)s->density_kg_m3)) < 0) {
+        r = PN_ERROR_INVALID_ARGUMENT;
         goto fail;
     }
-    pn_ex__lattice(s, x, n);
-    if (v) {
-        double a = s->angle_deg * 3.14159265358979 / 180;
-        for (p = 0; p < n; ++p) {
-            for (i = 0; i < d; ++i) v[p * (size_t)d + (size_t)i] = 0;
-            v[p * (size_t)d] = (pn_real)(s->speed_m_s * cos(a));
-            v[p * (size_t)d + 1] = (pn_real)(-s->speed_m_s * sin(a));
-        }
-    }
-    if ((r = pn_mpm_add_particles(w, g, n, x, v, (pn_real)pow(sp, d))) != PN_OK) {
-        *why = "the scene does not fit inside the walls (smaller size, or higher res)";
-        goto fail;
-    }
-    if (s->kind == PN_EX_SNOWBALL) { /* the snow's initial consolidation: h = log J_p = h0 */
-        for (p = 0; p < n; ++p) x[p] = (pn_real)s->h0;
-        if ((r = pn_mpm_set_state(w, 0, n, x)) != PN_OK) {
-            *why = "bad initial log J_p";
-            goto fail;
-        }
-    }
+    f.group = g;
+    if ((r = pn_mpm_fill(w, &f, NULL)) != PN_OK) goto fail;
     if (s->energy == PN_MPM_ENERGY_PNET) {
         pn_pnet net;
         pn_pnet_desc nd;
         memset(&nd, 0, sizeof nd);
         nd.energy = model;
         nd.regularizer = (pn_real)s->regularizer;
-        if ((r = pn_pnet_init(&net, &nd, &m, d, why)) != PN_OK) goto fail;
+        if ((r = pn_pnet_init(&net, &nd, &m, d, why)) != PN_OK) {
+            pn_mpm_destroy(w);
+            return r;
+        }
         r = pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net);
     } else {
         r = pn_mpm_group_set_energy(w, g, s->energy, NULL);
     }
-    if (r != PN_OK) {
-        *why = "this energy does not serve this material";
-        goto fail;
-    }
-    free(x);
-    free(v);
+    if (r != PN_OK) goto fail;
     *out = w;
     return PN_OK;
 fail:
-    free(x);
-    free(v);
+    snprintf(msg, sizeof msg, "%s", pn_mpm_error(w));
+    *why = msg;
     pn_mpm_destroy(w);
     return r;
+}
+
+/* How a scene is framed in pictures: the whole domain in 3D; in 2D the floor and the space
+   the material reaches, at 16:9. */
+PN_EX_UNUSED static void pn_ex_scene_view(const pn_ex_scene *s, pn_ex_view *v) {
+    double L = s->domain_m;
+    memset(v, 0, sizeof *v);
+    v->width = 960;
+    v->height = 540;
+    v->floor_m = pn_ex_scene_floor(s);
+    v->field_hi = s->kind == PN_EX_SAND_COLUMN ? 1.5 : 3;
+    v->title = s->kind == PN_EX_SAND_COLUMN ? "sand column" : "snowball";
+    v->hi[0] = v->hi[1] = v->hi[2] = L;
+    if (s->dim == 2) {
+        double w = s->kind == PN_EX_SAND_COLUMN ? 0.8 * L : L;
+        v->lo[0] = (L - w) / 2;
+        v->hi[0] = (L + w) / 2;
+        v->hi[1] = w * 9 / 16;
+    }
 }
 
 /* ---- stepping --------------------------------------------------------------------------- */
@@ -408,8 +353,8 @@ typedef struct pn_ex_tally {
 } pn_ex_tally;
 
 /* n steps of dt_s seconds, implicit (with id, which may be NULL for its defaults) or explicit;
-   adds to *t. Stops at the first failed step and returns its code (w->error_particle names
-   the culprit; the world stays as before that step). */
+   adds to *t. Stops at the first failed step and returns its code (pn_mpm_error says why;
+   the world stays as before that step). */
 PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double dt_s,
                                           const pn_mpm_implicit_desc *id, long n, pn_ex_tally *t) {
     long k;
@@ -444,37 +389,12 @@ PN_EX_UNUSED static void pn_ex_json_end(const pn_ex_tally *t, int measured) {
     printf("}\n");
 }
 
-/* One frame of an example: the steps, then DIR/frame_NNNN.png and .ply when asked. Says what
-   failed on stderr (prog: the program's name) and returns 0 then. */
-PN_EX_UNUSED static int pn_ex_frame(const char *prog, pn_mpm_world *w, int implicit, double dt_s,
-                                    const pn_mpm_implicit_desc *id, long steps, pn_ex_tally *t,
-                                    const char *out, int frame, int png, int ply) {
-    char path[1024];
-    pn_result r = pn_ex_steps(w, implicit, dt_s, id, steps, t);
-    if (r != PN_OK) {
-        fprintf(stderr, "\n%s: step %ld failed at particle %lu: %s\n", prog, t->steps,
-                (unsigned long)w->error_particle, pn_result_string(r));
-        return 0;
-    }
-    snprintf(path, sizeof path, "%s/frame_%04d.png", out, frame);
-    if (png && !pn_ex_render_png(path, w, 400)) {
-        fprintf(stderr, "\n%s: cannot write %s (does the folder exist?)\n", prog, path);
-        return 0;
-    }
-    snprintf(path, sizeof path, "%s/frame_%04d.ply", out, frame);
-    if (ply && !pn_ex_write_ply(path, w)) {
-        fprintf(stderr, "\n%s: cannot write %s (does the folder exist?)\n", prog, path);
-        return 0;
-    }
-    return 1;
-}
-
 /* ---- the command line every example shares --------------------------------------------- */
 
 static const char *const pn_ex_walls[] = {"sticky", "slip", "separate"};
 
 typedef struct pn_ex_cli {
-    int dim, implicit, frames, fps, res, png, ply, quiet, boundary;
+    int dim, implicit, frames, fps, res, png, ply, obj, apng, quiet, boundary, jitter;
     pn_mpm_implicit_desc solver; /* --fixed-point, --contact-rounds, --newton-tol, --cg-tol,
                                     --cg-forcing, --force-error                            */
     double dt, E, friction, filter;  /* filter < 0: the scene's default                  */
@@ -499,76 +419,217 @@ PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
     c->out = out;
 }
 
-/* If flag a (with its value v, NULL at the end) is a shared one, take it: returns how many
-   arguments it used (1 or 2); 0 for a flag the example must handle, -1 for a missing value. */
-PN_EX_UNUSED static int pn_ex_cli_flag(pn_ex_cli *c, const char *a, const char *v) {
-    if (!strcmp(a, "--png")) return c->png = 1;
-    if (!strcmp(a, "--ply")) return c->ply = 1;
-    if (!strcmp(a, "--quiet")) return c->quiet = 1;
-    if (!strcmp(a, "--force-error")) return c->solver.measure_force_error = 1;
-    if (strncmp(a, "--", 2) || !strstr("|--dim|--integrator|--energy|--boundary|--friction|--filter|--regularizer|"
-                                       "--dt|--fixed-point|--contact-rounds|--newton-tol|--cg-tol|--cg-forcing|"
-                                       "--frames|--fps|--E|--res|--out|", a))
-        return 0;
-    if (!v) return -1;
-    if (!strcmp(a, "--dim")) c->dim = atoi(v);
-    else if (!strcmp(a, "--integrator")) c->implicit = !strcmp(v, "implicit") ? 1 : !strcmp(v, "explicit") ? 0 : -1;
-    else if (!strcmp(a, "--energy")) c->energy = v;
-    else if (!strcmp(a, "--boundary"))
-        for (c->boundary = 0; c->boundary < 3 && strcmp(v, pn_ex_walls[c->boundary]); ++c->boundary) {}
-    else if (!strcmp(a, "--friction")) c->friction = atof(v);
-    else if (!strcmp(a, "--filter")) c->filter = atof(v);
-    else if (!strcmp(a, "--regularizer")) c->regularizer = atof(v);
-    else if (!strcmp(a, "--dt")) c->dt = atof(v);
-    else if (!strcmp(a, "--fixed-point")) c->solver.fixed_point_iters = atoi(v);
-    else if (!strcmp(a, "--contact-rounds")) c->solver.contact_rounds = atoi(v);
-    else if (!strcmp(a, "--newton-tol")) c->solver.newton_tol = (pn_real)atof(v);
-    else if (!strcmp(a, "--cg-tol")) c->solver.cg_rel_tol = (pn_real)atof(v);
-    else if (!strcmp(a, "--cg-forcing")) c->solver.cg_forcing_max = (pn_real)atof(v);
-    else if (!strcmp(a, "--frames")) c->frames = atoi(v);
-    else if (!strcmp(a, "--fps")) c->fps = atoi(v);
-    else if (!strcmp(a, "--E")) c->E = atof(v);
-    else if (!strcmp(a, "--res")) c->res = atoi(v);
-    else c->out = v;
-    return 2;
+/* flag a has its value v; says so on stderr otherwise */
+PN_EX_UNUSED static int pn_ex__need(const char *prog, const char *a, const char *v) {
+    if (!v) fprintf(stderr, "%s: %s needs a value (--help lists the flags)\n", prog, a);
+    return v != NULL;
 }
 
-/* The shared flags in range, and scene s (made with pn_ex_scene_default for c->dim) set
-   from them. Returns 0 when a value is out of range. */
-PN_EX_UNUSED static int pn_ex_cli_apply(const pn_ex_cli *c, pn_ex_scene *s) {
-    if ((c->dim != 2 && c->dim != 3) || c->implicit < 0 || c->boundary > 2 || !(c->friction >= 0) ||
-        !(c->dt > 0) || c->solver.fixed_point_iters < 1 || c->solver.contact_rounds < 1 || !(c->solver.newton_tol >= 0) ||
-        !(c->solver.cg_rel_tol >= 0 && c->solver.cg_rel_tol < 1) || !(c->solver.cg_forcing_max >= 0 && c->solver.cg_forcing_max < 1) || c->frames < 1 ||
-        c->fps < 1 || !(c->E >= 0) ||
-        (c->res && (c->res < 16 || c->res > 1024)) || !(c->filter >= 0 || c->filter == -1))
+/* v as a number for flag a; says what is wrong on stderr (prog: the program) otherwise */
+PN_EX_UNUSED static int pn_ex_number(const char *prog, const char *a, const char *v, double *out) {
+    char *end = NULL;
+    double x;
+    if (!pn_ex__need(prog, a, v)) return 0;
+    x = strtod(v, &end);
+    if (end == v || *end || x != x) {
+        fprintf(stderr, "%s: %s needs a number, not '%s'\n", prog, a, v);
         return 0;
+    }
+    *out = x;
+    return 1;
+}
+
+PN_EX_UNUSED static int pn_ex_integer(const char *prog, const char *a, const char *v, int *out) {
+    double x;
+    if (!pn_ex_number(prog, a, v, &x)) return 0;
+    if (x != floor(x) || x < -1e9 || x > 1e9) {
+        fprintf(stderr, "%s: %s needs a whole number, not '%s'\n", prog, a, v);
+        return 0;
+    }
+    *out = (int)x;
+    return 1;
+}
+
+/* v one of the n names for flag a: its index; -1 (said on stderr) otherwise */
+PN_EX_UNUSED static int pn_ex_choice(const char *prog, const char *a, const char *v, const char *const *names, int n) {
+    int i;
+    if (!pn_ex__need(prog, a, v)) return -1;
+    for (i = 0; i < n; ++i)
+        if (!strcmp(v, names[i])) return i;
+    fprintf(stderr, "%s: %s must be one of", prog, a);
+    for (i = 0; i < n; ++i) fprintf(stderr, " %s", names[i]);
+    fprintf(stderr, ", not '%s'\n", v);
+    return -1;
+}
+
+/* If flag a (with its value v, NULL at the end) is a shared one, take it: returns how many
+   arguments it used (1 or 2); 0 for a flag the example must handle; -1 for a bad or missing
+   value (said on stderr). Flags match whole words only. */
+PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const char *a, const char *v) {
+    static const char *const integrators[] = {"explicit", "implicit"};
+    double x = 0;
+    int ok = 1;
+    if (!strcmp(a, "--png")) return c->png = 1;
+    if (!strcmp(a, "--ply")) return c->ply = 1;
+    if (!strcmp(a, "--obj")) return c->obj = 1;
+    if (!strcmp(a, "--apng")) return c->apng = 1;
+    if (!strcmp(a, "--jitter")) return c->jitter = 1;
+    if (!strcmp(a, "--quiet")) return c->quiet = 1;
+    if (!strcmp(a, "--force-error")) return c->solver.measure_force_error = 1;
+    if (!strcmp(a, "--dim")) ok = pn_ex_integer(prog, a, v, &c->dim);
+    else if (!strcmp(a, "--integrator")) ok = (c->implicit = pn_ex_choice(prog, a, v, integrators, 2)) >= 0;
+    else if (!strcmp(a, "--energy")) ok = pn_ex__need(prog, a, v), c->energy = v;
+    else if (!strcmp(a, "--boundary")) ok = (c->boundary = pn_ex_choice(prog, a, v, pn_ex_walls, 3)) >= 0;
+    else if (!strcmp(a, "--friction")) ok = pn_ex_number(prog, a, v, &c->friction);
+    else if (!strcmp(a, "--filter")) ok = pn_ex_number(prog, a, v, &c->filter);
+    else if (!strcmp(a, "--regularizer")) ok = pn_ex_number(prog, a, v, &c->regularizer);
+    else if (!strcmp(a, "--dt")) ok = pn_ex_number(prog, a, v, &c->dt);
+    else if (!strcmp(a, "--fixed-point")) ok = pn_ex_integer(prog, a, v, &c->solver.fixed_point_iters);
+    else if (!strcmp(a, "--contact-rounds")) ok = pn_ex_integer(prog, a, v, &c->solver.contact_rounds);
+    else if (!strcmp(a, "--newton-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.newton_tol = (pn_real)x;
+    else if (!strcmp(a, "--cg-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.cg_rel_tol = (pn_real)x;
+    else if (!strcmp(a, "--cg-forcing")) ok = pn_ex_number(prog, a, v, &x), c->solver.cg_forcing_max = (pn_real)x;
+    else if (!strcmp(a, "--frames")) ok = pn_ex_integer(prog, a, v, &c->frames);
+    else if (!strcmp(a, "--fps")) ok = pn_ex_integer(prog, a, v, &c->fps);
+    else if (!strcmp(a, "--E")) ok = pn_ex_number(prog, a, v, &c->E);
+    else if (!strcmp(a, "--res")) ok = pn_ex_integer(prog, a, v, &c->res);
+    else if (!strcmp(a, "--out")) ok = pn_ex__need(prog, a, v), c->out = v ? v : c->out;
+    else return 0;
+    return ok ? 2 : -1;
+}
+
+/* The shared flags in range (naming the first that is not, on stderr), and scene s (made with
+   pn_ex_scene_default for c->dim) set from them. Returns 0 when a value is out of range. */
+PN_EX_UNUSED static int pn_ex_cli_apply(const char *prog, const pn_ex_cli *c, pn_ex_scene *s) {
+    const char *bad = NULL;
+    if (c->dim != 2 && c->dim != 3) bad = "--dim must be 2 or 3";
+    else if (!(c->friction >= 0)) bad = "--friction must be >= 0";
+    else if (!(c->dt > 0)) bad = "--dt must be > 0";
+    else if (c->solver.fixed_point_iters < 1) bad = "--fixed-point must be >= 1";
+    else if (c->solver.contact_rounds < 1) bad = "--contact-rounds must be >= 1";
+    else if (!(c->solver.newton_tol >= 0)) bad = "--newton-tol must be >= 0 (0: the default)";
+    else if (!(c->solver.cg_rel_tol >= 0 && c->solver.cg_rel_tol < 1)) bad = "--cg-tol must be in [0, 1)";
+    else if (!(c->solver.cg_forcing_max >= 0 && c->solver.cg_forcing_max < 1)) bad = "--cg-forcing must be in [0, 1)";
+    else if (c->frames < 1) bad = "--frames must be >= 1";
+    else if (c->fps < 1) bad = "--fps must be >= 1";
+    else if (!(c->E >= 0)) bad = "--E must be > 0";
+    else if (c->res && (c->res < 16 || c->res > 1024)) bad = "--res must be in 16 .. 1024";
+    else if (!(c->filter >= 0 || c->filter == -1)) bad = "--filter must be >= 0";
+    if (bad) {
+        fprintf(stderr, "%s: %s\n", prog, bad);
+        return 0;
+    }
     if (c->filter >= 0) s->filter_s = c->filter;
     s->regularizer = c->regularizer;
     if (c->res) s->res = c->res;
     if (c->E > 0) s->E_pa = c->E;
     s->boundary = (pn_mpm_boundary)c->boundary;
     s->friction = c->friction;
+    s->jitter = c->jitter;
+    return 1;
+}
+
+/* The flags every example takes, for its --help. */
+PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f) {
+    fprintf(f, "  --dim 2|3                  dimension [2]\n"
+               "  --integrator implicit|explicit  [implicit]\n"
+               "  --energy NAME              what implicit steps minimize [pnet]\n"
+               "  --dt S                     step (s) [1e-3]\n"
+               "  --frames N  --fps N        frames and frames per second [30, 30]\n"
+               "  --res N                    grid cells per axis [64 in 2D, 24 in 3D]\n"
+               "  --E PA                     Young's modulus [the scene's]\n"
+               "  --boundary sticky|slip|separate  --friction MU   the domain walls [separate, 0.5]\n"
+               "  --filter S                 transfer filter time (pn_mpm_desc.filter_time_s) [2e-3; 0: APIC]\n"
+               "  --regularizer W            PlasticityNet's w [1; < 0: off]\n"
+               "  --fixed-point N  --contact-rounds N  --newton-tol X  --cg-tol X  --cg-forcing X\n"
+               "                             pn_mpm_implicit_desc [1, 1, and the library's defaults]\n"
+               "  --force-error              measure the energy's force error (pn_mpm_stats)\n"
+               "  --jitter                   particles jittered in their lattice cells\n"
+               "  --out DIR                  where frames go (created)\n"
+               "  --png  --apng  --ply  --obj   frames as PNG pictures, one animated PNG (DIR/preview.png),\n"
+               "                             PLY points, OBJ surfaces (3D; marching tetrahedra)\n"
+               "  --quiet                    no progress line\n"
+               "  --help                     this text\n");
+}
+
+/* ---- frames and the run loop ------------------------------------------------------------ */
+
+/* What a run writes, and the picture buffer. */
+typedef struct pn_ex_output {
+    const char *out;
+    int png, ply, obj;
+    pn_apng *apng;
+    unsigned char *rgb;
+    pn_ex_view view;
+} pn_ex_output;
+
+/* OBJ iso-surface of the active particles (3D), for Blender */
+static int pn_ex__write_obj(const char *path, const pn_mpm_world *w) {
+    pn_mesh mesh;
+    int ok;
+    memset(&mesh, 0, sizeof mesh);
+    if (w->dim != 3) return 1;
+    ok = pn_iso_from_particles(w->n, w->x, w->active, (double)w->desc.dx_m / 4, (double)w->desc.dx_m / 8, &mesh) &&
+         pn_mesh_write_obj(path, &mesh);
+    pn_mesh_free(&mesh);
+    return ok;
+}
+
+/* The outputs of frame `frame` (pictures, points, surfaces). Says what failed on stderr
+   (prog: the program's name) and returns 0 then. */
+PN_EX_UNUSED static int pn_ex_outputs(const char *prog, const pn_mpm_world *w, pn_ex_output *o, int frame) {
+    char path[1024];
+    if ((o->png || o->apng) && !pn_ex_render(&o->view, w, o->rgb)) {
+        fprintf(stderr, "\n%s: out of memory for a picture\n", prog);
+        return 0;
+    }
+    snprintf(path, sizeof path, "%s/frame_%04d.png", o->out, frame);
+    if (o->png && !pn_png_write(path, o->view.width, o->view.height, o->rgb)) {
+        fprintf(stderr, "\n%s: cannot write %s\n", prog, path);
+        return 0;
+    }
+    if (o->apng && !pn_apng_add(o->apng, o->rgb)) {
+        fprintf(stderr, "\n%s: cannot write %s/preview.png\n", prog, o->out);
+        return 0;
+    }
+    snprintf(path, sizeof path, "%s/frame_%04d.ply", o->out, frame);
+    if (o->ply && !pn_ex_write_ply(path, w)) {
+        fprintf(stderr, "\n%s: cannot write %s\n", prog, path);
+        return 0;
+    }
+    snprintf(path, sizeof path, "%s/frame_%04d.obj", o->out, frame);
+    if (o->obj && !pn_ex__write_obj(path, w)) {
+        fprintf(stderr, "\n%s: cannot write %s\n", prog, path);
+        return 0;
+    }
     return 1;
 }
 
 /* An example's whole run: frames of 1/fps s at dt_s (implicit steps with the settings id),
-   the outputs of pn_ex_frame, a progress line on stderr unless quiet; *wall_s gets the wall
-   seconds. Returns 0 after a failure (said on stderr). */
+   the outputs of each frame, a progress line on stderr unless quiet; *wall_s gets the wall
+   seconds of the steps (not of the outputs). Returns 0 after a failure (said on stderr). */
 PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implicit, double dt_s,
-                                  const pn_mpm_implicit_desc *id, int frames, int fps, const char *out, int png,
-                                  int ply, int quiet, pn_ex_tally *tally, double *wall_s) {
+                                  const pn_mpm_implicit_desc *id, int frames, int fps, pn_ex_output *o, int quiet,
+                                  pn_ex_tally *tally, double *wall_s) {
     long steps_per_frame = (long)(1.0 / fps / dt_s + 0.5);
-    double t0 = pn_ex_seconds();
     int frame;
     memset(tally, 0, sizeof *tally);
+    *wall_s = 0;
     if (steps_per_frame < 1) steps_per_frame = 1;
     for (frame = 1; frame <= frames; ++frame) {
-        if (!pn_ex_frame(prog, w, implicit, dt_s, id, steps_per_frame, tally, out, frame, png, ply)) return 0;
-        *wall_s = pn_ex_seconds() - t0;
+        double t0 = pn_ex_seconds();
+        pn_result r = pn_ex_steps(w, implicit, dt_s, id, steps_per_frame, tally);
+        *wall_s += pn_ex_seconds() - t0;
+        if (r != PN_OK) {
+            fprintf(stderr, "\n%s: step %ld failed: %s (%s)\n", prog, tally->steps + 1, pn_mpm_error(w),
+                    pn_result_string(r));
+            return 0;
+        }
+        if (!pn_ex_outputs(prog, w, o, frame)) return 0;
         if (!quiet)
             fprintf(stderr, "\rframe %d/%d  t = %.3f s  wall %.1f s  Newton/step %.1f  CG/step %.0f   ", frame, frames,
-                    (double)w->time_s, *wall_s, (double)tally->newton / (double)tally->steps,
-                    (double)tally->cg / (double)tally->steps);
+                    (double)w->time_s, *wall_s, implicit ? (double)tally->newton / (double)tally->steps : 0.0,
+                    implicit ? (double)tally->cg / (double)tally->steps : 0.0);
     }
     if (!quiet) fprintf(stderr, "\n");
     return 1;
@@ -602,15 +663,44 @@ typedef struct pn_ex_outcome {
 PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, const pn_ex_scene *sc,
                                        pn_ex_outcome *o) {
     const char *why = "";
+    char path[1024];
+    pn_ex_output out;
     pn_result r;
+    int ok;
     memset(o, 0, sizeof *o);
+    memset(&out, 0, sizeof out);
+    out.out = c->out;
+    out.png = c->png;
+    out.ply = c->ply;
+    out.obj = c->obj;
+    pn_ex_scene_view(sc, &out.view);
+    if ((c->png || c->apng || c->ply || c->obj) && !pn_ex_mkdirs(c->out)) {
+        fprintf(stderr, "%s: cannot create the folder %s\n", prog, c->out);
+        return 0;
+    }
+    if (c->png || c->apng) {
+        out.rgb = (unsigned char *)malloc((size_t)out.view.width * (size_t)out.view.height * 3);
+        snprintf(path, sizeof path, "%s/preview.png", c->out);
+        if (!out.rgb || (c->apng && !(out.apng = pn_apng_open(path, out.view.width, out.view.height, c->fps)))) {
+            fprintf(stderr, "%s: cannot start %s\n", prog, c->apng ? path : "the pictures");
+            free(out.rgb);
+            return 0;
+        }
+    }
     if ((r = pn_ex_scene_create(sc, &o->w, &why)) != PN_OK) {
         fprintf(stderr, "%s: %s (%s)\n", prog, why, pn_result_string(r));
+        if (out.apng) pn_apng_close(out.apng);
+        free(out.rgb);
         return 0;
     }
     pn_ex_bounds(o->w, o->lo0, o->hi0);
-    if (!pn_ex_run(prog, o->w, c->implicit, c->dt, &c->solver, c->frames, c->fps, c->out, c->png, c->ply, c->quiet,
-                   &o->tally, &o->wall_s)) {
+    ok = pn_ex_run(prog, o->w, c->implicit, c->dt, &c->solver, c->frames, c->fps, &out, c->quiet, &o->tally, &o->wall_s);
+    if (out.apng && !pn_apng_close(out.apng) && ok) {
+        fprintf(stderr, "%s: cannot finish %s/preview.png\n", prog, c->out);
+        ok = 0;
+    }
+    free(out.rgb);
+    if (!ok) {
         pn_mpm_destroy(o->w);
         o->w = NULL;
         return 0;
@@ -619,12 +709,12 @@ PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, con
     return 1;
 }
 
-/* ---- mass IoU (PlasticityNet Fig. 5a-b; VALIDATION.md) -----------------------------------
+/* ---- mass IoU (PlasticityNet Fig. 5a-b; docs/validation.md) -----------------------------------
 
    Each run's particle mass is spread onto the simulation grid's nodes with the quadratic
    B-spline weights of the MPM transfers (so the field is what the solver itself sees) and
    divided by its maximum, giving a and b in [0, 1]. Three scores per pair of fields:
-   - soft: sum(a b) / sum(a + b - a b), the formula of VALIDATION.md. It is below 1 even for
+   - soft: sum(a b) / sum(a + b - a b), the formula of docs/validation.md. It is below 1 even for
      identical fields wherever a is fractional (edges, thin layers, a denser node setting the
      maximum): compare runs with the reference's score against itself, its ceiling.
    - minmax: sum(min(a, b)) / sum(max(a, b)) (weighted Jaccard): the same as soft on 0/1

@@ -1,36 +1,33 @@
 /* sand_column: a column of sand (aspect ratio a = H / W) collapsing on a frictional floor,
    simulated by plastinet_mpm.h, explicit (the reference) or implicit with the PlasticityNet
    sand model, the lagged energy or the frozen-yield Drucker-Prager energy (dp). The scene is
-   the one of shared/design/VALIDATION.md (examples/pn_example.h).
+   the one of docs/validation.md (examples/pn_example.h).
    Build: cc -std=c99 -O2 examples/sand_column.c -lm -o sand_column
-   Usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|dp|elastic]
-                      [--dt S] [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--aspect A] [--E PA]
-                      [--res N] [--boundary sticky|slip|separate] [--friction MU]
-                      [--filter S] [--regularizer W] [--force-error] [--out DIR] [--png] [--ply] [--quiet]
-                      [--newton-tol X] [--cg-tol X] [--cg-forcing X] (pn_mpm_implicit_desc)
+   Usage: sand_column [flags]      (sand_column --help lists them)
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps, a = 2,
    E = 1e7 Pa, res 64 (2D) / 24 (3D) cells over 1 m (2D) / 0.5 m (3D), walls separate with
    Coulomb friction 0.5, transfer filter time 2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC),
    PlasticityNet regularizer w = 1 (Eq. 11; --regularizer -1: off).
-   Writes DIR/frame_NNNN.png (--png) and DIR/frame_NNNN.ply (--ply, ASCII point clouds); a
-   progress line on stderr; a one-line JSON summary on stdout: frames, wall seconds (monotonic
-   clock), iterations per step, runout (how far the front moved past the column's initial edge),
-   final height above the floor, largest fixed-point residual. */
+   Writes DIR/frame_NNNN.png (--png), DIR/preview.png (--apng, animated), DIR/frame_NNNN.ply
+   (--ply, points) and DIR/frame_NNNN.obj (--obj, 3D surfaces); a progress line on stderr; a
+   one-line JSON summary on stdout: frames, wall seconds of the steps (monotonic clock),
+   iterations per step, runout (how far the front moved past the column's initial edge), final
+   height above the floor, largest fixed-point residual. */
 #define PLASTINET_IMPLEMENTATION
 #include "pn_example.h"
 
-static void usage(void) {
-    fprintf(stderr, "usage: sand_column [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged|dp|elastic]\n"
-                    "       [--dt S] [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--aspect A] [--E PA] [--res N]\n"
-                    "       [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
-                    "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n"
-                    "       [--newton-tol X] [--cg-tol X] [--cg-forcing X] (pn_mpm_implicit_desc; 0: its default)\n");
+static void usage(FILE *f) {
+    fprintf(f, "usage: sand_column [flags]   a sand column collapsing on a frictional floor\n"
+               "  --energy pnet|lagged|dp|elastic   what implicit steps minimize [pnet]\n"
+               "  --aspect A                 column height / width [2]\n");
+    pn_ex_cli_usage(f);
 }
 
 int main(int argc, char **argv) {
     static const char *const energies[] = {"pnet", "lagged", "dp", "elastic"};
     static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP,
                                               PN_MPM_ENERGY_ELASTIC};
+    const char *prog = "sand_column";
     int energy, k, i;
     double aspect = 2, runout = 0;
     pn_ex_cli c;
@@ -38,21 +35,32 @@ int main(int argc, char **argv) {
     pn_ex_outcome o;
     pn_ex_cli_default(&c, "build/sand_column_frames");
     for (k = 1; k < argc; ++k) {
-        const char *v = k + 1 < argc ? argv[k + 1] : NULL;
-        int used = pn_ex_cli_flag(&c, argv[k], v);
-        if (used > 0) k += used - 1;
-        else if (used == 0 && v && !strcmp(argv[k], "--aspect")) aspect = atof(v), ++k;
-        else { usage(); return 2; }
+        const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
+        int used;
+        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
+            usage(stdout);
+            return 0;
+        }
+        used = pn_ex_cli_flag(prog, &c, a, v);
+        if (used < 0) return 2;
+        if (used == 0 && !strcmp(a, "--aspect")) used = pn_ex_number(prog, a, v, &aspect) ? 2 : -1;
+        if (used < 0) return 2;
+        if (used == 0) {
+            fprintf(stderr, "%s: unknown flag '%s' (--help lists them)\n", prog, a);
+            return 2;
+        }
+        k += used - 1;
     }
-    for (energy = 0; energy < 4 && strcmp(c.energy, energies[energy]); ++energy) {}
-    pn_ex_scene_default(&sc, PN_EX_SAND_COLUMN, c.dim);
-    if (!pn_ex_cli_apply(&c, &sc) || energy > 3 || !(aspect > 0)) {
-        usage();
+    if ((energy = pn_ex_choice(prog, "--energy", c.energy, energies, 4)) < 0) return 2;
+    pn_ex_scene_default(&sc, PN_EX_SAND_COLUMN, c.dim == 3 ? 3 : 2);
+    if (!pn_ex_cli_apply(prog, &c, &sc)) return 2;
+    if (!(aspect > 0)) {
+        fprintf(stderr, "%s: --aspect must be > 0\n", prog);
         return 2;
     }
     sc.aspect = aspect;
     sc.energy = energy_of[energy];
-    if (!pn_ex_simulate("sand_column", &c, &sc, &o)) return 1;
+    if (!pn_ex_simulate(prog, &c, &sc, &o)) return 1;
     for (i = 0; i < c.dim; ++i) /* front travel along the horizontal axes, either side */
         if (i != 1) runout = fmax(runout, fmax(o.hi[i] - o.hi0[i], o.lo0[i] - o.lo[i]));
     printf("{\"scene\": \"sand_column\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "

@@ -1,13 +1,9 @@
 /* snowball: a ball of snow (Neo-Hookean + Cam-Clay with hardening) thrown at a frictional
    floor at an angle; it breaks and spreads. Simulated by plastinet_mpm.h, explicit (the
    reference) or implicit with the PlasticityNet snow model or the lagged energy (Cam-Clay has
-   no exact energy). The scene is the one of shared/design/VALIDATION.md (examples/pn_example.h).
+   no exact energy). The scene is the one of docs/validation.md (examples/pn_example.h).
    Build: cc -std=c99 -O2 examples/snowball.c -lm -o snowball
-   Usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]
-                   [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S]
-                   [--angle DEG] [--h0 LOGJP] [--no-hardening] [--boundary sticky|slip|separate] [--friction MU]
-                   [--filter S] [--regularizer W] [--force-error] [--out DIR] [--png] [--ply] [--quiet]
-                   [--newton-tol X] [--cg-tol X] [--cg-forcing X] (pn_mpm_implicit_desc)
+   Usage: snowball [flags]      (snowball --help lists them)
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps,
    E = 1e6 Pa, res 64 (2D) / 24 (3D) cells over 1 m (2D) / 0.5 m (3D), radius 0.1 m (2D) /
    0.08 m (3D), 3 m/s at 45 degrees below the horizontal, initial log J_p = -0.01 (inside the
@@ -15,22 +11,26 @@
    filter time 2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC), PlasticityNet regularizer w = 1
    (Eq. 11; --regularizer -1: off). --no-hardening: Cam-Clay with log J_p held (the hardening
    that makes the snow fracture, and its mass field chaotic, is off).
-   Writes DIR/frame_NNNN.png (--png) and DIR/frame_NNNN.ply (--ply); a progress line on
-   stderr; a one-line JSON summary on stdout: frames, wall seconds (monotonic clock),
+   Writes DIR/frame_NNNN.png (--png), DIR/preview.png (--apng, animated), DIR/frame_NNNN.ply
+   (--ply) and DIR/frame_NNNN.obj (--obj, 3D); a progress line on stderr; a one-line JSON
+   summary on stdout: frames, wall seconds of the steps (monotonic clock),
    iterations per step, spread (extent of the snow along the throw), runout (how far its front
    moved), final height above the floor, largest fixed-point residual. */
 #define PLASTINET_IMPLEMENTATION
 #include "pn_example.h"
 
-static void usage(void) {
-    fprintf(stderr, "usage: snowball [--dim 2|3] [--integrator implicit|explicit] [--energy pnet|lagged] [--dt S]\n"
-                    "       [--fixed-point N] [--contact-rounds N] [--frames N] [--fps N] [--E PA] [--res N] [--speed M_S] [--angle DEG]\n"
-                    "       [--h0 LOGJP] [--no-hardening] [--boundary sticky|slip|separate] [--friction MU] [--filter S] [--regularizer W]\n"
-                    "       [--force-error] [--out DIR] [--png] [--ply] [--quiet]\n"
-                    "       [--newton-tol X] [--cg-tol X] [--cg-forcing X] (pn_mpm_implicit_desc; 0: its default)\n");
+static void usage(FILE *f) {
+    fprintf(f, "usage: snowball [flags]   a snowball thrown at a frictional floor\n"
+               "  --energy pnet|lagged       what implicit steps minimize [pnet]\n"
+               "  --speed M_S  --angle DEG   the throw: speed and angle below the horizontal [3, 45]\n"
+               "  --h0 LOGJP                 initial consolidation log J_p <= 0 [-0.01]\n"
+               "  --no-hardening             Cam-Clay with the state held\n");
+    pn_ex_cli_usage(f);
 }
 
 int main(int argc, char **argv) {
+    static const char *const energies[] = {"pnet", "lagged"};
+    const char *prog = "snowball";
     int lagged, k;
     double speed = 3, angle = 45, h0 = -0.01;
     int no_hardening = 0;
@@ -40,19 +40,30 @@ int main(int argc, char **argv) {
     pn_ex_cli_default(&c, "build/snowball_frames");
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
-        int used = pn_ex_cli_flag(&c, a, v);
-        if (used > 0) k += used - 1;
-        else if (used == 0 && !strcmp(a, "--no-hardening")) no_hardening = 1;
-        else if (used < 0 || !v) { usage(); return 2; }
-        else if (!strcmp(a, "--speed")) speed = atof(v), ++k;
-        else if (!strcmp(a, "--angle")) angle = atof(v), ++k;
-        else if (!strcmp(a, "--h0")) h0 = atof(v), ++k;
-        else { usage(); return 2; }
+        int used;
+        if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
+            usage(stdout);
+            return 0;
+        }
+        used = pn_ex_cli_flag(prog, &c, a, v);
+        if (used == 0) {
+            if (!strcmp(a, "--no-hardening")) used = no_hardening = 1;
+            else if (!strcmp(a, "--speed")) used = pn_ex_number(prog, a, v, &speed) ? 2 : -1;
+            else if (!strcmp(a, "--angle")) used = pn_ex_number(prog, a, v, &angle) ? 2 : -1;
+            else if (!strcmp(a, "--h0")) used = pn_ex_number(prog, a, v, &h0) ? 2 : -1;
+            else {
+                fprintf(stderr, "%s: unknown flag '%s' (--help lists them)\n", prog, a);
+                return 2;
+            }
+        }
+        if (used < 0) return 2;
+        k += used - 1;
     }
-    lagged = !strcmp(c.energy, "lagged") ? 1 : !strcmp(c.energy, "pnet") ? 0 : -1;
-    pn_ex_scene_default(&sc, PN_EX_SNOWBALL, c.dim);
-    if (!pn_ex_cli_apply(&c, &sc) || lagged < 0 || !(speed >= 0) || !(angle >= -90 && angle <= 90) || !(h0 <= 0)) {
-        usage();
+    if ((lagged = pn_ex_choice(prog, "--energy", c.energy, energies, 2)) < 0) return 2;
+    pn_ex_scene_default(&sc, PN_EX_SNOWBALL, c.dim == 3 ? 3 : 2);
+    if (!pn_ex_cli_apply(prog, &c, &sc)) return 2;
+    if (!(speed >= 0) || !(angle >= -90 && angle <= 90) || !(h0 <= 0)) {
+        fprintf(stderr, "%s: --speed must be >= 0, --angle in [-90, 90], --h0 <= 0\n", prog);
         return 2;
     }
     sc.speed_m_s = speed;

@@ -72,6 +72,7 @@ models=
 # test_main with OpenMP: test_mpm.c checks that 1 and 2 threads give the same bits
 run_bin test_main tests/test_main.c "$models -fopenmp" "$@"
 run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"
+run_bin test_render tests/test_render.c "" "$@"
 
 # 3. C against torch (gen/crosscheck.py): the training targets and every shipped model. Runs
 #    whenever torch is installed (Debian: apt-get install -y python3-torch); CI requires it.
@@ -84,6 +85,30 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
         bad "crosscheck: torch is not installed (CI needs it: apt-get install -y python3-torch)"
     else
         echo "skip crosscheck (torch not installed: apt-get install -y python3-torch)"
+    fi
+fi
+# 4. the same bits from every compiler (tests/cross_compiler.sh: gcc, g++, clang at -O2 with
+#    -ffp-contract=off, every integrator and energy); skipped with fewer than two compilers
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    sh tests/cross_compiler.sh >build/cross_compiler.log 2>&1
+    tally cross_compiler build/cross_compiler.log $?
+fi
+# 5. the browser demo (examples/web, WebAssembly) in headless Chromium: tests/web_test.py. Runs
+#    whenever emscripten, chromium and chromedriver are installed (Debian: apt-get install -y
+#    emscripten chromium chromium-driver); CI requires them.
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    if command -v emcc >/dev/null 2>&1 && command -v chromium >/dev/null 2>&1 &&
+        command -v chromedriver >/dev/null 2>&1; then
+        if make -s web >build/web_build.log 2>&1; then
+            /usr/bin/python3 tests/web_test.py >build/web_test.log 2>&1
+            tally web_test build/web_test.log $?
+        else
+            bad "web: make web failed"; sed 's/^/    /' build/web_build.log | head -20
+        fi
+    elif [ "${CI:-}" = true ]; then
+        bad "web: emscripten/chromium/chromedriver not installed (apt-get install -y emscripten chromium chromium-driver)"
+    else
+        echo "skip web demo test (emscripten, chromium or chromedriver not installed: apt-get install -y emscripten chromium chromium-driver)"
     fi
 fi
 echo "$passed passed, $failed failed"

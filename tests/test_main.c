@@ -17,6 +17,7 @@
 #include "test_driver.c"  /* pn_tests_driver: the material-point driver end to end      */
 #include "test_pnet.c"    /* pn_tests_pnet: MLP, PlasticityNet energy, learned return map */
 #include "test_mpm.c"     /* pn_tests_mpm: explicit MPM on small scenes                 */
+#include "test_scene.c"   /* pn_tests_scene: fill helpers, stable dt, large steps, errors */
 
 #define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
@@ -29,6 +30,7 @@ int main(int argc, char **argv) {
     pn_test_run(pn_tests_driver, PN_COUNT(pn_tests_driver), filter, &passed, &failed);
     pn_test_run(pn_tests_pnet, PN_COUNT(pn_tests_pnet), filter, &passed, &failed);
     pn_test_run(pn_tests_mpm, PN_COUNT(pn_tests_mpm), filter, &passed, &failed);
+    pn_test_run(pn_tests_scene, PN_COUNT(pn_tests_scene), filter, &passed, &failed);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }
