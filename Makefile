@@ -1,30 +1,32 @@
 # plastinet: `make run` (the demo) and `make test` (every test). Nothing else is needed to use
 # the headers: copy plastinet.h into your project.
 CC ?= cc
+CXX ?= c++
 CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
+CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point test test-sanitize bench-core bench-mpm clean examples models model-report crosscheck
+.PHONY: all run run-material-point run-game-loop test test-sanitize bench-core bench-mpm clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point build/sand_column build/snowball
+examples: build/material_point build/sand_column build/snowball build/game_loop
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/material_point.c $(LDLIBS) -o $@
 
 # The main demo: a 2D sand column collapsing under gravity, implicit at dt = 1e-3 s with the
-# embedded PlasticityNet sand model (E = 1e7 Pa); PNG frames in build/sand_column_frames/.
+# embedded PlasticityNet sand model (E = 1e7 Pa); PNG frames and an animated preview in
+# build/sand_column_frames/.
 run: build/sand_column
-	@mkdir -p build/sand_column_frames
-	build/sand_column --png --frames 30 --out build/sand_column_frames
-	@echo "# frames: build/sand_column_frames/frame_0001.png ... frame_0030.png"
+	build/sand_column --png --apng --frames 30 --out build/sand_column_frames
+	@echo "# frames: build/sand_column_frames/frame_0001.png ... frame_0030.png, animated: preview.png"
 
 # What the MPM examples and bench/bench_mpm.c share: PNG/PLY output, the scenes, the mass IoU.
-EXAMPLE_DEPS = examples/pn_example.h plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h \
+EXAMPLE_DEPS = examples/pn_example.h examples/pn_render.h plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h \
     models/pn_model_sand_3d.h models/pn_model_snow_2d.h models/pn_model_snow_3d.h
 
 build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
@@ -35,6 +37,14 @@ build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
 build/snowball: examples/snowball.c $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/snowball.c $(LDLIBS) -o $@
+
+# C++17: a 3D sandbox stepped once per 60 Hz frame with pn_mpm_advance; prints ms per frame.
+build/game_loop: examples/game_loop.cpp examples/pn_render.h plastinet.h plastinet_mpm.h
+	@mkdir -p build
+	$(CXX) $(CXXFLAGS) examples/game_loop.cpp -o $@
+
+run-game-loop: build/game_loop
+	build/game_loop --frames 60
 
 # The material-point driver on a von Mises tensile test (uniaxial stress, linear hardening):
 # prints the stress-strain curve.
@@ -91,3 +101,33 @@ test-sanitize:
 
 clean:
 	rm -rf build
+
+# ---- the browser demo (examples/web): 2D sand and snow in WebAssembly -----------------------
+# `make web` builds build/web/ (index.html, app.js, demo.js, demo.wasm; serve it over http, e.g.
+# python3 -m http.server -d build/web). Debian's emscripten: apt-get install -y emscripten; its
+# system libraries come prebuilt in a frozen cache, so no EM_CACHE is needed. NODE_PATH lets emcc
+# find Debian's node modules (acorn) when node itself is not Debian's (e.g. NodeSource).
+# `make test-web` drives the page in headless Chromium (apt-get install -y chromium chromium-driver).
+EMCC ?= emcc
+WEB_CFLAGS = -std=c99 -O2 -Wall -Wextra -pedantic
+WEB_LDFLAGS = -sALLOW_MEMORY_GROWTH=1 -sMODULARIZE=1 -sEXPORT_NAME=createPlastinetDemo \
+    -sENVIRONMENT=web -sFILESYSTEM=0 -sEXPORTED_RUNTIME_METHODS=HEAPF32
+WEB_FILES = build/web/demo.js build/web/index.html build/web/app.js
+
+web: $(WEB_FILES)
+
+build/web/demo.js: examples/web/demo.c plastinet.h plastinet_mpm.h
+	@command -v $(EMCC) >/dev/null 2>&1 || { echo "make web: $(EMCC) not found; install emscripten (Debian: apt-get install -y emscripten)" >&2; exit 1; }
+	@mkdir -p build/web
+	NODE_PATH=$${NODE_PATH:+$$NODE_PATH:}/usr/share/nodejs $(EMCC) $(WEB_CFLAGS) $(WEB_LDFLAGS) examples/web/demo.c -o $@
+
+build/web/index.html: examples/web/index.html
+	@mkdir -p build/web
+	cp examples/web/index.html $@
+
+build/web/app.js: examples/web/app.js
+	@mkdir -p build/web
+	cp examples/web/app.js $@
+
+test-web: web
+	$(PY) tests/web_test.py

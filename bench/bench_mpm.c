@@ -1,5 +1,5 @@
 /* bench_mpm: speed against accuracy of the MPM integrators of plastinet_mpm.h on the sand column
-   and the snowball of shared/design/VALIDATION.md (scenes in examples/pn_example.h).
+   and the snowball of docs/validation.md (scenes in examples/pn_example.h).
    Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
                     [--max-run-seconds S] [--filter S] [--references] [--out DIR]
@@ -20,7 +20,7 @@
    hardening (pn_ex_scene.no_hardening), to see what its fracture does to the reference.
    --cost: instead of the runs, DIR/bench_mpm_cost.md: per step, the fair explicit step, the
    least an implicit step at 1e-3 s can cost (one Newton and one CG iteration), each further
-   CG iteration, and a real step, against the budget VALIDATION.md's time bar leaves a step
+   CG iteration, and a real step, against the budget docs/validation.md's time bar leaves a step
    (sand: half the fair explicit time, snow: the same).
 
    For each scene and dimension, in one run:
@@ -38,7 +38,7 @@
       Drucker-Prager energy (pn_dp_energy).
    Every run is compared with the reference frame by frame (25 fps, so that every dt above
    divides a frame) by the mass IoUs of examples/pn_example.h: soft (the formula of
-   VALIDATION.md; below 1 even for identical fields, so the reference's score against itself
+   docs/validation.md; below 1 even for identical fields, so the reference's score against itself
    is its ceiling), min/max (1 for identical fields; the plots use it) and binary occupancy.
    Then a Young's-modulus sweep of the 2D sand column (1e5 to 1e8 Pa): implicit PlasticityNet
    at dt 1e-3 s, 1 fixed-point pass, against the fair explicit baseline found at each E (IoU
@@ -74,7 +74,7 @@ typedef struct bench_run {
     size_t particles;
     double wall, cpu, sim; /* seconds stepping, simulated seconds done              */
     pn_ex_tally tally;
-    double iou_mean, iou_min;       /* soft IoU (the formula of VALIDATION.md)     */
+    double iou_mean, iou_min;       /* soft IoU (the formula of docs/validation.md)     */
     double mm_mean, mm_min;         /* min/max IoU (1 for identical fields)        */
     double biou_mean;               /* binary occupancy IoU                        */
     int scored;                     /* compared with a reference                   */
@@ -512,7 +512,7 @@ static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FIL
     pn_ex_scene s;
     bench_run fair;
     double warm_s = 0.4 * cfg->duration[dim], dt = 1e-3, expl = 0, budget;
-    double bar = kind == PN_EX_SAND_COLUMN ? 0.5 : 1.0; /* VALIDATION.md: time over fair explicit */
+    double bar = kind == PN_EX_SAND_COLUMN ? 0.5 : 1.0; /* docs/validation.md: time over fair explicit */
     int frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5), e;
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
@@ -522,7 +522,7 @@ static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FIL
         return;
     }
     fprintf(md, "**%s %dD**, after %.2f s of explicit steps; fair explicit dt %.3g s. Budget: the wall time an "
-                "implicit step of %g s may take for the run to cost %g times the fair explicit one (VALIDATION.md), "
+                "implicit step of %g s may take for the run to cost %g times the fair explicit one (docs/validation.md), "
                 "%g (%g / %.3g) explicit steps.\n\n",
             kind == PN_EX_SAND_COLUMN ? "sand" : "snow", dim, warm_s, fair.dt, dt, bar, bar, dt, fair.dt);
     fprintf(md, "| energy | explicit step (ms) | budget (ms) | 1 Newton + 1 CG (ms) | each more CG (ms) | "
@@ -750,10 +750,10 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
         return;
     }
     fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm)%s -->\n", cfg->quick ? ", --quick" : "");
-    fprintf(f, "Scenes of shared/design/VALIDATION.md (examples/pn_example.h): 2D res %d over 1 m, 3D res %d over 0.5 m; "
+    fprintf(f, "Scenes of docs/validation.md (examples/pn_example.h): 2D res %d over 1 m, 3D res %d over 0.5 m; "
                "%.2f s (2D) and %.2f s (3D) simulated, compared at %d frames per second. Mass IoU against the "
                "explicit reference, mean / min over frames: *soft* is sum(ab) / sum(a + b - ab) of the max-normalized "
-               "mass fields (VALIDATION.md), below 1 even for identical fields (the reference row shows its ceiling); "
+               "mass fields (docs/validation.md), below 1 even for identical fields (the reference row shows its ceiling); "
                "*min/max* is sum(min(a, b)) / sum(max(a, b)), 1 for identical fields; *binary*: occupancy above "
                "%.0f%% of the maximum. *x fair*: wall time per simulated second over the explicit run at its largest "
                "stable step. *it/step*: Newton / CG / fixed-point passes per step. *LS fails / halved*: Newton "

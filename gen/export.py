@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Write a trained model as a C header in models/ (STYLE.md, "Generated headers").
+"""Write a trained model as a C header in models/ (models/README.md, "header layout").
 
     /usr/bin/python3 gen/export.py --model sand_2d [--quality build/quality_sand_2d.txt]
 

@@ -3,7 +3,7 @@
 Everything works in principal space: a deformation F = U diag(s) V^T with U, V rotations is
 handled through its singular values s (shape [B, d]); the force density of the return mapping is
 T(F) = U diag(t(s)) V^T with t_i = tau_i(Z(s)) / s_i (PlasticityNet Eq. 7). The formulas follow
-../shared/design/FORMULAS.md; gen/crosscheck.py compares them with plastinet.h on random inputs so
+docs/method.md; gen/crosscheck.py compares them with plastinet.h on random inputs so
 the two can never drift apart.
 """
 import math

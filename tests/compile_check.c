@@ -126,7 +126,7 @@ static void smoke_mpm(int d) {
     wd.dx_m = (pn_real)(1.0 / 16);
     wd.gravity[1] = (pn_real)-9.81;
     wd.max_particles = 4;
-    CHECK(pn_mpm_create(&wd, &w) == PN_OK);
+    CHECK(pn_mpm_create(&wd, &w, NULL) == PN_OK);
     if (!w) return;
     memset(&md, 0, sizeof md);
     md.plastic = PN_PLASTIC_DRUCKER_PRAGER;

@@ -3,7 +3,7 @@
 
    #included by test_main.c after plastinet.h (with PLASTINET_IMPLEMENTATION) and pn_test.h;
    defines pn_tests_energy. Expected values come from independent sources: central differences
-   with Richardson extrapolation, the principal-stretch formulas of FORMULAS.md evaluated on
+   with Richardson extrapolation, the principal-stretch formulas of docs/method.md evaluated on
    singular values known by construction (F = R1 diag(s) R2), and the tests' own Jacobi
    eigen-solver for the PSD projection. The helpers shared with the other test files (products,
    norm, random rotations, the Jacobi solver, Lame constants) are in test_util.h; those of this
@@ -292,7 +292,7 @@ static void t_en_finish(pn_test_ctx *pn__t, const t_en_stats *st, int with_ref) 
     }
 }
 
-/* ---- principal-stretch reference energies (FORMULAS.md), signed s by construction -------- */
+/* ---- principal-stretch reference energies (docs/method.md), signed s by construction -------- */
 
 /* psi and dpsi/ds_i of an elastic model; P = R1 diag(dpsi/ds) R2 when F = R1 diag(s) R2. */
 static void t_en_ref_elastic(pn_elastic_model model, double mu, double lam, int dim, const double *s,
@@ -340,7 +340,7 @@ static void t_en_ref_elastic(pn_elastic_model model, double mu, double lam, int 
     }
 }
 
-/* Exact StVK-Hencky + von Mises energy (FORMULAS.md) from the log stretches e. Returns the
+/* Exact StVK-Hencky + von Mises energy (docs/method.md) from the log stretches e. Returns the
    signed distance |dev e| - r to the yield surface in strain. */
 static double t_en_ref_vm(double mu, double lam, double tauY, int dim, const double *s, double *psi,
                           double *dpsi) {

@@ -2,7 +2,7 @@
 
    Every trial F is built as F = R1 diag(exp(e)) R2 with random rotations R1, R2, so its SVD is
    known exactly without calling the library. The expected Z, h_new, yield value and T come
-   from a principal-space reference written here from FORMULAS.md and the header's
+   from a principal-space reference written here from docs/method.md and the header's
    documentation (material parameters read from the pn_material_desc, Lame constants
    recomputed), with root finds done by plain bisection. The library's Z is brought back into
    the test's frame, D = R1^T Z R2^T, which must be diagonal (coaxiality) and holds the
@@ -123,7 +123,7 @@ static void pn_tr_snow(pn_tr_case *c, const char *name) {
     c->h_zero = 0.2;
 }
 
-/* ---- the reference return mapping (principal space, FORMULAS.md) ---------------------- */
+/* ---- the reference return mapping (principal space, docs/method.md) ---------------------- */
 
 enum { PN_TR_INSIDE, PN_TR_FLOW, PN_TR_TIP, PN_TR_TIP_TENSION };
 
@@ -235,7 +235,7 @@ static void pn_tr_ref_vm(const pn_material_desc *p, int d, const double *e, doub
             if (f > 0) lo = mid; else hi = mid;
         }
         g = 0.5 * (lo + hi);
-    } else { /* closed form (FORMULAS.md, Simo-Hughes radial return) */
+    } else { /* closed form (docs/method.md, Simo-Hughes radial return) */
         g = (2 * l.mu * rn - tauy) / (2 * l.mu + 2 * K / 3);
     }
     for (i = 0; i < d; ++i) r->z[i] = exp(e[i] - g * n[i]);
@@ -815,7 +815,7 @@ PN_TEST(return_snow_stomakhin) {
 /* The exact StVK-Hencky + von Mises energy (yield stress frozen at sigma_Y0 + K h): its
    gradient is T of the return mapping with that yield stress and no hardening within the
    step, i.e. of a K = 0 material with sigma_Y0' = sigma_Y0 + K h. Also its value against
-   FORMULAS.md and a central difference of it. */
+   docs/method.md and a central difference of it. */
 PN_TEST(return_von_mises_energy_gradient) {
     pn_material_desc dk, d0;
     pn_material mk, m0;
@@ -862,7 +862,7 @@ PN_TEST(return_von_mises_energy_gradient) {
                 Td[i] = T[i];
             }
             pn_tr_max_into(&worst_grad, pn_tr_reldiff(n, Pd, Td, PN_TR_STRAIN_FLOOR * dk.youngs_modulus_pa));
-            /* FORMULAS.md: kappa/2 tr^2 + mu |e^|^2 inside, kappa/2 tr^2 + tau_Y |e^| - tau_Y^2/(4 mu) outside */
+            /* docs/method.md: kappa/2 tr^2 + mu |e^|^2 inside, kappa/2 tr^2 + tau_Y |e^| - tau_Y^2/(4 mu) outside */
             mu = dk.youngs_modulus_pa / (2 * (1 + dk.poisson_ratio));
             la = dk.youngs_modulus_pa * dk.poisson_ratio / ((1 + dk.poisson_ratio) * (1 - 2 * dk.poisson_ratio));
             kappa = la + 2 * mu / d;
@@ -895,7 +895,7 @@ PN_TEST(return_von_mises_energy_gradient) {
             pn_tr_max_into(&worst_fd, fabs(fd - dir) / (pn_tr_maxabs(n, Td) * pn_tr_maxabs(n, dF) +
                                                         PN_TR_STRAIN_FLOOR * dk.youngs_modulus_pa));
         }
-    PN_REPORT("%d samples (%d plastic): worst |P_energy - T| / |T| = %.2e, psi vs FORMULAS.md "
+    PN_REPORT("%d samples (%d plastic): worst |P_energy - T| / |T| = %.2e, psi vs docs/method.md "
               "%.2e, central difference %.2e", n_samples, plastic, worst_grad, worst_psi, worst_fd);
     PN_CHECK(errors == 0);
     PN_CHECK(plastic >= n_samples / 10 && plastic <= n_samples * 9 / 10);
