@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop test test-sanitize bench-core bench-mpm clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -131,3 +131,15 @@ build/web/app.js: examples/web/app.js
 
 test-web: web
 	$(PY) tests/web_test.py
+
+# ---- the README's pictures (docs/images): animated previews the examples write -----------------
+pictures: build/sand_column build/snowball
+	build/sand_column --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/sand_2d --quiet
+	build/sand_column --dim 3 --res 32 --jitter --energy dp --apng --frames 15 --fps 15 --out build/pictures/sand_3d --quiet
+	build/snowball --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/snow_2d --quiet
+	@mkdir -p docs/images
+	cp build/pictures/sand_2d/preview.png docs/images/sand_column_2d.png
+	cp build/pictures/sand_3d/preview.png docs/images/sand_column_3d.png
+	cp build/pictures/snow_2d/preview.png docs/images/snowball_2d.png
+	@if [ -f build/web_test/after.png ]; then cp build/web_test/after.png docs/images/web_demo.png; \
+	else echo "docs/images/web_demo.png: run make test-web first for the browser screenshot"; fi

@@ -1,4 +1,4 @@
-/* plastinet.h - v0.2 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.3 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -126,6 +126,10 @@
           exact von Mises and lagged-plasticity energies.
      0.2  learned models: MLP inference with exact Hessians, PlasticityNet energies and the
           learned return mapping; model headers in models/ (format version 1).
+     0.3  model format 2 (array lengths checked, NaN weights refused; gen/upgrade_format.py);
+          pn_model_material names its reason; pn_material_check; result codes
+          PN_ERROR_STEP_TOO_LARGE, PN_ERROR_OUTSIDE_DOMAIN, PN_ERROR_CAPACITY; the same bits
+          from gcc and clang (no pow that a compiler may fold).
 */
 #ifndef PLASTINET_H
 #define PLASTINET_H
@@ -143,7 +147,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 2
+#define PN_VERSION_MINOR 3
 
 #ifdef __cplusplus
 extern "C" {

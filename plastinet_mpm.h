@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.2 - material point method solvers on plastinet.h.
+/* plastinet_mpm.h - v0.3 - material point method solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -10,6 +10,8 @@
    WHAT IS HERE (greppable banners in the implementation: // >>name)
    ======================================================================================
      >>world     creation, particle groups, particles (structure of arrays), colliders
+     >>fill      particles in boxes, spheres, cylinders and closed meshes (pn_mpm_fill)
+     >>stable-dt the explicit step bound from the wave speed (pn_mpm_stable_dt)
      >>bin       per step: each particle's quadratic B-spline stencil, particles sorted by
                  stencil base node (counting sort), the list of active grid nodes
      >>transfer  particle-to-grid as a gather per node, grid-to-particle per particle (APIC,
@@ -21,18 +23,22 @@
                  active set and lagged friction for separating contact, step halving
      >>explicit  symplectic Euler with the analytic return mapping after the F update (the
                  reference integrator; Jiang et al. 2016 course notes, Hu et al. 2018 MLS)
+     >>advance   a frame in as many steps as the physics asks for (pn_mpm_advance)
 
-   QUICK START
-       pn_mpm_desc wd;  pn_mpm_world *w;  pn_material sand;  int g;
-       memset(&wd, 0, sizeof wd);
+   QUICK START (README.md has it as a complete program)
+       pn_mpm_desc wd;  pn_mpm_fill_desc f;  pn_mpm_world *w;  pn_material sand;  size_t n;
+       memset(&wd, 0, sizeof wd);                            // zeroed fields mean defaults
        wd.dim = 2; wd.res[0] = wd.res[1] = 64; wd.dx_m = 1.0 / 64; wd.gravity[1] = -9.81;
        wd.boundary = PN_MPM_BOUNDARY_SEPARATE; wd.friction = 0.5;
-       wd.max_particles = 100000;
-       pn_mpm_create(&wd, &w);
-       g = pn_mpm_add_group(w, &sand, 1600);                 // material, density kg/m^3
-       pn_mpm_add_particles(w, g, n, x, NULL, volume_m3);    // positions (m), optional v
-       pn_mpm_step_explicit(w, 1e-4, NULL);                  // dt in seconds
-       pn_mpm_step_implicit(w, 1e-3, NULL, NULL);            // or implicit, 10x the step
+       memset(&f, 0, sizeof f);                              // a block of sand
+       f.shape = PN_MPM_FILL_BOX; f.center_m[0] = 0.5; f.center_m[1] = 0.2;
+       f.half_extent_m[0] = 0.1; f.half_extent_m[1] = 0.1;
+       pn_mpm_fill_count(&wd, &f, &n, NULL);  wd.max_particles = n;
+       pn_mpm_create(&wd, &w, &why);                         // why: the field at fault
+       f.group = pn_mpm_add_group(w, &sand, 1600);           // material, density kg/m^3
+       pn_mpm_fill(w, &f, NULL);                             // pn_mpm_error(w) says why not
+       pn_mpm_advance(w, 1.0 / 60, NULL, NULL);              // a frame: stable explicit steps
+       pn_mpm_step_implicit(w, 1e-3, NULL, NULL);            // or one implicit step
        pn_mpm_destroy(w);
 
    MEMORY: pn_mpm_create allocates every array through the allocator of the desc (both
@@ -40,10 +46,15 @@
    allocates the solver storage; after that a step allocates nothing.
    WORK: each step sorts the particles by grid node and works only on the nodes their
    stencils touch (a few bytes per grid node are cleared per step, no floating point work).
-   ERRORS: a step that meets a non-finite value, an invalid state or (implicit) a solve that
-   does not converge after the fallback returns its pn_result, names the particle in
-   pn_mpm_world.error_particle when there is one, and leaves the world exactly as it was
-   before the step (the new state is built in scratch arrays and swapped in).
+   ERRORS: every call that fails returns its pn_result and leaves the world as it was, and
+   pn_mpm_error(w) says why in a sentence naming the field, particle, group or capacity at
+   fault (pn_mpm_create, which has no world yet, through its why argument). A step that
+   meets a non-finite value, an invalid state, material that would move more than
+   advection_limit cells or leave through a wall (PN_ERROR_STEP_TOO_LARGE,
+   PN_ERROR_OUTSIDE_DOMAIN) or (implicit) a solve that does not converge after the fallback
+   names the particle in pn_mpm_world.error_particle and leaves the world exactly as it was
+   before the step (the new state is built in scratch arrays and swapped in). No step
+   returns PN_OK with material lost: outflow is an error unless allow_outflow is set.
    THREADS: compile with -fopenmp to run the particle and node loops on OpenMP threads.
    Results are bitwise identical for any thread count: particle-to-grid is a gather over
    particles sorted by node (no atomics, a fixed summation order) and every reduction sums
@@ -345,10 +356,10 @@ PN_API pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc
        dt = 0.9 dx / max_p (c_p + |v_p|),   c_p = sqrt(K_p / rho_p),
    K_p the particle's P-wave modulus (lambda + 2 mu, stiffened by compression: divided by J,
    times the hardening of Stomakhin snow), rho_p its current density. The factor 0.9 is
-   measured: on sand, rubber, snow and metal scenes in 2D and 3D the largest step found
-   stable by search was 1.25 to 2 times this one (docs/results.md; tests/test_mpm.c,
-   mpm_stable_dt). Without particles, the groups' materials at rest. PN_ERROR_INVALID_ARGUMENT
-   without groups. */
+   measured: on sand, rubber, snow and metal scenes in 2D the largest step found stable by
+   search was 1.19 to 1.68 times this one (tests/test_scene.c, scene_stable_dt;
+   docs/results.md). Without particles, the groups' materials at rest.
+   PN_ERROR_INVALID_ARGUMENT without groups. */
 PN_API pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s);
 
 /* ---- stepping a frame ------------------------------------------------------------------- */

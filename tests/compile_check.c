@@ -148,6 +148,23 @@ static void smoke_mpm(int d) {
         CHECK(pn_mpm_add_collider(w, &c, NULL) == PN_OK);
     }
     for (k = 0; k < 3; ++k) CHECK(pn_mpm_step_explicit(w, (pn_real)1e-3, &st) == PN_OK);
+    { /* the scene helpers and the frame stepper */
+        pn_mpm_fill_desc f;
+        pn_real dt = 0, at[3] = {(pn_real)0.3, (pn_real)0.3, (pn_real)0.3};
+        size_t n = 0;
+        const char *why = NULL;
+        memset(&f, 0, sizeof f);
+        f.shape = PN_MPM_FILL_SPHERE;
+        f.center_m[0] = f.center_m[1] = f.center_m[2] = (pn_real)0.5;
+        f.radius_m = (pn_real)0.01;
+        f.group = g;
+        CHECK(pn_mpm_fill_count(&w->desc, &f, &n, &why) == PN_OK && n == 0);
+        CHECK(pn_mpm_fill(w, &f, &n) == PN_OK && n == 0);
+        CHECK(pn_mpm_stable_dt(w, &dt) == PN_OK && dt > 0);
+        CHECK(pn_mpm_advance(w, (pn_real)1e-3, NULL, &st) == PN_OK && pn_mpm_error(w)[0] == 0);
+        CHECK(pn_mpm_move_collider(w, 0, at, NULL) == PN_OK);
+        CHECK(pn_material_check(&m, &why) == PN_OK);
+    }
     CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_LAGGED, NULL) == PN_OK);
     CHECK(pn_mpm_step_implicit(w, (pn_real)1e-3, NULL, &st) == PN_OK);
     pn_mpm_totals(w, &mass, mom);

@@ -87,13 +87,18 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
         echo "skip crosscheck (torch not installed: apt-get install -y python3-torch)"
     fi
 fi
-# 4. the same bits from every compiler (tests/cross_compiler.sh: gcc, g++, clang at -O2 with
+# 4. every C block of README.md builds and runs (tests/readme_snippets.sh)
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    sh tests/readme_snippets.sh >build/readme_snippets.log 2>&1
+    tally readme_snippets build/readme_snippets.log $?
+fi
+# 5. the same bits from every compiler (tests/cross_compiler.sh: gcc, g++, clang at -O2 with
 #    -ffp-contract=off, every integrator and energy); skipped with fewer than two compilers
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     sh tests/cross_compiler.sh >build/cross_compiler.log 2>&1
     tally cross_compiler build/cross_compiler.log $?
 fi
-# 5. the browser demo (examples/web, WebAssembly) in headless Chromium: tests/web_test.py. Runs
+# 6. the browser demo (examples/web, WebAssembly) in headless Chromium: tests/web_test.py. Runs
 #    whenever emscripten, chromium and chromedriver are installed (Debian: apt-get install -y
 #    emscripten chromium chromium-driver); CI requires them.
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
