@@ -135,7 +135,7 @@ test-web: web
 # ---- the README's pictures (docs/images): animated previews the examples write -----------------
 pictures: build/sand_column build/snowball
 	build/sand_column --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/sand_2d --quiet
-	build/sand_column --dim 3 --res 32 --jitter --energy dp --apng --frames 15 --fps 15 --out build/pictures/sand_3d --quiet
+	build/sand_column --dim 3 --res 32 --jitter --integrator explicit --dt 1e-4 --apng --frames 15 --fps 15 --out build/pictures/sand_3d --quiet
 	build/snowball --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/snow_2d --quiet
 	@mkdir -p docs/images
 	cp build/pictures/sand_2d/preview.png docs/images/sand_column_2d.png

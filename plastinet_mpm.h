@@ -1169,74 +1169,50 @@ static pn_result pn__mpm_fill_walk(const pn_mpm_desc *wd, int wall, const pn_mpm
     return *open ? PN_ERROR_INVALID_ARGUMENT : PN_OK;
 }
 
-/* count (x NULL) or fill; the mesh bins live for the call */
+/* Count (x NULL) or write the fill's points; the mesh bins live for the call. On failure
+   *why is a static sentence, or "" for a point outside the walls (bad: the point). */
 static pn_result pn__mpm_fill_do(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, pn_real *x, size_t *count,
-                                 char *msg, size_t msg_n) {
+                                 const char **why, pn_real *bad) {
     pn__mpm_mesh_bins b;
-    pn_real axis[3], lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, bad[3] = {0, 0, 0};
-    const char *why = "";
+    pn_real axis[3], lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
     int open = 0, wall = wd->wall_cells ? wd->wall_cells : 3;
-    pn_result r = pn__mpm_fill_valid(wd, f, axis, &why);
+    pn_result r = pn__mpm_fill_valid(wd, f, axis, why);
     *count = 0;
     memset(&b, 0, sizeof b);
     if (r == PN_OK && f->shape == PN_MPM_FILL_MESH) {
         pn__mpm_fill_box(f, wd->dim, axis, lo, hi);
         r = pn__mpm_bins_make(&b, f, wd->dim, wd->dx_m / (pn_real)(f->per_axis ? f->per_axis : 2), lo, hi, &wd->allocator);
-        if (r != PN_OK) why = "out of memory for the mesh's bins";
+        if (r != PN_OK) *why = "out of memory for the mesh's bins";
     }
     if (r == PN_OK) {
         r = pn__mpm_fill_walk(wd, wall, f, &b, axis, x, count, bad, &open);
-        if (open) why = "pn_mpm_fill_desc: the mesh is not closed (a line crosses it an odd number of times)";
-        else if (r != PN_OK) why = "";
+        *why = open ? "pn_mpm_fill_desc: the mesh is not closed (a line crosses it an odd number of times)" : "";
     }
     if (b.start) pn_free(&wd->allocator, b.start);
     if (b.item) pn_free(&wd->allocator, b.item);
-    if (r == PN_OK || !msg) return r;
-#ifndef PN_NO_STDIO
-    if (!*why)
-        snprintf(msg, msg_n, "pn_mpm_fill: the shape reaches outside the walls at (%g, %g, %g) m (move it, or set "
-                 "pn_mpm_fill_desc.clip)", (double)bad[0], (double)bad[1], (double)bad[2]);
-    else
-        snprintf(msg, msg_n, "%s", why);
-#else
-    (void)msg_n;
-    msg[0] = 0;
-#endif
     return r;
 }
 
 PN__DEF pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, size_t *count, const char **why) {
-    pn__mpm_mesh_bins b;
-    pn_real axis[3], lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, bad[3];
-    int open = 0;
+    pn_real bad[3];
+    const char *w = "";
     pn_result r;
-    const char *w0 = "pn_mpm_fill_count: the shape reaches outside the walls (move it, or set clip)";
     PN_ASSERT(wd && f && count);
     *count = 0;
     if (!pn__dim_ok(wd->dim) || !(wd->dx_m > 0) || !pn__finite(wd->dx_m)) {
         if (why) *why = "pn_mpm_fill_count: the world description's dim or dx_m is invalid";
         return PN_ERROR_INVALID_ARGUMENT;
     }
-    r = pn__mpm_fill_valid(wd, f, axis, why ? why : &w0);
-    if (r != PN_OK) return r;
-    memset(&b, 0, sizeof b);
-    if (f->shape == PN_MPM_FILL_MESH) {
-        pn__mpm_fill_box(f, wd->dim, axis, lo, hi);
-        r = pn__mpm_bins_make(&b, f, wd->dim, wd->dx_m / (pn_real)(f->per_axis ? f->per_axis : 2), lo, hi, &wd->allocator);
-        if (r != PN_OK) return r;
-    }
-    r = pn__mpm_fill_walk(wd, wd->wall_cells ? wd->wall_cells : 3, f, &b, axis, NULL, count, bad, &open);
-    if (b.start) pn_free(&wd->allocator, b.start);
-    if (b.item) pn_free(&wd->allocator, b.item);
-    if (r != PN_OK && why)
-        *why = open ? "pn_mpm_fill_desc: the mesh is not closed (a line crosses it an odd number of times)" : w0;
+    r = pn__mpm_fill_do(wd, f, NULL, count, &w, bad);
+    if (r != PN_OK && why) *why = *w ? w : "pn_mpm_fill_count: the shape reaches outside the walls (move it, or set clip)";
     return r;
 }
 
 PN__DEF pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t *added) {
     size_t n = 0, p, q;
     int d, i;
-    pn_real vol, mass;
+    pn_real vol, mass, bad[3] = {0, 0, 0};
+    const char *why = "";
     pn_result r;
     PN_ASSERT(w && f);
     d = w->dim;
@@ -1245,8 +1221,11 @@ PN__DEF pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t
     if (f->group < 0 || f->group >= w->n_groups)
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: group %d does not exist (%d groups)", f->group,
                             w->n_groups);
-    r = pn__mpm_fill_do(&w->desc, f, NULL, &n, w->error, sizeof w->error);
-    if (r != PN_OK) return r;
+    r = pn__mpm_fill_do(&w->desc, f, NULL, &n, &why, bad);
+    if (r != PN_OK && *why) return pn__mpm_fail(w, r, "%s", why);
+    if (r != PN_OK)
+        return pn__mpm_fail(w, r, "pn_mpm_fill: the shape reaches outside the walls at (%g, %g, %g) m (move it, or set "
+                            "pn_mpm_fill_desc.clip)", (double)bad[0], (double)bad[1], (double)bad[2]);
     if (n > w->cap - w->n)
         return pn__mpm_fail(w, PN_ERROR_CAPACITY, "pn_mpm_fill: the shape holds %lu particles; max_particles must be >= %lu "
                             "(it is %lu, %lu in use; pn_mpm_fill_count tells before creating the world)",
@@ -1257,7 +1236,7 @@ PN__DEF pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: particle volume %g m^3 gives mass %g kg", (double)vol,
                             (double)mass);
     /* the walk writes straight into the particle arrays, past the particles in use */
-    r = pn__mpm_fill_do(&w->desc, f, w->x + w->n * (size_t)d, &q, w->error, sizeof w->error);
+    r = pn__mpm_fill_do(&w->desc, f, w->x + w->n * (size_t)d, &q, &why, bad);
     if (r != PN_OK || q != n) return r != PN_OK ? r : PN_ERROR_INVALID_ARGUMENT;
     for (p = w->n; p < w->n + n; ++p) {
         for (i = 0; i < d; ++i) w->v[p * (size_t)d + (size_t)i] = f->velocity_m_s[i];

@@ -993,10 +993,8 @@ PN_TEST(render_speed) {
     t0 = t_seconds();
     PN_CHECK(pn_render_particles(&d, n, x, sp, NULL, img));
     t2 = t_seconds() - t0;
+    /* measured, never asserted: tests do not bound wall time */
     PN_REPORT("100000 particles at 960x540: 3D %.0f ms, 2D %.0f ms", 1e3 * t3, 1e3 * t2);
-    /* generous bounds: sanitizer builds and busy machines run several times slower */
-    PN_CHECK_LE(t3, 5.0);
-    PN_CHECK_LE(t2, 5.0);
 done:
     free(x);
     free(sp);

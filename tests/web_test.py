@@ -60,55 +60,22 @@ def free_port():
         return s.getsockname()[1]
 
 
-# ---- PNG decoding (zlib + unfiltering), enough for Chromium's screenshots -------------------
+# ---- PNG decoding: the independent decoder of the renderer's tests (tests/check_png.py) ------
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import check_png  # noqa: E402
+
 
 def png_decode(data):
     """(width, height, channels, rows) of an 8-bit greyscale/RGB/RGBA non-interlaced PNG; rows
     is a list of bytes objects, one per row, without the filter byte."""
-    if data[:8] != b"\x89PNG\r\n\x1a\n":
-        raise ValueError("not a PNG")
-    pos, idat, w = 8, [], None
-    while pos < len(data):
-        n, kind = struct.unpack(">I4s", data[pos:pos + 8])
-        body = data[pos + 8:pos + 8 + n]
-        pos += 12 + n
-        if kind == b"IHDR":
-            w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", body)
-            if depth != 8 or interlace or ctype not in (0, 2, 6):
-                raise ValueError("unsupported PNG (depth %d, colour type %d, interlace %d)" % (depth, ctype, interlace))
-            ch = {0: 1, 2: 3, 6: 4}[ctype]
-        elif kind == b"IDAT":
-            idat.append(body)
-        elif kind == b"IEND":
-            break
-    raw = zlib.decompress(b"".join(idat))
-    stride = w * ch
-    rows, prev = [], bytes(stride)
-    for y in range(h):
-        f = raw[y * (stride + 1)]
-        line = bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
-        if f == 1:
-            for i in range(ch, stride):
-                line[i] = (line[i] + line[i - ch]) & 255
-        elif f == 2:
-            line = bytearray((a + b) & 255 for a, b in zip(line, prev))
-        elif f == 3:
-            for i in range(stride):
-                left = line[i - ch] if i >= ch else 0
-                line[i] = (line[i] + ((left + prev[i]) >> 1)) & 255
-        elif f == 4:
-            for i in range(stride):
-                a = line[i - ch] if i >= ch else 0
-                b = prev[i]
-                c = prev[i - ch] if i >= ch else 0
-                p = a + b - c
-                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
-        elif f != 0:
-            raise ValueError("bad PNG filter %d" % f)
-        rows.append(bytes(line))
-        prev = line
-    return w, h, ch, rows
+    ch = check_png.chunks(data)
+    w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", ch[0][1])
+    if depth != 8 or interlace or ctype not in (0, 2, 6):
+        raise ValueError("unsupported PNG (depth %d, colour type %d, interlace %d)" % (depth, ctype, interlace))
+    n = {0: 1, 2: 3, 6: 4}[ctype]
+    pixels = check_png.unfilter(check_png.inflate(b"".join(b for k, b in ch if k == "IDAT")), w, h, n)
+    return w, h, n, [bytes(pixels[y * w * n:(y + 1) * w * n]) for y in range(h)]
 
 
 def changed_pixels(a, b, rect):
