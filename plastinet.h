@@ -2464,7 +2464,8 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
 static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_real *y0, pn_real h,
                                  int level, pn_real *N, pn_real *gN, pn_real *HN) {
     int nf = pn__model_nf(mo), nr = 2 * nf + 1, d = mo->dim, i, j, l, k;
-    pn_real c = d == 2 ? 1 : (pn_real)1.5, q0, S, s, qj[3], qjl[3][3], sj[3], sjl[3][3];
+    pn_real c = d == 2 ? 1 : (pn_real)1.5, q0, S, s, qj[3] = {0, 0, 0}, qjl[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+    pn_real sj[3], sjl[3][3]; /* qj, qjl zeroed: gcc -O3 cannot see that nf >= 2 fills them */
     pn_real a[3], a1[3], a2[3], raw[8], u[8], J[7][3], K[7][3][3], m, gm[7], hm[7 * 7];
     pn_real gr[7], Mj[3], Mjl[3][3];
     pn_result r;

@@ -106,7 +106,7 @@ static void smoke_models(void) {
         }
     }
     {
-        pn_real in[2] = {0, 0}, out = 0, g[2], h[4];
+        pn_real in[PN_MLP_MAX_WIDTH] = {0}, out = 0, g[2], h[4]; /* as many inputs as any network has */
         CHECK(pn_mlp_eval(&pn_models_all[0]()->mlp, in, 0, &out, g, h) != PN_ERROR_NONFINITE);
     }
 }
