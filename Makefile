@@ -12,7 +12,7 @@ PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point build/sand_column build/snowball build/game_loop
+examples: build/material_point build/sand_column build/snowball build/materials build/game_loop
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
@@ -37,6 +37,11 @@ build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
 build/snowball: examples/snowball.c $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/snowball.c $(LDLIBS) -o $@
+
+# Sand, rubber, steel and snow with a post and a moving plate (build/materials --help).
+build/materials: examples/materials.c $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/materials.c $(LDLIBS) -o $@
 
 # C++17: a 3D sandbox stepped once per 60 Hz frame with pn_mpm_advance; prints ms per frame.
 build/game_loop: examples/game_loop.cpp examples/pn_render.h plastinet.h plastinet_mpm.h
@@ -133,13 +138,15 @@ test-web: web
 	$(PY) tests/web_test.py
 
 # ---- the README's pictures (docs/images): animated previews the examples write -----------------
-pictures: build/sand_column build/snowball
+pictures: build/sand_column build/snowball build/materials
 	build/sand_column --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/sand_2d --quiet
 	build/sand_column --dim 3 --res 32 --jitter --integrator explicit --dt 1e-4 --apng --frames 15 --fps 15 --out build/pictures/sand_3d --quiet
 	build/snowball --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/snow_2d --quiet
 	@mkdir -p docs/images
 	cp build/pictures/sand_2d/preview.png docs/images/sand_column_2d.png
 	cp build/pictures/sand_3d/preview.png docs/images/sand_column_3d.png
+	build/materials --apng --out build/pictures/materials --quiet
 	cp build/pictures/snow_2d/preview.png docs/images/snowball_2d.png
+	cp build/pictures/materials/preview.png docs/images/materials_2d.png
 	@if [ -f build/web_test/after.png ]; then cp build/web_test/after.png docs/images/web_demo.png; \
 	else echo "docs/images/web_demo.png: run make test-web first for the browser screenshot"; fi

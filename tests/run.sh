@@ -87,7 +87,12 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
         echo "skip crosscheck (torch not installed: apt-get install -y python3-torch)"
     fi
 fi
-# 4. every C block of README.md builds and runs (tests/readme_snippets.sh)
+# 4. every example builds with the Makefile's line (make examples), and every C block of
+#    README.md builds and runs (tests/readme_snippets.sh)
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    if make -s examples >build/examples.log 2>&1; then ok "examples build (make examples)"
+    else bad "examples build (make examples)"; sed 's/^/    /' build/examples.log | head -20; fi
+fi
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     sh tests/readme_snippets.sh >build/readme_snippets.log 2>&1
     tally readme_snippets build/readme_snippets.log $?
