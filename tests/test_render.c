@@ -722,6 +722,21 @@ static void t_desc3(pn_render_desc *d, int w, int h) {
     d->time_s = -1;
 }
 
+/* a 960 x 540 frame of the unit box with everything drawn: floor at 0.1, camera 30/20, a
+   speed legend up to 1 m/s, a scale bar, a time stamp */
+static void t_desc3_full(pn_render_desc *d, double radius_m, double time_s) {
+    t_desc3(d, 960, 540);
+    d->radius_m = radius_m;
+    d->has_floor = 1;
+    d->floor_m = 0.1;
+    d->yaw_deg = 30;
+    d->pitch_deg = 20;
+    d->field_name = "speed (m/s)";
+    d->field_hi = 1;
+    d->time_s = time_s;
+    d->scale_bar = 1;
+}
+
 static long t_diff(const unsigned char *a, const unsigned char *b, int w, int x0, int y0, int x1, int y1) {
     long n = 0;
     int i, j;
@@ -920,20 +935,7 @@ PN_TEST(render_scenes) {
         x[3 * n + 2] = (pn_real)(0.5 + r * sin(a));
         sp[n] = (pn_real)(hgt * 4);
     }
-    memset(&d, 0, sizeof d);
-    d.width = 960;
-    d.height = 540;
-    d.dim = 3;
-    d.hi[0] = d.hi[1] = d.hi[2] = 1;
-    d.radius_m = 0.006;
-    d.has_floor = 1;
-    d.floor_m = 0.1;
-    d.yaw_deg = 30;
-    d.pitch_deg = 20;
-    d.field_name = "speed (m/s)";
-    d.field_hi = 1;
-    d.time_s = 1.25;
-    d.scale_bar = 1;
+    t_desc3_full(&d, 0.006, 1.25);
     d.title = "colliders 3D";
     d.shapes = sh;
     d.n_shapes = 3;
@@ -971,20 +973,7 @@ PN_TEST(render_speed) {
                 x[3 * p + 2] = (pn_real)(0.3 + k * 0.008);
                 sp[p] = (pn_real)pn_test_rng_uniform(&rng);
             }
-    memset(&d, 0, sizeof d);
-    d.width = 960;
-    d.height = 540;
-    d.dim = 3;
-    d.hi[0] = d.hi[1] = d.hi[2] = 1;
-    d.radius_m = 0.0048;
-    d.has_floor = 1;
-    d.floor_m = 0.1;
-    d.yaw_deg = 30;
-    d.pitch_deg = 20;
-    d.field_name = "speed (m/s)";
-    d.field_hi = 1;
-    d.time_s = 0;
-    d.scale_bar = 1;
+    t_desc3_full(&d, 0.0048, 0);
     t0 = t_seconds();
     PN_CHECK(pn_render_particles(&d, n, x, sp, NULL, img));
     t3 = t_seconds() - t0;

@@ -440,22 +440,33 @@ PN_TEST(scene_stable_dt) {
 
 /* ---- honest large steps ------------------------------------------------------------------- */
 
+/* a 2D world (res 32 on 1 m, gravity) holding a box of sand centred at (cx, cy) of half
+   sizes (hx, hy), falling at vy; *n its particle count; NULL on failure */
+static pn_mpm_world *t_sc_sand_box(double cx, double cy, double hx, double hy, double vy, size_t *n) {
+    pn_mpm_world *w = t_sc_world(2, 32, 1.0 / 32, NULL, -9.81, 10000);
+    pn_mpm_fill_desc f;
+    if (!w) return NULL;
+    memset(&f, 0, sizeof f);
+    f.group = t_sc_group(w, 0);
+    f.center_m[0] = cx, f.center_m[1] = cy;
+    f.half_extent_m[0] = hx, f.half_extent_m[1] = hy;
+    f.velocity_m_s[1] = vy;
+    if (pn_mpm_fill(w, &f, n) != PN_OK) {
+        pn_mpm_destroy(w);
+        return NULL;
+    }
+    return w;
+}
+
 /* A sand layer falling at 2 m/s onto the floor, stepped once by dt: either PN_OK with every
    particle still active and inside the walls' grid, or an error with the state untouched. */
 static void t_sc_big_step(pn_test_ctx *pn__t, int implicit, double dt, pn_result *out) {
-    pn_mpm_world *w = t_sc_world(2, 32, 1.0 / 32, NULL, -9.81, 10000);
-    pn_mpm_fill_desc f;
+    size_t n = 0, p;
+    pn_mpm_world *w = t_sc_sand_box(0.5, 0.25, 0.3, 0.05, -2, &n);
     pn_real *x0, *v0;
-    size_t n, p;
     pn_result r;
     PN_CHECK(w != NULL);
     if (!w) return;
-    memset(&f, 0, sizeof f);
-    f.group = t_sc_group(w, 0);
-    f.center_m[0] = 0.5, f.center_m[1] = 0.25;
-    f.half_extent_m[0] = 0.3, f.half_extent_m[1] = 0.05;
-    f.velocity_m_s[1] = -2;
-    PN_CHECK(pn_mpm_fill(w, &f, &n) == PN_OK);
     x0 = (pn_real *)malloc(sizeof(pn_real) * n * 2);
     v0 = (pn_real *)malloc(sizeof(pn_real) * n * 2);
     memcpy(x0, w->x, sizeof(pn_real) * n * 2);
@@ -488,19 +499,12 @@ PN_TEST(scene_large_steps_never_lose_material) {
     PN_REPORT("explicit dt 1e-2 s: %s", pn_result_string(r));
     /* the frame stepper takes as many steps as the advection limit asks: nothing lost */
     {
-        pn_mpm_world *w = t_sc_world(2, 32, 1.0 / 32, NULL, -9.81, 10000);
-        pn_mpm_fill_desc f;
+        size_t n = 0, p, bad = 0;
+        pn_mpm_world *w = t_sc_sand_box(0.5, 0.5, 0.1, 0.1, -3, &n);
         pn_mpm_advance_desc a;
         pn_mpm_stats st;
-        size_t n = 0, p, bad = 0;
         PN_CHECK(w != NULL);
         if (!w) return;
-        memset(&f, 0, sizeof f);
-        f.group = t_sc_group(w, 0);
-        f.center_m[0] = 0.5, f.center_m[1] = 0.5;
-        f.half_extent_m[0] = 0.1, f.half_extent_m[1] = 0.1;
-        f.velocity_m_s[1] = -3;
-        PN_CHECK(pn_mpm_fill(w, &f, &n) == PN_OK);
         memset(&a, 0, sizeof a);
         a.integrator = PN_MPM_IMPLICIT;
         a.max_step_s = 0.1;
@@ -591,19 +595,14 @@ PN_TEST(scene_origin) {
 }
 
 PN_TEST(scene_advance) {
-    pn_mpm_world *w = t_sc_world(2, 32, 1.0 / 32, NULL, -9.81, 10000);
-    pn_mpm_fill_desc f;
+    size_t n = 0;
+    pn_mpm_world *w = t_sc_sand_box(0.5, 0.3, 0.1, 0.15, 0, &n);
     pn_mpm_advance_desc a;
     pn_mpm_stats st;
     pn_real dt;
     int frame;
-    PN_CHECK(w != NULL);
+    PN_CHECK(w != NULL && n > 0);
     if (!w) return;
-    memset(&f, 0, sizeof f);
-    f.group = t_sc_group(w, 0);
-    f.center_m[0] = 0.5, f.center_m[1] = 0.3;
-    f.half_extent_m[0] = 0.1, f.half_extent_m[1] = 0.15;
-    PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_OK);
     PN_CHECK(pn_mpm_stable_dt(w, &dt) == PN_OK);
     for (frame = 1; frame <= 3; ++frame) {
         PN_CHECK(pn_mpm_advance(w, 1.0 / 60, NULL, &st) == PN_OK);
