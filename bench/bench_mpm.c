@@ -915,10 +915,14 @@ int main(int argc, char **argv) {
     cfg.energy_mask = mask;
     cfg.Es = cfg.quick ? Es_quick : Es_full;
     cfg.n_Es = cfg.quick ? 2 : 4;
+    if (!pn_ex_mkdirs(cfg.out)) {
+        fprintf(stderr, "bench_mpm: cannot create the folder %s\n", cfg.out);
+        return 1;
+    }
     if (cost) { /* the cost table only */
         snprintf(path, sizeof path, "%s/bench_mpm_cost.md", cfg.out);
         if (!(csv = fopen(path, "w"))) {
-            fprintf(stderr, "bench_mpm: cannot write %s (does the folder exist?)\n", path);
+            fprintf(stderr, "bench_mpm: cannot write %s\n", path);
             return 1;
         }
         fprintf(csv, "<!-- written by bench/bench_mpm.c --cost -->\nWall milliseconds per step, the least of %d "
@@ -933,7 +937,7 @@ int main(int argc, char **argv) {
     }
     snprintf(path, sizeof path, "%s/bench_mpm.csv", cfg.out);
     if (!(csv = fopen(path, "w"))) {
-        fprintf(stderr, "bench_mpm: cannot write %s (does the folder exist?)\n", path);
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
         return 1;
     }
     csv_header(csv);
