@@ -356,8 +356,9 @@ PN_API pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc
        dt = 0.9 dx / max_p (c_p + |v_p|),   c_p = sqrt(K_p / rho_p),
    K_p the particle's P-wave modulus (lambda + 2 mu, stiffened by compression: divided by J,
    times the hardening of Stomakhin snow), rho_p its current density. The factor 0.9 is
-   measured: on sand, rubber, snow and metal scenes in 2D the largest step found stable by
-   search was 1.19 to 1.68 times this one (tests/test_scene.c, scene_stable_dt;
+   measured: on sand, rubber, snow and metal scenes in 2D and sand and rubber in 3D the
+   largest step found stable by search was 1.19 to 1.68 times this one (scene_stable_dt in
+   tests/test_scene.c;
    docs/results.md). Without particles, the groups' materials at rest.
    PN_ERROR_INVALID_ARGUMENT without groups. */
 PN_API pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s);

@@ -420,21 +420,22 @@ static int t_sc_run_at(int kind, int dim, double k, double T, double ke_cap, dou
 }
 
 PN_TEST(scene_stable_dt) {
-    static const int kinds[4] = {0, 1, 2, 3};
+    static const int kinds[6] = {0, 1, 2, 3, 0, 1}, dims[6] = {2, 2, 2, 2, 3, 3};
     static const char *names[4] = {"sand", "rubber", "snow", "metal"};
     int s;
-    for (s = 0; s < 4; ++s) {
+    for (s = 0; s < 6; ++s) {
         double ke_ref, ke, k, largest = 0, T = kinds[s] == 3 ? 0.03 : 0.2;
-        int stable_at_1;
-        PN_CHECK(t_sc_run_at(kinds[s], 2, 0.5, T, HUGE_VAL, &ke_ref));
-        stable_at_1 = t_sc_run_at(kinds[s], 2, 1.0, T, 1.5 * ke_ref + 1e-9, &ke);
+        int stable_at_1, d = dims[s];
+        PN_CHECK(t_sc_run_at(kinds[s], d, 0.5, T, HUGE_VAL, &ke_ref));
+        stable_at_1 = t_sc_run_at(kinds[s], d, 1.0, T, 1.5 * ke_ref + 1e-9, &ke);
         PN_CHECK(stable_at_1);
         for (k = 1.0; k <= 2.5; k *= 1.189207115) { /* rungs 2^(i/4), until the first unstable one */
-            if (!t_sc_run_at(kinds[s], 2, k, T, 1.5 * ke_ref + 1e-9, &ke)) break;
+            if (!t_sc_run_at(kinds[s], d, k, T, 1.5 * ke_ref + 1e-9, &ke)) break;
             largest = k;
         }
         PN_CHECK(largest >= 1.0 && largest <= 2.0);
-        PN_REPORT("2D %s: stable at pn_mpm_stable_dt; the largest stable step found is %.2fx it", names[s], largest);
+        PN_REPORT("%dD %s: stable at pn_mpm_stable_dt; the largest stable step found is %.2fx it", d, names[kinds[s]],
+                  largest);
     }
 }
 
