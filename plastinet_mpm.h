@@ -334,8 +334,9 @@ typedef struct pn_mpm_fill_desc {
     unsigned long seed;          /* jitter's seed [0]                                        */
     pn_real velocity_m_s[3];     /* initial velocity [0]                                     */
     pn_real state;               /* initial plastic state h [0] (pn_mpm_set_state)          */
-    int clip;                    /* nonzero: points outside the walls are skipped [0: such a
-                                    shape is refused, naming the first point outside]      */
+    int clip;                    /* nonzero: the part outside the walls is left out [0: a
+                                    shape that reaches beyond the walls is refused, naming
+                                    a point of it outside]                                  */
 } pn_mpm_fill_desc;
 
 /* Fill a shape with particles of group f->group: the points of a lattice of spacing dx /
@@ -1060,8 +1061,9 @@ static pn_result pn__mpm_fill_valid(const pn_mpm_desc *wd, const pn_mpm_fill_des
     if (f->shape == PN_MPM_FILL_MESH) {
         if (!f->vertices_m || !f->indices || f->n_vertices == 0 || f->n_elements == 0)
             PN__MPM_BAD("pn_mpm_fill_desc: a mesh needs vertices_m, indices, n_vertices and n_elements");
-        if (!pn__all_finite(d * (int)PN__MIN(f->n_vertices, (size_t)1 << 20), f->vertices_m))
-            PN__MPM_BAD("pn_mpm_fill_desc.vertices_m has a NaN or infinite coordinate");
+        for (e = 0; e < f->n_vertices; ++e)
+            if (!pn__all_finite(d, f->vertices_m + e * (size_t)d))
+                PN__MPM_BAD("pn_mpm_fill_desc.vertices_m has a NaN or infinite coordinate");
         for (e = 0; e < f->n_elements * (size_t)d; ++e)
             if (f->indices[e] < 0 || (size_t)f->indices[e] >= f->n_vertices)
                 PN__MPM_BAD("pn_mpm_fill_desc.indices has an index outside 0 .. n_vertices - 1");
@@ -1081,7 +1083,7 @@ static pn_result pn__mpm_bins_make(pn__mpm_mesh_bins *b, const pn_mpm_fill_desc 
     b->nb[1] = 1;
     for (i = 0; i < d - 1; ++i) {
         b->lo[i] = lo[i + 1] - h;
-        b->nb[i] = (int)PN__MIN((pn_real)1e5, PN__MPM_FLOOR((hi[i + 1] - lo[i + 1]) / h) + 3);
+        b->nb[i] = (int)PN__MAX(1, PN__MPM_FLOOR((hi[i + 1] - lo[i + 1]) / h) + 3); /* bins of a cell, in the walls */
     }
     nbins = (size_t)b->nb[0] * (size_t)b->nb[1];
     b->start = (size_t *)pn_alloc(a, sizeof(size_t) * (nbins + 1));
@@ -1129,14 +1131,35 @@ static pn_result pn__mpm_bins_make(pn__mpm_mesh_bins *b, const pn_mpm_fill_desc 
 
 /* Walk the lattice points of the fill: count them (x NULL) or write them to x. Returns
    PN_OK, or the first point outside the walls (*bad) / an open mesh. */
+/* The part of the shape's bounding box [lo, hi] inside the walls. Unless the fill clips, a
+   shape that reaches beyond a wall by more than half a lattice spacing (where a lattice
+   point could lie) is refused (*bad: a point of it outside). The bounding box is exact for
+   boxes, spheres and cylinders, and holds a mesh's vertices, so this is the shape's own
+   extent; and every walk stays inside the walls, its cost bounded by the domain's. */
+static pn_result pn__mpm_fill_range(const pn_mpm_desc *wd, int wall, const pn_mpm_fill_desc *f, const pn_real *axis,
+                                    pn_real h, pn_real *lo, pn_real *hi, pn_real *bad) {
+    int d = wd->dim, i, j;
+    pn__mpm_fill_box(f, d, axis, lo, hi);
+    for (i = 0; i < d; ++i) {
+        pn_real o = wd->origin_m[i], wlo = o + wall * wd->dx_m, whi = o + (wd->res[i] - wall) * wd->dx_m;
+        if (!f->clip && (lo[i] < wlo - h / 2 || hi[i] > whi + h / 2)) {
+            for (j = 0; j < 3; ++j) bad[j] = j < d ? (lo[j] + hi[j]) / 2 : 0;
+            bad[i] = lo[i] < wlo - h / 2 ? lo[i] : hi[i];
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+        lo[i] = PN__MAX(lo[i], wlo);
+        hi[i] = PN__MIN(hi[i], whi);
+    }
+    return PN_OK;
+}
+
 static pn_result pn__mpm_fill_walk(const pn_mpm_desc *wd, int wall, const pn_mpm_fill_desc *f,
-                                   const pn__mpm_mesh_bins *b, const pn_real *axis, pn_real *x, size_t *count,
-                                   pn_real *bad, int *open) {
+                                   const pn__mpm_mesh_bins *b, const pn_real *axis, const pn_real *lo,
+                                   const pn_real *hi, pn_real *x, size_t *count, pn_real *bad, int *open) {
     int d = wd->dim, i, per = f->per_axis ? f->per_axis : 2;
-    pn_real h = wd->dx_m / (pn_real)per, lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+    pn_real h = wd->dx_m / (pn_real)per;
     long i0[3] = {0, 0, 0}, i1[3] = {0, 0, 0}, a, c, e;
     size_t n = 0;
-    pn__mpm_fill_box(f, d, axis, lo, hi);
     for (i = 0; i < d; ++i) { /* lattice cells that can hold a point of the shape */
         i0[i] = (long)PN__MPM_FLOOR((lo[i] - wd->origin_m[i]) / h) - 1;
         i1[i] = (long)PN__MPM_FLOOR((hi[i] - wd->origin_m[i]) / h) + 1;
@@ -1175,18 +1198,18 @@ static pn_result pn__mpm_fill_walk(const pn_mpm_desc *wd, int wall, const pn_mpm
 static pn_result pn__mpm_fill_do(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, pn_real *x, size_t *count,
                                  const char **why, pn_real *bad) {
     pn__mpm_mesh_bins b;
-    pn_real axis[3], lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+    pn_real axis[3], lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, h = wd->dx_m / (pn_real)(f->per_axis ? f->per_axis : 2);
     int open = 0, wall = wd->wall_cells ? wd->wall_cells : 3;
     pn_result r = pn__mpm_fill_valid(wd, f, axis, why);
     *count = 0;
     memset(&b, 0, sizeof b);
+    if (r == PN_OK && (r = pn__mpm_fill_range(wd, wall, f, axis, h, lo, hi, bad)) != PN_OK) *why = "";
     if (r == PN_OK && f->shape == PN_MPM_FILL_MESH) {
-        pn__mpm_fill_box(f, wd->dim, axis, lo, hi);
-        r = pn__mpm_bins_make(&b, f, wd->dim, wd->dx_m / (pn_real)(f->per_axis ? f->per_axis : 2), lo, hi, &wd->allocator);
+        r = pn__mpm_bins_make(&b, f, wd->dim, wd->dx_m, lo, hi, &wd->allocator);
         if (r != PN_OK) *why = "out of memory for the mesh's bins";
     }
     if (r == PN_OK) {
-        r = pn__mpm_fill_walk(wd, wall, f, &b, axis, x, count, bad, &open);
+        r = pn__mpm_fill_walk(wd, wall, f, &b, axis, lo, hi, x, count, bad, &open);
         *why = open ? "pn_mpm_fill_desc: the mesh is not closed (a line crosses it an odd number of times)" : "";
     }
     if (b.start) pn_free(&wd->allocator, b.start);

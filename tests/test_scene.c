@@ -379,6 +379,22 @@ PN_TEST(scene_fill_errors) {
     PN_CHECK(pn_mpm_fill(w, &f, &n) == PN_ERROR_CAPACITY && w->n == before);
     PN_CHECK(strstr(pn_mpm_error(w), "max_particles") != NULL);
     PN_REPORT("capacity message: %s", pn_mpm_error(w));
+    /* a shape far larger than the domain: refused, or clipped to the walls in a time bounded
+       by the domain (every interior lattice point: (32 - 6)^2 cells x 4) */
+    {
+        pn_mpm_desc wd = w->desc;
+        pn_mpm_fill_desc big = f;
+        big.shape = PN_MPM_FILL_SPHERE;
+        big.radius_m = 1e6;
+        PN_CHECK(pn_mpm_fill_count(&wd, &big, &n, &why) == PN_ERROR_INVALID_ARGUMENT);
+        big.clip = 1;
+        PN_CHECK(pn_mpm_fill_count(&wd, &big, &n, &why) == PN_OK && n == 26 * 26 * 4);
+        big.center_m[0] = 50; /* wholly outside: nothing to add, or refused */
+        big.radius_m = 1;
+        PN_CHECK(pn_mpm_fill_count(&wd, &big, &n, NULL) == PN_OK && n == 0);
+        big.clip = 0;
+        PN_CHECK(pn_mpm_fill_count(&wd, &big, &n, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    }
     f.radius_m = -1;
     f.shape = PN_MPM_FILL_SPHERE;
     PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_ERROR_INVALID_ARGUMENT && strstr(pn_mpm_error(w), "radius_m"));
