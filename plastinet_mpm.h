@@ -55,7 +55,9 @@
    names the particle in pn_mpm_world.error_particle and leaves the world exactly as it was
    before the step (the new state is built in scratch arrays and swapped in). No step
    returns PN_OK with material lost: outflow is an error unless allow_outflow is set.
-   THREADS: compile with -fopenmp to run the particle and node loops on OpenMP threads.
+   THREADS: compile with -fopenmp to run the particle and node loops on OpenMP threads
+   (worlds of at least desc.parallel_min_particles particles, 4096 by default; smaller ones
+   stay on one thread, where a parallel region costs more than its work).
    Results are bitwise identical for any thread count: particle-to-grid is a gather over
    particles sorted by node (no atomics, a fixed summation order) and every reduction sums
    fixed-size chunks in a fixed order. One world must not be stepped from two threads at
@@ -104,6 +106,8 @@ typedef struct pn_mpm_desc {
                                     the same filtering per simulated second at any dt)     */
     int wall_cells;              /* thickness of the walls in cells; 0 = 3                  */
     size_t max_particles;        /* capacity, > 0                                           */
+    size_t parallel_min_particles; /* with -fopenmp: the particle loops of a world with fewer
+                                    particles run on one thread [4096; 1: always parallel] */
     int allow_outflow;           /* nonzero: a particle that passes through a wall is retired
                                     (inactive, counted in left_domain). 0: such a step fails
                                     with PN_ERROR_OUTSIDE_DOMAIN and the world is unchanged
@@ -450,9 +454,12 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
 #endif
 
 /* OpenMP loops that compile away (and do not warn) without -fopenmp. Each iteration writes
-   only its own outputs, so the schedule cannot change a result. */
+   only its own outputs, so the schedule cannot change a result. A world of fewer particles
+   than desc.parallel_min_particles runs them on one thread: a parallel region costs more
+   than its work there, and on a busy machine a thread waiting for a core stalls every one
+   of the step's dozens of regions. Every use has the world in scope as w. */
 #ifdef _OPENMP
-#define PN__OMP_FOR _Pragma("omp parallel for schedule(dynamic, 64)")
+#define PN__OMP_FOR _Pragma("omp parallel for schedule(dynamic, 64) if(w->n >= w->desc.parallel_min_particles)")
 #else
 #define PN__OMP_FOR
 #endif
@@ -571,6 +578,7 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     w->desc = *desc;
     for (i = d; i < 3; ++i) w->desc.origin_m[i] = 0;
     if (!(w->desc.advection_limit > 0)) w->desc.advection_limit = 1;
+    if (w->desc.parallel_min_particles == 0) w->desc.parallel_min_particles = 4096;
     w->dim = d;
     w->wall = wall;
     w->cap = cap;

@@ -546,6 +546,7 @@ PN_TEST(mpm_threads_identical) {
             pn_mpm_implicit_desc id;
             memset(&id, 0, sizeof id);
             id.fixed_point_iters = 2;
+            if (w) w->desc.parallel_min_particles = 1; /* this small world on 2 threads too */
             omp_set_num_threads(t);
             n = t_mpm_block(w, g, lo, sz, NULL);
             bytes = sizeof(pn_real) * n * 2;
