@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-explicit clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -83,6 +83,29 @@ bench-mpm: build/bench_mpm
 build/bench_mpm: bench/bench_mpm.c $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_mpm.c $(LDLIBS) -o $@
+
+# Explicit MPM throughput (bench/bench_explicit.c): the 88-line MLS-MPM scene (30k particles,
+# n 80 and 256) in float and double, then the 2D/3D sweep 1e3 .. 1e6 particles at 1 and 2
+# threads (build/bench_explicit_sweep.{csv,md}). With MLS88_DIR=/path/to/a/copy of that
+# program, it runs beside ours first (bench/mls88_side_by_side.sh, build/mls88_side_by_side.md).
+# BENCH_EXPLICIT_MAX=100000 for a quicker sweep.
+BENCH_EXPLICIT_MAX ?= 1000000
+bench-explicit: build/bench_explicit build/bench_explicit_float
+	@if [ -n "$(MLS88_DIR)" ]; then MLS88_DIR="$(MLS88_DIR)" sh bench/mls88_side_by_side.sh 1000; fi
+	build/bench_explicit_float --n 80 --steps 1000 --threads 1
+	build/bench_explicit_float --n 256 --steps 1000 --threads 1
+	build/bench_explicit --n 80 --steps 1000 --threads 1
+	build/bench_explicit --n 256 --steps 1000 --threads 1
+	build/bench_explicit --sweep --max $(BENCH_EXPLICIT_MAX) --csv build/bench_explicit_sweep.csv --md build/bench_explicit_sweep.md
+	@cat build/bench_explicit_sweep.md
+
+build/bench_explicit: bench/bench_explicit.c plastinet.h plastinet_mpm.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) -fopenmp bench/bench_explicit.c $(LDLIBS) -o $@
+
+build/bench_explicit_float: bench/bench_explicit.c plastinet.h plastinet_mpm.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) -fopenmp -DPN_REAL=float bench/bench_explicit.c $(LDLIBS) -o $@
 
 # Train (resuming checkpoints), export and measure the shipped models: all, or MODEL=name.
 models:

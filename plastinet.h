@@ -270,6 +270,9 @@ typedef struct pn_material_desc {
     pn_real snow_theta_c;           /* critical compression in (0, 1), e.g. 2.5e-2         */
     pn_real snow_theta_s;           /* critical stretch >= 0, e.g. 7.5e-3                  */
     pn_real snow_xi;                /* hardening coefficient >= 0, e.g. 10                 */
+    pn_real snow_jp_min, snow_jp_max; /* bounds on the plastic volume ratio J_p, min in (0, 1)
+                                       and max > 1, 0: none. E.g. 0.6 and 20: the hardening
+                                       exp(xi (1 - J_p)) stays in [exp(-19 xi), exp(0.4 xi)] */
 } pn_material_desc;
 
 /* A validated material with derived constants. Treat as read-only. */
@@ -284,6 +287,7 @@ typedef struct pn_material {
     pn_real beta, xi;
     int camclay_hardening;
     pn_real theta_c, theta_s, snow_xi;
+    pn_real snow_h_min, snow_h_max; /* log J_p bounds, < 0 and > 0 (0: none)               */
 } pn_material;
 
 /* Validate desc and fill m. On failure m is untouched, and *why (if why is not NULL) points to
@@ -586,11 +590,12 @@ static pn_real pn__pow_dim(pn_real x, int k, int d) {
     return PN__POW(x, (pn_real)k / (pn_real)d);
 }
 
+/* x - x is +0 for finite x and NaN otherwise, and NaN survives the sum: no branch per entry */
 static int pn__all_finite(int n, const pn_real *a) {
+    pn_real z = 0;
     int i;
-    for (i = 0; i < n; ++i)
-        if (!pn__finite(a[i])) return 0;
-    return 1;
+    for (i = 0; i < n; ++i) z += a[i] - a[i];
+    return z == 0;
 }
 
 static int pn__dim_ok(int d) {
@@ -712,9 +717,75 @@ static void pn__swap_cols(int d, pn_real *A, int p, int q) {
     }
 }
 
+/* 2x2 in closed form (the hot path of 2D MPM): the polar rotation R of F from
+   (F00 + F11, F10 - F01), then the one Jacobi rotation J that diagonalizes the symmetric
+   S = R^T F, so F = (R J) diag(l) J^T. l_0 + l_1 = tr S >= 0; the smaller one is det F / l_0
+   (relative accuracy where F is nearly singular). Same conventions as the Jacobi path. */
+static void pn__svd2(const pn_real *F, pn_real *U, pn_real *s, pn_real *V) {
+    pn_real a, b, c, e, x, y, r, cs, sn, s00, s01, s11, cj, sj, l0, l1, det, scale = 0;
+    int i;
+    for (i = 0; i < 4; ++i) scale = PN__MAX(scale, PN__FABS(F[i]));
+    if (!(scale > 0) || !pn__finite(scale)) { /* zero (or not finite: the callers check F) */
+        U[0] = U[3] = V[0] = V[3] = 1;
+        U[1] = U[2] = V[1] = V[2] = 0;
+        s[0] = s[1] = scale == 0 ? 0 : scale - scale;
+        return;
+    }
+    /* squares stay normal and finite for entries in [2^-30, 2^30]: scale only outside */
+    if (scale > (pn_real)1073741824.0 || scale < (pn_real)9.3132257461547852e-10) {
+        pn_real inv = 1 / scale;
+        a = F[0] * inv, b = F[1] * inv, c = F[2] * inv, e = F[3] * inv;
+    } else {
+        scale = 1;
+        a = F[0], b = F[1], c = F[2], e = F[3];
+    }
+    x = a + e;
+    y = c - b;
+    r = PN__SQRT(x * x + y * y);
+    if (r > 0) {
+        pn_real ir = 1 / r;
+        cs = x * ir, sn = y * ir;
+    } else {
+        cs = 1, sn = 0; /* F is a scaled reflection: already symmetric */
+    }
+    s00 = cs * a + sn * c;
+    s01 = cs * b + sn * e;
+    s11 = cs * e - sn * b;
+    if (s01 != 0) {
+        pn_real zeta = (s11 - s00) / (2 * s01), t;
+        if (PN__FABS(zeta) > 1 / PN__EPS) t = 1 / (2 * zeta);
+        else t = (zeta >= 0 ? 1 : -1) / (PN__FABS(zeta) + PN__SQRT(1 + zeta * zeta));
+        cj = 1 / PN__SQRT(1 + t * t);
+        sj = t * cj;
+        l0 = s00 - t * s01;
+        l1 = s11 + t * s01;
+    } else {
+        cj = 1, sj = 0, l0 = s00, l1 = s11;
+    }
+    /* V = J = [cj sj; -sj cj]; order descending (a swap with one column negated keeps det +1) */
+    if (l0 >= l1) {
+        V[0] = cj, V[1] = sj, V[2] = -sj, V[3] = cj;
+    } else {
+        pn_real t = l0;
+        l0 = l1, l1 = t;
+        V[0] = sj, V[1] = -cj, V[2] = cj, V[3] = sj;
+    }
+    det = a * e - b * c;
+    if (l0 > 0) l1 = det / l0;
+    if (PN__FABS(l1) > l0) l1 = l1 < 0 ? -l0 : l0; /* l0 >= |l1| exactly (tr S >= 0), not only up to rounding */
+    U[0] = cs * V[0] - sn * V[2], U[1] = cs * V[1] - sn * V[3];
+    U[2] = sn * V[0] + cs * V[2], U[3] = sn * V[1] + cs * V[3];
+    s[0] = l0 * scale;
+    s[1] = l1 * scale;
+}
+
 static void pn__svd(int d, const pn_real *F, pn_real *U, pn_real *s, pn_real *V) {
     pn_real B[9], scale = 0, eps = PN__EPS, tiny;
     int i, j, p, q, sweep;
+    if (d == 2) {
+        pn__svd2(F, U, s, V);
+        return;
+    }
     for (i = 0; i < d * d; ++i) scale = PN__MAX(scale, PN__FABS(F[i]));
     pn__identity(d, V);
     if (scale == 0) {
@@ -1068,9 +1139,15 @@ PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *des
             PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_theta_s must be finite and >= 0");
         if (!pn__finite(dd->snow_xi) || !(dd->snow_xi >= 0))
             PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_xi must be finite and >= 0");
+        if (!pn__finite(dd->snow_jp_min) || !(dd->snow_jp_min >= 0 && dd->snow_jp_min < 1))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_jp_min must be in (0, 1), or 0 for no bound");
+        if (!pn__finite(dd->snow_jp_max) || !(dd->snow_jp_max == 0 || dd->snow_jp_max > 1))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_jp_max must be > 1, or 0 for no bound");
         m.theta_c = dd->snow_theta_c;
         m.theta_s = dd->snow_theta_s;
         m.snow_xi = dd->snow_xi;
+        m.snow_h_min = dd->snow_jp_min > 0 ? PN__LOG(dd->snow_jp_min) : 0;
+        m.snow_h_max = dd->snow_jp_max > 0 ? PN__LOG(dd->snow_jp_max) : 0;
         break;
     default: break;
     }
@@ -1120,6 +1197,9 @@ PN__DEF pn_result pn_material_check(const pn_material *m, const char **why) {
         if (!pn__finite(m->theta_c) || !(m->theta_c > 0) || !(m->theta_c < 1) ||
             !pn__finite(m->theta_s) || !(m->theta_s >= 0) || !pn__finite(m->snow_xi) || !(m->snow_xi >= 0))
             PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.theta_c must be in (0, 1), theta_s and snow_xi >= 0");
+        if (!pn__finite(m->snow_h_min) || !(m->snow_h_min <= 0) || !pn__finite(m->snow_h_max) || !(m->snow_h_max >= 0))
+            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.snow_h_min must be <= 0 and snow_h_max >= 0 (log J_p "
+                                                 "bounds, 0: none)");
         break;
     default: break;
     }
@@ -1147,8 +1227,9 @@ PN__DEF int pn_material_describe(const pn_material *m, char *buf, size_t cap) {
                  (double)m->beta, (double)m->xi, m->camclay_hardening);
         break;
     case PN_PLASTIC_SNOW_STOMAKHIN:
-        snprintf(extra, sizeof extra, " theta_c=%g theta_s=%g xi=%g", (double)m->theta_c,
-                 (double)m->theta_s, (double)m->snow_xi);
+        snprintf(extra, sizeof extra, " theta_c=%g theta_s=%g xi=%g jp=[%g, %g]", (double)m->theta_c,
+                 (double)m->theta_s, (double)m->snow_xi, m->snow_h_min < 0 ? exp((double)m->snow_h_min) : 0.0,
+                 m->snow_h_max > 0 ? exp((double)m->snow_h_max) : 0.0);
         break;
     default: break;
     }
@@ -1219,14 +1300,16 @@ static void pn__cq_pairs(int d, const pn_real *s, pn_real c, pn_real q, pn__prin
     }
 }
 
-/* Fill pr for elastic model `model` with Lame constants mu, la at stretches s. Hencky and
-   Neo-Hookean models need s > 0 (checked by the callers). */
+/* Fill pr for elastic model `model` with Lame constants mu, la at stretches s (without hess,
+   only psi and g: all a stress needs). Hencky and Neo-Hookean models need s > 0 (checked by
+   the callers). */
 static void pn__elastic_principal(pn_elastic_model model, pn_real mu, pn_real la, int d,
-                                  const pn_real *s, pn__principal *pr) {
+                                  const pn_real *s, pn__principal *pr, int hess) {
     pn_real J = 1;
     int i, j, k;
     for (i = 0; i < d; ++i) J *= s[i];
-    memset(pr, 0, sizeof *pr);
+    if (hess) memset(pr, 0, sizeof *pr);
+    else pr->psi = 0, pr->g[0] = pr->g[1] = pr->g[2] = 0;
     switch (model) {
     case PN_ELASTIC_FIXED_COROTATED: {
         /* psi = mu sum (s_i - 1)^2 + la/2 (J - 1)^2; Jh_i = J / s_i and Jh_ab = J/(s_a s_b)
@@ -1240,6 +1323,7 @@ static void pn__elastic_principal(pn_elastic_model model, pn_real mu, pn_real la
         for (i = 0; i < d; ++i) pr->psi += mu * (s[i] - 1) * (s[i] - 1);
         pr->psi += la / 2 * (J - 1) * (J - 1);
         for (i = 0; i < d; ++i) pr->g[i] = 2 * mu * (s[i] - 1) + la * (J - 1) * Jh[i];
+        if (!hess) break;
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j) {
                 pn_real Jab = 1;
@@ -1267,6 +1351,10 @@ static void pn__elastic_principal(pn_elastic_model model, pn_real mu, pn_real la
         for (i = 0; i < d; ++i) pr->psi += mu * e[i] * e[i];
         pr->psi += la / 2 * tr * tr;
         for (i = 0; i < d; ++i) ge[i] = 2 * mu * e[i] + la * tr;
+        if (!hess) {
+            for (i = 0; i < d; ++i) pr->g[i] = ge[i] / s[i];
+            break;
+        }
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j) Ae[i * 3 + j] = la + (i == j ? 2 * mu : 0);
         pn__hencky_to_s(d, s, ge, Ae, 2 * mu, pr);
@@ -1278,6 +1366,7 @@ static void pn__elastic_principal(pn_elastic_model model, pn_real mu, pn_real la
         for (i = 0; i < d; ++i) pr->psi += mu / 2 * s[i] * s[i];
         pr->psi += -mu / 2 * d - mu * lj + la / 2 * lj * lj;
         for (i = 0; i < d; ++i) pr->g[i] = mu * s[i] + q / s[i];
+        if (!hess) break;
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j)
                 pr->H[i * 3 + j] = la / (s[i] * s[j]) + (i == j ? mu - q / (s[i] * s[i]) : 0);
@@ -1293,6 +1382,7 @@ static void pn__elastic_principal(pn_elastic_model model, pn_real mu, pn_real la
         q = -c * S / dd + kappa / 2 * (J * J - 1);
         pr->psi = mu / 2 * (c / mu * S - dd) + kappa / 2 * ((J * J - 1) / 2 - PN__LOG(J));
         for (i = 0; i < d; ++i) pr->g[i] = c * s[i] + q / s[i];
+        if (!hess) break;
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j)
                 pr->H[i * 3 + j] = (i == j ? c - q / (s[i] * s[i]) : 0) - 2 / dd * c * s[i] / s[j] -
@@ -1403,7 +1493,7 @@ static pn_result pn__elastic_at(const pn_material *m, int d, const pn_real *F, p
     pn__svd(d, F, U, s, V);
     if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
     pn__lame_at(m, h, &mu, &la);
-    pn__elastic_principal(m->elastic, mu, la, d, s, pr);
+    pn__elastic_principal(m->elastic, mu, la, d, s, pr, 1);
     return PN_OK;
 }
 
@@ -1504,7 +1594,7 @@ static void pn__tau_principal(const pn_material *m, pn_real h, int d, const pn_r
     pn_real mu, la;
     int i;
     pn__lame_at(m, h, &mu, &la);
-    pn__elastic_principal(m->elastic, mu, la, d, s, &pr);
+    pn__elastic_principal(m->elastic, mu, la, d, s, &pr, 0);
     for (i = 0; i < d; ++i) tau[i] = s[i] * pr.g[i];
 }
 
@@ -1583,7 +1673,7 @@ static pn_result pn__vm_rootfind(const pn_material *m, int d, const pn_real *s, 
         pn_real zz[3], tau[3], dev[3], mean = 0, dn, dtau[3];
         pn__principal pr;
         for (i = 0; i < d; ++i) zz[i] = PN__EXP(e[i] - g * n[i]);
-        pn__elastic_principal(m->elastic, m->mu, m->lambda, d, zz, &pr);
+        pn__elastic_principal(m->elastic, m->mu, m->lambda, d, zz, &pr, 1);
         for (i = 0; i < d; ++i) {
             tau[i] = zz[i] * pr.g[i];
             mean += tau[i] / d;
@@ -1740,7 +1830,10 @@ static pn_result pn__return_principal(const pn_material *m, int d, const pn_real
         return PN_OK;
     }
     case PN_PLASTIC_SNOW_STOMAKHIN: {
-        /* clamp the stretches to [1 - theta_c, 1 + theta_s]; log Jp += log(J / J_new) */
+        /* clamp the stretches to [1 - theta_c, 1 + theta_s]; log Jp += log(J / J_new). The
+           clamp also takes an inverted trial state (the smallest stretch signed, J < 0, where
+           the fixed corotated energy is still defined) back to a valid one: its volume
+           change counts as the compression |J|. Then the optional J_p bounds. */
         pn_real J = 1, Jn = 1;
         for (i = 0; i < d; ++i) {
             z[i] = PN__MIN(PN__MAX(s[i], 1 - m->theta_c), 1 + m->theta_s);
@@ -1748,11 +1841,40 @@ static pn_result pn__return_principal(const pn_material *m, int d, const pn_real
             J *= s[i];
             Jn *= z[i];
         }
-        if (*plastic) *h_new = h + PN__LOG(J / Jn);
+        if (*plastic) {
+            pn_real hn = h + PN__LOG(PN__FABS(J) / Jn);
+            if (m->snow_h_min < 0 && hn < m->snow_h_min) hn = m->snow_h_min;
+            if (m->snow_h_max > 0 && hn > m->snow_h_max) hn = m->snow_h_max;
+            *h_new = hn;
+        }
         return PN_OK;
     }
     default: return PN_OK;
     }
+}
+
+/* The return mapping in principal form, shared by pn_return_map and the explicit MPM step:
+   the SVD of a finite F, the projected stretches z, h_new and the principal Kirchhoff
+   stresses t_i = tau_i(z) of the result. Plastic flow needs det F > 0, except the Stomakhin
+   clamp, whose fixed corotated energy is defined for inverted F and whose clamp restores
+   det > 0; purely elastic models need it where their energy does (not fixed corotated). */
+static pn_result pn__return_core(const pn_material *m, int d, const pn_real *F, pn_real h, pn_real *U,
+                                 pn_real *s, pn_real *V, pn_real *z, pn_real *h_new, int *plastic, pn_real *t) {
+    pn_result r;
+    int i;
+    pn__svd(d, F, U, s, V);
+    if (m->plastic == PN_PLASTIC_NONE) {
+        if (pn__needs_positive(m->elastic) && !(s[d - 1] > 0)) return PN_ERROR_INVERTED;
+        for (i = 0; i < d; ++i) z[i] = s[i];
+        *h_new = h;
+        *plastic = 0;
+    } else {
+        if (!(s[d - 1] > 0) && m->plastic != PN_PLASTIC_SNOW_STOMAKHIN) return PN_ERROR_INVERTED;
+        r = pn__return_principal(m, d, s, h, z, h_new, plastic);
+        if (r != PN_OK) return r;
+    }
+    pn__tau_principal(m, *h_new, d, z, t);
+    return PN_OK;
 }
 
 PN__DEF pn_result pn_return_map(const pn_material *m, int d, const pn_real *F, pn_real h,
@@ -1761,29 +1883,24 @@ PN__DEF pn_result pn_return_map(const pn_material *m, int d, const pn_real *F, p
     int plastic, i, n = d * d;
     pn_result r;
     PN_ASSERT(m && F);
-    if (m->plastic == PN_PLASTIC_NONE) { /* T = P(F) */
-        pn__principal pr;
-        r = pn__elastic_at(m, d, F, h, U, s, V, &pr);
-        if (r != PN_OK) return r;
-        pn__udvt(d, U, pr.g, V, tt);
-        if (!pn__all_finite(n, tt)) return PN_ERROR_OVERFLOW;
-        if (Z) memcpy(Z, F, sizeof(pn_real) * (size_t)n);
-        if (h_new) *h_new = h;
-        if (T) memcpy(T, tt, sizeof(pn_real) * (size_t)n);
-        return PN_OK;
-    }
     r = pn__check_F(d, F);
     if (r != PN_OK) return r;
     if (!pn__finite(h)) return PN_ERROR_NONFINITE;
-    pn__svd(d, F, U, s, V);
-    if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED; /* plastic flow is defined for det F > 0 */
-    r = pn__return_principal(m, d, s, h, z, &hn, &plastic);
+    r = pn__return_core(m, d, F, h, U, s, V, z, &hn, &plastic, w);
     if (r != PN_OK) return r;
     if (plastic) pn__udvt(d, U, z, V, zz);
     else memcpy(zz, F, sizeof(pn_real) * (size_t)n);
-    /* T = tau(Z) F^-T = U diag(tau_i(z) / s_i) V^T */
-    pn__tau_principal(m, hn, d, z, w);
-    for (i = 0; i < d; ++i) w[i] /= s[i];
+    /* T = tau(Z) F^-T = U diag(tau_i(z) / s_i) V^T; elastic: P(F) = U diag(g_i) V^T, the same
+       where s_i != 0 and defined at s_i = 0 as well */
+    if (m->plastic == PN_PLASTIC_NONE) {
+        pn__principal pr;
+        pn_real mu, la;
+        pn__lame_at(m, h, &mu, &la);
+        pn__elastic_principal(m->elastic, mu, la, d, s, &pr, 0);
+        for (i = 0; i < d; ++i) w[i] = pr.g[i];
+    } else {
+        for (i = 0; i < d; ++i) w[i] /= s[i];
+    }
     pn__udvt(d, U, w, V, tt);
     if (!pn__finite(hn) || !pn__all_finite(n, zz) || !pn__all_finite(n, tt))
         return PN_ERROR_OVERFLOW;

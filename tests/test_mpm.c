@@ -842,6 +842,125 @@ PN_TEST(mpm_newton_forcing) {
     pn_mpm_destroy(w[1]);
 }
 
+/* Walls act at their planes (pn__mpm_wall_plane): a sand block dropped from 0.15 m and an
+   elastic block thrown down at 8 m/s, explicit at the stable step and implicit at 1e-3 s,
+   never put a particle below the floor plane wall_cells dx (in the wall band the held node
+   rows alone let material sink 0.6-1.1 cells). The deepest point is reported in cells. */
+PN_TEST(mpm_floor_plane) {
+    int dim, impl, kind;
+    for (dim = 2; dim <= 3; ++dim)
+        for (kind = 0; kind < 2; ++kind)
+            for (impl = 0; impl < 2; ++impl) {
+                pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 32 : 16, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+                double lo[3] = {0.4, 0.25, 0.4}, sz[3] = {0.2, 0.2, 0.2}, v[3] = {0, kind ? -8 : 0, 0}, deepest = 1e9;
+                double floor_y, t = 0, end = 0.3;
+                size_t n, p;
+                int g, bad = 0;
+                PN_CHECK(w != NULL);
+                if (!w) continue;
+                floor_y = w->wall * w->desc.dx_m;
+                g = kind ? t_mpm_group(w, PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE, 1e5)
+                         : t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e5);
+                lo[1] = floor_y + (kind ? 0.02 : 0.15);
+                n = t_mpm_block(w, g, lo, sz, v);
+                PN_CHECK(n > 0);
+                while (t < end && !bad) {
+                    pn_real dt = 1e-3;
+                    pn_result r;
+                    if (!impl) {
+                        pn_mpm_stable_dt(w, &dt);
+                        dt = fmin(dt, end - t);
+                    }
+                    r = impl ? pn_mpm_step_implicit(w, dt, NULL, NULL) : pn_mpm_step_explicit(w, dt, NULL);
+                    if (r != PN_OK) {
+                        fprintf(stderr, "      dim %d %s %s: %s\n", dim, kind ? "thrown" : "dropped",
+                                impl ? "implicit" : "explicit", pn_mpm_error(w));
+                        bad = 1;
+                    }
+                    t += dt;
+                    for (p = 0; p < n; ++p) deepest = fmin(deepest, (w->x[p * dim + 1] - floor_y) / w->desc.dx_m);
+                }
+                PN_CHECK(!bad && w->left_total == 0);
+                PN_CHECK(deepest >= -1e-9);
+                PN_REPORT("dim %d, %s block, %s: lowest particle %.3g cells above the floor plane", dim,
+                          kind ? "elastic thrown at 8 m/s" : "sand dropped", impl ? "implicit dt 1e-3" : "explicit",
+                          deepest);
+                pn_mpm_destroy(w);
+            }
+}
+
+/* Fixed corotated elasticity is defined for inverted F, and the Stomakhin clamp takes an
+   inverted trial state back to det > 0: two snow blocks meeting at a step where the
+   material inverts keep going; Neo-Hookean blocks, whose energy is undefined there, still
+   fail with PN_ERROR_INVERTED and leave the world as it was. */
+PN_TEST(mpm_inversion) {
+    pn_material_desc md;
+    pn_material snow, nh;
+    pn_real F[4] = {1, 0, 0, -0.2}, Z[4], h = 0, T[4];
+    int model;
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED;
+    md.plastic = PN_PLASTIC_SNOW_STOMAKHIN;
+    md.youngs_modulus_pa = 1e4;
+    md.poisson_ratio = 0.2;
+    md.snow_theta_c = 2.5e-2;
+    md.snow_theta_s = 7.5e-3;
+    md.snow_xi = 10;
+    md.snow_jp_min = 0.6;
+    md.snow_jp_max = 20;
+    PN_CHECK(pn_material_init(&snow, &md, NULL) == PN_OK);
+    /* the material point: clamped to [1 - theta_c, 1 + theta_s], J_p = 0.2 / 0.975 -> 0.6 */
+    PN_CHECK(pn_return_map(&snow, 2, F, 0, Z, &h, T) == PN_OK);
+    PN_CHECK(pn_mat_det(2, Z) > 0 && fabs(Z[0] - 1) < 1e-12 && fabs(Z[3] - 0.975) < 1e-12);
+    PN_CHECK(fabs(h - log(0.6)) < 1e-12);
+    md.plastic = PN_PLASTIC_NONE;
+    md.elastic = PN_ELASTIC_NEO_HOOKEAN;
+    PN_CHECK(pn_material_init(&nh, &md, NULL) == PN_OK);
+    PN_CHECK(pn_return_map(&nh, 2, F, 0, Z, &h, T) == PN_ERROR_INVERTED);
+    md.snow_jp_min = 1; /* the bounds must straddle 1 */
+    md.plastic = PN_PLASTIC_SNOW_STOMAKHIN;
+    md.elastic = PN_ELASTIC_FIXED_COROTATED;
+    PN_CHECK(pn_material_init(&nh, &md, NULL) == PN_ERROR_INVALID_PARAMETER);
+    md.plastic = PN_PLASTIC_NONE;
+    md.elastic = PN_ELASTIC_NEO_HOOKEAN;
+    PN_CHECK(pn_material_init(&nh, &md, NULL) == PN_OK);
+    for (model = 0; model < 2; ++model) { /* the MPM scene: two blocks meet at 2 x 20 m/s, twice the stable step */
+        pn_mpm_world *w = t_mpm_world(2, 32, 0, PN_MPM_BOUNDARY_SEPARATE);
+        double lo[3] = {0.25, 0.4, 0}, sz[3] = {0.2, 0.2, 0}, v[3] = {20, 0, 0};
+        size_t n;
+        int g, s, inverted = 0, failed = 0;
+        pn_real dt;
+        PN_CHECK(w != NULL);
+        if (!w) continue;
+        w->desc.advection_limit = 4;
+        g = pn_mpm_add_group(w, model ? &nh : &snow, 400);
+        n = t_mpm_block(w, g, lo, sz, v);
+        lo[0] = 0.55, v[0] = -20;
+        n += t_mpm_block(w, g, lo, sz, v);
+        pn_mpm_stable_dt(w, &dt);
+        for (s = 0; s < 40 && !failed; ++s) {
+            pn_real x0 = w->x[0];
+            long steps0 = w->steps;
+            pn_result r = pn_mpm_step_explicit(w, 2 * dt, NULL);
+            if (r != PN_OK) {
+                failed = 1;
+                if (model == 0) fprintf(stderr, "      snow, step %d: %s\n", s, pn_mpm_error(w));
+                PN_CHECK(r == PN_ERROR_INVERTED && model == 1 && w->steps == steps0 && w->x[0] == x0);
+            }
+        }
+        if (model == 0) {
+            size_t p;
+            for (p = 0; p < n; ++p) inverted += !(pn_mat_det(2, w->F + 4 * p) > 0) || !(w->h[p] >= log(0.6) - 1e-12);
+            PN_CHECK(!failed && inverted == 0 && w->left_total == 0);
+        } else {
+            PN_CHECK(failed);
+        }
+        PN_REPORT("blocks meeting at 2 x 20 m/s, twice the stable step: %s %s", model ? "Neo-Hookean" : "Stomakhin snow",
+                  failed ? "stops with PN_ERROR_INVERTED, world unchanged" : "runs 40 steps, every F with det > 0");
+        pn_mpm_destroy(w);
+    }
+}
+
 static const pn_test_case pn_tests_mpm[] = {
     {"mpm_transfer_conserves_mass_momentum", mpm_transfer_conserves_mass_momentum},
     {"mpm_transfer_filter_per_second", mpm_transfer_filter_per_second},
@@ -861,4 +980,6 @@ static const pn_test_case pn_tests_mpm[] = {
     {"mpm_implicit_fallback", mpm_implicit_fallback},
     {"mpm_line_search_descends", mpm_line_search_descends},
     {"mpm_newton_forcing", mpm_newton_forcing},
+    {"mpm_floor_plane", mpm_floor_plane},
+    {"mpm_inversion", mpm_inversion},
 };

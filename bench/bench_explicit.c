@@ -1,0 +1,243 @@
+/* bench_explicit: throughput of plastinet's explicit MPM step, in particle-steps per second.
+
+   The scene is that of the classic 88-line MLS-MPM program (Hu et al. 2018), in its units
+   (1 m box, density 1, E 1e4 Pa, nu 0.2, gravity -200 m/s^2): three squares of side 0.16 m
+   centred at (0.55, 0.45), (0.45, 0.65), (0.55, 0.85), each with `per_block` particles placed
+   uniformly at random (a seeded generator); fixed corotated elasticity with the Stomakhin snow
+   clamp (theta_c 2.5e-2, theta_s 7.5e-3, xi 10, J_p in [0.6, 20]), or without it (--jelly);
+   walls 0.05 m thick (separating; the program's side walls are sticky, which these blocks
+   never reach). In 3D the squares become cubes at z = 0.5. The step is 1e-4 s at n = 80 (the
+   program's) and scales with the cell below that (2e-5 s at n = 256).
+
+   Modes:
+     bench_explicit [--n 80] [--per-block 10000] [--steps 1000] [--dt S] [--jelly] [--dim 2]
+                    [--threads T]
+         one run; prints particles, steps, wall seconds, particle-steps per second and the
+         mean height at the end (to set beside the 88-line program's: same scene, same physics).
+     bench_explicit --sweep [--max 1000000] [--csv FILE] [--md FILE]
+         2D and 3D, 1e3 .. --max particles at about 8 per occupied cell (the grid refined with
+         the count), 1 and 2 threads: particle-steps per second, the log-log slope of the time
+         per step against the particle count, and the 2-thread speedup.
+   `make bench-explicit` runs both (and the 88-line program beside them when MLS88_DIR names
+   a copy of it: bench/mls88_side_by_side.sh). */
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 199309L
+#endif
+#define PLASTINET_IMPLEMENTATION
+#define PLASTINET_MPM_IMPLEMENTATION
+#include "../plastinet.h"
+#include "../plastinet_mpm.h"
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+static double wall_seconds(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* xorshift64*: the positions are the same on every machine */
+static double uniform01(unsigned long long *s) {
+    *s ^= *s >> 12;
+    *s ^= *s << 25;
+    *s ^= *s >> 27;
+    return (double)((*s * 2685821657736338717ULL) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+static void set_threads(int t) {
+#ifdef _OPENMP
+    if (t > 0) omp_set_num_threads(t);
+#else
+    (void)t;
+#endif
+}
+
+static int max_threads(void) {
+#ifdef _OPENMP
+    return omp_get_max_threads();
+#else
+    return 1;
+#endif
+}
+
+/* the scene on an n^dim grid; NULL on failure (the reason printed) */
+static pn_mpm_world *scene(int dim, int n, long per_block, int jelly) {
+    static const double centers[3][3] = {{0.55, 0.45, 0.5}, {0.45, 0.65, 0.5}, {0.55, 0.85, 0.5}};
+    pn_mpm_desc d;
+    pn_material_desc md;
+    pn_material mat;
+    pn_mpm_world *w = NULL;
+    pn_real *x;
+    unsigned long long seed = 88;
+    const char *why = "";
+    size_t p, np = (size_t)(3 * per_block);
+    int g, b, i;
+    memset(&d, 0, sizeof d);
+    d.dim = dim;
+    d.res[0] = d.res[1] = d.res[2] = n;
+    d.dx_m = (pn_real)(1.0 / n);
+    d.gravity[1] = -200;
+    d.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    d.wall_cells = (int)(0.05 * n + 0.999);
+    d.max_particles = np;
+    d.parallel_min_particles = 1;
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED;
+    md.plastic = jelly ? PN_PLASTIC_NONE : PN_PLASTIC_SNOW_STOMAKHIN;
+    md.youngs_modulus_pa = (pn_real)1e4;
+    md.poisson_ratio = (pn_real)0.2;
+    md.snow_theta_c = (pn_real)2.5e-2;
+    md.snow_theta_s = (pn_real)7.5e-3;
+    md.snow_xi = 10;
+    md.snow_jp_min = (pn_real)0.6; /* the program clamps J_p to [0.6, 20] */
+    md.snow_jp_max = 20;
+    if (pn_material_init(&mat, &md, &why) != PN_OK || pn_mpm_create(&d, &w, &why) != PN_OK) {
+        fprintf(stderr, "bench_explicit: %s\n", why);
+        return NULL;
+    }
+    g = pn_mpm_add_group(w, &mat, 1);
+    x = (pn_real *)malloc(sizeof(pn_real) * (size_t)dim * np);
+    if (g < 0 || !x) {
+        pn_mpm_destroy(w);
+        free(x);
+        return NULL;
+    }
+    for (b = 0, p = 0; b < 3; ++b) {
+        long k;
+        for (k = 0; k < per_block; ++k, ++p)
+            for (i = 0; i < dim; ++i) x[(size_t)dim * p + (size_t)i] = (pn_real)(centers[b][i] + (uniform01(&seed) * 2 - 1) * 0.08);
+    }
+    /* the program gives every particle volume 1 and mass 1: only their ratio (density 1)
+       matters to the motion, so the particles here share the blocks' volume */
+    if (pn_mpm_add_particles(w, g, np, x, NULL, (pn_real)(3 * pow(0.16, dim) / (double)np)) != PN_OK) {
+        fprintf(stderr, "bench_explicit: %s\n", pn_mpm_error(w));
+        pn_mpm_destroy(w);
+        w = NULL;
+    }
+    free(x);
+    return w;
+}
+
+/* steps at dt after `warm` untimed ones: wall seconds, or -1 when a step fails */
+static double run(pn_mpm_world *w, int warm, int steps, double dt) {
+    double t0 = wall_seconds();
+    int i;
+    for (i = 0; i < warm + steps; ++i) {
+        pn_result r;
+        if (i == warm) t0 = wall_seconds();
+        r = pn_mpm_step_explicit(w, (pn_real)dt, NULL);
+        if (r != PN_OK) {
+            fprintf(stderr, "bench_explicit: step %d failed: %s (%s)\n", i, pn_result_string(r), pn_mpm_error(w));
+            return -1;
+        }
+    }
+    return wall_seconds() - t0;
+}
+
+static double step_for(int n) { return n <= 80 ? 1e-4 : 1e-4 * 80.0 / n * 0.64; }
+
+static int sweep(long max_n, const char *csv, const char *md) {
+    static const long counts[] = {1000, 3000, 10000, 30000, 100000, 300000, 1000000, 3000000};
+    FILE *fc = csv ? fopen(csv, "w") : NULL, *fm = md ? fopen(md, "w") : NULL;
+    int dim, k, t, tmax = max_threads() >= 2 ? 2 : 1;
+    if (fc) fprintf(fc, "dim,particles,grid,threads,steps,seconds,psteps_per_s\n");
+    if (fm)
+        fprintf(fm, "| dim | particles | grid | particle-steps/s, 1 thread | 2 threads | speedup |\n"
+                    "|---|---|---|---|---|---|\n");
+    for (dim = 2; dim <= 3; ++dim) {
+        double sx = 0, sy = 0, sxx = 0, sxy = 0;
+        int m = 0;
+        for (k = 0; k < (int)(sizeof counts / sizeof counts[0]) && counts[k] <= max_n; ++k) {
+            long np = counts[k];
+            /* about 8 particles per cell of the blocks: 3 x 0.16^dim m^dim of material */
+            int n = (int)(pow((double)np / 8 / (3 * pow(0.16, dim)), 1.0 / dim) + 0.5), steps;
+            double rate[2] = {0, 0};
+            if (n < 24) n = 24;
+            steps = (int)(3e6 / (double)np);
+            if (steps < 4) steps = 4;
+            for (t = 1; t <= tmax; ++t) {
+                pn_mpm_world *w = scene(dim, n, np / 3, 0);
+                double s;
+                if (!w) return 1;
+                set_threads(t);
+                s = run(w, 3, steps, step_for(n) * (dim == 3 ? 0.5 : 1));
+                pn_mpm_destroy(w);
+                if (s < 0) return 1;
+                rate[t - 1] = (double)(np / 3 * 3) * steps / s;
+                if (fc) fprintf(fc, "%d,%ld,%d,%d,%d,%.4f,%.5g\n", dim, np / 3 * 3, n, t, steps, s, rate[t - 1]);
+                printf("dim %d  particles %8ld  grid %4d  threads %d  %.3g particle-steps/s\n", dim, np / 3 * 3, n, t,
+                       rate[t - 1]);
+                fflush(stdout);
+            }
+            /* fit log(seconds per step) = a + slope log(particles) */
+            sx += log((double)np);
+            sy += log((double)np / rate[0]);
+            sxx += log((double)np) * log((double)np);
+            sxy += log((double)np) * log((double)np / rate[0]);
+            m++;
+            if (fm)
+                fprintf(fm, "| %d | %ld | %d^%d | %.3g | %.3g | %.2f |\n", dim, np / 3 * 3, n, dim, rate[0],
+                        rate[1], rate[1] > 0 ? rate[1] / rate[0] : 0);
+        }
+        if (m > 1) {
+            double slope = (m * sxy - sx * sy) / (m * sxx - sx * sx);
+            printf("dim %d: cost per step ~ particles^%.3f (log-log fit, 1 thread)\n", dim, slope);
+            if (fm) fprintf(fm, "| %d | slope of log(time per step) on log(particles), 1 thread: **%.3f** | | | | |\n", dim, slope);
+        }
+    }
+    if (fc) fclose(fc);
+    if (fm) fclose(fm);
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    int n = 80, steps = 1000, jelly = 0, threads = 0, dim = 2, do_sweep = 0, i;
+    long per_block = 10000, max_n = 1000000;
+    double dt = 0, s, mean_y = 0;
+    const char *csv = NULL, *md = NULL;
+    pn_mpm_world *w;
+    size_t p;
+    for (i = 1; i < argc; ++i) {
+        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (!strcmp(a, "--jelly")) jelly = 1;
+        else if (!strcmp(a, "--sweep")) do_sweep = 1;
+        else if (v && !strcmp(a, "--n")) n = atoi(v), ++i;
+        else if (v && !strcmp(a, "--dim")) dim = atoi(v), ++i;
+        else if (v && !strcmp(a, "--per-block")) per_block = atol(v), ++i;
+        else if (v && !strcmp(a, "--steps")) steps = atoi(v), ++i;
+        else if (v && !strcmp(a, "--dt")) dt = atof(v), ++i;
+        else if (v && !strcmp(a, "--threads")) threads = atoi(v), ++i;
+        else if (v && !strcmp(a, "--max")) max_n = atol(v), ++i;
+        else if (v && !strcmp(a, "--csv")) csv = v, ++i;
+        else if (v && !strcmp(a, "--md")) md = v, ++i;
+        else {
+            fprintf(stderr, "usage: %s [--n 80] [--per-block 10000] [--steps 1000] [--dt S] [--jelly] [--dim 2] "
+                            "[--threads T] | --sweep [--max 1000000] [--csv FILE] [--md FILE]\n", argv[0]);
+            return 2;
+        }
+    }
+    if (do_sweep) return sweep(max_n, csv, md);
+    if (n < 16 || per_block < 1 || steps < 1 || (dim != 2 && dim != 3)) {
+        fprintf(stderr, "bench_explicit: --n >= 16, --per-block >= 1, --steps >= 1, --dim 2 or 3\n");
+        return 2;
+    }
+    if (!(dt > 0)) dt = step_for(n);
+    set_threads(threads);
+    if (!(w = scene(dim, n, per_block, jelly))) return 1;
+    s = run(w, 10, steps, dt); /* as the side-by-side harness: 10 untimed steps */
+    if (s < 0) return 1;
+    for (p = 0; p < w->n; ++p) mean_y += (double)w->x[p * (size_t)dim + 1];
+    mean_y /= (double)w->n;
+    printf("bench_explicit %s real=%s dim=%d n=%d particles=%lu threads=%d steps=%d dt=%g seconds=%.3f "
+           "psteps_per_s=%.4g mean_y=%.6f\n",
+           jelly ? "jelly" : "snow", sizeof(pn_real) == 4 ? "float" : "double", dim, n, (unsigned long)w->n,
+           max_threads(), steps, dt, s, (double)w->n * steps / s, mean_y);
+    pn_mpm_destroy(w);
+    return 0;
+}
