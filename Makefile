@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-explicit clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-explicit bench-deposit clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -91,7 +91,7 @@ build/bench_mpm: bench/bench_mpm.c $(EXAMPLE_DEPS)
 # BENCH_EXPLICIT_MAX=100000 for a quicker sweep.
 BENCH_EXPLICIT_MAX ?= 1000000
 bench-explicit: build/bench_explicit build/bench_explicit_float
-	@if [ -n "$(MLS88_DIR)" ]; then MLS88_DIR="$(MLS88_DIR)" sh bench/mls88_side_by_side.sh 1000; fi
+	@if [ -n "$(MLS88_DIR)" ]; then MLS88_DIR="$(MLS88_DIR)" sh bench/mls88_side_by_side.sh 0.1; fi
 	build/bench_explicit_float --n 80 --steps 1000 --threads 1
 	build/bench_explicit_float --n 256 --steps 1000 --threads 1
 	build/bench_explicit --n 80 --steps 1000 --threads 1
@@ -106,6 +106,17 @@ build/bench_explicit: bench/bench_explicit.c plastinet.h plastinet_mpm.h
 build/bench_explicit_float: bench/bench_explicit.c plastinet.h plastinet_mpm.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) -fopenmp -DPN_REAL=float bench/bench_explicit.c $(LDLIBS) -o $@
+
+# Is the explicit reference converged? (bench/bench_deposit.c): the 2D sand column's deposit at
+# res 64/128/256 and at step halvings, the settled pile, the snow press at step halvings.
+# build/bench_deposit.md. BENCH_DEPOSIT_FLAGS=--quick for a smoke test.
+bench-deposit: build/bench_deposit
+	build/bench_deposit --md build/bench_deposit.md $(BENCH_DEPOSIT_FLAGS)
+	@cat build/bench_deposit.md
+
+build/bench_deposit: bench/bench_deposit.c $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/bench_deposit.c $(LDLIBS) -o $@
 
 # Train (resuming checkpoints), export and measure the shipped models: all, or MODEL=name.
 models:

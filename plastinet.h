@@ -1547,8 +1547,14 @@ static void pn__hencky_split(int d, const pn_real *s, pn_real c, pn_real v, pn_r
     *r = PN__SQRT(r2);
 }
 
-/* Drucker-Prager friction coefficient alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)) */
-static pn_real pn__dp_alpha(pn_real sin_phi) {
+/* Drucker-Prager friction coefficient of the cone |dev tau| + alpha tr tau <= 0 for the
+   Mohr-Coulomb angle phi. 3D: alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)), the cone through
+   the compression corners of the Mohr-Coulomb pyramid (triaxial compression). 2D (plane
+   strain as the 2D law sees it, in-plane stresses only): |dev tau| = |tau1 - tau2| / sqrt(2),
+   so alpha = sin(phi) / sqrt(2) is exactly |tau1 - tau2| <= -sin(phi) (tau1 + tau2), the
+   Mohr-Coulomb limit in the plane (the 3D value there would mean 27.5 deg for 30). */
+static pn_real pn__dp_alpha(pn_real sin_phi, int d) {
+    if (d == 2) return sin_phi * (pn_real)0.70710678118654752440;
     return PN__SQRT((pn_real)2 / 3) * 2 * sin_phi / (3 - sin_phi);
 }
 
@@ -1563,7 +1569,9 @@ typedef struct pn__camclay {
 
 static void pn__camclay_eval(const pn_material *m, int d, const pn_real *s, pn_real h,
                              pn__camclay *c) {
-    pn_real dd = (pn_real)d, trb = 0, alpha = pn__dp_alpha(m->sin_phi), jm, n2 = 0, a, b;
+    /* the critical-state slope M keeps the triaxial-compression mapping in 2D as well (the
+       shipped snow models were trained with it) */
+    pn_real dd = (pn_real)d, trb = 0, alpha = pn__dp_alpha(m->sin_phi, 3), jm, n2 = 0, a, b;
     int i;
     c->kappa = m->lambda + 2 * m->mu / dd;
     c->J = 1;
@@ -1616,7 +1624,7 @@ static void pn__yield_principal(const pn_material *m, int d, const pn_real *s, p
     case PN_PLASTIC_DRUCKER_PRAGER: {
         /* cone in stress: |dev tau| + alpha tr tau <= 0 with tau of the cohesion-shifted strain;
            the volume-correction credit h is not part of the stress state */
-        pn_real bulk = d * m->lambda + mu2, alpha = pn__dp_alpha(m->sin_phi), dev;
+        pn_real bulk = d * m->lambda + mu2, alpha = pn__dp_alpha(m->sin_phi, d), dev;
         pn__hencky_split(d, s, m->cohesion_strain, 0, e, NULL, &tr, &dev);
         for (i = 0; i < d; ++i) full2 += e[i] * e[i];
         *y = mu2 * dev + alpha * bulk * tr;
@@ -1754,7 +1762,7 @@ static pn_result pn__return_principal(const pn_material *m, int d, const pn_real
     case PN_PLASTIC_DRUCKER_PRAGER: {
         /* Klar et al. 2016 in the cohesion-shifted strain e - c; volume correction
            (Tampubolon et al. 2017) adds the stored log-volume gain h to the trace */
-        pn_real alpha = pn__dp_alpha(m->sin_phi), c = m->cohesion_strain, dg;
+        pn_real alpha = pn__dp_alpha(m->sin_phi, d), c = m->cohesion_strain, dg;
         pn_real hv = m->volume_correction ? h : 0;
         pn__hencky_split(d, s, c, hv, e, ehat, &tr, &r);
         if (tr >= 0) { /* expansion: the cone apex, stress free */
@@ -1992,7 +2000,7 @@ PN__DEF pn_result pn_dp_prepare(const pn_material *m, int d, const pn_real *F0, 
     pn__svd(d, F0, U, s, V);
     if (!(s[d - 1] > 0)) return PN_ERROR_INVERTED;
     pn__hencky_split(d, s, m->cohesion_strain, m->volume_correction ? h : 0, e, NULL, &tr, &rr);
-    *tau_y = PN__MAX(-(pn_real)d * kappa * pn__dp_alpha(m->sin_phi) * tr, 0);
+    *tau_y = PN__MAX(-(pn_real)d * kappa * pn__dp_alpha(m->sin_phi, d) * tr, 0);
     return PN_OK;
 }
 

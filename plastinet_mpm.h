@@ -2740,6 +2740,17 @@ static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, p
     }
     r = pn__return_core(m, d, F, h, U, s, V, z, h_new, plastic, t);
     if (r != PN_OK) return r;
+    if (d == 2) { /* U diag V^T spelled out (the loops of pn__udvt do not unroll for a runtime d) */
+        if (*plastic) {
+            Z[0] = U[0] * z[0] * V[0] + U[1] * z[1] * V[1], Z[1] = U[0] * z[0] * V[2] + U[1] * z[1] * V[3];
+            Z[2] = U[2] * z[0] * V[0] + U[3] * z[1] * V[1], Z[3] = U[2] * z[0] * V[2] + U[3] * z[1] * V[3];
+        } else {
+            memcpy(Z, F, sizeof(pn_real) * 4);
+        }
+        tau[0] = U[0] * t[0] * U[0] + U[1] * t[1] * U[1], tau[1] = U[0] * t[0] * U[2] + U[1] * t[1] * U[3];
+        tau[2] = tau[1], tau[3] = U[2] * t[0] * U[2] + U[3] * t[1] * U[3];
+        return PN_OK;
+    }
     if (*plastic) pn__udvt(d, U, z, V, Z);
     else memcpy(Z, F, sizeof(pn_real) * (size_t)(d * d));
     pn__udvt(d, U, t, U, tau);
@@ -3161,7 +3172,6 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
 PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *stats) {
     int d, dd;
     long l;
-    size_t p;
     pn_real tf, flip, reach, v2max = 0, *t;
     size_t *key;
     pn_mpm_stats st;
@@ -3181,34 +3191,45 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     w->rec_ok = 1;
     pn__mpm_xp2g(w, dt);
     st.active_nodes = pn__mpm_xgrid(w, dt);
-    PN__OMP_FOR
-    for (l = 0; l < (long)w->n; ++l) { /* retired particles keep their last state */
-        size_t q = (size_t)l;
-        w->pstat[q] = 0;
-        if (w->active[q]) continue;
-        w->sactive[q] = 0;
-        memcpy(w->sx + q * (size_t)d, w->x + q * (size_t)d, sizeof(pn_real) * (size_t)d);
-        memcpy(w->sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
-        memcpy(w->sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-        memcpy(w->sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-        w->sh[q] = w->h[q];
-    }
-    PN__OMP_FOR /* in index order: the particle arrays stream */
-    for (l = 0; l < (long)w->n; ++l)
-        if (w->active[l]) pn__mpm_xg2p(w, (size_t)l, dt, flip, reach);
-    if ((r = pn__mpm_first_error(w, dt)) != PN_OK) return r;
-    for (p = 0; p < w->n; ++p) {
-        pn_real sp = 0;
-        int i;
-        if (!w->active[p]) continue;
-        if (w->pstat[p] & 0x100) st.plastic++;
-        if (w->pstat[p] & 0x200) {
-            st.left_domain++;
-            continue;
+    { /* G2P in index order (the particle arrays stream), retired particles copied, and the
+         statistics: integer counts and a max, the same whatever the thread count */
+        size_t n_plastic = 0, n_left = 0, n_alive = 0;
+        int any = 0;
+#if defined(_OPENMP)
+#pragma omp parallel for schedule(dynamic, 64) reduction(+ : n_plastic, n_left, n_alive) reduction(max : v2max) \
+    reduction(| : any) if (w->n >= w->desc.parallel_min_particles)
+#endif
+        for (l = 0; l < (long)w->n; ++l) {
+            size_t q = (size_t)l;
+            const pn_real *sv = w->sv + q * (size_t)d;
+            pn_real sp = 0;
+            int i, stat;
+            if (!w->active[q]) { /* retired particles keep their last state */
+                w->pstat[q] = 0;
+                w->sactive[q] = 0;
+                memcpy(w->sx + q * (size_t)d, w->x + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+                memcpy(w->sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+                memcpy(w->sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+                memcpy(w->sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+                w->sh[q] = w->h[q];
+                continue;
+            }
+            pn__mpm_xg2p(w, q, dt, flip, reach);
+            stat = w->pstat[q];
+            any |= stat;
+            n_plastic += (size_t)((stat & 0x100) != 0);
+            if (stat & 0x200) {
+                n_left++;
+                continue;
+            }
+            for (i = 0; i < d; ++i) sp += sv[i] * sv[i];
+            n_alive++;
+            v2max = PN__MAX(v2max, sp);
         }
-        for (i = 0; i < d; ++i) sp += w->sv[p * (size_t)d + (size_t)i] * w->sv[p * (size_t)d + (size_t)i];
-        st.particles++;
-        v2max = PN__MAX(v2max, sp);
+        if ((any & 0xcff) && (r = pn__mpm_first_error(w, dt)) != PN_OK) return r;
+        st.plastic = n_plastic;
+        st.left_domain = n_left;
+        st.particles = n_alive;
     }
     st.max_speed_m_s = PN__SQRT(v2max);
     pn__mpm_commit(w, dt, &st);

@@ -164,9 +164,14 @@ PN_EX_UNUSED static int pn_ex_write_ply(const char *path, const pn_mpm_world *w)
      p0 = kappa sinh(-xi h) (25-29 kPa at E = 1e6), which gives the snow cohesion but is
      exceeded by the impact (about rho c v = 60 kPa, c = sqrt(E / rho)), so the ball breaks
      (at h0 = -0.03 it bounces off whole).
+   - snow press: the snowball's snow (initial h -0.01) as a layer 0.15 domain_m deep and
+     0.5 domain_m wide (0.5 x 0.5 in 3D) on the floor, pressed by a plate (a box collider
+     0.2 domain_m wide, SEPARATE, friction 0.5) that comes down at press_m_s [0.4 m/s] from
+     the layer's top: a rut compacted by a boot or a wheel. Nothing in it fractures, so its
+     mass field converges as the step shrinks (the snowball's does not: docs/results.md).
    Walls: SEPARATE with Coulomb friction 0.5 (the frictional floor); STICKY or SLIP on request. */
 
-typedef enum pn_ex_scene_kind { PN_EX_SAND_COLUMN = 0, PN_EX_SNOWBALL } pn_ex_scene_kind;
+typedef enum pn_ex_scene_kind { PN_EX_SAND_COLUMN = 0, PN_EX_SNOWBALL, PN_EX_SNOW_PRESS } pn_ex_scene_kind;
 
 typedef struct pn_ex_scene {
     pn_ex_scene_kind kind;
@@ -185,6 +190,7 @@ typedef struct pn_ex_scene {
     double speed_m_s, angle_deg; /* snowball: throw speed [3] and angle below horizontal [45] */
     double h0;                   /* snowball: initial log J_p [-0.01]                       */
     int no_hardening;            /* snowball: Cam-Clay with h held (no hardening) [0]        */
+    double press_m_s;            /* snow press: the plate's speed, downwards [0.4]           */
     int jitter;                  /* particles jittered in their lattice cells [0]           */
 } pn_ex_scene;
 
@@ -208,6 +214,7 @@ PN_EX_UNUSED static void pn_ex_scene_default(pn_ex_scene *s, pn_ex_scene_kind ki
     s->speed_m_s = 3;
     s->angle_deg = 45;
     s->h0 = -0.01;
+    s->press_m_s = 0.4;
 }
 
 #define PN_EX_WALL_CELLS 3
@@ -249,6 +256,15 @@ static void pn_ex__scene_setup(const pn_ex_scene *s, pn_mpm_desc *wd, pn_mpm_fil
         }
         f->center_m[1] = (pn_real)(fl + nb * sp / 2);
         f->half_extent_m[1] = (pn_real)(nb * sp / 2);
+    } else if (s->kind == PN_EX_SNOW_PRESS) {
+        f->shape = PN_MPM_FILL_BOX;
+        for (i = 0; i < d; ++i) {
+            f->center_m[i] = (pn_real)(0.5 * s->domain_m);
+            f->half_extent_m[i] = (pn_real)(0.25 * s->domain_m);
+        }
+        f->center_m[1] = (pn_real)(fl + 0.075 * s->domain_m);
+        f->half_extent_m[1] = (pn_real)(0.075 * s->domain_m);
+        f->state = (pn_real)s->h0;
     } else {
         double a = s->angle_deg * 3.14159265358979 / 180;
         f->shape = PN_MPM_FILL_SPHERE;
@@ -272,7 +288,7 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
     pn_mpm_world *w = NULL;
     pn_material m;
     size_t n = 0;
-    int g, d = s->dim;
+    int g, d = s->dim, i;
     pn_result r;
     *out = NULL;
     *why = "";
@@ -297,6 +313,21 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
     }
     f.group = g;
     if ((r = pn_mpm_fill(w, &f, NULL)) != PN_OK) goto fail;
+    if (s->kind == PN_EX_SNOW_PRESS) { /* the plate, its lower face on the layer's top at t = 0 */
+        pn_mpm_collider c;
+        memset(&c, 0, sizeof c);
+        c.shape = PN_MPM_SHAPE_BOX;
+        c.boundary = PN_MPM_BOUNDARY_SEPARATE;
+        c.friction = (pn_real)0.5;
+        for (i = 0; i < d; ++i) {
+            c.center_m[i] = (pn_real)(0.5 * s->domain_m);
+            c.half_extent_m[i] = (pn_real)(0.1 * s->domain_m);
+        }
+        c.half_extent_m[1] = (pn_real)(0.05 * s->domain_m);
+        c.center_m[1] = (pn_real)(pn_ex_scene_floor(s) + 0.15 * s->domain_m + 0.05 * s->domain_m);
+        c.velocity_m_s[1] = (pn_real)-s->press_m_s;
+        if ((r = pn_mpm_add_collider(w, &c, NULL)) != PN_OK) goto fail;
+    }
     if (s->energy == PN_MPM_ENERGY_PNET) {
         pn_pnet net;
         pn_pnet_desc nd;
@@ -329,11 +360,11 @@ PN_EX_UNUSED static void pn_ex_scene_view(const pn_ex_scene *s, pn_ex_view *v) {
     v->width = 960;
     v->height = 540;
     v->floor_m = pn_ex_scene_floor(s);
-    v->field_hi = s->kind == PN_EX_SAND_COLUMN ? 1.5 : 3;
-    v->title = s->kind == PN_EX_SAND_COLUMN ? "sand column" : "snowball";
+    v->field_hi = s->kind == PN_EX_SAND_COLUMN ? 1.5 : s->kind == PN_EX_SNOW_PRESS ? 0.5 : 3;
+    v->title = s->kind == PN_EX_SAND_COLUMN ? "sand column" : s->kind == PN_EX_SNOW_PRESS ? "snow press" : "snowball";
     v->hi[0] = v->hi[1] = v->hi[2] = L;
     if (s->dim == 2) {
-        double w = s->kind == PN_EX_SAND_COLUMN ? 0.8 * L : L;
+        double w = s->kind == PN_EX_SNOWBALL ? L : 0.8 * L;
         v->lo[0] = (L - w) / 2;
         v->hi[0] = (L + w) / 2;
         v->hi[1] = w * 9 / 16;

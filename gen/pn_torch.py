@@ -35,7 +35,11 @@ class Material:
         return self.lam + 2 * self.mu / d
 
 
-def dp_alpha(sin_phi):
+def dp_alpha(sin_phi, d):
+    """Drucker-Prager cone coefficient for the Mohr-Coulomb angle (plastinet.h pn__dp_alpha):
+    3D the triaxial-compression fit, 2D the exact in-plane Mohr-Coulomb limit sin(phi) / sqrt(2)."""
+    if d == 2:
+        return sin_phi / math.sqrt(2.0)
     return math.sqrt(2.0 / 3.0) * 2 * sin_phi / (3 - sin_phi)
 
 
@@ -84,7 +88,7 @@ def return_drucker_prager(mat, s):
     tr = e.sum(-1, keepdim=True)
     ehat = e - tr / d
     r = torch.linalg.vector_norm(ehat, dim=-1, keepdim=True)
-    alpha = dp_alpha(mat.sin_phi)
+    alpha = dp_alpha(mat.sin_phi, d)
     dg = r + (d * mat.lam + 2 * mat.mu) / (2 * mat.mu) * tr * alpha
     rsafe = torch.where(r > 0, r, torch.ones_like(r))
     shear = torch.exp(e - dg * ehat / rsafe + c)
@@ -142,7 +146,7 @@ def camclay_quantities(mat, s, h):
     b = s * s
     p = -kappa / 2 * (J * J - 1)
     p0 = kappa * (1e-5 + torch.sinh(mat.xi * torch.clamp(-h, min=0)))
-    alpha = dp_alpha(mat.sin_phi)
+    alpha = dp_alpha(mat.sin_phi, 3)  # Cam-Clay's M: the triaxial mapping in 2D as well
     M = alpha * d / math.sqrt(2.0 / (6 - d))
     shat = mat.mu * J ** (-2.0 / d) * (b - b.mean(-1, keepdim=True))
     q2 = (6 - d) / 2 * (shat * shat).sum(-1, keepdim=True)

@@ -708,14 +708,15 @@ PN_TEST(energy_dp_frozen_yield) {
         t_en_fn f;
         int dim = 2 + (k & 1), n2 = dim * dim, i, variant = (k / 2) % 3;
         double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_mu(E, nu), lam = t_lambda(E, nu);
-        double kappa = lam + 2 * mu / dim, alpha, c, h, v, tr, rcone, r, e[3], dir[3], nd = 0, s[3];
+        double kappa = lam + 2 * mu / dim, alpha, sp, c, h, v, tr, rcone, r, e[3], dir[3], nd = 0, s[3];
         double R1[9], R2[9], F[9], P[9], T[9], Z[9], hn, nT, tau_y, eg, eh, dist, step;
         t_en_desc(&d, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, E, nu);
         d.friction_angle_deg = pn_test_rng_range(&rng, 20, 40);
         d.cohesion_strain = variant == 1 ? 1e-3 : 0;
         d.volume_correction = variant == 2;
         if (!t_en_init(pn__t, &m, &d)) return;
-        alpha = sqrt(2.0 / 3.0) * 2 * sin(d.friction_angle_deg * 3.14159265358979323846 / 180) / (3 - sin(d.friction_angle_deg * 3.14159265358979323846 / 180));
+        sp = sin(d.friction_angle_deg * 3.14159265358979323846 / 180); /* docs/method.md: the cone per dimension */
+        alpha = dim == 2 ? sp / sqrt(2.0) : sqrt(2.0 / 3.0) * 2 * sp / (3 - sp);
         c = d.cohesion_strain;
         h = variant == 2 ? pn_test_rng_range(&rng, 0, 1e-3) : 0;
         v = variant == 2 ? h : 0;

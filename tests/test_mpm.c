@@ -423,7 +423,7 @@ PN_TEST(mpm_implicit_bad_input) {
 }
 
 /* The shipped PlasticityNet sand model in the implicit integrator (the same column, dt 1e-3,
-   one fixed-point pass): it lands where explicit does. */
+   two fixed-point passes): it lands where explicit does. */
 PN_TEST(mpm_implicit_pnet_sand_column) {
 #ifdef PN_TEST_HAVE_MODELS
     pn_mpm_world *e = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
@@ -447,14 +447,16 @@ PN_TEST(mpm_implicit_pnet_sand_column) {
     n = t_mpm_block(e, ge, lo, sz, NULL);
     t_mpm_block(im, gi, lo, sz, NULL);
     memset(&id, 0, sizeof id);
-    id.fixed_point_iters = 1;
+    /* two fixed-point passes: with one the runout lands 3.6% short (lagged 1.6%) since 2D sand
+       means its full 30 degrees (docs/results.md); with the old 27.5 one pass was within 0.5% */
+    id.fixed_point_iters = 2;
     for (step = 0; step < 3000; ++step) PN_CHECK(pn_mpm_step_explicit(e, 1e-4, NULL) == PN_OK);
     for (step = 0; step < 300; ++step) PN_CHECK(pn_mpm_step_implicit(im, 1e-3, &id, NULL) == PN_OK);
     t_mpm_extent(e, n, &xe, &ye);
     t_mpm_extent(im, n, &xi, &yi);
     PN_CHECK_LE(fabs(xi - xe) / (xe - 0.5), 0.02);
     PN_CHECK_LE(fabs(yi - ye) / ye, 0.05);
-    PN_REPORT("0.3 s: right edge explicit %.4f, implicit PlasticityNet (dt 1e-3) %.4f; height %.4f, %.4f", xe, xi,
+    PN_REPORT("0.3 s: right edge explicit %.4f, implicit PlasticityNet (dt 1e-3, 2 passes) %.4f; height %.4f, %.4f", xe, xi,
               ye, yi);
     pn_mpm_destroy(e);
     pn_mpm_destroy(im);

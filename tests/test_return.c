@@ -147,9 +147,11 @@ static pn_tr_lame pn_tr_lame_of(const pn_material_desc *p, int d) {
     return l;
 }
 
-static double pn_tr_dp_alpha(double phi_deg) {
+/* the documented mapping (docs/method.md): 2D the in-plane Mohr-Coulomb limit, 3D the
+   triaxial-compression fit; Cam-Clay's M uses the 3D one in both */
+static double pn_tr_dp_alpha(double phi_deg, int d) {
     double s = sin(phi_deg * 3.14159265358979323846 / 180);
-    return sqrt(2.0 / 3) * 2 * s / (3 - s);
+    return d == 2 ? s / sqrt(2.0) : sqrt(2.0 / 3) * 2 * s / (3 - s);
 }
 
 /* mean and deviator norm of v */
@@ -168,7 +170,7 @@ static void pn_tr_ref_dp(const pn_material_desc *p, int d, const double *e, doub
                          pn_tr_ref *r) {
     pn_tr_lame l = pn_tr_lame_of(p, d);
     double c = p->cohesion_strain, hv = p->volume_correction ? h : 0, ec[3] = {0, 0, 0}, eh[3], tr = 0;
-    double alpha = pn_tr_dp_alpha(p->friction_angle_deg), bulk = d * l.la + 2 * l.mu, rn, dg;
+    double alpha = pn_tr_dp_alpha(p->friction_angle_deg, d), bulk = d * l.la + 2 * l.mu, rn, dg;
     double ey[3] = {0, 0, 0}, ehy[3], try_ = 0;
     int i;
     for (i = 0; i < d; ++i) {
@@ -247,7 +249,7 @@ typedef struct pn_tr_cc_q { double kappa, mu, J, p, p0, M, q2, y; } pn_tr_cc_q;
 static pn_tr_cc_q pn_tr_cc_eval(const pn_material_desc *p, int d, const double *s, double h) {
     pn_tr_lame l = pn_tr_lame_of(p, d);
     pn_tr_cc_q q;
-    double b[3], db[3], alpha = pn_tr_dp_alpha(p->friction_angle_deg), beta = p->camclay_beta, sh;
+    double b[3], db[3], alpha = pn_tr_dp_alpha(p->friction_angle_deg, 3), beta = p->camclay_beta, sh;
     int i;
     q.kappa = l.kappa;
     q.mu = l.mu;
@@ -1187,8 +1189,61 @@ PN_TEST(return_extremes_fuzz) {
     PN_CHECK(ok > calls / 2);
 }
 
+/* What a friction angle means, from the stresses alone: drive a material point in Drucker-
+   Prager sand (StVK-Hencky, 1 MPa) along a shear path at fixed compression until it flows,
+   then read the Mohr-Coulomb angle off the returned principal Kirchhoff stresses,
+   sin(phi) = (tau_max - tau_min) / -(tau_max + tau_min). 2D: biaxial shear e = (-v + g, -v - g),
+   the angle in the plane (plane strain as the 2D law sees it); 3D: triaxial compression
+   e = (-v - 2g, -v + g, -v + g), the meridian where the cone meets the Mohr-Coulomb pyramid.
+   Both must give the angle the material was made with. */
+PN_TEST(return_dp_friction_angle) {
+    static const double phis[3] = {15, 30, 45};
+    int d, k;
+    for (d = 2; d <= 3; ++d)
+        for (k = 0; k < 3; ++k) {
+            pn_material_desc md;
+            pn_material m;
+            double mu, la, worst = 0, got = 0;
+            int step, flowed = 0;
+            memset(&md, 0, sizeof md);
+            md.elastic = PN_ELASTIC_STVK_HENCKY;
+            md.plastic = PN_PLASTIC_DRUCKER_PRAGER;
+            md.youngs_modulus_pa = 1e6;
+            md.poisson_ratio = 0.3;
+            md.friction_angle_deg = phis[k];
+            PN_CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+            mu = t_mu(1e6, 0.3);
+            la = t_lambda(1e6, 0.3);
+            for (step = 1; step <= 400; ++step) {
+                double g = 2.5e-5 * step, v = 1e-3, e[3], F[9] = {0}, Z[9], h, T[9], z[3], tr = 0, tau[3], hi, lo, sphi;
+                int i;
+                if (d == 2) e[0] = -v + g, e[1] = -v - g;
+                else e[0] = -v - 2 * g, e[1] = e[2] = -v + g;
+                for (i = 0; i < d; ++i) F[i * d + i] = exp(e[i]);
+                PN_CHECK(pn_return_map(&m, d, F, 0, Z, &h, T) == PN_OK);
+                for (i = 0; i < d; ++i) {
+                    z[i] = log(Z[i * d + i]);
+                    tr += z[i];
+                }
+                if (fabs(z[0] - e[0]) < 1e-12) continue; /* still elastic */
+                flowed++;
+                for (i = 0; i < d; ++i) tau[i] = 2 * mu * z[i] + la * tr;
+                hi = lo = tau[0];
+                for (i = 1; i < d; ++i) hi = fmax(hi, tau[i]), lo = fmin(lo, tau[i]);
+                sphi = (hi - lo) / -(hi + lo);
+                got = asin(sphi) * 180 / 3.14159265358979323846;
+                worst = fmax(worst, fabs(got - phis[k]));
+            }
+            PN_CHECK(flowed > 10);
+            PN_CHECK_LE(worst, 0.5);
+            PN_REPORT("%dD, friction angle %g deg: Mohr-Coulomb angle of the flowing stress %.6f deg (%d plastic points)", d,
+                      phis[k], got, flowed);
+        }
+}
+
 static const pn_test_case pn_tests_return[] = {
     {"return_drucker_prager", return_drucker_prager},
+    {"return_dp_friction_angle", return_dp_friction_angle},
     {"return_drucker_prager_cohesion", return_drucker_prager_cohesion},
     {"return_drucker_prager_volume_correction", return_drucker_prager_volume_correction},
     {"return_von_mises_stvk_hencky", return_von_mises_stvk_hencky},
