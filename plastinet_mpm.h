@@ -12,17 +12,18 @@
      >>world     creation, particle groups, particles (structure of arrays), colliders
      >>fill      particles in boxes, spheres, cylinders and closed meshes (pn_mpm_fill)
      >>stable-dt the explicit step bound from the wave speed (pn_mpm_stable_dt)
-     >>bin       per step: each particle's quadratic B-spline stencil, particles sorted by
-                 stencil base node (counting sort), the list of active grid nodes
-     >>transfer  particle-to-grid as a gather per node, grid-to-particle per particle (APIC,
-                 or AFLIP with a transfer filter per simulated second: filter_time_s)
+     >>bin       per implicit step: each particle's quadratic B-spline stencil, particles
+                 sorted by stencil base node (counting sort), the list of active grid nodes
+     >>transfer  implicit: particle-to-grid as a gather per node, grid-to-particle per
+                 particle (APIC, or AFLIP with a transfer filter per simulated second)
      >>contact   domain walls and analytic colliders (half-spaces, boxes, spheres, moving):
                  sticky, slip, separate with Coulomb friction
      >>implicit  optimization time integration: Newton + filtered PCG + line search on the
                  incremental potential, fixed point on F0 (PlasticityNet Eqs. 3, 10, 11),
                  active set and lagged friction for separating contact, step halving
      >>explicit  symplectic Euler with the analytic return mapping after the F update (the
-                 reference integrator; Jiang et al. 2016 course notes, Hu et al. 2018 MLS)
+                 reference integrator; Jiang et al. 2016 course notes, Hu et al. 2018 MLS):
+                 a dense grid scattered block by block in colours, one SVD per particle-step
      >>advance   a frame in as many steps as the physics asks for (pn_mpm_advance)
 
    QUICK START (README.md has it as a complete program)
@@ -44,8 +45,11 @@
    MEMORY: pn_mpm_create allocates every array through the allocator of the desc (both
    callbacks or neither) for max_particles particles and the grid; the first implicit step
    allocates the solver storage; after that a step allocates nothing.
-   WORK: each step sorts the particles by grid node and works only on the nodes their
-   stencils touch (a few bytes per grid node are cleared per step, no floating point work).
+   WORK: each step sorts the particles (by grid node, or by block of 4^dim cells for the
+   explicit step) and works only on the nodes their stencils touch.
+   WALLS act at their planes, origin + wall_cells dx and origin + (res - wall_cells) dx:
+   no particle ends a step beyond one (one that would leave the grid went through: outflow
+   or an error).
    ERRORS: every call that fails returns its pn_result and leaves the world as it was, and
    pn_mpm_error(w) says why in a sentence naming the field, particle, group or capacity at
    fault (pn_mpm_create, which has no world yet, through its why argument). A step that
@@ -275,7 +279,7 @@ typedef struct pn_mpm_world {
        and their normal force L/dt (N; negative: the node stuck) */
     size_t *lnode, *blnode, n_lag, bn_lag;
     pn_real *lval, *blval;
-    /* >>explicit: blocks, the dense grid and the stress cache */
+    /* >>explicit: blocks, the dense grid and the P2G records */
     size_t nblk[3], bstride[3], nblocks;
     size_t *bstart;              /* particles of block b: order[bstart[b] .. bstart[b + 1]) */
     size_t *bocc, bcolor[9];     /* occupied blocks by colour: bocc[bcolor[c] .. bcolor[c+1]) */
