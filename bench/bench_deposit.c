@@ -17,7 +17,9 @@
       against the next at every 25 fps frame, mean and worst, and against the run at 1/4; and
       the run at 1/2 against itself with E larger by 1e-6 (how chaotic the scene is: a floor
       under any step's distance). The deepest compaction (min log J_p) is printed beside.
-   Usage: bench_deposit [--quick] [--end S] [--settle S] [--md FILE]
+   Usage: bench_deposit [--quick] [--end S] [--settle S] [--filter S] [--md FILE]
+   --filter S: the transfer filter time (pn_mpm_desc.filter_time_s) instead of the scenes'
+   2e-3 s; 0 is plain APIC.
    --quick: res 32, 64, 128 and shorter runs (a smoke test). */
 #define PLASTINET_IMPLEMENTATION
 #define PLASTINET_MPM_IMPLEMENTATION
@@ -69,6 +71,8 @@ static deposit measure(const pn_mpm_world *w, const pn_ex_scene *s) {
     return r;
 }
 
+static double filter_s = -1; /* --filter: the scenes' transfer filter time (-1: their default, 2e-3 s) */
+
 static int column(int res, double courant, double end, double settle, deposit *at_end, deposit *settled) {
     pn_ex_scene s;
     pn_mpm_world *w = NULL;
@@ -78,6 +82,7 @@ static int column(int res, double courant, double end, double settle, deposit *a
     pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
     s.res = res;
     s.energy = PN_MPM_ENERGY_LAGGED; /* explicit runs ignore it; no network to set up */
+    if (filter_s >= 0) s.filter_s = filter_s;
     if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
         fprintf(stderr, "bench_deposit: %s\n", why);
         return 0;
@@ -117,6 +122,7 @@ static int press(int res, double courant, double perturb, int frames, double *f,
     int k;
     pn_ex_scene_default(&s, PN_EX_SNOW_PRESS, 2);
     s.res = res;
+    if (filter_s >= 0) s.filter_s = filter_s;
     s.E_pa *= 1 + perturb;
     s.energy = PN_MPM_ENERGY_LAGGED;
     if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
@@ -154,8 +160,9 @@ int main(int argc, char **argv) {
         else if (v && !strcmp(a, "--end")) end = atof(v), ++i;
         else if (v && !strcmp(a, "--settle")) settle = atof(v), ++i;
         else if (v && !strcmp(a, "--md")) mdp = v, ++i;
+        else if (v && !strcmp(a, "--filter")) filter_s = atof(v), ++i;
         else {
-            fprintf(stderr, "usage: %s [--quick] [--end S] [--settle S] [--md FILE]\n", argv[0]);
+            fprintf(stderr, "usage: %s [--quick] [--end S] [--settle S] [--filter S] [--md FILE]\n", argv[0]);
             return 2;
         }
     }
