@@ -1,4 +1,4 @@
-/* plastinet.h - v0.3 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.4 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -130,6 +130,10 @@
           pn_model_material names its reason; pn_material_check; result codes
           PN_ERROR_STEP_TOO_LARGE, PN_ERROR_OUTSIDE_DOMAIN, PN_ERROR_CAPACITY; the same bits
           from gcc and clang (no pow that a compiler may fold).
+     0.4  closed-form 2x2 SVD; in 2D the Drucker-Prager friction angle is the in-plane
+          Mohr-Coulomb angle (alpha = sin(phi) / sqrt(2); the sand_2d models retrained);
+          Stomakhin snow defined for inverted trial states, optional J_p bounds
+          (snow_jp_min, snow_jp_max).
 */
 #ifndef PLASTINET_H
 #define PLASTINET_H
@@ -147,7 +151,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 3
+#define PN_VERSION_MINOR 4
 
 #ifdef __cplusplus
 extern "C" {
