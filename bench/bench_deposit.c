@@ -1,12 +1,12 @@
 /* bench_deposit: is the explicit reference converged? (docs/results.md, "The explicit reference")
 
    1. The 2D sand column of docs/validation.md (examples/pn_example.h) collapses for --end
-      seconds [1]; then its deposit is measured by its thickness profile: mass per unit length
-      over the initial density (what the deposit would be at the packing it started with; a
-      particle's height would move by the particle spacing with dx), smoothed by a 3 cm tent.
-      Its front: how far from the centre the thickness is still at least 1 cm (and 2 cm), the
-      mean of both sides; its summit: the largest thickness; its core: the mean thickness over
-      the column's footprint (the mass left there over rho W). The thin
+      seconds [1]; then its deposit is measured by its thickness profile: mass per unit
+      length over the initial density (what the deposit would be at the packing it started
+      with; a particle's height would move by the particle spacing with dx), smoothed by a
+      3 cm tent. Its front: how far from the centre the thickness is still at least 1 cm
+      (and 2 cm), the mean of both sides; its summit: the largest thickness; its core: the
+      mean thickness over the column's footprint (the mass left there over rho W). The thin
       sheared tail ahead of the front lengthens as dx shrinks; these measures need not.
       Runs: res 64, 128, 256 at the stable step (courant 1), and res 128 at courant 1/2 and
       1/4 (dt halvings). Each halving's relative change is reported.
@@ -15,11 +15,13 @@
    3. The snow press (pn_example.h): a plate pressed 0.08 m into a snow layer at 0.4 m/s,
       res 64, courant 1, 1/2, 1/4: the min/max mass IoU (docs/validation.md) of each run
       against the next at every 25 fps frame, mean and worst, and against the run at 1/4; and
-      the run at 1/2 against itself with E larger by 1e-6 (how chaotic the scene is: a floor
-      under any step's distance). The deepest compaction (min log J_p) is printed beside.
-   Usage: bench_deposit [--quick] [--end S] [--settle S] [--filter S] [--md FILE]
+      the run at 1/2 against itself with E larger by --perturb [1e-6] (how chaotic the scene
+      is: a floor under any step's distance). The deepest compaction (min log J_p) is printed beside.
+   Usage: bench_deposit [--quick] [--end S] [--settle S] [--filter S] [--friction F]
+                        [--perturb X] [--only column|settle|press] [--md FILE]
    --filter S: the transfer filter time (pn_mpm_desc.filter_time_s) instead of the scenes'
-   2e-3 s; 0 is plain APIC.
+   2e-3 s; 0 is plain APIC. --friction F: the column's wall Coulomb coefficient instead of
+   the scene's 0.5 (1: a rough floor, above the sand's tan 30 deg). --only: one part.
    --quick: res 32, 64, 128 and shorter runs (a smoke test). */
 #define PLASTINET_IMPLEMENTATION
 #define PLASTINET_MPM_IMPLEMENTATION
@@ -72,6 +74,8 @@ static deposit measure(const pn_mpm_world *w, const pn_ex_scene *s) {
 }
 
 static double filter_s = -1; /* --filter: the scenes' transfer filter time (-1: their default, 2e-3 s) */
+static double perturb = 1e-6; /* --perturb: the relative change of E of the chaos run */
+static double friction = -1; /* --friction: the column's wall Coulomb coefficient (-1: the scene's 0.5) */
 
 static int column(int res, double courant, double end, double settle, deposit *at_end, deposit *settled) {
     pn_ex_scene s;
@@ -83,6 +87,7 @@ static int column(int res, double courant, double end, double settle, deposit *a
     s.res = res;
     s.energy = PN_MPM_ENERGY_LAGGED; /* explicit runs ignore it; no network to set up */
     if (filter_s >= 0) s.filter_s = filter_s;
+    if (friction >= 0) s.friction = friction;
     if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
         fprintf(stderr, "bench_deposit: %s\n", why);
         return 0;
@@ -106,6 +111,9 @@ static int column(int res, double courant, double end, double settle, deposit *a
     pn_mpm_destroy(w);
     return 1;
 }
+
+/* --only: run one part (column, settle, press), or all when empty */
+static int want(const char *only, const char *part) { return !*only || !strcmp(only, part); }
 
 static double rel(double a, double b) { return fabs(a - b) / fabs(b); }
 
@@ -151,7 +159,7 @@ static int press(int res, double courant, double perturb, int frames, double *f,
 int main(int argc, char **argv) {
     int quick = 0, i, k, res[3] = {64, 128, 256};
     double end = 1, settle = 3, courants[3] = {1, 0.5, 0.25};
-    const char *mdp = "build/bench_deposit.md";
+    const char *mdp = "build/bench_deposit.md", *only = "";
     deposit dx_runs[3], dt_runs[3], set_at1[4], set_end[4];
     FILE *md;
     for (i = 1; i < argc; ++i) {
@@ -161,8 +169,12 @@ int main(int argc, char **argv) {
         else if (v && !strcmp(a, "--settle")) settle = atof(v), ++i;
         else if (v && !strcmp(a, "--md")) mdp = v, ++i;
         else if (v && !strcmp(a, "--filter")) filter_s = atof(v), ++i;
+        else if (v && !strcmp(a, "--friction")) friction = atof(v), ++i;
+        else if (v && !strcmp(a, "--perturb")) perturb = atof(v), ++i;
+        else if (v && !strcmp(a, "--only")) only = v, ++i;
         else {
-            fprintf(stderr, "usage: %s [--quick] [--end S] [--settle S] [--filter S] [--md FILE]\n", argv[0]);
+            fprintf(stderr, "usage: %s [--quick] [--end S] [--settle S] [--filter S] [--friction F] [--perturb X]\n"
+                            "       [--only column|settle|press] [--md FILE]\n", argv[0]);
             return 2;
         }
     }
@@ -175,20 +187,21 @@ int main(int argc, char **argv) {
         return 1;
     }
     /* 1. dx and dt halvings */
-    for (k = 0; k < 3; ++k) {
+    for (k = 0; k < 3 && want(only, "column"); ++k) {
         if (!column(res[k], 1, end, 0, &dx_runs[k], NULL)) return 1;
         printf("column res %d courant 1: front(1 cm) %.4f m, front(2 cm) %.4f m, summit %.4f m, core %.4f m (%.1f s)\n",
                res[k], dx_runs[k].front1, dx_runs[k].front2, dx_runs[k].summit, dx_runs[k].core, dx_runs[k].seconds);
         fflush(stdout);
     }
     dt_runs[0] = dx_runs[1];
-    for (k = 1; k < 3; ++k) {
+    for (k = 1; k < 3 && want(only, "column"); ++k) {
         if (!column(res[1], courants[k], end, 0, &dt_runs[k], NULL)) return 1;
         printf("column res %d courant %g: front(1 cm) %.4f m, front(2 cm) %.4f m, summit %.4f m, core %.4f m (%.1f s)\n",
                res[1], courants[k], dt_runs[k].front1, dt_runs[k].front2, dt_runs[k].summit, dt_runs[k].core,
                dt_runs[k].seconds);
         fflush(stdout);
     }
+    if (want(only, "column")) {
     fprintf(md, "## Sand column deposit at %.2g s (2D, explicit)\n\n", end);
     fprintf(md, "| run | front, thickness >= 1 cm (m) | front, >= 2 cm (m) | summit (m) | core (m) | wall s |\n"
                 "|---|---|---|---|---|---|\n");
@@ -208,11 +221,12 @@ int main(int argc, char **argv) {
                 res[1], 100 * rel(dt_runs[k].front1, dt_runs[k - 1].front1),
                 100 * rel(dt_runs[k].front2, dt_runs[k - 1].front2), 100 * rel(dt_runs[k].summit, dt_runs[k - 1].summit),
                 100 * rel(dt_runs[k].core, dt_runs[k - 1].core));
+    }
     fflush(md);
     /* 2. the settled pile */
-    fprintf(md, "\n## Settled pile: core and summit at 1 s and at %.2g s\n\n| run | core at 1 s (m) | at %.2g s (m) | sank | "
+    if (want(only, "settle")) fprintf(md, "\n## Settled pile: core and summit at 1 s and at %.2g s\n\n| run | core at 1 s (m) | at %.2g s (m) | sank | "
                 "summit at 1 s (m) | at %.2g s (m) |\n|---|---|---|---|---|---|\n", settle, settle, settle);
-    for (k = 0; k < 4; ++k) {
+    for (k = 0; k < 4 && want(only, "settle"); ++k) {
         int r = res[k / 2];
         double c = courants[k % 2];
         if (!column(r, c, quick ? 0.6 : 1.0, settle, &set_at1[k], &set_end[k])) return 1;
@@ -223,17 +237,17 @@ int main(int argc, char **argv) {
         fflush(stdout);
     }
     /* 3. the snow press: frames of 0.04 s while the plate goes 0.08 m down */
-    {
+    if (want(only, "press")) {
         int frames = 5, r = quick ? 32 : 64, j;
         size_t nodes = (size_t)(r + 1) * (size_t)(r + 1);
         double *f[4], hmin[4], sec[4];
-        for (k = 0; k < 4; ++k) { /* the fourth: step x 1/2 with E larger by 1e-6, how chaotic it is */
+        for (k = 0; k < 4; ++k) { /* the fourth: step x 1/2 with E x (1 + perturb), how chaotic it is */
             f[k] = (double *)malloc(sizeof(double) * nodes * (size_t)frames);
-            if (!f[k] || !press(r, courants[k < 3 ? k : 1], k < 3 ? 0 : 1e-6, frames, f[k], nodes, &hmin[k], &sec[k]))
+            if (!f[k] || !press(r, courants[k < 3 ? k : 1], k < 3 ? 0 : perturb, frames, f[k], nodes, &hmin[k], &sec[k]))
                 return 1;
         }
-        fprintf(md, "\n## Snow press (2D, res %d, explicit): min/max mass IoU between step halvings\n\n"
-                    "| runs | mean over %d frames | worst frame | deepest log J_p |\n|---|---|---|---|\n", r, frames);
+        fprintf(md, "\n## Snow press (2D, res %d, explicit): min/max mass IoU between step halvings (perturb: %g)\n\n"
+                    "| runs | mean over %d frames | worst frame | deepest log J_p |\n|---|---|---|---|\n", r, perturb, frames);
         for (k = 0; k < 4; ++k) {
             int a = k < 2 ? k : k == 2 ? 0 : 1, b = k < 2 ? k + 1 : k == 2 ? 2 : 3;
             double mean = 0, worst = 1;
@@ -243,9 +257,9 @@ int main(int argc, char **argv) {
                 worst = sc.minmax < worst ? sc.minmax : worst;
             }
             printf("snow press: step x %g vs x %g%s: min/max IoU mean %.4f, worst %.4f\n", courants[a], courants[b < 3 ? b : 1],
-                   b == 3 ? " with E x (1 + 1e-6)" : "", mean, worst);
+                   b == 3 ? " with E x (1 + perturb)" : "", mean, worst);
             fprintf(md, "| step x %g vs x %g%s | %.4f | %.4f | %.4f vs %.4f |\n", courants[a], courants[b < 3 ? b : 1],
-                    b == 3 ? " with E x (1 + 1e-6)" : "", mean, worst, hmin[a], hmin[b]);
+                    b == 3 ? " with E x (1 + perturb)" : "", mean, worst, hmin[a], hmin[b]);
         }
         for (k = 0; k < 4; ++k) free(f[k]);
     }
