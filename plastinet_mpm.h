@@ -276,7 +276,11 @@ typedef struct pn_mpm_world {
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
     unsigned char *bactive;
     /* contact memory of the last implicit step: the nodes a separating contact held, ascending,
-       and their normal force L/dt (N; negative: the node stuck) */
+       as node << 3 | the directions held (bit b: the node's obstacle direction b), and their
+       normal force L/dt (N; negative: the node stuck). Holding every direction of a lagged
+       node instead held a corner node on a floor along the side wall's normal as well: with
+       the walls' plane rows held, a block sliding away from a side wall lost 15% of its
+       speed in one step. */
     size_t *lnode, *blnode, n_lag, bn_lag;
     pn_real *lval, *blval;
     /* >>explicit: blocks, the dense grid and the P2G records */
@@ -721,13 +725,16 @@ static int pn__mpm_inside(const pn_mpm_world *w, const pn_real *x) {
 /* where the 3^dim stencil stays on the grid: [dx, (res - 1) dx]. A step that ends a particle
    in the wall band puts it back on the wall's plane (pn__mpm_wall_plane); only one that
    leaves this region has gone through a wall. */
-/* The walls act at their planes, origin + wall dx and origin + (res - wall) dx: the held
-   node rows alone let material sink up to about a cell into them (their nodes are held,
-   but a particle near the plane also takes velocity from free nodes above it). A particle
-   that ends a step past a plane but still on the grid is put back on the plane, its
-   velocity left to the grid (zeroing its normal part as well drains momentum at every
-   contact: the sand column of tests/test_mpm.c then runs out 3% shorter explicitly and 6%
-   implicitly); one that left the grid went through (outflow). */
+/* The walls act at their planes, origin + wall dx and origin + (res - wall) dx. The node
+   rows on the planes are held with the walls (pn__mpm_obstacle): holding only the rows
+   behind them let material sink up to about a cell in, and once particles were put back on
+   the plane, the material above a floor, still moving into it, piled into one dense sheet
+   on the plane (a compacted snow layer held 2.7x the mass of the rows above in its bottom
+   row, and its mass field depended on the step). A particle that still ends a step past a
+   plane but on the grid is put back on the plane, its velocity left to the grid (zeroing
+   its normal part as well drains momentum at every contact: the sand column of
+   tests/test_mpm.c then ran out 3% shorter explicitly and 6% implicitly); one that left
+   the grid went through (outflow). */
 static inline void pn__mpm_wall_plane(const pn_mpm_world *w, pn_real *x) {
     int i;
     for (i = 0; i < w->dim; ++i) {
@@ -1710,9 +1717,9 @@ static int pn__mpm_obstacle(const pn_mpm_world *w, const int *idx, pn_real m, pn
     pn_real mu = w->desc.friction, xn[3], nrm[3];
     for (i = 0; i < 9; ++i) dir[i] = 0;
     for (i = 0; i < 3; ++i) vel[i] = 0;
-    for (i = 0; i < d; ++i) {
-        if (idx[i] < w->wall) dir[3 * cn++ + i] = 1;
-        else if (idx[i] > w->desc.res[i] - w->wall) dir[3 * cn++ + i] = -1;
+    for (i = 0; i < d; ++i) { /* the rows on the planes too (see pn__mpm_wall_plane) */
+        if (idx[i] <= w->wall) dir[3 * cn++ + i] = 1;
+        else if (idx[i] >= w->desc.res[i] - w->wall) dir[3 * cn++ + i] = -1;
     }
     if (cn == 0) {
         for (i = 0; i < d; ++i) xn[i] = w->desc.origin_m[i] + (pn_real)idx[i] * w->desc.dx_m;
@@ -2304,10 +2311,10 @@ static void pn__mpm_friction_start(pn_mpm_world *w, pn_real *v, pn_real dt) {
         w->clam[k] = -1; /* not set yet */
         w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
     }
-    for (j = 0; j < w->n_lag; ++j) { /* the contact held at the end of the last step holds on */
-        long kk = w->dof[w->lnode[j]];
+    for (j = 0; j < w->n_lag; ++j) { /* the contact held at the end of the last step holds on, */
+        long kk = w->dof[w->lnode[j] >> 3]; /* along the directions it held then */
         if (kk < 0 || w->ckind[kk] != PN_MPM_BOUNDARY_SEPARATE || !w->cn[kk]) continue;
-        w->chold[kk] = (unsigned char)(w->chold[kk] | ((1 << w->cn[kk]) - 1));
+        w->chold[kk] = (unsigned char)(w->chold[kk] | ((w->lnode[j] & 7) & ((1u << w->cn[kk]) - 1)));
         pn__mpm_hold(w, (size_t)kk, v + (size_t)kk * (size_t)d);
         if (pn__mpm_has_friction(w, (size_t)kk))
             pn__mpm_stick_or_slide(w, (size_t)kk, v, PN__FABS(w->lval[j]) * dt, 0, w->lval[j] < 0);
@@ -2353,7 +2360,7 @@ static void pn__mpm_friction_record(pn_mpm_world *w, pn_real dt) {
         if (w->ckind[k] != PN_MPM_BOUNDARY_SEPARATE || !(w->chold[k] & 0x7f)) continue;
         L = pn__mpm_reaction(w, k, w->grad + k * (size_t)w->dim);
         if (!(L > 0)) continue;
-        w->lnode[w->n_lag] = w->act[k];
+        w->lnode[w->n_lag] = w->act[k] << 3 | (size_t)(w->chold[k] & 7); /* the node, its held directions */
         w->lval[w->n_lag++] = (w->chold[k] & PN__MPM_STICK ? -L : L) / dt;
     }
 }
@@ -2888,6 +2895,12 @@ static void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real *x, cons
                          const pn_real *tau, pn_real *out) {
     int d = w->dim, i, j, n = 0;
     pn_real m = w->mass[p], k = -w->vol0[p] * 4 / (w->desc.dx_m * w->desc.dx_m);
+    if (d == 2) { /* spelled out: the loops below do not unroll for a runtime d */
+        out[0] = x[0], out[1] = x[1], out[2] = m, out[3] = m * v[0], out[4] = m * v[1];
+        out[5] = m * C[0], out[6] = m * C[1], out[7] = m * C[2], out[8] = m * C[3];
+        out[9] = k * tau[0], out[10] = k * tau[1], out[11] = k * tau[3];
+        return;
+    }
     for (i = 0; i < d; ++i) out[n++] = x[i];
     out[n++] = m;
     for (i = 0; i < d; ++i) out[n++] = m * v[i];

@@ -1,15 +1,16 @@
 /* bench_deposit: is the explicit reference converged? (docs/results.md, "The explicit reference")
 
-   1. The 2D sand column of docs/validation.md (examples/pn_example.h) collapses for --end
-      seconds [1]; then its deposit is measured by its thickness profile: mass per unit
-      length over the initial density (what the deposit would be at the packing it started
-      with; a particle's height would move by the particle spacing with dx), smoothed by a
-      3 cm tent. Its front: how far from the centre the thickness is still at least 1 cm
-      (and 2 cm), the mean of both sides; its summit: the largest thickness; its core: the
-      mean thickness over the column's footprint (the mass left there over rho W). The thin
-      sheared tail ahead of the front lengthens as dx shrinks; these measures need not.
-      Runs: res 64, 128, 256 at the stable step (courant 1), and res 128 at courant 1/2 and
-      1/4 (dt halvings). Each halving's relative change is reported.
+   1. The 2D sand column of docs/validation.md (examples/pn_example.h), on a rough floor
+      (--friction), collapses for --end seconds [1]; then its deposit is measured by its
+      thickness profile: mass per unit length over the initial density (what the deposit
+      would be at the packing it started with; a particle's height would move by the
+      particle spacing with dx), smoothed by a 3 cm tent. Its front: how far from the centre
+      the thickness is still at least 1 cm (and 2 cm), the mean of both sides; its summit:
+      the largest thickness; its core: the mean thickness over the column's footprint (the
+      mass left there over rho W). The thin sheared tail ahead of the front lengthens as dx
+      shrinks; these measures need not. Runs: res 64, 128, 256 at the stable step (courant
+      1), and res 128 at courant 1/2 and 1/4 (dt halvings). Each halving's relative change
+      is reported.
    2. The settled pile: core and summit at 1 s and at --settle seconds [3] (res 64 and 128,
       courant 1 and 1/2): how much a pile at rest still sinks.
    3. The snow press (pn_example.h): a plate pressed 0.08 m into a snow layer at 0.4 m/s,
@@ -20,8 +21,10 @@
    Usage: bench_deposit [--quick] [--end S] [--settle S] [--filter S] [--friction F]
                         [--perturb X] [--only column|settle|press] [--md FILE]
    --filter S: the transfer filter time (pn_mpm_desc.filter_time_s) instead of the scenes'
-   2e-3 s; 0 is plain APIC. --friction F: the column's wall Coulomb coefficient instead of
-   the scene's 0.5 (1: a rough floor, above the sand's tan 30 deg). --only: one part.
+   2e-3 s; 0 is plain APIC. --friction F: the column's wall Coulomb coefficient [1: a rough
+   floor, above the sand's tan 30 deg = 0.58, as laboratory column collapses use, so the
+   deposit is the sand's and not a basal slip layer's, which the grid resolves only to a
+   cell; the scene's own 0.5 lets the sand slide on the floor]. --only: one part.
    --quick: res 32, 64, 128 and shorter runs (a smoke test). */
 #define PLASTINET_IMPLEMENTATION
 #define PLASTINET_MPM_IMPLEMENTATION
@@ -75,7 +78,7 @@ static deposit measure(const pn_mpm_world *w, const pn_ex_scene *s) {
 
 static double filter_s = -1; /* --filter: the scenes' transfer filter time (-1: their default, 2e-3 s) */
 static double perturb = 1e-6; /* --perturb: the relative change of E of the chaos run */
-static double friction = -1; /* --friction: the column's wall Coulomb coefficient (-1: the scene's 0.5) */
+static double friction = 1; /* --friction: the column's wall Coulomb coefficient [1: a rough floor] */
 
 static int column(int res, double courant, double end, double settle, deposit *at_end, deposit *settled) {
     pn_ex_scene s;
@@ -87,7 +90,7 @@ static int column(int res, double courant, double end, double settle, deposit *a
     s.res = res;
     s.energy = PN_MPM_ENERGY_LAGGED; /* explicit runs ignore it; no network to set up */
     if (filter_s >= 0) s.filter_s = filter_s;
-    if (friction >= 0) s.friction = friction;
+    s.friction = friction;
     if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
         fprintf(stderr, "bench_deposit: %s\n", why);
         return 0;

@@ -1,12 +1,14 @@
 /* bench_mpm: speed against accuracy of the MPM integrators of plastinet_mpm.h on the sand column
-   and the snowball of docs/validation.md (scenes in examples/pn_example.h).
+   and the snow press of docs/validation.md (scenes in examples/pn_example.h), or the snowball
+   (--snowball: its fracture is chaotic, so its reference is not converged).
    Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
-                    [--max-run-seconds S] [--filter S] [--references] [--out DIR]
+                    [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]
                     [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
                     [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
-   simulated, at most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
+   simulated (the snow press for at most 0.2 s, while its plate goes 0.08 domain_m deep), at
+   most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
    --quick: 2D only (unless --dim), res 32, 2 frames, implicit dt 1e-3 and 1e-2 with 1 and 2
    passes, sweep E 1e6 and 1e7. --filter S: the scenes' transfer filter time
    (pn_mpm_desc.filter_time_s; 0: plain APIC) instead of their default. --references: only
@@ -88,6 +90,7 @@ typedef struct bench_cfg {
     int refs_only;        /* only the fair baseline, the reference and its check     */
     double filter;        /* the scenes' transfer filter time (< 0: their default)  */
     int no_hardening;     /* the snow without Cam-Clay hardening                    */
+    int snowball;         /* the snow scene: the snowball instead of the snow press  */
     const double *dts;    /* implicit steps                                        */
     int n_dts;
     const int *fps_iters; /* fixed-point passes                                    */
@@ -99,6 +102,21 @@ typedef struct bench_cfg {
     int n_Es;
     const char *out;
 } bench_cfg;
+
+/* the scene of a benchmark kind (0: sand column, 1: snow) */
+static pn_ex_scene_kind bench_kind(const bench_cfg *cfg, int kind) {
+    return kind == 0 ? PN_EX_SAND_COLUMN : cfg->snowball ? PN_EX_SNOWBALL : PN_EX_SNOW_PRESS;
+}
+
+/* frames of 1/BENCH_FPS s a run of scene s lasts: the dimension's duration, and for the snow
+   press no longer than the plate takes to go 0.08 domain_m deep (0.2 s) */
+static int bench_frames(const bench_cfg *cfg, const pn_ex_scene *s) {
+    double t = cfg->duration[s->dim];
+    int frames;
+    if (s->kind == PN_EX_SNOW_PRESS && t > 0.08 * s->domain_m / s->press_m_s) t = 0.08 * s->domain_m / s->press_m_s;
+    frames = (int)floor(t * BENCH_FPS + 0.5);
+    return frames < 1 ? 1 : frames > BENCH_MAX_FRAMES ? BENCH_MAX_FRAMES : frames;
+}
 
 static const char *energy_name(const bench_run *r) {
     if (!r->implicit) return "return_mapping";
@@ -399,10 +417,8 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
     if (cfg->filter >= 0) s.filter_s = cfg->filter;
-    s.no_hardening = cfg->no_hardening && kind == PN_EX_SNOWBALL;
-    frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5);
-    if (frames < 1) frames = 1;
-    if (frames > BENCH_MAX_FRAMES) frames = BENCH_MAX_FRAMES;
+    s.no_hardening = cfg->no_hardening && kind != PN_EX_SAND_COLUMN;
+    frames = bench_frames(cfg, &s);
     memset(out, 0, sizeof *out);
     out->name = kind == PN_EX_SAND_COLUMN ? "sand" : "snow";
     out->dim = dim;
@@ -505,19 +521,22 @@ static double cost_ms(pn_mpm_world *w, int implicit, double dt, const pn_mpm_imp
    step that cannot converge, so it fails and leaves the world as it was), what each further
    CG iteration adds, and what a real step costs; against the budget a step has for the
    implicit run to meet the time bar (sand 0.5, snow 1.0 of the fair explicit time). The state: the scene after warm_s of
-   explicit stepping (the column collapsing, the ball hitting the floor). */
+   explicit stepping (the column collapsing, the plate pressing the snow, or the ball hitting
+   the floor), 0.4 of the run. */
 static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FILE *md) {
     static const pn_mpm_energy en[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP};
     static const char *const names[] = {"pnet", "lagged", "dp"};
     pn_ex_scene s;
     bench_run fair;
-    double warm_s = 0.4 * cfg->duration[dim], dt = 1e-3, expl = 0, budget;
+    double warm_s, dt = 1e-3, expl = 0, budget;
     double bar = kind == PN_EX_SAND_COLUMN ? 0.5 : 1.0; /* docs/validation.md: time over fair explicit */
-    int frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5), e;
+    int frames, e;
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
     if (cfg->filter >= 0) s.filter_s = cfg->filter;
-    if (!bench_fair(&s, frames < 1 ? 1 : frames, &fair, NULL)) {
+    frames = bench_frames(cfg, &s);
+    warm_s = 0.4 * frames / (double)BENCH_FPS;
+    if (!bench_fair(&s, frames, &fair, NULL)) {
         fprintf(md, "**%s %dD**: no stable explicit step found.\n\n", kind == PN_EX_SAND_COLUMN ? "sand" : "snow", dim);
         return;
     }
@@ -750,8 +769,9 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
         return;
     }
     fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm)%s -->\n", cfg->quick ? ", --quick" : "");
-    fprintf(f, "Scenes of docs/validation.md (examples/pn_example.h): 2D res %d over 1 m, 3D res %d over 0.5 m; "
-               "%.2f s (2D) and %.2f s (3D) simulated, compared at %d frames per second. Mass IoU against the "
+    fprintf(f, "Scenes of docs/validation.md (examples/pn_example.h): the sand column and the %s; 2D res %d over 1 m, "
+               "3D res %d over 0.5 m; %.2f s (2D) and %.2f s (3D) simulated (the snow press at most 0.2 s), compared at %d "
+               "frames per second. Mass IoU against the "
                "explicit reference, mean / min over frames: *soft* is sum(ab) / sum(a + b - ab) of the max-normalized "
                "mass fields (docs/validation.md), below 1 even for identical fields (the reference row shows its ceiling); "
                "*min/max* is sum(min(a, b)) / sum(max(a, b)), 1 for identical fields; *binary*: occupancy above "
@@ -759,7 +779,8 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
                "stable step. *it/step*: Newton / CG / fixed-point passes per step. *LS fails / halved*: Newton "
                "steps whose line search failed / implicit steps retried as substeps. *max FP residual*: largest "
                "max_q |F0_new - F0| (not measured with one pass). Wall time from CLOCK_MONOTONIC.\n\n",
-            cfg->res[2], cfg->res[3], cfg->duration[2], cfg->duration[3], BENCH_FPS, 100 * PN_EX_OCCUPIED);
+            cfg->snowball ? "snowball" : "snow press", cfg->res[2], cfg->res[3], cfg->duration[2], cfg->duration[3],
+            BENCH_FPS, 100 * PN_EX_OCCUPIED);
     if (cfg->solver.contact_rounds != 1)
         fprintf(f, "Implicit runs with up to %d contact solves per fixed-point pass (--contact-rounds).\n\n",
                 cfg->solver.contact_rounds);
@@ -813,7 +834,7 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
 
 static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
-                    "       [--max-run-seconds S] [--filter S] [--references] [--out DIR]\n"
+                    "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n");
 }
@@ -878,6 +899,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--references")) cfg.refs_only = 1;
         else if (!strcmp(a, "--no-sweep")) sweep = 0;
         else if (!strcmp(a, "--no-hardening")) cfg.no_hardening = 1;
+        else if (!strcmp(a, "--snowball")) cfg.snowball = 1;
         else if (!strcmp(a, "--cost")) cost = 1;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
@@ -930,7 +952,7 @@ int main(int argc, char **argv) {
         for (kind = 0; kind < 2; ++kind)
             for (d = 2; d <= 3; ++d)
                 if ((only < 0 || only == kind) && (!dim_only || dim_only == d))
-                    bench_cost(&cfg, (pn_ex_scene_kind)kind, d, csv);
+                    bench_cost(&cfg, bench_kind(&cfg, kind), d, csv);
         fclose(csv);
         fprintf(stderr, "wrote %s\n", path);
         return 0;
@@ -944,7 +966,7 @@ int main(int argc, char **argv) {
     for (kind = 0; kind < 2; ++kind)
         for (d = 2; d <= 3; ++d) {
             if ((only >= 0 && only != kind) || (dim_only && dim_only != d)) continue;
-            bench_one(&cfg, (pn_ex_scene_kind)kind, d, &scenes[n_sc++], csv);
+            bench_one(&cfg, bench_kind(&cfg, kind), d, &scenes[n_sc++], csv);
         }
     fclose(csv);
     snprintf(path, sizeof path, "%s/bench_mpm_esweep.csv", cfg.out);
