@@ -89,7 +89,7 @@ static pn_mpm_world *scene(int dim, int n, long per_block, int jelly, double per
     d.dx_m = (pn_real)(1.0 / n);
     d.gravity[1] = -200;
     d.boundary = PN_MPM_BOUNDARY_SEPARATE;
-    d.wall_cells = (int)(0.05 * n + 0.999);
+    d.wall_cells = (int)(0.05 * n + 0.999) - 1; /* the program holds nodes below 0.05: rows 0..wall */
     d.max_particles = np;
     d.parallel_min_particles = 1;
     memset(&md, 0, sizeof md);
