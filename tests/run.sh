@@ -105,13 +105,13 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
 fi
 # 5b. explicit MPM in float against double (bench/bench_explicit.c, the 88-line MLS-MPM scene
 #     with 3000 particles, 0.15 s through the impact): the elastic blocks' mean height agrees to
-#     1e-3 (float resolves a height of 0.2 m to 1.5e-8 m, and a step moves a particle 1e-4 m or
+#     5e-4 (float resolves a height of 0.2 m to 1.5e-8 m, and a step moves a particle 1e-4 m or
 #     less, so each step's displacement is rounded by up to ~1e-4 of itself; over 1500 steps of
-#     slowly varying velocity those roundings add up to a few 1e-4: measured 2.1e-4 since the
-#     walls hold their plane rows, 1.6e-5 before; double is not sensitive there: E x (1 + 1e-6)
-#     or FMA on/off move it < 1e-5); for the snow, which fractures (chaotic), the float-double gap is printed beside what
-#     a change of E by 1e-6 does in double (docs/results.md: float works at the precision the
-#     scene allows)
+#     slowly varying velocity those roundings add up to a few 1e-4: measured 7.7e-5, and 2.1e-4
+#     with one more wall row held; double is not sensitive there: E x (1 + 1e-6) or FMA on/off
+#     move it < 1e-5); for the snow, which fractures (chaotic), the float-double gap is printed
+#     beside what a change of E by 1e-6 does in double (docs/results.md: float works at the
+#     precision the scene allows)
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     ok_build=1
     for r in float double; do
@@ -126,10 +126,10 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
         sf=$(hy build/float_check_float --per-block 1000 --steps 1500)
         sd=$(hy build/float_check_double --per-block 1000 --steps 1500)
         sp=$(hy build/float_check_double --per-block 1000 --steps 1500 --perturb 1e-6)
-        if awk -v a="$jf" -v b="$jd" 'BEGIN { d = a - b; if (d < 0) d = -d; exit !(b > 0 && d / b <= 1e-3) }'; then
+        if awk -v a="$jf" -v b="$jd" 'BEGIN { d = a - b; if (d < 0) d = -d; exit !(b > 0 && d / b <= 5e-4) }'; then
             ok "explicit MPM float vs double, elastic: mean height $jf vs $jd"
         else
-            bad "explicit MPM float vs double, elastic: mean height $jf vs $jd (bar 1e-3 relative)"
+            bad "explicit MPM float vs double, elastic: mean height $jf vs $jd (bar 5e-4 relative)"
         fi
         echo "    snow (chaotic): float $sf, double $sd, double with E x (1 + 1e-6) $sp"
     else
