@@ -191,12 +191,18 @@ typedef struct pn_mpm_implicit_desc {
     void *trace_user;
     int max_halvings;            /* a step that fails is retried as 2, 4, ... substeps, at
                                     most this many halvings [3]; < 0: never                 */
+    int newton_budget;           /* Newton iterations one call may spend over its attempts
+                                    and substeps; when they are spent the step fails
+                                    (PN_ERROR_NOT_CONVERGED, world unchanged) instead of
+                                    retrying on [newton_max fixed_point_iters contact_rounds
+                                    2^max_halvings: what the deepest level may take, half
+                                    of what every level taken in full would]                */
     int measure_force_error;     /* nonzero: at each converged step, compare the energy's
                                     force density with the return mapping's T(F) (one return
                                     mapping per particle; see pn_mpm_stats.force_error)    */
 } pn_mpm_implicit_desc;
 
-/* Statistics of the last step. */
+/* Statistics of the last step (of a failed implicit step: its first attempt). */
 typedef struct pn_mpm_stats {
     size_t particles;            /* active particles                                         */
     size_t plastic;              /* particles the return mapping projected                   */
@@ -209,6 +215,9 @@ typedef struct pn_mpm_stats {
     int active_set_rounds;       /* re-solves after separating contact changed its set
                                     (contact_rounds > 1)                                    */
     int line_search_failures;    /* Newton steps whose line search found no decrease        */
+    int cg_capped;               /* Newton steps whose linear solve stopped at cg_max short
+                                    of its tolerance: never counted as converged (a step
+                                    whose last one was fails, PN_ERROR_NOT_CONVERGED)       */
     int solves;                  /* minimizations (passes x contact rounds x substeps)      */
     pn_real newton_residual;     /* largest final max |dv| dt / dx over the passes           */
     pn_real fixed_point_residual;/* largest max_q |F0_new - F0| at the last pass             */
@@ -243,6 +252,7 @@ typedef struct pn_mpm_world {
     int n_colliders;
     pn_real time_s;
     long steps;
+    long newton_left;            /* implicit: Newton iterations the current call may still take */
     size_t error_particle;       /* particle that made the last step fail ((size_t)-1: none) */
     size_t left_total;           /* particles deactivated for leaving the domain, in total  */
     char error[256];             /* why the last call failed (pn_mpm_error)                 */
@@ -453,9 +463,11 @@ PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy e
    held) or slides against the Coulomb force mu L t, L the normal impulse at the start of the
    pass; the set is corrected after each solve (an active set; contact_rounds re-solves).
    The state update (APIC, return mapping) follows as in the explicit step. A step that
-   fails (an error, a non-finite value, or Newton short of 100 newton_tol) is retried as two
-   half steps, then four, up to max_halvings times; stats->substeps says so. The first call allocates the solver storage (PN_ERROR_OUT_OF_MEMORY possible);
-   later calls allocate nothing. On failure the world is unchanged. desc may be NULL. */
+   fails (an error, a non-finite value, Newton short of 100 newton_tol, or a last linear
+   solve stopped at cg_max) is retried as two half steps, then four, up to max_halvings
+   times; stats->substeps says so. The first call allocates the solver storage
+   (PN_ERROR_OUT_OF_MEMORY possible); later calls allocate nothing. On failure the world is
+   unchanged and stats describe the first attempt. desc may be NULL. */
 PN_API pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt_s, const pn_mpm_implicit_desc *desc,
                                       pn_mpm_stats *stats);
 
@@ -2165,10 +2177,11 @@ static void pn__mpm_diagonal(pn_mpm_world *w, pn_real dt) {
 
 /* Solve S H S dir = -S grad by Jacobi-preconditioned CG to |r| <= rel_tol |S grad|; returns
    iterations. warm: resume from the dir of the last call (same H and grad). */
-static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol, int warm) {
+static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol, int warm, int *capped) {
     int d = w->dim, it;
     size_t nd = w->n_act * (size_t)d, k, i;
     pn_real rz, r0, rr;
+    *capped = 0;
     if (!warm) pn__mpm_diagonal(w, dt);
     else pn__mpm_hess_vec(w, w->dir, dt, w->cg_q); /* resume from dir: r = -g - H dir */
     for (k = 0; k < w->n_act; ++k) {
@@ -2211,6 +2224,7 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol,
         rz = rz_new;
         for (k = 0; k < nd; ++k) w->cg_p[k] = w->cg_z[k] + beta * w->cg_p[k];
     }
+    *capped = it == max_it; /* stopped short of rel_tol: dir is not the Newton direction */
     return it;
 }
 
@@ -2438,6 +2452,7 @@ static void pn__mpm_stats_add(pn_mpm_stats *st, const pn_mpm_stats *sub) {
     st->cg_iters += sub->cg_iters;
     st->active_set_rounds += sub->active_set_rounds;
     st->line_search_failures += sub->line_search_failures;
+    st->cg_capped += sub->cg_capped;
     st->newton_residual = PN__MAX(st->newton_residual, sub->newton_residual);
     st->fixed_point_residual = PN__MAX(st->fixed_point_residual, sub->fixed_point_residual);
     st->force_error = PN__MAX(st->force_error, sub->force_error);
@@ -2519,7 +2534,7 @@ static pn_real pn__mpm_forcing(const pn_mpm_implicit_desc *o, int it, pn_real et
 /* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
 static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
                                        pn_mpm_stats *st) {
-    int d = w->dim, i, pass, has_sep = 0;
+    int d = w->dim, i, pass, has_sep = 0, capped = 0; /* capped: the last linear solve stopped at cg_max */
     size_t k, nd;
     pn_result r;
     pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
@@ -2564,24 +2579,29 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
             st->solves++;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0, gnorm;
+                if (w->newton_left-- <= 0)
+                    return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step: its newton_budget of %d Newton iterations "
+                                        "is spent (over its attempts and substeps): take a smaller step", o->newton_budget);
                 r = pn__mpm_objective(w, w->vsol, dt, 2, &E0);
                 if (r != PN_OK) return r;
                 gnorm = pn__mpm_model_norm(w, 0);
                 eta = pn__mpm_forcing(o, it, eta, gprev, pred, gnorm);
                 gprev = gnorm;
-                st->cg_iters += pn__mpm_pcg(w, dt, o->cg_max, eta, 0);
+                st->cg_iters += pn__mpm_pcg(w, dt, o->cg_max, eta, 0, &capped);
                 st->newton_iters++;
                 for (k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
                 if (dmax <= vscale && eta > o->cg_rel_tol) { /* a loose solve may stop Newton early */
-                    st->cg_iters += pn__mpm_pcg(w, dt, o->cg_max, o->cg_rel_tol, 1);
+                    st->cg_iters += pn__mpm_pcg(w, dt, o->cg_max, o->cg_rel_tol, 1, &capped);
                     for (dmax = 0, k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
                 }
+                st->cg_capped += capped;
                 last_res = dmax / (w->desc.dx_m / dt);
                 if (o->trace) o->trace(o->trace_user, st->solves, it, E0, last_res);
                 if (!pn__finite(dmax))
                     return pn__mpm_fail(w, PN_ERROR_OVERFLOW, "implicit step of %g s: the Newton direction is not finite "
                                         "(the Hessian overflowed)", (double)dt);
-                if (dmax <= vscale) break;
+                /* a small direction from a solve cut at cg_max proves nothing: go on */
+                if (dmax <= vscale && !capped) break;
                 gd = pn__mpm_sum(w, nd, w->grad, w->dir);
                 for (;;) { /* backtracking with the Armijo condition */
                     for (k = 0; k < nd; ++k) w->vtry[k] = w->vsol[k] + alpha * w->dir[k];
@@ -2602,6 +2622,10 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         }
     }
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
+    if (capped)
+        return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: the last linear solve stopped at cg_max = %d "
+                            "short of cg_rel_tol %g, so Newton did not converge: raise cg_max or take a smaller step",
+                            (double)dt, o->cg_max, (double)o->cg_rel_tol);
     if (!(last_res <= 100 * o->newton_tol))
         return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped at max |dv| dt / dx = %.3g "
                             "(newton_tol %g, newton_max %d; %d line searches failed): a smaller step converges",
@@ -2655,6 +2679,11 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (o.contact_rounds <= 0) o.contact_rounds = 1;
     if (o.max_halvings == 0) o.max_halvings = 3;
     if (o.max_halvings > 10) o.max_halvings = 10;
+    if (o.newton_budget <= 0) { /* the deepest level's full work: half of every level's in full */
+        double b = (double)o.newton_max * o.fixed_point_iters * o.contact_rounds * (double)(1 << PN__MAX(o.max_halvings, 0));
+        o.newton_budget = b < 1e9 ? (int)b : 1000000000;
+    }
+    w->newton_left = o.newton_budget;
     r = pn__mpm_check_state(w);
     if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
@@ -2665,8 +2694,10 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         if (stats) *stats = st;
         return PN_OK;
     }
-    /* fallback: the same step as 2, 4, ... substeps; the world is restored if none works */
+    /* fallback: the same step as 2, 4, ... substeps; the world is restored if none works,
+       and the stats are the first attempt's (how it failed: cg_capped, line searches) */
     {
+        pn_mpm_stats st_first = st;
         pn_real t0 = w->time_s;
         long steps0 = w->steps;
         size_t left0 = w->left_total, culprit = w->error_particle;
@@ -2696,12 +2727,15 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
             w->time_s = t0;
             w->steps = steps0;
             w->left_total = left0;
+            if (w->newton_left < 0) break; /* the budget is spent */
         }
         w->error_particle = culprit;
         memcpy(w->error, why, sizeof why);
-        { /* the first failure says why; add that halving did not help */
+        if (stats) *stats = st_first;
+        if (o.max_halvings > 0) { /* the first failure says why; add that halving did not help */
             size_t len = strlen(w->error);
-            const char *tail = " [also as 2^max_halvings substeps]";
+            const char *tail = w->newton_left < 0 ? " [and substeps until newton_budget was spent]"
+                                                  : " [also as 2^max_halvings substeps]";
             if (len + strlen(tail) < sizeof w->error) memcpy(w->error + len, tail, strlen(tail) + 1);
         }
     }

@@ -720,7 +720,7 @@ PN_TEST(mpm_colliders) {
 /* A step that cannot converge falls back to substeps: the world then equals the one stepped
    by hand with those substeps, and time and the step count advance by one step. */
 PN_TEST(mpm_implicit_fallback) {
-    int g, k;
+    int g, k, subs;
     pn_mpm_world *a = t_mpm_sand_world(32, 0.5, &g), *b = t_mpm_sand_world(32, 0.5, &g);
     double lo[2] = {0.4, 3.0 / 32}, sz[2] = {0.12, 0.24};
     pn_mpm_implicit_desc id;
@@ -736,6 +736,7 @@ PN_TEST(mpm_implicit_fallback) {
     for (k = 0; k < st.substeps; ++k) PN_CHECK(pn_mpm_step_implicit(b, 2e-2 / st.substeps, &id, NULL) == PN_OK);
     PN_CHECK(memcmp(a->x, b->x, sizeof(pn_real) * n * 2) == 0 && memcmp(a->v, b->v, sizeof(pn_real) * n * 2) == 0);
     PN_CHECK(a->steps == 1 && a->time_s == (pn_real)2e-2);
+    subs = st.substeps;
     id.max_halvings = -1; /* no fallback: the failure is reported, the world unchanged */
     {
         pn_real *copy = (pn_real *)malloc(sizeof(pn_real) * n * 2);
@@ -744,7 +745,7 @@ PN_TEST(mpm_implicit_fallback) {
         PN_CHECK(memcmp(copy, a->x, sizeof(pn_real) * n * 2) == 0 && a->steps == 1);
         free(copy);
     }
-    PN_REPORT("2e-2 s step with 2 Newton iterations: %d substeps, identical to stepping them by hand", st.substeps);
+    PN_REPORT("2e-2 s step with 2 Newton iterations: %d substeps, identical to stepping them by hand", subs);
     pn_mpm_destroy(a);
     pn_mpm_destroy(b);
 }
@@ -846,6 +847,126 @@ PN_TEST(mpm_newton_forcing) {
               worst * 32, newton[0], cg[0], newton[1], cg[1]);
     pn_mpm_destroy(w[0]);
     pn_mpm_destroy(w[1]);
+}
+
+/* A Newton step whose linear solve stops at cg_max is not a converged one: an elastic block
+   landing on the floor at 1e-2 s (about 20 explicit steps per step) with cg_max = 3 must
+   fail with PN_ERROR_NOT_CONVERGED, naming cg_max, count its capped solves and leave the
+   world as it was (no fallback: max_halvings < 0); with the fallback, newton_budget bounds
+   the Newton iterations of all its attempts (traced); with the defaults the same step
+   converges and no solve is capped. */
+static void t_count_trace(void *user, int solve, int iteration, pn_real energy_j, pn_real residual) {
+    (void)solve, (void)iteration, (void)energy_j, (void)residual;
+    ++*(int *)user;
+}
+
+PN_TEST(mpm_cg_capped) {
+    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+    int traced = 0;
+    double lo[2] = {0.4, 3.0 / 32 + 0.02}, sz[2] = {0.2, 0.1}, v[2] = {0, -1};
+    pn_mpm_implicit_desc id;
+    pn_mpm_stats st;
+    pn_real *x0;
+    size_t n, p;
+    int g, same = 1;
+    PN_CHECK(w != NULL);
+    if (!w) return;
+    g = t_mpm_group(w, PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE, 1e6);
+    n = t_mpm_block(w, g, lo, sz, v);
+    x0 = (pn_real *)malloc(sizeof(pn_real) * 2 * n);
+    PN_CHECK(n > 0 && x0 != NULL);
+    if (!x0) return;
+    memcpy(x0, w->x, sizeof(pn_real) * 2 * n);
+    memset(&id, 0, sizeof id);
+    id.cg_max = 3;
+    id.max_halvings = -1;
+    PN_CHECK(pn_mpm_step_implicit(w, 1e-2, &id, &st) == PN_ERROR_NOT_CONVERGED);
+    PN_CHECK(strstr(pn_mpm_error(w), "cg_max") != NULL);
+    for (p = 0; p < 2 * n; ++p) same &= w->x[p] == x0[p];
+    PN_CHECK(same && w->time_s == 0);
+    PN_CHECK(st.cg_capped > 0);
+    PN_REPORT("cg_max 3: %s (%d of %d Newton steps capped)", pn_mpm_error(w), st.cg_capped, st.newton_iters);
+    /* with the fallback on, newton_budget bounds the Newton iterations of all attempts */
+    id.max_halvings = 3;
+    id.newton_budget = 70;
+    id.trace = t_count_trace;
+    id.trace_user = &traced;
+    PN_CHECK(pn_mpm_step_implicit(w, 1e-2, &id, &st) == PN_ERROR_NOT_CONVERGED);
+    PN_CHECK(traced <= 70 && traced > 50 && strstr(pn_mpm_error(w), "newton_budget") != NULL);
+    for (p = 0, same = 1; p < 2 * n; ++p) same &= w->x[p] == x0[p];
+    PN_CHECK(same && w->time_s == 0);
+    PN_REPORT("cg_max 3, newton_budget 70: %d Newton iterations in all, then: %s", traced, pn_mpm_error(w));
+    memset(&id, 0, sizeof id); /* the defaults */
+    PN_CHECK(pn_mpm_step_implicit(w, 1e-2, &id, &st) == PN_OK);
+    PN_CHECK(st.cg_capped == 0);
+    PN_REPORT("default cg_max: converged in %d Newton / %d CG iterations, none capped", st.newton_iters, st.cg_iters);
+    free(x0);
+    pn_mpm_destroy(w);
+}
+
+/* A learned energy must not run away along a solve: PlasticityNet sand (the shipped sand_2d
+   model) stepped at 0.1 s and 1 s, E 1e7 and 1e9 Pa, 3 steps each. A step either fails with
+   the world unchanged or succeeds with every particle on the grid and slower than a fall
+   from the top of the domain (sqrt(2 g 1 m) = 4.4 m/s), and no Newton iterate's incremental
+   potential goes below -1e4 J (the column's m g h over the whole domain is 590 J; a
+   runaway once reached -3.5e6 J and launched the sand at 42 m/s). */
+static void t_min_trace(void *user, int solve, int iteration, pn_real energy_j, pn_real residual) {
+    (void)solve, (void)iteration, (void)residual;
+    if ((double)energy_j < *(double *)user) *(double *)user = (double)energy_j;
+}
+
+PN_TEST(mpm_implicit_pnet_large_steps) {
+#ifdef PN_TEST_HAVE_MODELS
+    static const double dts[2] = {0.1, 1.0}, Es[2] = {1e7, 1e9};
+    int a, b, s;
+    for (a = 0; a < 2; ++a)
+        for (b = 0; b < 2; ++b) {
+            pn_mpm_world *w = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+            double lo[2] = {0.4, 3.0 / 64}, sz[2] = {0.2, 0.3}, emin = 1e300, vmax = 0;
+            pn_material m;
+            pn_pnet net;
+            pn_pnet_desc nd;
+            pn_mpm_implicit_desc id;
+            pn_mpm_stats st;
+            size_t n, p;
+            int g, ok = 0, failed = 0, bad = 0;
+            PN_CHECK(w != NULL);
+            if (!w) return;
+            PN_CHECK(pn_model_material(pn_model_sand_2d(), Es[b], &m, NULL) == PN_OK);
+            memset(&nd, 0, sizeof nd);
+            nd.energy = pn_model_sand_2d();
+            PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK);
+            g = pn_mpm_add_group(w, &m, 1000);
+            PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net) == PN_OK);
+            n = t_mpm_block(w, g, lo, sz, NULL);
+            memset(&id, 0, sizeof id);
+            id.trace = t_min_trace;
+            id.trace_user = &emin;
+            for (s = 0; s < 3; ++s) {
+                double t0 = (double)w->time_s, x0 = (double)w->x[0];
+                if (pn_mpm_step_implicit(w, (pn_real)dts[a], &id, &st) == PN_OK) {
+                    ok++;
+                    for (p = 0; p < n; ++p) {
+                        vmax = fmax(vmax, hypot((double)w->v[2 * p], (double)w->v[2 * p + 1]));
+                        bad |= !w->active[p];
+                    }
+                } else {
+                    failed++;
+                    bad |= (double)w->time_s != t0 || (double)w->x[0] != x0;
+                }
+            }
+            PN_CHECK(!bad);
+            PN_CHECK_LE(vmax, 4.43);
+            PN_CHECK(emin >= -1e4);
+            if (emin > 1e299) /* every attempt failed at its start (an inverted first iterate) */
+                PN_REPORT("dt %g s, E %.0e: %d steps ok, %d failed (world unchanged) before any Newton iterate", dts[a],
+                          Es[b], ok, failed);
+            else
+                PN_REPORT("dt %g s, E %.0e: %d steps ok, %d failed (world unchanged), fastest particle %.3f m/s, lowest "
+                          "incremental potential %.3g J", dts[a], Es[b], ok, failed, vmax, emin);
+            pn_mpm_destroy(w);
+        }
+#endif
 }
 
 /* Walls act at their planes (pn__mpm_wall_plane): a sand block dropped from 0.15 m and an
@@ -986,6 +1107,8 @@ static const pn_test_case pn_tests_mpm[] = {
     {"mpm_implicit_fallback", mpm_implicit_fallback},
     {"mpm_line_search_descends", mpm_line_search_descends},
     {"mpm_newton_forcing", mpm_newton_forcing},
+    {"mpm_cg_capped", mpm_cg_capped},
+    {"mpm_implicit_pnet_large_steps", mpm_implicit_pnet_large_steps},
     {"mpm_floor_plane", mpm_floor_plane},
     {"mpm_inversion", mpm_inversion},
 };
