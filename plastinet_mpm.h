@@ -229,6 +229,10 @@ typedef struct pn_mpm_stats {
        Drucker-Prager apex: in tension, free to separate). Largest over substeps; -1 when off
        (and for explicit steps).                                                            */
     pn_real force_error, force_error_regularizer, apex_fraction;
+    /* the step over the explicit bound pn_mpm_stable_dt at its start: how many explicit
+       steps one implicit step stands for (pn_mpm_advance: the largest of its steps; -1 for
+       an explicit step taken alone, which does not compute the bound)                      */
+    pn_real dt_over_cfl;
 } pn_mpm_stats;
 
 /* The world. Particle arrays (structure of arrays, read-only for users): x, v (dim per
@@ -2437,6 +2441,7 @@ static void pn__mpm_stats_clear(pn_mpm_stats *st, int measure) {
     memset(st, 0, sizeof *st);
     st->substeps = 1;
     st->force_error = st->force_error_regularizer = st->apex_fraction = measure ? 0 : -1;
+    st->dt_over_cfl = -1;
 }
 
 /* st += a later step's sub: counts add up, the state figures are the later one's, the
@@ -2458,6 +2463,7 @@ static void pn__mpm_stats_add(pn_mpm_stats *st, const pn_mpm_stats *sub) {
     st->force_error = PN__MAX(st->force_error, sub->force_error);
     st->force_error_regularizer = PN__MAX(st->force_error_regularizer, sub->force_error_regularizer);
     st->apex_fraction = PN__MAX(st->apex_fraction, sub->apex_fraction);
+    st->dt_over_cfl = PN__MAX(st->dt_over_cfl, sub->dt_over_cfl);
 }
 
 /* pn_mpm_stats.force_error and its parts at the grid velocities v (serial: a diagnostic). */
@@ -2660,6 +2666,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     pn_mpm_implicit_desc o;
     pn_mpm_stats st;
     pn_result r, first;
+    pn_real cfl; /* the explicit bound, then dt over it */
     int level;
     PN_ASSERT(w);
     w->error[0] = 0;
@@ -2688,8 +2695,11 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
     if (r != PN_OK) return pn__mpm_fail(w, r, "pn_mpm_step_implicit: out of memory for the solver storage");
+    if (pn_mpm_stable_dt(w, &cfl) == PN_OK) cfl = dt / cfl;
+    else cfl = -1;
     pn__mpm_stats_clear(&st, o.measure_force_error);
     first = pn__mpm_implicit_once(w, dt, &o, &st);
+    st.dt_over_cfl = cfl;
     if (first == PN_OK) {
         if (stats) *stats = st;
         return PN_OK;
@@ -2718,6 +2728,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
             }
             if (r == PN_OK) {
                 st.substeps = n_sub;
+                st.dt_over_cfl = cfl;
                 w->time_s = t0 + dt;
                 w->steps = steps0 + 1;
                 if (stats) *stats = st;
@@ -3301,7 +3312,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
                                  pn_mpm_stats *stats) {
     pn_mpm_advance_desc a;
     pn_mpm_stats tot, st;
-    pn_real done = 0, g2 = 0, courant;
+    pn_real done = 0, g2 = 0, courant, stable = 0;
     long steps = 0;
     int i, d;
     PN_ASSERT(w);
@@ -3328,6 +3339,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
         if (a.integrator == PN_MPM_EXPLICIT) {
             if ((r = pn_mpm_stable_dt(w, &dt)) != PN_OK)
                 return pn__mpm_fail(w, r, "pn_mpm_advance: no stable step (no group, or a non-finite state)");
+            stable = dt;
             dt *= courant;
             if (a.max_step_s > 0) dt = PN__MIN(dt, a.max_step_s);
         } else { /* at most max_step_s, and short enough for the fastest particle and gravity */
@@ -3354,6 +3366,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
                                 (double)frame_s, (double)dt);
         r = a.integrator == PN_MPM_EXPLICIT ? pn_mpm_step_explicit(w, dt, &st) : pn_mpm_step_implicit(w, dt, a.implicit, &st);
         if (r != PN_OK) return r;
+        if (a.integrator == PN_MPM_EXPLICIT) st.dt_over_cfl = dt / stable;
         pn__mpm_stats_add(&tot, &st);
         tot.solves += st.solves;
         tot.substeps += st.substeps;

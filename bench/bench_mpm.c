@@ -279,18 +279,19 @@ static void csv_header(FILE *f) {
     fprintf(f, "scene,dim,role,integrator,energy,dt_s,fixed_point_iters,particles,frames,frames_done,"
                "mass_iou_mean,mass_iou_min,minmax_iou_mean,minmax_iou_min,binary_iou_mean,wall_s,cpu_s,simulated_s,"
                "wall_per_sim_s,ratio_to_fair,newton_per_step,cg_per_step,fixed_point_per_step,line_search_failures,"
-               "halved_steps,max_fixed_point_residual,finite,status\n");
+               "halved_steps,max_fixed_point_residual,dt_over_cfl,cg_capped,finite,status\n");
 }
 
 static void csv_row(FILE *f, const char *scene, int dim, const bench_run *r, double fair_wps) {
     double st = r->tally.steps ? (double)r->tally.steps : 1;
     fprintf(f, "%s,%d,%s,%s,%s,%.6g,%d,%lu,%d,%d,%.4f,%.4f,%.4f,%.4f,%.4f,%.3f,%.3f,%.4f,%.4g,%.4g,%.2f,%.1f,%.2f,%ld,%ld,"
-               "%.3e,%s,\"%s\"\n", /* quoted: error strings hold commas */
+               "%.3e,%.3g,%ld,%s,\"%s\"\n", /* quoted: error strings hold commas */
             scene, dim, r->role, r->implicit ? "implicit" : "explicit", energy_name(r), r->dt, r->implicit ? r->fp : 0,
             (unsigned long)r->particles, r->frames, r->frames_done, r->iou_mean, r->iou_min, r->mm_mean, r->mm_min,
             r->biou_mean, r->wall, r->cpu, r->sim, wall_per_sim(r), fair_wps > 0 ? wall_per_sim(r) / fair_wps : 0,
             r->tally.newton / st, r->tally.cg / st, r->tally.fixed_point / st, r->tally.line_search_failures,
-            r->tally.halved, r->tally.max_fixed_point_residual, r->status == RUN_OK ? "yes" : "no",
+            r->tally.halved, r->tally.max_fixed_point_residual, r->tally.max_dt_over_cfl, r->tally.cg_capped,
+            r->status == RUN_OK ? "yes" : "no",
             status_detail(r));
 }
 
@@ -307,12 +308,13 @@ static void md_row(FILE *f, const char *scene, int dim, const bench_run *r, doub
     if (r->implicit && (r->fp > 1 || r->tally.max_fixed_point_residual > 0))
         snprintf(res, sizeof res, "%.2e", r->tally.max_fixed_point_residual);
     else strcpy(res, "-");
-    fprintf(f, "| %s | %d | %s | %s | %s | %.3g | %s | %.3f / %.3f | %.3f / %.3f | %.3f | %.3g | %.2f | %.1f / %.0f / %.1f "
-               "| %ld / %ld | %s | %s |\n",
-            scene, dim, r->role, r->implicit ? "implicit" : "explicit", energy_name(r), r->dt, fp, r->iou_mean,
+    fprintf(f, "| %s | %d | %s | %s | %s | %.3g | %.3g | %s | %.3f / %.3f | %.3f / %.3f | %.3f | %.3g | %.2f | %.1f / %.0f / %.1f "
+               "| %ld / %ld / %ld | %s | %s |\n",
+            scene, dim, r->role, r->implicit ? "implicit" : "explicit", energy_name(r), r->dt, r->tally.max_dt_over_cfl, fp,
+            r->iou_mean,
             r->iou_min, r->mm_mean, r->mm_min, r->biou_mean, wall_per_sim(r),
             fair_wps > 0 ? wall_per_sim(r) / fair_wps : 0, r->tally.newton / st, r->tally.cg / st,
-            r->tally.fixed_point / st, r->tally.line_search_failures, r->tally.halved, res, finite);
+            r->tally.fixed_point / st, r->tally.line_search_failures, r->tally.halved, r->tally.cg_capped, res, finite);
 }
 
 /* ---- a small SVG plot: log-x axis, linear or log y, labelled markers -------------------- */
@@ -776,8 +778,10 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
                "mass fields (docs/validation.md), below 1 even for identical fields (the reference row shows its ceiling); "
                "*min/max* is sum(min(a, b)) / sum(max(a, b)), 1 for identical fields; *binary*: occupancy above "
                "%.0f%% of the maximum. *x fair*: wall time per simulated second over the explicit run at its largest "
-               "stable step. *it/step*: Newton / CG / fixed-point passes per step. *LS fails / halved*: Newton "
-               "steps whose line search failed / implicit steps retried as substeps. *max FP residual*: largest "
+               "stable step. *dt / dt_CFL*: the step over the explicit bound pn_mpm_stable_dt (largest over the "
+               "run; for explicit runs at each frame's start). *it/step*: Newton / CG / fixed-point passes per step. "
+               "*LS fails / halved / CG capped*: Newton steps whose line search failed / implicit steps retried as "
+               "substeps / Newton steps whose linear solve stopped at cg_max. *max FP residual*: largest "
                "max_q |F0_new - F0| (not measured with one pass). Wall time from CLOCK_MONOTONIC.\n\n",
             cfg->snowball ? "snowball" : "snow press", cfg->res[2], cfg->res[3], cfg->duration[2], cfg->duration[3],
             BENCH_FPS, 100 * PN_EX_OCCUPIED);
@@ -801,10 +805,10 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
                 s->name, s->dim, (unsigned long)s->runs[0].particles, s->runs[1].dt, BENCH_REF_DIV, s->ref_convergence,
                 s->runs[2].iou_mean, s->runs[1].iou_mean, BENCH_PERTURB, s->ref_sensitivity, s->runs[0].dt,
                 s->runs[1].status == RUN_OK ? "" : " **The reference itself failed: the IoUs are meaningless.**");
-        fprintf(f, "| scene | dim | role | integrator | energy | dt (s) | FP iters | soft IoU mean / min | "
+        fprintf(f, "| scene | dim | role | integrator | energy | dt (s) | dt / dt_CFL | FP iters | soft IoU mean / min | "
                    "min/max IoU mean / min | binary IoU | wall s / sim s | x fair | it/step N / CG / FP | "
-                   "LS fails / halved | max FP residual | finite |\n");
-        fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+                   "LS fails / halved / CG capped | max FP residual | finite |\n");
+        fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for (k = 0; k < s->n_runs; ++k) md_row(f, s->name, s->dim, &s->runs[k], fair_wps);
         fprintf(f, "\n");
     }

@@ -382,6 +382,8 @@ typedef struct pn_ex_tally {
     long halved;                     /* implicit steps retried as substeps (the fallback)    */
     double max_fixed_point_residual; /* max_q |F0_new - F0| at the end of a step, worst step  */
     double max_speed_m_s;            /* fastest particle after any step                      */
+    double max_dt_over_cfl;          /* largest step over pn_mpm_stable_dt at its start      */
+    long cg_capped;                  /* Newton steps whose linear solve stopped at cg_max    */
     /* pn_mpm_implicit_desc.measure_force_error: per-step values summed (mean = sum / steps) */
     double force_error, force_error_regularizer, apex_fraction;
 } pn_ex_tally;
@@ -394,9 +396,15 @@ PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double 
     long k;
     for (k = 0; k < n; ++k) {
         pn_mpm_stats st;
-        pn_result r = implicit ? pn_mpm_step_implicit(w, (pn_real)dt_s, id, &st)
-                               : pn_mpm_step_explicit(w, (pn_real)dt_s, &st);
+        pn_real cfl = 0;
+        pn_result r;
+        /* an explicit step does not compute its bound: once per call is enough here */
+        if (!implicit && k == 0 && pn_mpm_stable_dt(w, &cfl) == PN_OK && dt_s / (double)cfl > t->max_dt_over_cfl)
+            t->max_dt_over_cfl = dt_s / (double)cfl;
+        r = implicit ? pn_mpm_step_implicit(w, (pn_real)dt_s, id, &st) : pn_mpm_step_explicit(w, (pn_real)dt_s, &st);
         if (r != PN_OK) return r;
+        if (implicit && (double)st.dt_over_cfl > t->max_dt_over_cfl) t->max_dt_over_cfl = (double)st.dt_over_cfl;
+        t->cg_capped += st.cg_capped;
         t->steps++;
         t->newton += st.newton_iters;
         t->cg += st.cg_iters;

@@ -854,7 +854,8 @@ PN_TEST(mpm_newton_forcing) {
    fail with PN_ERROR_NOT_CONVERGED, naming cg_max, count its capped solves and leave the
    world as it was (no fallback: max_halvings < 0); with the fallback, newton_budget bounds
    the Newton iterations of all its attempts (traced); with the defaults the same step
-   converges and no solve is capped. */
+   converges, no solve is capped, and the step reports dt / dt_CFL against the analytic
+   P-wave bound. */
 static void t_count_trace(void *user, int solve, int iteration, pn_real energy_j, pn_real residual) {
     (void)solve, (void)iteration, (void)energy_j, (void)residual;
     ++*(int *)user;
@@ -899,7 +900,13 @@ PN_TEST(mpm_cg_capped) {
     memset(&id, 0, sizeof id); /* the defaults */
     PN_CHECK(pn_mpm_step_implicit(w, 1e-2, &id, &st) == PN_OK);
     PN_CHECK(st.cg_capped == 0);
-    PN_REPORT("default cg_max: converged in %d Newton / %d CG iterations, none capped", st.newton_iters, st.cg_iters);
+    { /* the explicit bound 0.9 dx / (c + |v|): P-wave speed c = sqrt(E (1 - nu) / ((1 + nu)(1 - 2 nu)) / rho)
+         of E 1e6 Pa, nu 0.3, 1000 kg/m^3 at rest (J = 1), the block falling at 1 m/s */
+        double c = sqrt(1e6 * 0.7 / (1.3 * 0.4) / 1000), want = 1e-2 * (c + 1) / (0.9 / 32);
+        PN_CHECK_LE(fabs((double)st.dt_over_cfl - want), 1e-6 * want);
+    }
+    PN_REPORT("default cg_max: converged in %d Newton / %d CG iterations, none capped; dt / dt_CFL %.1f",
+              st.newton_iters, st.cg_iters, (double)st.dt_over_cfl);
     free(x0);
     pn_mpm_destroy(w);
 }
