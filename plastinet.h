@@ -1,4 +1,4 @@
-/* plastinet.h - v0.4 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.5 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -134,6 +134,9 @@
           Mohr-Coulomb angle (alpha = sin(phi) / sqrt(2); the sand_2d models retrained);
           Stomakhin snow defined for inverted trial states, optional J_p bounds
           (snow_jp_min, snow_jp_max).
+     0.5  explicit MPM: no sort (P2G in particle order, a slab of rows per thread), 2D fixed
+          corotated and Stomakhin snow in vector lanes (closed-form clamp); implicit MPM:
+          pn_mpm_implicit_desc.newton_budget, pn_mpm_stats.cg_capped and dt_over_cfl.
 */
 #ifndef PLASTINET_H
 #define PLASTINET_H
@@ -1458,9 +1461,13 @@ static void pn__assemble(int d, const pn_real *U, const pn_real *V, const pn__pr
 }
 
 /* Lame constants at plastic state h (Stomakhin snow hardens them; others ignore h). */
+/* the factor on mu and lambda at plastic state h: Stomakhin's hardening exp(xi (1 - J_p)) */
+static pn_real pn__hardening(const pn_material *m, pn_real h) {
+    return m->plastic == PN_PLASTIC_SNOW_STOMAKHIN ? PN__EXP(m->snow_xi * (1 - PN__EXP(h))) : 1;
+}
+
 static void pn__lame_at(const pn_material *m, pn_real h, pn_real *mu, pn_real *la) {
-    pn_real f = 1;
-    if (m->plastic == PN_PLASTIC_SNOW_STOMAKHIN) f = PN__EXP(m->snow_xi * (1 - PN__EXP(h)));
+    pn_real f = pn__hardening(m, h);
     *mu = m->mu * f;
     *la = m->lambda * f;
 }

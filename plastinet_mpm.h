@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.4 - material point method solvers on plastinet.h.
+/* plastinet_mpm.h - v0.5 - material point method solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -23,7 +23,8 @@
                  active set and lagged friction for separating contact, step halving
      >>explicit  symplectic Euler with the analytic return mapping after the F update (the
                  reference integrator; Jiang et al. 2016 course notes, Hu et al. 2018 MLS):
-                 a dense grid scattered block by block in colours, one SVD per particle-step
+                 a dense grid scattered in particle order (threads own slabs of rows), 2D
+                 fixed corotated and snow in vector lanes, one SVD per particle-step elsewhere
      >>advance   a frame in as many steps as the physics asks for (pn_mpm_advance)
 
    QUICK START (README.md has it as a complete program)
@@ -45,8 +46,8 @@
    MEMORY: pn_mpm_create allocates every array through the allocator of the desc (both
    callbacks or neither) for max_particles particles and the grid; the first implicit step
    allocates the solver storage; after that a step allocates nothing.
-   WORK: each step sorts the particles (by grid node, or by block of 4^dim cells for the
-   explicit step) and works only on the nodes their stencils touch.
+   WORK: an implicit step sorts the particles by grid node, and an explicit one marks the
+   blocks of 4^dim nodes they occupy; both work only on the nodes the stencils touch.
    WALLS act at their planes, origin + wall_cells dx and origin + (res - wall_cells) dx:
    no particle ends a step beyond one (one that would leave the grid went through: outflow
    or an error).
@@ -63,8 +64,9 @@
    (worlds of at least desc.parallel_min_particles particles, 4096 by default; smaller ones
    stay on one thread, where a parallel region costs more than its work).
    Results are bitwise identical for any thread count: particle-to-grid is a gather over
-   particles sorted by node (no atomics, a fixed summation order) and every reduction sums
-   fixed-size chunks in a fixed order. One world must not be stepped from two threads at
+   particles sorted by node (implicit) or a scatter in particle order where each thread adds
+   only to its own slab of rows (explicit): no atomics, a fixed summation order; every
+   reduction sums fixed-size chunks in a fixed order. One world must not be stepped from two threads at
    once; different worlds may.
    DETERMINISM: as for plastinet.h: with -ffp-contract=off (and without -ffast-math) gcc,
    g++ and clang give the same bits at any -O level for every integrator and energy
@@ -297,15 +299,15 @@ typedef struct pn_mpm_world {
        speed in one step. */
     size_t *lnode, *blnode, n_lag, bn_lag;
     pn_real *lval, *blval;
-    /* >>explicit: blocks, the dense grid and the P2G records */
-    size_t nblk[3], bstride[3], nblocks;
-    size_t *bstart;              /* particles of block b: order[bstart[b] .. bstart[b + 1]) */
-    size_t *bocc, bcolor[9];     /* occupied blocks by colour: bocc[bcolor[c] .. bcolor[c+1]) */
-    size_t *bact, n_bact;        /* active blocks (occupied and their upper neighbours)      */
-    unsigned char *bmark;
+    /* >>explicit: the dense grid, its touched spans and the P2G records */
+    size_t nblk[3], bstride[3], nblocks; /* blocks of PN__MPM_BLOCK^dim nodes                */
+    unsigned char *bmark;        /* blocks holding a particle's stencil base node this step  */
+    size_t *bact, n_bact;        /* the blocks P2G touched: marked ones and their upper neighbours */
+    size_t *rowcount;            /* particles per stencil base row of axis 0 (the thread slabs) */
     pn_real *gdense;             /* (m, m v) per node, 4 reals (2D: one unused, for SIMD)     */
+    pn_real *gdense0;            /* the transfer's own momentum per node (AFLIP only), dim reals */
     pn_real *ppay, *spay;        /* P2G record of each particle's state (and scratch)        */
-    size_t *pkey, *skey;         /* block of each particle's stencil base (and scratch)      */
+    int *prow, *srow;            /* stencil base row (axis 0) of each particle (and scratch) */
     int rec_ok;                  /* ppay belongs to the current state                        */
     pn_real inv_dx, grid_lo[3], grid_hi[3]; /* 1 / dx; [dx, (res - 1) dx] + origin (>>world) */
     pn_real wall_lo[3], wall_hi[3]; /* the wall planes [wall dx, (res - wall) dx] + origin   */
@@ -494,15 +496,24 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
    than desc.parallel_min_particles runs them on one thread: a parallel region costs more
    than its work there, and on a busy machine a thread waiting for a core stalls every one
    of the step's dozens of regions. Every use has the world in scope as w. */
+#if defined(__SSE2__) || defined(__AVX__)
+#include <immintrin.h> /* >>explicit: pn__mpm_sqrt_lanes */
+#endif
 #ifdef _OPENMP
+#include <omp.h>
 #define PN__OMP_FOR _Pragma("omp parallel for schedule(dynamic, 64) if(w->n >= w->desc.parallel_min_particles)")
-#define PN__OMP_BLOCKS _Pragma("omp parallel for schedule(dynamic, 1) if(w->n >= w->desc.parallel_min_particles)")
 #else
 #define PN__OMP_FOR
-#define PN__OMP_BLOCKS
 #endif
-#define PN__MPM_BLOCK 4 /* >>explicit: cells per block edge (>= 2, so one colour never shares a node) */
-#define PN__MPM_PAY(d) ((d) == 2 ? 12 : 22) /* >>explicit: reals per P2G record */
+#if defined(__GNUC__)
+#define PN__MPM_INLINE static inline __attribute__((always_inline))
+#else
+#define PN__MPM_INLINE static inline
+#endif
+#define PN__MPM_BLOCK 4 /* >>explicit: nodes per block edge (>= 3: a stencil reaches one block up) */
+#define PN__MPM_LANES 8 /* >>explicit: particles per batch of the 2D G2P */
+#define PN__MPM_SLABS 256 /* >>explicit: the most threads P2G splits the rows among */
+#define PN__MPM_PAY(d) ((d) == 2 ? 13 : 23) /* >>explicit: reals per P2G record */
 #define PN__MPM_CHUNK 1024 /* reductions sum chunks of this size, then the chunks in order */
 #include <stdarg.h>
 
@@ -544,7 +555,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
     X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(pq) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
-    X(lnode) X(blnode) X(lval) X(blval) X(bstart) X(bocc) X(bact) X(bmark) X(gdense) X(ppay) X(spay) X(pkey) X(skey)
+    X(lnode) X(blnode) X(lval) X(blval) X(bmark) X(bact) X(rowcount) X(gdense) X(gdense0) X(ppay) X(spay) X(prow) X(srow)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
     pn_allocator a;
@@ -681,15 +692,15 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     PN__MPM_A(cmu, nodes, pn_real);
     PN__MPM_A(clam, nodes, pn_real);
     PN__MPM_A(ctan, nodes * 3, pn_real);
-    PN__MPM_A(bstart, w->nblocks + 1, size_t);
-    PN__MPM_A(bocc, w->nblocks, size_t);
-    PN__MPM_A(bact, w->nblocks, size_t);
     PN__MPM_A(bmark, w->nblocks, unsigned char);
-    PN__MPM_A(gdense, nodes * 4, pn_real);
+    PN__MPM_A(bact, w->nblocks, size_t);
+    PN__MPM_A(rowcount, (size_t)desc->res[0] + 1, size_t);
+    PN__MPM_A(gdense, nodes * 4, pn_real); /* zero: each explicit step leaves it so */
+    if (desc->filter_time_s > 0) PN__MPM_A(gdense0, nodes * (size_t)d, pn_real);
     PN__MPM_A(ppay, cap * (size_t)PN__MPM_PAY(d), pn_real);
     PN__MPM_A(spay, cap * (size_t)PN__MPM_PAY(d), pn_real);
-    PN__MPM_A(pkey, cap, size_t);
-    PN__MPM_A(skey, cap, size_t);
+    PN__MPM_A(prow, cap, int);
+    PN__MPM_A(srow, cap, int);
     if (fail) {
         pn_mpm_destroy(w);
         if (why) *why = "out of memory for max_particles particles and the grid";
@@ -2757,42 +2768,91 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
    >>explicit: symplectic Euler, MLS-MPM (Hu et al. 2018): P2G of mass, momentum and the
    stress impulse, grid update with gravity and contact, G2P with F = (I + dt C) F and the
    return mapping. Unlike the implicit step's compact gather, it works on a dense grid of
-   (m, m v) per node: the particles are sorted by block of PN__MPM_BLOCK^dim cells (a stable
-   counting sort), and P2G scatters block by block in 2^dim colours; blocks of one colour are
-   two blocks apart, so no two of them reach the same node and each node sums its
-   contributions in one fixed order whatever the thread count. Each particle's Kirchhoff
-   stress comes from the G2P that made its state: one SVD per particle and step.
+   (m, m v) per node, and P2G scatters the particles in index order: no sort. With threads,
+   each thread owns a slab of rows of axis 0 and adds only to them (pn__mpm_xp2g), so each
+   node sums its contributions in one fixed order whatever the thread count. P2G widens a
+   touched span per line of nodes; the grid update works on the spans, and after G2P they
+   are zeroed again. Each particle's Kirchhoff stress comes from the G2P that made its
+   state, packed with what P2G reads into one record: one SVD per particle and step.
    ====================================================================================== */
 
+/* 2D fixed corotated, branch-free (pn__mpm_xg2p2_lanes runs it in vector lanes). Write F =
+   [e + f, g - hh; g + hh, e - f] (e, hh its conformal part, f, g the anticonformal one): with
+   q = |(e, hh)| and r = |(f, g)| the singular values are s0 = q + r and the signed s1 = q - r,
+   the polar rotation is R = [c -sn; sn c], (c, sn) = (e, hh) / q, and the stretch R^T F =
+   q I + D has the deviator D = R^T F - q I of size r. No division has a condition on it or
+   on its divisor (gcc then branches, and does not vectorize): at q = 0 (e = hh = 0) the
+   rotation is the identity. pn__fcr2_norms gives q^2 and r^2. */
+PN__MPM_INLINE void pn__fcr2_norms(const pn_real *F, pn_real *qq, pn_real *rr) {
+    pn_real e = (F[0] + F[3]) / 2, hh = (F[2] - F[1]) / 2, f = (F[0] - F[3]) / 2, g = (F[2] + F[1]) / 2;
+    *qq = e * e + hh * hh, *rr = f * f + g * g;
+}
+
+PN__MPM_INLINE void pn__fcr2_rotation(const pn_real *F, pn_real q, pn_real *c, pn_real *sn) {
+    pn_real qd = q + (q > 0 ? 0 : 1); /* q >= 0: 1 where 0 */
+    *c = (F[0] + F[3]) / 2 / qd + (q > 0 ? 0 : 1), *sn = (F[2] - F[1]) / 2 / qd;
+}
+
+/* the Kirchhoff stress tau = 2 mu (Z - R) Z^T + lambda (J - 1) J I of a state Z with polar
+   rotation R = [c -sn; sn c] */
+PN__MPM_INLINE void pn__fcr2_stress(const pn_real *Z, pn_real c, pn_real sn, pn_real mu, pn_real la, pn_real *tau) {
+    pn_real J = Z[0] * Z[3] - Z[1] * Z[2], vol = la * (J - 1) * J;
+    pn_real A0 = 2 * mu * (Z[0] - c), A1 = 2 * mu * (Z[1] + sn); /* 2 mu (Z - R) */
+    pn_real A2 = 2 * mu * (Z[2] - sn), A3 = 2 * mu * (Z[3] - c);
+    tau[0] = A0 * Z[0] + A1 * Z[1] + vol, tau[1] = A0 * Z[2] + A1 * Z[3];
+    tau[2] = A2 * Z[0] + A3 * Z[1], tau[3] = A2 * Z[2] + A3 * Z[3] + vol;
+}
+
+/* The Stomakhin clamp of the stretches to [lo, hi] (Stomakhin et al. 2013), closed form: the
+   clamped stretch is m' I + beta D, m' and beta r the mean and half difference of the
+   clamped s0, s1, so Z = R (m' I + beta D) = (m' - q beta) R + beta F (F itself where nothing
+   clamps). The smallest stretch is signed: an inverted F (s1 < 0) clamps back to det > 0.
+   Returns whether it clamped; ratio = |s0 s1| / (z0 z1), the factor on J_p. */
+PN__MPM_INLINE int pn__snow2_clamp(const pn_real *F, pn_real q, pn_real r, pn_real c, pn_real sn, pn_real lo, pn_real hi,
+                                   pn_real *Z, pn_real *ratio) {
+    pn_real s0 = q + r, s1 = q - r, z0 = PN__MIN(PN__MAX(s0, lo), hi), z1 = PN__MIN(PN__MAX(s1, lo), hi);
+    pn_real beta = (z0 - z1) / 2 / (r + (r > 0 ? 0 : 1)), alpha = (z0 + z1) / 2 - q * beta;
+    int clamped = (z0 != s0) | (z1 != s1);
+    pn_real k = (pn_real)clamped; /* a blend, not a select: gcc would put beta's division under the condition */
+    Z[0] = F[0] + k * (alpha * c + beta * F[0] - F[0]), Z[1] = F[1] + k * (-alpha * sn + beta * F[1] - F[1]);
+    Z[2] = F[2] + k * (alpha * sn + beta * F[2] - F[2]), Z[3] = F[3] + k * (alpha * c + beta * F[3] - F[3]);
+    *ratio = PN__FABS(s0 * s1) / (z0 * z1);
+    return clamped;
+}
+
+/* The fast path's parameters of material m: 0 unless it is fixed corotated, elastic or with
+   the Stomakhin clamp; else its Lame parameters and box [lo, hi] (+-1e30 without the clamp). */
+static int pn__fcr2_params(const pn_material *m, pn_real *mu, pn_real *la, pn_real *lo, pn_real *hi) {
+    int snow = m->plastic == PN_PLASTIC_SNOW_STOMAKHIN;
+    *mu = m->mu, *la = m->lambda;
+    *lo = snow ? 1 - m->theta_c : (pn_real)-1e30, *hi = snow ? 1 + m->theta_s : (pn_real)1e30;
+    return m->elastic == PN_ELASTIC_FIXED_COROTATED && (snow || m->plastic == PN_PLASTIC_NONE);
+}
+
+/* The 2D Kirchhoff stress of an elastic state F, when the material takes the fast path and F
+   is inside its box (then F is its own return mapping); 0 (tau unspecified) otherwise. hard:
+   pn__hardening at the plastic state. */
+PN__MPM_INLINE int pn__tau_fcr2(const pn_material *m, const pn_real *F, pn_real hard, pn_real *tau) {
+    pn_real mu, la, lo, hi, q, r, c, sn;
+    if (!pn__fcr2_params(m, &mu, &la, &lo, &hi)) return 0;
+    pn__fcr2_norms(F, &q, &r);
+    q = PN__SQRT(q), r = PN__SQRT(r);
+    if (!(q + r <= hi && q - r >= lo)) return 0;
+    pn__fcr2_rotation(F, q, &c, &sn);
+    pn__fcr2_stress(F, c, sn, mu * hard, la * hard, tau);
+    return 1;
+}
 /* For the explicit step: Z, h_new and the Kirchhoff stress of the result
    tau(Z) = U diag(t) U^T, all from one SVD. F must be finite; outputs unchecked. */
 static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, pn_real h, pn_real *Z,
                                 pn_real *h_new, pn_real *tau, int *plastic) {
     pn_real U[9], s[3], V[9], z[3], t[3];
     pn_result r;
-    if (d == 2 && m->elastic == PN_ELASTIC_FIXED_COROTATED &&
-        (m->plastic == PN_PLASTIC_NONE || m->plastic == PN_PLASTIC_SNOW_STOMAKHIN)) {
-        /* 2D fixed corotated: the singular values from the invariants, s0 = |(e, hh)| +
-           |(f, g)| and s1 = J / s0 (e, f, g, hh the conformal and anticonformal halves of F).
-           Inside the Stomakhin box (or without it) the state is elastic, and
-           tau = 2 mu (F - R) F^T + lambda (J - 1) J I needs only the polar rotation R. */
-        pn_real e = (F[0] + F[3]) / 2, hh = (F[2] - F[1]) / 2, f = (F[0] - F[3]) / 2, g = (F[2] + F[1]) / 2;
-        pn_real q = PN__SQRT(e * e + hh * hh), s0 = q + PN__SQRT(f * f + g * g), J = F[0] * F[3] - F[1] * F[2];
-        pn_real s1 = s0 > 0 ? J / s0 : 0, lo = 1 - m->theta_c, hi = 1 + m->theta_s;
-        if (m->plastic == PN_PLASTIC_NONE || (s0 <= hi && s1 >= lo)) {
-            pn_real c = 1, sn = 0, mu, la, A[4], vol;
-            if (q > 0) c = e / q, sn = hh / q;
-            pn__lame_at(m, h, &mu, &la);
-            A[0] = 2 * mu * (F[0] - c), A[1] = 2 * mu * (F[1] + sn); /* 2 mu (F - R), R = [c -sn; sn c] */
-            A[2] = 2 * mu * (F[2] - sn), A[3] = 2 * mu * (F[3] - c);
-            vol = la * (J - 1) * J;
-            tau[0] = A[0] * F[0] + A[1] * F[1] + vol, tau[1] = A[0] * F[2] + A[1] * F[3];
-            tau[2] = A[2] * F[0] + A[3] * F[1], tau[3] = A[2] * F[2] + A[3] * F[3] + vol;
-            memcpy(Z, F, sizeof(pn_real) * 4);
-            *h_new = h;
-            *plastic = 0;
-            return PN_OK;
-        }
+    if (d == 2 && pn__tau_fcr2(m, F, pn__hardening(m, h), tau)) {
+        memcpy(Z, F, sizeof(pn_real) * 4);
+        *h_new = h;
+        *plastic = 0;
+        return PN_OK;
     }
     r = pn__return_core(m, d, F, h, U, s, V, z, h_new, plastic, t);
     if (r != PN_OK) return r;
@@ -2825,139 +2885,42 @@ static inline void pn__mpm_base(const pn_mpm_world *w, const pn_real *x, int *ba
 }
 
 /* quadratic B-spline weights of the three nodes from x/dx - base (>>bin) */
-#define PN__MPM_SPLINE(W, f)                                                                 \
+#define PN__MPM_SPLINE3(w0, w1, w2, f)                                                       \
     do {                                                                                     \
-        W[0] = (pn_real)0.5 * ((pn_real)1.5 - (f)) * ((pn_real)1.5 - (f));                   \
-        W[1] = (pn_real)0.75 - ((f) - 1) * ((f) - 1);                                        \
-        W[2] = (pn_real)0.5 * ((f) - (pn_real)0.5) * ((f) - (pn_real)0.5);                   \
+        w0 = (pn_real)0.5 * ((pn_real)1.5 - (f)) * ((pn_real)1.5 - (f));                     \
+        w1 = (pn_real)0.75 - ((f) - 1) * ((f) - 1);                                          \
+        w2 = (pn_real)0.5 * ((f) - (pn_real)0.5) * ((f) - (pn_real)0.5);                     \
     } while (0)
+#define PN__MPM_SPLINE(W, f) PN__MPM_SPLINE3(W[0], W[1], W[2], f)
 
-/* State check, block keys, the stable counting sort by block, the occupied blocks by colour
-   and the active blocks (occupied ones and their upper neighbours, which their stencils
-   reach). A particle with a non-finite state or outside the grid fails the step. */
-/* the block of a particle at x inside the grid */
-static size_t pn__mpm_block_of(const pn_mpm_world *w, const pn_real *x) {
-    int base[3], i;
-    pn_real fx[3];
-    size_t key = 0;
-    pn__mpm_base(w, x, base, fx);
-    for (i = 0; i < w->dim; ++i) key += (size_t)(base[i] / PN__MPM_BLOCK) * w->bstride[i];
-    return key;
-}
-
-static pn_result pn__mpm_xsort(pn_mpm_world *w) {
-    int d = w->dim;
-    size_t p, b, k, cnt[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    long lp;
-    if (!w->rec_ok) { /* keys from x (checked); otherwise the G2P that made the state left them */
-        PN__OMP_FOR
-        for (lp = 0; lp < (long)w->n; ++lp) {
-            size_t q = (size_t)lp;
-            w->pstat[q] = 0;
-            if (!w->active[q]) continue;
-            if (!pn__mpm_in_grid(w, w->x + q * (size_t)d)) /* also NaN */
-                w->pstat[q] = pn__all_finite(d, w->x + q * (size_t)d) ? 2 : 1;
-            else
-                w->pkey[q] = pn__mpm_block_of(w, w->x + q * (size_t)d);
-        }
-    }
-    memset(w->bstart, 0, sizeof(size_t) * (w->nblocks + 1));
-    for (p = 0; p < w->n; ++p) {
-        if (!w->active[p]) continue;
-        if (!w->rec_ok && w->pstat[p]) {
-            w->error_particle = p;
-            if (w->pstat[p] == 1)
-                return pn__mpm_fail(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by "
-                                    "hand?)", (unsigned long)p);
-            return pn__mpm_fail(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by hand?)",
-                                (unsigned long)p);
-        }
-        w->bstart[w->pkey[p] + 1]++;
-    }
-    for (b = 0; b < w->nblocks; ++b) w->bstart[b + 1] += w->bstart[b];
-    for (p = 0; p < w->n; ++p)
-        if (w->active[p]) w->order[w->bstart[w->pkey[p]]++] = p;
-    for (b = w->nblocks; b > 0; --b) w->bstart[b] = w->bstart[b - 1];
-    w->bstart[0] = 0;
-    /* colour = parity of the block index per axis; blocks of one colour are 2 apart */
-    for (b = 0; b < w->nblocks; ++b) {
-        size_t r = b, c = 0;
-        int i;
-        if (w->bstart[b + 1] == w->bstart[b]) continue;
-        for (i = d - 1; i >= 0; --i) {
-            c |= (r % w->nblk[i] & 1) << i;
-            r /= w->nblk[i];
-        }
-        w->bmark[b] = (unsigned char)(c + 1);
-        cnt[c]++;
-    }
-    w->bcolor[0] = 0;
-    for (k = 0; k < (size_t)(1 << d); ++k) w->bcolor[k + 1] = w->bcolor[k] + cnt[k], cnt[k] = w->bcolor[k];
-    for (b = 0; b < w->nblocks; ++b) {
-        size_t r = b, up[3];
-        int i, o;
-        if (!w->bmark[b] || w->bmark[b] > 8) continue;
-        w->bocc[cnt[w->bmark[b] - 1]++] = b;
-        for (i = d - 1; i >= 0; --i) {
-            up[i] = r % w->nblk[i] + 1 < w->nblk[i];
-            r /= w->nblk[i];
-        }
-        for (o = 1; o < 1 << d; ++o) { /* the upper neighbours get mark 9 (active, not occupied) */
-            size_t nb = b;
-            int ok = 1;
-            for (i = 0; i < d; ++i)
-                if (o >> i & 1) {
-                    ok &= (int)up[i];
-                    nb += w->bstride[i];
-                }
-            if (ok && !w->bmark[nb]) w->bmark[nb] = 9;
-        }
-    }
-    w->n_bact = 0;
-    for (b = 0; b < w->nblocks; ++b)
-        if (w->bmark[b]) {
-            w->bmark[b] = 0;
-            w->bact[w->n_bact++] = b;
-        }
-    return PN_OK;
-}
-
-/* the node range of block b, clipped to the grid: lo, hi (exclusive) per axis */
-static void pn__mpm_block_nodes(const pn_mpm_world *w, size_t b, int *lo, int *hi) {
-    int i;
-    for (i = w->dim - 1; i >= 0; --i) {
-        lo[i] = (int)(b % w->nblk[i]) * PN__MPM_BLOCK;
-        hi[i] = PN__MIN(lo[i] + PN__MPM_BLOCK, w->desc.res[i] + 1);
-        b /= w->nblk[i];
-    }
-    if (w->dim == 2) lo[2] = 0, hi[2] = 1;
+/* the stencil base row (axis 0) of a particle at x inside the grid */
+static inline int pn__mpm_row_of(const pn_mpm_world *w, const pn_real *x) {
+    return (int)((x[0] - w->desc.origin_m[0]) * w->inv_dx - (pn_real)0.5);
 }
 
 /* What P2G needs of a particle, packed in one record (written by the G2P that made the state,
-   read in block order): x, m, m v, m C and k = -V0 (4/dx^2) tau (symmetric, upper triangle),
-   so the stress impulse of a step dt is dt k (x_i - x_p) (MLS-MPM, Hu et al. 2018). */
-static void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real *x, const pn_real *v, const pn_real *C,
-                         const pn_real *tau, pn_real *out) {
-    int d = w->dim, i, j, n = 0;
-    pn_real m = w->mass[p], k = -w->vol0[p] * 4 / (w->desc.dx_m * w->desc.dx_m);
-    if (d == 2) { /* spelled out: the loops below do not unroll for a runtime d */
-        out[0] = x[0], out[1] = x[1], out[2] = m, out[3] = m * v[0], out[4] = m * v[1];
-        out[5] = m * C[0], out[6] = m * C[1], out[7] = m * C[2], out[8] = m * C[3];
-        out[9] = k * tau[0], out[10] = k * tau[1], out[11] = k * tau[3];
-        return;
-    }
+   read in index order): x, m, m v, m C and k = -V0 (4/dx^2) tau (symmetric, upper triangle),
+   so the stress impulse of a step dt is dt k (x_i - x_p) (MLS-MPM, Hu et al. 2018); last, the
+   state's pn__hardening, which the next G2P reuses while the particle stays elastic. */
+PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real *x, const pn_real *v, const pn_real *C,
+                                 const pn_real *tau, pn_real hard, pn_real *out, const int d) {
+    int i, j, n = 0;
+    pn_real m = w->mass[p], k = -w->vol0[p] * (4 * w->inv_dx * w->inv_dx); /* no division per particle */
     for (i = 0; i < d; ++i) out[n++] = x[i];
     out[n++] = m;
     for (i = 0; i < d; ++i) out[n++] = m * v[i];
     for (i = 0; i < d * d; ++i) out[n++] = m * C[i];
     for (i = 0; i < d; ++i)
         for (j = i; j < d; ++j) out[n++] = k * tau[i * d + j];
+    out[n] = hard;
 }
 
-/* Particle record r's MLS-MPM contribution to the dense grid: mass and momentum
-   m v + Q (x_i - x_p), Q = m C + dt k; when v0 != NULL also the transfer's own momentum
-   m v + m C (x_i - x_p) (AFLIP). The dimension is spelled out: see >>transfer. */
-static void pn__mpm_scatter2(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_real *v0) {
+/* Particle record r's MLS-MPM contribution to the dense grid, on the stencil rows i0 <= i < i1
+   (of 0 .. 2; a thread's slab may hold only some): mass and momentum m v + Q (x_i - x_p),
+   Q = m C + dt k; when v0 != NULL also the transfer's own momentum m v + m C (x_i - x_p)
+   (AFLIP). The dimension is spelled out: see >>transfer. */
+static inline void pn__mpm_scatter2(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_real *v0, int i0, int i1,
+                                    int mark) {
     pn_real dx = w->desc.dx_m, m = r[2], fx[3], wx[3], wy[3];
     pn_real q00 = r[5] + dt * r[9], q01 = r[6] + dt * r[10], q10 = r[7] + dt * r[10], q11 = r[8] + dt * r[11];
     pn_real *g;
@@ -2966,8 +2929,9 @@ static void pn__mpm_scatter2(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_r
     pn__mpm_base(w, r, base, fx);
     PN__MPM_SPLINE(wx, fx[0]);
     PN__MPM_SPLINE(wy, fx[1]);
-    g = w->gdense + ((size_t)base[0] * s0 + (size_t)base[1]) * 4;
-    for (i = 0; i < 3; ++i, g += s0 * 4) {
+    if (mark) w->bmark[(unsigned)base[0] / PN__MPM_BLOCK * w->bstride[0] + (unsigned)base[1] / PN__MPM_BLOCK] = 1;
+    g = w->gdense + ((size_t)(base[0] + i0) * s0 + (size_t)base[1]) * 4;
+    for (i = i0; i < i1; ++i, g += s0 * 4) {
         pn_real ex = ((pn_real)i - fx[0]) * dx, a0 = r[3] + q00 * ex, a1 = r[4] + q10 * ex;
         for (j = 0; j < 3; ++j) {
             pn_real ey = ((pn_real)j - fx[1]) * dx, wt = wx[i] * wy[j];
@@ -2977,8 +2941,8 @@ static void pn__mpm_scatter2(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_r
         }
     }
     if (v0) {
-        pn_real *o = v0 + ((size_t)base[0] * s0 + (size_t)base[1]) * 2;
-        for (i = 0; i < 3; ++i, o += s0 * 2)
+        pn_real *o = v0 + ((size_t)(base[0] + i0) * s0 + (size_t)base[1]) * 2;
+        for (i = i0; i < i1; ++i, o += s0 * 2)
             for (j = 0; j < 3; ++j) {
                 pn_real ex = ((pn_real)i - fx[0]) * dx, ey = ((pn_real)j - fx[1]) * dx, wt = wx[i] * wy[j];
                 o[2 * j] += wt * (r[3] + r[5] * ex + r[6] * ey);
@@ -2987,7 +2951,8 @@ static void pn__mpm_scatter2(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_r
     }
 }
 
-static void pn__mpm_scatter3(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_real *v0) {
+static inline void pn__mpm_scatter3(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_real *v0, int i0, int i1,
+                                    int mark) {
     static const int sym[9] = {0, 1, 2, 1, 3, 4, 2, 4, 5}; /* upper triangle of k */
     pn_real dx = w->desc.dx_m, m = r[3], fx[3], W[3][3], q[9];
     const pn_real *mv = r + 4, *mC = r + 7, *k = r + 16;
@@ -2997,8 +2962,11 @@ static void pn__mpm_scatter3(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_r
     pn__mpm_base(w, r, base, fx);
     for (i = 0; i < 3; ++i) PN__MPM_SPLINE(W[i], fx[i]);
     for (c = 0; c < 9; ++c) q[c] = mC[c] + dt * k[sym[c]];
+    if (mark)
+        w->bmark[(unsigned)base[0] / PN__MPM_BLOCK * w->bstride[0] + (unsigned)base[1] / PN__MPM_BLOCK * w->bstride[1] +
+                 (unsigned)base[2] / PN__MPM_BLOCK] = 1;
     g = w->gdense + ((size_t)base[0] * s0 + (size_t)base[1] * s1 + (size_t)base[2]) * 4;
-    for (i = 0; i < 3; ++i) {
+    for (i = i0; i < i1; ++i) {
         pn_real ex = ((pn_real)i - fx[0]) * dx;
         pn_real a0 = mv[0] + q[0] * ex, a1 = mv[1] + q[3] * ex, a2 = mv[2] + q[6] * ex;
         for (j = 0; j < 3; ++j) {
@@ -3015,7 +2983,7 @@ static void pn__mpm_scatter3(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_r
         }
     }
     if (v0)
-        for (i = 0; i < 3; ++i)
+        for (i = i0; i < i1; ++i)
             for (j = 0; j < 3; ++j)
                 for (l = 0; l < 3; ++l) {
                     pn_real e[3], wt = W[0][i] * W[1][j] * W[2][l];
@@ -3025,45 +2993,149 @@ static void pn__mpm_scatter3(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_r
                 }
 }
 
-/* P2G by colour: the blocks of one colour in parallel, each block's particles in order */
-static void pn__mpm_xp2g(pn_mpm_world *w, pn_real dt) {
-    int c, d = w->dim;
-    long lb;
-    pn_real *v0 = w->desc.filter_time_s > 0 ? w->grid_v0 : NULL;
-    PN__OMP_BLOCKS
-    for (lb = 0; lb < (long)w->n_bact; ++lb) { /* zero the nodes this step touches */
-        int lo[3], hi[3], a, b;
-        pn__mpm_block_nodes(w, w->bact[lb], lo, hi);
-        for (a = lo[0]; a < hi[0]; ++a)
-            for (b = lo[1]; b < hi[1]; ++b) {
-                size_t n0 = (size_t)a * w->stride[0] + (size_t)b * w->stride[1] + (size_t)lo[2];
-                memset(w->gdense + n0 * 4, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * 4));
-                if (v0) memset(v0 + n0 * (size_t)d, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * d));
-            }
+/* 2D P2G (APIC) of the particles idx[0 .. n - 1] (ascending, n <= PN__MPM_LANES), rows
+   [r0, r1) of axis 0: each one's nine node contributions computed in lanes the compiler can
+   vectorize, then added particle by particle, node by node: pn__mpm_scatter2's arithmetic and
+   order, so the same bits. mark as there, per particle. */
+static void pn__mpm_scatter2_lanes(pn_mpm_world *w, const size_t *idx, int n, pn_real dt, int r0, int r1,
+                                   const unsigned char *mark) {
+    enum { L = PN__MPM_LANES, pay = PN__MPM_PAY(2) };
+    pn_real rec[12][L], c[9][3][L], fx0[L], fx1[L], wx[3][L], wy[3][L], q00[L], q01[L], q10[L], q11[L];
+    pn_real dx = w->desc.dx_m, inv_dx = w->inv_dx;
+    pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1];
+    int b0[L], b1[L], i, j, l, k;
+    size_t s0 = w->stride[0];
+    for (l = 0; l < L; ++l) /* the records (a stride of 13 does not vectorize) */
+        for (k = 0; k < 12; ++k) rec[k][l] = w->ppay[idx[l < n ? l : 0] * (size_t)pay + (size_t)k]; /* past n: lane 0 */
+    for (l = 0; l < L; ++l) { /* loops over l innermost: gcc -O2 vectorizes them, and unrolls no inner loop */
+        pn_real xc = (rec[0][l] - ox) * inv_dx, yc = (rec[1][l] - oy) * inv_dx;
+        q00[l] = rec[5][l] + dt * rec[9][l], q01[l] = rec[6][l] + dt * rec[10][l];
+        q10[l] = rec[7][l] + dt * rec[10][l], q11[l] = rec[8][l] + dt * rec[11][l];
+        b0[l] = (int)(xc - (pn_real)0.5), b1[l] = (int)(yc - (pn_real)0.5);
+        fx0[l] = xc - (pn_real)b0[l], fx1[l] = yc - (pn_real)b1[l];
+        PN__MPM_SPLINE3(wx[0][l], wx[1][l], wx[2][l], fx0[l]);
+        PN__MPM_SPLINE3(wy[0][l], wy[1][l], wy[2][l], fx1[l]);
     }
-    for (c = 0; c < 1 << d; ++c) {
-        long lo = (long)w->bcolor[c], hi = (long)w->bcolor[c + 1];
-        PN__OMP_BLOCKS
-        for (lb = lo; lb < hi; ++lb) {
-            size_t b = w->bocc[lb], s;
-            for (s = w->bstart[b]; s < w->bstart[b + 1]; ++s) {
-                const pn_real *r = w->ppay + w->order[s] * (size_t)PN__MPM_PAY(d);
-#if defined(__GNUC__) /* the records are read in block order: fetch a few ahead */
-                if (s + 8 < w->bstart[w->nblocks]) __builtin_prefetch(w->ppay + w->order[s + 8] * (size_t)PN__MPM_PAY(d));
-#endif
-                if (d == 2) pn__mpm_scatter2(w, r, dt, v0);
-                else pn__mpm_scatter3(w, r, dt, v0);
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j)
+            for (l = 0; l < L; ++l) {
+                pn_real ex = ((pn_real)i - fx0[l]) * dx, a0 = rec[3][l] + q00[l] * ex, a1 = rec[4][l] + q10[l] * ex;
+                pn_real ey = ((pn_real)j - fx1[l]) * dx, wt = wx[i][l] * wy[j][l];
+                c[3 * i + j][0][l] = wt * rec[2][l];
+                c[3 * i + j][1][l] = wt * (a0 + q01[l] * ey);
+                c[3 * i + j][2][l] = wt * (a1 + q11[l] * ey);
             }
-        }
+    for (l = 0; l < n; ++l) {
+        int i0 = PN__MAX(r0 - b0[l], 0), i1 = PN__MIN(r1 - b0[l], 3);
+        pn_real *g = w->gdense + ((size_t)b0[l] * s0 + (size_t)b1[l]) * 4;
+        if (mark[l]) w->bmark[(unsigned)b0[l] / PN__MPM_BLOCK * w->bstride[0] + (unsigned)b1[l] / PN__MPM_BLOCK] = 1;
+        for (i = i0; i < i1; ++i)
+            for (j = 0; j < 3; ++j) {
+                pn_real *gn = g + ((size_t)i * s0 + (size_t)j) * 4;
+                gn[0] += c[3 * i + j][0][l];
+                gn[1] += c[3 * i + j][1][l];
+                gn[2] += c[3 * i + j][2][l];
+            }
     }
 }
 
-/* Grid update on the active blocks: v = p/m + dt g, then the obstacles (>>contact) */
+/* One slab of P2G: the particles, in index order, whose stencils reach rows [r0, r1) of axis 0,
+   added to those rows only; each marks its base node's block in the slab that holds its base
+   row (slabs start at block rows, so no two threads write one mark). The whole grid in one
+   slab: every particle, every row (the constant bounds let the compiler unroll the rows). */
+static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
+    int d = w->dim, pay = PN__MPM_PAY(d), whole = r0 == 0 && r1 > w->desc.res[0], nl = 0;
+    pn_real *v0 = w->gdense0;
+    size_t p, idx[PN__MPM_LANES];
+    unsigned char mark[PN__MPM_LANES];
+    for (p = 0; p < w->n; ++p) {
+        const pn_real *r = w->ppay + p * (size_t)pay;
+        int b = w->prow[p];
+        if (!w->active[p] || !(whole || (b + 3 > r0 && b < r1))) continue;
+        if (d == 2 && !v0) { /* batches of the slab's particles, in order */
+            idx[nl] = p, mark[nl] = (unsigned char)(b >= r0);
+            if (++nl == PN__MPM_LANES) pn__mpm_scatter2_lanes(w, idx, nl, dt, r0, r1, mark), nl = 0;
+        } else if (whole) {
+            if (d == 2) pn__mpm_scatter2(w, r, dt, v0, 0, 3, 1);
+            else pn__mpm_scatter3(w, r, dt, v0, 0, 3, 1);
+        } else {
+            int i0 = PN__MAX(r0 - b, 0), i1 = PN__MIN(r1 - b, 3);
+            if (d == 2) pn__mpm_scatter2(w, r, dt, v0, i0, i1, b >= r0);
+            else pn__mpm_scatter3(w, r, dt, v0, i0, i1, b >= r0);
+        }
+    }
+    if (nl) pn__mpm_scatter2_lanes(w, idx, nl, dt, r0, r1, mark);
+}
+
+/* P2G in particle index order. With threads, the rows of axis 0 are cut into as many slabs as
+   threads, of about equal particle counts, and each thread scans every particle but adds only
+   to its own slab's rows: each node still sums its contributions in index order, so the
+   result is bitwise the same for any thread count, without a sort and without atomics. Then
+   the touched blocks: the marked ones and their upper neighbours, which their stencils reach. */
+static void pn__mpm_xp2g(pn_mpm_world *w, pn_real dt) {
+    int d = w->dim, rows = w->desc.res[0] + 1, ns = 1, cut[PN__MPM_SLABS + 1];
+    long ls;
+    size_t b;
+#ifdef _OPENMP
+    if (w->n >= w->desc.parallel_min_particles) ns = PN__MIN(omp_get_max_threads(), PN__MPM_SLABS);
+#endif
+    cut[0] = 0;
+    if (ns > 1) { /* cut the cumulative row histogram at equal shares, at block rows */
+        size_t p, tot = 0, acc = 0;
+        int row, k = 1;
+        memset(w->rowcount, 0, sizeof(size_t) * (size_t)rows);
+        for (p = 0; p < w->n; ++p)
+            if (w->active[p]) w->rowcount[w->prow[p]]++, tot++;
+        for (row = 0; row < rows && k < ns; ++row) {
+            acc += w->rowcount[row];
+            if ((row + 1) % PN__MPM_BLOCK) continue;
+            while (k < ns && acc * (size_t)ns >= tot * (size_t)k) cut[k++] = row + 1;
+        }
+        while (k < ns) cut[k++] = rows;
+    }
+    cut[ns] = rows;
+#if defined(_OPENMP)
+#pragma omp parallel for schedule(static, 1) num_threads(ns) if (ns > 1)
+#endif
+    for (ls = 0; ls < ns; ++ls) pn__mpm_xp2g_slab(w, dt, cut[ls], cut[ls + 1]);
+    for (b = 0; b < w->nblocks; ++b) { /* upper neighbours of marked blocks get mark 2 */
+        size_t r = b, up[3];
+        int i, o;
+        if (w->bmark[b] != 1) continue;
+        for (i = d - 1; i >= 0; --i) {
+            up[i] = r % w->nblk[i] + 1 < w->nblk[i];
+            r /= w->nblk[i];
+        }
+        for (o = 1; o < 1 << d; ++o) {
+            size_t nb = b;
+            int ok = 1;
+            for (i = 0; i < d; ++i)
+                if (o >> i & 1) ok &= (int)up[i], nb += w->bstride[i];
+            if (ok && !w->bmark[nb]) w->bmark[nb] = 2;
+        }
+    }
+    w->n_bact = 0;
+    for (b = 0; b < w->nblocks; ++b)
+        if (w->bmark[b]) w->bmark[b] = 0, w->bact[w->n_bact++] = b;
+}
+
+/* the node range of block b, clipped to the grid: lo, hi (exclusive) per axis */
+static void pn__mpm_block_nodes(const pn_mpm_world *w, size_t b, int *lo, int *hi) {
+    int i;
+    for (i = w->dim - 1; i >= 0; --i) {
+        lo[i] = (int)(b % w->nblk[i]) * PN__MPM_BLOCK;
+        hi[i] = PN__MIN(lo[i] + PN__MPM_BLOCK, w->desc.res[i] + 1);
+        b /= w->nblk[i];
+    }
+    if (w->dim == 2) lo[2] = 0, hi[2] = 1;
+}
+
+/* Grid update on the touched blocks: v = p/m + dt g, then the obstacles (>>contact) */
 static size_t pn__mpm_xgrid(pn_mpm_world *w, pn_real dt) {
     int d = w->dim;
     long lb;
     size_t count = 0;
-    pn_real *v0 = w->desc.filter_time_s > 0 ? w->grid_v0 : NULL;
+    pn_real *v0 = w->gdense0;
     int walls_or_colliders = w->wall > 0 || w->n_colliders > 0;
 #if defined(_OPENMP)
 #pragma omp parallel for schedule(dynamic, 16) reduction(+ : count) if (w->n >= w->desc.parallel_min_particles)
@@ -3088,6 +3160,26 @@ static size_t pn__mpm_xgrid(pn_mpm_world *w, pn_real dt) {
                 }
     }
     return count;
+}
+
+/* After G2P: the touched blocks back to zero, as the next P2G expects the grid */
+static void pn__mpm_xclear(pn_mpm_world *w) {
+    int d = w->dim;
+    long lb;
+#if defined(_OPENMP)
+#pragma omp parallel for schedule(static, 16) if (w->n >= w->desc.parallel_min_particles)
+#endif
+    for (lb = 0; lb < (long)w->n_bact; ++lb) {
+        int lo[3], hi[3], a, b;
+        pn__mpm_block_nodes(w, w->bact[lb], lo, hi);
+        for (a = lo[0]; a < hi[0]; ++a)
+            for (b = lo[1]; b < hi[1]; ++b) {
+                size_t n0 = (size_t)a * w->stride[0] + (size_t)b * w->stride[1] + (size_t)lo[2];
+                memset(w->gdense + n0 * 4, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * 4));
+                if (w->gdense0) memset(w->gdense0 + n0 * (size_t)d, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * d));
+            }
+    }
+    w->n_bact = 0;
 }
 
 /* The grid velocity at a particle at x: v = sum_i w_i v_i and C = (4/dx^2) sum_i w_i v_i
@@ -3155,78 +3247,261 @@ static void pn__mpm_vel0(const pn_mpm_world *w, const pn_real *x, pn_real *ov) {
                 size_t node = (size_t)(base[0] + i) * w->stride[0] + (size_t)(base[1] + j) * w->stride[1] +
                               (d == 3 ? (size_t)(base[2] + l) : 0);
                 pn_real wt = W[0][i] * W[1][j] * W[2][l];
-                for (c = 0; c < d; ++c) ov[c] += wt * w->grid_v0[node * (size_t)d + (size_t)c];
+                for (c = 0; c < d; ++c) ov[c] += wt * w->gdense0[node * (size_t)d + (size_t)c];
             }
 }
 
 /* G2P for particle p into scratch (as pn__mpm_g2p: APIC v and C, AFLIP when filtering, x += dt
-   v, F = (I + dt C) F, the return mapping), and the P2G record of the new state. */
-static void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real flip, pn_real reach) {
-    int d = w->dim, dd = d * d, i, j, plastic = 0, stat;
-    const pn_real *F = w->F + p * (size_t)dd, *x = w->ppay + p * (size_t)PN__MPM_PAY(d); /* x as P2G saw it */
-    pn_real nv[3], ov[3] = {0, 0, 0}, nC[9], Fn[9], Z[9], tau[9], hn, chk[4] = {0, 0, 0, 0};
+   v, F = (I + dt C) F, the return mapping), and the P2G record of the new state. Called with
+   a constant d and inlined, so every loop over the dimension unrolls. vc (2D, or NULL): v and
+   C already gathered, in lane `lane` of pn__mpm_xg2p2_lanes. */
+PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real flip, pn_real reach, const int d,
+                                 const pn_real *vc, int lane) {
+    const int dd = d * d, pay = PN__MPM_PAY(d);
+    int i, j, plastic = 0, stat;
+    const pn_real *F = w->F + p * (size_t)dd, *x = w->ppay + p * (size_t)pay; /* x as P2G saw it */
+    const pn_material *mat = &w->groups[w->group[p]].material;
+    pn_real nv[3], ov[3] = {0, 0, 0}, nC[9], Fn[9], Z[9] = {0}, tau[9] = {0}, hn = w->h[p], chk[4] = {0, 0, 0, 0}, fin = 0;
+    pn_real hard = x[pay - 1];
     pn_real *sx = w->sx + p * (size_t)d, *sv = w->sv + p * (size_t)d;
-    if (d == 2) pn__mpm_vel2(w, x, nv, nC);
+    if (vc) { /* found by pn__mpm_xg2p2_lanes */
+        for (i = 0; i < 2; ++i) nv[i] = vc[i * PN__MPM_LANES + lane];
+        for (i = 0; i < 4; ++i) nC[i] = vc[(i + 2) * PN__MPM_LANES + lane];
+    }
+    else if (d == 2) pn__mpm_vel2(w, x, nv, nC);
     else pn__mpm_vel3(w, x, nv, nC);
     if (flip > 0) pn__mpm_vel0(w, x, ov);
-    if (d == 2) { /* Fn = (I + dt C) F */
-        Fn[0] = F[0] + dt * (nC[0] * F[0] + nC[1] * F[2]), Fn[1] = F[1] + dt * (nC[0] * F[1] + nC[1] * F[3]);
-        Fn[2] = F[2] + dt * (nC[2] * F[0] + nC[3] * F[2]), Fn[3] = F[3] + dt * (nC[2] * F[1] + nC[3] * F[3]);
+    for (i = 0; i < d; ++i) /* Fn = (I + dt C) F */
+        for (j = 0; j < d; ++j) {
+            pn_real cf = nC[i * d] * F[j];
+            int k;
+            for (k = 1; k < d; ++k) cf += nC[i * d + k] * F[k * d + j];
+            Fn[i * d + j] = F[i * d + j] + dt * cf;
+        }
+    if (d == 2 && pn__tau_fcr2(mat, Fn, hard, tau)) { /* the 2D elastic fast path: the state is Fn (checked below) */
+        stat = PN_OK;
+        for (i = 0; i < dd; ++i) Z[i] = Fn[i];
+        hn = w->h[p];
     } else {
-        for (i = 0; i < 3; ++i)
-            for (j = 0; j < 3; ++j)
-                Fn[i * 3 + j] = F[i * 3 + j] + dt * (nC[i * 3] * F[j] + nC[i * 3 + 1] * F[3 + j] + nC[i * 3 + 2] * F[6 + j]);
+        for (i = 0; i < dd; ++i) fin += Fn[i] - Fn[i];
+        stat = fin == 0 ? (int)pn__return_tau(mat, d, Fn, w->h[p], Z, &hn, tau, &plastic) : (int)PN_ERROR_OVERFLOW;
+        if (plastic) hard = pn__hardening(mat, hn);
     }
-    stat = pn__all_finite(dd, Fn) ? (int)pn__return_tau(&w->groups[w->group[p]].material, d, Fn, w->h[p], Z, &hn, tau, &plastic)
-                                  : (int)PN_ERROR_OVERFLOW;
     w->sactive[p] = 1;
     for (i = 0; i < d; ++i) {
         sv[i] = nv[i] + flip * (w->v[p * (size_t)d + (size_t)i] - ov[i]);
         sx[i] = x[i] + dt * nv[i];
         if (!(PN__FABS(nv[i]) <= reach)) stat |= 0x400; /* more than the limit along an axis */
     }
-    /* everything the next step reads, checked at once (four partial sums: no long chain) */
-    for (i = 0; i < dd; ++i) chk[i & 3] += (Z[i] - Z[i]) + (tau[i] - tau[i]);
-    for (i = 0; i < d; ++i) chk[i] += (sv[i] - sv[i]) + (nC[i] - nC[i]);
-    chk[3] += hn - hn;
-    if ((stat & 0xff) == PN_OK && !(chk[0] + chk[1] + chk[2] + chk[3] == 0)) stat = PN_ERROR_OVERFLOW | (stat & ~0xff);
+    if ((stat & 0xff) == PN_OK) { /* everything the next step reads, checked at once (four partial sums) */
+        for (i = 0; i < dd; ++i) chk[i & 3] += (Z[i] - Z[i]) + (tau[i] - tau[i]);
+        for (i = 0; i < d; ++i) chk[i] += (sv[i] - sv[i]) + (nC[i] - nC[i]);
+        chk[3] += hn - hn;
+        if (!(chk[0] + chk[1] + chk[2] + chk[3] == 0)) stat = PN_ERROR_OVERFLOW | (stat & ~0xff);
+    }
     if ((stat & 0xff) != PN_OK) { /* an input written by hand, or the deformation overflowed */
         if (!pn__all_finite(dd, F) || !pn__finite(w->h[p])) stat = PN_ERROR_NONFINITE;
         w->pstat[p] = stat & 0xff;
         return;
     }
     if (plastic) stat |= 0x100;
-    memcpy(w->sC + p * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);
-    memcpy(w->sF + p * (size_t)dd, Z, sizeof(pn_real) * (size_t)dd);
+    for (i = 0; i < dd; ++i) w->sC[p * (size_t)dd + (size_t)i] = nC[i], w->sF[p * (size_t)dd + (size_t)i] = Z[i];
     w->sh[p] = hn;
-    if (!pn__mpm_in_grid(w, sx)) { /* went through a wall */
-        w->sactive[p] = 0;
-        stat |= w->desc.allow_outflow ? 0x200 : 0x800;
-    } else {
-        pn__mpm_wall_plane(w, sx);
-        w->skey[p] = pn__mpm_block_of(w, sx);
-        pn__mpm_pack(w, p, sx, sv, nC, tau, w->spay + p * (size_t)PN__MPM_PAY(d));
+    {
+        int in = 1;
+        for (i = 0; i < d; ++i) in &= sx[i] >= w->grid_lo[i] && sx[i] <= w->grid_hi[i];
+        if (!in) { /* went through a wall */
+            w->sactive[p] = 0;
+            stat |= w->desc.allow_outflow ? 0x200 : 0x800;
+            w->pstat[p] = stat;
+            return;
+        }
     }
+    for (i = 0; i < d; ++i) sx[i] = PN__MIN(PN__MAX(sx[i], w->wall_lo[i]), w->wall_hi[i]); /* pn__mpm_wall_plane */
+    w->srow[p] = pn__mpm_row_of(w, sx);
+    pn__mpm_pack(w, p, sx, sv, nC, tau, hard, w->spay + p * (size_t)pay, d);
     w->pstat[p] = stat;
 }
 
-/* The P2G records of every particle, when the state did not come from an explicit step. */
+/* x[l] = sqrt(x[l]) for the PN__MPM_LANES (8) lanes, correctly rounded as PN__SQRT: one
+   instruction per register where the target has one. libm's sqrt does not vectorize: it
+   may set errno, so the compiler keeps a branch around it. */
+static inline void pn__mpm_sqrt_lanes(pn_real *x) {
+#if defined(__AVX__)
+    if (sizeof(pn_real) == 4) {
+        _mm256_storeu_ps((float *)x, _mm256_sqrt_ps(_mm256_loadu_ps((const float *)x)));
+    } else {
+        _mm256_storeu_pd((double *)x, _mm256_sqrt_pd(_mm256_loadu_pd((const double *)x)));
+        _mm256_storeu_pd((double *)x + 4, _mm256_sqrt_pd(_mm256_loadu_pd((const double *)x + 4)));
+    }
+#elif defined(__SSE2__)
+    int i;
+    if (sizeof(pn_real) == 4)
+        for (i = 0; i < 8; i += 4) _mm_storeu_ps((float *)x + i, _mm_sqrt_ps(_mm_loadu_ps((const float *)x + i)));
+    else
+        for (i = 0; i < 8; i += 2) _mm_storeu_pd((double *)x + i, _mm_sqrt_pd(_mm_loadu_pd((const double *)x + i)));
+#else
+    int i;
+    for (i = 0; i < PN__MPM_LANES; ++i) x[i] = PN__SQRT(x[i]);
+#endif
+}
+
+/* 2D G2P (APIC) of particles p0 .. p0 + n - 1, n <= PN__MPM_LANES, in lanes the compiler can
+   vectorize: the grid gather, F = (I + dt C) F, the Stomakhin clamp in closed form
+   (pn__snow2_clamp) and the fixed-corotated stress run in every lane; only J_p and the
+   hardening of the clamped particles, which need log and exp, are scalar. A particle is
+   finished here (done[l] = 1) when its group is 2D fixed corotated, elastic or with the clamp
+   (gpar: ok, mu, lambda, lo, hi per group, pn__fcr2_params), and its new state is finite,
+   within reach and on the grid; the rest go through pn__mpm_xg2p with the velocity and C
+   found here (vc: v0, v1, C00, C01, C10, C11 per lane). Elastic states get the bits of
+   pn__mpm_xg2p's fast path (the arithmetic is pn__mpm_vel2's and pn__tau_fcr2's, in order). */
+static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, pn_real reach, const pn_real *gpar,
+                                unsigned char *done, pn_real (*vc)[PN__MPM_LANES]) {
+    enum { L = PN__MPM_LANES, pay = PN__MPM_PAY(2) };
+    pn_real fx0[L], fx1[L], wx[3][L], wy[3][L], g00[L], g01[L], g10[L], g11[L], Fn[4][L], tau[4][L], nx[2][L];
+    pn_real qq[L], rr[L], mu[L], la[L], lo[L], hi[L], hard[L], k = 4 * w->inv_dx, inv_dx = w->inv_dx;
+    pn_real rot[2][L], ratio[L], hnew[L], Fin[4][L];
+    pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1], v0[L], v1[L], C[4][L], px[L], py[L];
+    const pn_real *G = w->gdense;
+    int b0[L], b1[L], ok[L], clamped[L], i, j, l;
+    size_t s0 = w->stride[0], nd[L];
+    const pn_real *pay0 = w->ppay + p0 * (size_t)pay, *F0 = w->F + p0 * 4;
+    for (l = 0; l < L; ++l) { /* the inputs (strided, and the group a gather); lanes past n copy lane 0 */
+        int src = l < n ? l : 0;
+        const pn_real *gp = gpar + 5 * w->group[p0 + (size_t)src];
+        px[l] = pay0[src * pay], py[l] = pay0[src * pay + 1], hard[l] = pay0[src * pay + pay - 1];
+        for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
+        ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l];
+        mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
+    }
+    /* every vector loop runs over all L lanes: a constant trip count, which gcc -O2 (its very
+       cheap cost model) vectorizes too */
+    for (l = 0; l < L; ++l) { /* pn__mpm_base and the splines */
+        pn_real xc = (px[l] - ox) * inv_dx, yc = (py[l] - oy) * inv_dx;
+        b0[l] = (int)(xc - (pn_real)0.5), b1[l] = (int)(yc - (pn_real)0.5);
+        fx0[l] = xc - (pn_real)b0[l], fx1[l] = yc - (pn_real)b1[l];
+        PN__MPM_SPLINE3(wx[0][l], wx[1][l], wx[2][l], fx0[l]);
+        PN__MPM_SPLINE3(wy[0][l], wy[1][l], wy[2][l], fx1[l]);
+        v0[l] = v1[l] = g00[l] = g01[l] = g10[l] = g11[l] = 0;
+        nd[l] = ((size_t)b0[l] * s0 + (size_t)b1[l]) * 4;
+    }
+    for (i = 0; i < 3; ++i) /* pn__mpm_vel2 */
+        for (l = 0; l < L; ++l) {
+            size_t o = nd[l] + (size_t)i * s0 * 4;
+            pn_real a0 = 0, a1 = 0, c0 = 0, c1 = 0;
+            for (j = 0; j < 3; ++j) {
+                pn_real t0 = wy[j][l] * G[o + 4 * (size_t)j + 1], t1 = wy[j][l] * G[o + 4 * (size_t)j + 2];
+                a0 += t0, a1 += t1;
+                c0 += t0 * (pn_real)j, c1 += t1 * (pn_real)j;
+            }
+            v0[l] += wx[i][l] * a0, v1[l] += wx[i][l] * a1;
+            g00[l] += wx[i][l] * a0 * (pn_real)i, g10[l] += wx[i][l] * a1 * (pn_real)i;
+            g01[l] += wx[i][l] * c0, g11[l] += wx[i][l] * c1;
+        }
+    for (l = 0; l < L; ++l) { /* C, F = (I + dt C) F as pn__mpm_xg2p, the norms of pn__tau_fcr2 */
+        pn_real Fl[4], F[4];
+        F[0] = Fin[0][l], F[1] = Fin[1][l], F[2] = Fin[2][l], F[3] = Fin[3][l];
+        C[0][l] = k * (g00[l] - v0[l] * fx0[l]), C[1][l] = k * (g01[l] - v0[l] * fx1[l]);
+        C[2][l] = k * (g10[l] - v1[l] * fx0[l]), C[3][l] = k * (g11[l] - v1[l] * fx1[l]);
+        Fl[0] = F[0] + dt * (C[0][l] * F[0] + C[1][l] * F[2]), Fl[1] = F[1] + dt * (C[0][l] * F[1] + C[1][l] * F[3]);
+        Fl[2] = F[2] + dt * (C[2][l] * F[0] + C[3][l] * F[2]), Fl[3] = F[3] + dt * (C[2][l] * F[1] + C[3][l] * F[3]);
+        pn__fcr2_norms(Fl, qq + l, rr + l);
+        Fn[0][l] = Fl[0], Fn[1][l] = Fl[1], Fn[2][l] = Fl[2], Fn[3][l] = Fl[3];
+    }
+    pn__mpm_sqrt_lanes(qq);
+    pn__mpm_sqrt_lanes(rr);
+    for (l = 0; l < L; ++l) { /* the polar rotation and the clamp */
+        pn_real Fl[4], Z[4];
+        Fl[0] = Fn[0][l], Fl[1] = Fn[1][l], Fl[2] = Fn[2][l], Fl[3] = Fn[3][l];
+        pn__fcr2_rotation(Fl, qq[l], rot[0] + l, rot[1] + l);
+        clamped[l] = pn__snow2_clamp(Fl, qq[l], rr[l], rot[0][l], rot[1][l], lo[l], hi[l], Z, ratio + l);
+        Fn[0][l] = Z[0], Fn[1][l] = Z[1], Fn[2][l] = Z[2], Fn[3][l] = Z[3];
+    }
+    for (l = 0; l < n; ++l) { /* J_p and the hardening of the clamped (scalar: log and exp) */
+        const pn_material *m = &w->groups[w->group[p0 + (size_t)l]].material;
+        pn_real hn = w->h[p0 + (size_t)l];
+        if (!clamped[l] || !ok[l]) {
+            hnew[l] = hn;
+            continue;
+        }
+        hn += PN__LOG(ratio[l]); /* as pn__return_principal */
+        if (m->snow_h_min < 0 && hn < m->snow_h_min) hn = m->snow_h_min;
+        if (m->snow_h_max > 0 && hn > m->snow_h_max) hn = m->snow_h_max;
+        hnew[l] = hn;
+        hard[l] = pn__hardening(m, hn);
+        mu[l] = gpar[5 * w->group[p0 + (size_t)l] + 1] * hard[l], la[l] = gpar[5 * w->group[p0 + (size_t)l] + 2] * hard[l];
+    }
+    for (l = 0; l < L; ++l) { /* the stress, the move and every check of pn__mpm_xg2p */
+        pn_real Zl[4], tl[4], chk;
+        int in;
+        Zl[0] = Fn[0][l], Zl[1] = Fn[1][l], Zl[2] = Fn[2][l], Zl[3] = Fn[3][l];
+        pn__fcr2_stress(Zl, rot[0][l], rot[1][l], mu[l], la[l], tl);
+        nx[0][l] = px[l] + dt * v0[l], nx[1][l] = py[l] + dt * v1[l];
+        chk = (Zl[0] - Zl[0]) + (Zl[1] - Zl[1]) + (Zl[2] - Zl[2]) + (Zl[3] - Zl[3]) + (tl[0] - tl[0]) +
+              (tl[1] - tl[1]) + (tl[3] - tl[3]) + (C[0][l] - C[0][l]) + (C[1][l] - C[1][l]) +
+              (C[2][l] - C[2][l]) + (C[3][l] - C[3][l]) + (v0[l] - v0[l]) + (v1[l] - v1[l]) + (hnew[l] - hnew[l]);
+        in = (chk == 0) & (PN__FABS(v0[l]) <= reach) & (PN__FABS(v1[l]) <= reach);
+        in &= (nx[0][l] >= w->grid_lo[0]) & (nx[0][l] <= w->grid_hi[0]) & (nx[1][l] >= w->grid_lo[1]) &
+              (nx[1][l] <= w->grid_hi[1]);
+        ok[l] &= in;
+        tau[0][l] = tl[0], tau[1][l] = tl[1], tau[2][l] = tl[2], tau[3][l] = tl[3];
+    }
+    memcpy(vc[0], v0, sizeof v0), memcpy(vc[1], v1, sizeof v1), memcpy(vc[2], C, sizeof C);
+    for (l = 0; l < n; ++l) {
+        size_t p = p0 + (size_t)l;
+        pn_real *sx = w->sx + p * 2, *sv = w->sv + p * 2, *sC = w->sC + p * 4, *sF = w->sF + p * 4, t[4];
+        done[l] = (unsigned char)ok[l];
+        if (!ok[l]) continue;
+        sv[0] = v0[l], sv[1] = v1[l];
+        for (i = 0; i < 2; ++i) sx[i] = PN__MIN(PN__MAX(nx[i][l], w->wall_lo[i]), w->wall_hi[i]); /* pn__mpm_wall_plane */
+        for (i = 0; i < 4; ++i) sC[i] = C[i][l], sF[i] = Fn[i][l], t[i] = tau[i][l];
+        w->sh[p] = hnew[l];
+        w->sactive[p] = 1;
+        w->srow[p] = pn__mpm_row_of(w, sx);
+        pn__mpm_pack(w, p, sx, sv, sC, t, hard[l], w->spay + p * (size_t)pay, 2);
+        w->pstat[p] = clamped[l] ? 0x100 : 0;
+    }
+}
+
+/* The P2G records of every particle, when the state did not come from an explicit step; the
+   state is checked on the way (x inside the grid, everything finite). */
 static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
     int d = w->dim, dd = d * d;
     long lp;
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp) {
         size_t p = (size_t)lp;
-        pn_real tau[9];
+        const pn_real *x = w->x + p * (size_t)d;
+        pn_real tau[9] = {0}, hard;
+        w->pstat[p] = 0;
         if (!w->active[p]) continue;
+        if (!pn__mpm_in_grid(w, x)) { /* also NaN */
+            w->pstat[p] = pn__all_finite(d, x) ? 0x1000 : 0x2000;
+            continue;
+        }
         if (!pn__all_finite(d, w->v + p * (size_t)d) || !pn__all_finite(dd, w->C + p * (size_t)dd)) {
             w->pstat[p] = PN_ERROR_NONFINITE;
             continue;
         }
         w->pstat[p] = (int)pn_kirchhoff_stress(&w->groups[w->group[p]].material, d, w->F + p * (size_t)dd, w->h[p], tau);
-        if (w->pstat[p] == PN_OK)
-            pn__mpm_pack(w, p, w->x + p * (size_t)d, w->v + p * (size_t)d, w->C + p * (size_t)dd, tau,
-                         w->ppay + p * (size_t)PN__MPM_PAY(d));
+        if (w->pstat[p] != PN_OK) continue;
+        w->prow[p] = pn__mpm_row_of(w, x);
+        hard = pn__hardening(&w->groups[w->group[p]].material, w->h[p]);
+        if (d == 2) pn__mpm_pack(w, p, x, w->v + p * 2, w->C + p * 4, tau, hard, w->ppay + p * (size_t)PN__MPM_PAY(2), 2);
+        else pn__mpm_pack(w, p, x, w->v + p * 3, w->C + p * 9, tau, hard, w->ppay + p * (size_t)PN__MPM_PAY(3), 3);
+    }
+    {
+        size_t p;
+        for (p = 0; p < w->n; ++p) { /* the first particle at fault */
+            if (!w->active[p] || !w->pstat[p]) continue;
+            if (w->pstat[p] < 0x1000) break;
+            w->error_particle = p;
+            if (w->pstat[p] == 0x2000)
+                return pn__mpm_fail(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by "
+                                    "hand?)", (unsigned long)p);
+            return pn__mpm_fail(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by "
+                                "hand?)", (unsigned long)p);
+        }
     }
     return pn__mpm_first_error(w, dt);
 }
@@ -3235,7 +3510,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     int d, dd;
     long l;
     pn_real tf, flip, reach, v2max = 0, *t;
-    size_t *key;
+    int *row;
     pn_mpm_stats st;
     pn_result r;
     PN_ASSERT(w);
@@ -3248,7 +3523,6 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     flip = tf > 0 && dt < tf ? 1 - dt / tf : 0; /* the FLIP share 1 - s */
     reach = w->desc.advection_limit * w->desc.dx_m / dt; /* the fastest honest speed */
     pn__mpm_stats_clear(&st, 0);
-    if ((r = pn__mpm_xsort(w)) != PN_OK) return r;
     if (!w->rec_ok && (r = pn__mpm_xrecords(w, dt)) != PN_OK) return r;
     w->rec_ok = 1;
     pn__mpm_xp2g(w, dt);
@@ -3256,38 +3530,53 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     { /* G2P in index order (the particle arrays stream), retired particles copied, and the
          statistics: integer counts and a max, the same whatever the thread count */
         size_t n_plastic = 0, n_left = 0, n_alive = 0;
-        int any = 0;
+        long nb = (long)((w->n + PN__MPM_LANES - 1) / PN__MPM_LANES);
+        int any = 0, g, lanes = d == 2 && flip == 0 && w->gdense0 == NULL;
+        pn_real gpar[5 * PN_MPM_MAX_GROUPS];
+        for (g = 0; g < w->n_groups; ++g)
+            gpar[5 * g] = (pn_real)pn__fcr2_params(&w->groups[g].material, gpar + 5 * g + 1, gpar + 5 * g + 2,
+                                                   gpar + 5 * g + 3, gpar + 5 * g + 4);
 #if defined(_OPENMP)
-#pragma omp parallel for schedule(dynamic, 64) reduction(+ : n_plastic, n_left, n_alive) reduction(max : v2max) \
+#pragma omp parallel for schedule(dynamic, 8) reduction(+ : n_plastic, n_left, n_alive) reduction(max : v2max) \
     reduction(| : any) if (w->n >= w->desc.parallel_min_particles)
 #endif
-        for (l = 0; l < (long)w->n; ++l) {
-            size_t q = (size_t)l;
-            const pn_real *sv = w->sv + q * (size_t)d;
-            pn_real sp = 0;
-            int i, stat;
-            if (!w->active[q]) { /* retired particles keep their last state */
-                w->pstat[q] = 0;
-                w->sactive[q] = 0;
-                memcpy(w->sx + q * (size_t)d, w->x + q * (size_t)d, sizeof(pn_real) * (size_t)d);
-                memcpy(w->sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
-                memcpy(w->sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-                memcpy(w->sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-                w->sh[q] = w->h[q];
-                continue;
+        for (l = 0; l < nb; ++l) { /* batches of PN__MPM_LANES particles */
+            size_t q0 = (size_t)l * PN__MPM_LANES, q;
+            int nl = (int)PN__MIN((size_t)PN__MPM_LANES, w->n - q0);
+            unsigned char done[PN__MPM_LANES] = {0};
+            pn_real vc[6][PN__MPM_LANES];
+            if (lanes) pn__mpm_xg2p2_lanes(w, q0, nl, dt, reach, gpar, done, vc);
+            for (q = q0; q < q0 + (size_t)nl; ++q) {
+                const pn_real *sv = w->sv + q * (size_t)d;
+                pn_real sp = 0;
+                int i, stat;
+                if (!w->active[q]) { /* retired particles keep their last state */
+                    w->pstat[q] = 0;
+                    w->sactive[q] = 0;
+                    memcpy(w->sx + q * (size_t)d, w->x + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+                    memcpy(w->sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+                    memcpy(w->sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+                    memcpy(w->sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+                    w->sh[q] = w->h[q];
+                    continue;
+                }
+                if (!done[q - q0]) {
+                    if (d == 2) pn__mpm_xg2p(w, q, dt, flip, reach, 2, lanes ? vc[0] : NULL, (int)(q - q0));
+                    else pn__mpm_xg2p(w, q, dt, flip, reach, 3, NULL, 0);
+                }
+                stat = w->pstat[q];
+                any |= stat;
+                n_plastic += (size_t)((stat & 0x100) != 0);
+                if (stat & 0x200) {
+                    n_left++;
+                    continue;
+                }
+                for (i = 0; i < d; ++i) sp += sv[i] * sv[i];
+                n_alive++;
+                v2max = PN__MAX(v2max, sp);
             }
-            pn__mpm_xg2p(w, q, dt, flip, reach);
-            stat = w->pstat[q];
-            any |= stat;
-            n_plastic += (size_t)((stat & 0x100) != 0);
-            if (stat & 0x200) {
-                n_left++;
-                continue;
-            }
-            for (i = 0; i < d; ++i) sp += sv[i] * sv[i];
-            n_alive++;
-            v2max = PN__MAX(v2max, sp);
         }
+        pn__mpm_xclear(w);
         if ((any & 0xcff) && (r = pn__mpm_first_error(w, dt)) != PN_OK) return r;
         st.plastic = n_plastic;
         st.left_domain = n_left;
@@ -3296,7 +3585,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     st.max_speed_m_s = PN__SQRT(v2max);
     pn__mpm_commit(w, dt, &st);
     t = w->ppay, w->ppay = w->spay, w->spay = t;
-    key = w->pkey, w->pkey = w->skey, w->skey = key;
+    row = w->prow, w->prow = w->srow, w->srow = row;
     w->rec_ok = 1;
     w->n_lag = 0; /* the implicit friction memory is stale now */
     if (stats) *stats = st;
@@ -3377,9 +3666,11 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
 }
 
 #undef PN__OMP_FOR
-#undef PN__OMP_BLOCKS
 #undef PN__MPM_SPLINE
 #undef PN__MPM_PAY
+#undef PN__MPM_SLABS
+#undef PN__MPM_LANES
 #undef PN__MPM_BLOCK
+#undef PN__MPM_INLINE
 #undef PN__MPM_ARRAYS
 #endif /* PLASTINET_MPM_IMPLEMENTATION */

@@ -130,13 +130,16 @@ static pn_mpm_world *scene(int dim, int n, long per_block, int jelly, double per
 }
 
 /* steps at dt after `warm` untimed ones: wall seconds, or -1 when a step fails */
-static double run(pn_mpm_world *w, int warm, int steps, double dt) {
+static double run(pn_mpm_world *w, int warm, int steps, double dt, double *plastic) {
     double t0 = wall_seconds();
     int i;
+    if (plastic) *plastic = 0;
     for (i = 0; i < warm + steps; ++i) {
         pn_result r;
+        pn_mpm_stats st;
         if (i == warm) t0 = wall_seconds();
-        r = pn_mpm_step_explicit(w, (pn_real)dt, NULL);
+        r = pn_mpm_step_explicit(w, (pn_real)dt, &st);
+        if (plastic && i >= warm) *plastic += (double)st.plastic / (double)st.particles / steps;
         if (r != PN_OK) {
             fprintf(stderr, "bench_explicit: step %d failed: %s (%s)\n", i, pn_result_string(r), pn_mpm_error(w));
             return -1;
@@ -174,7 +177,7 @@ static int sweep(long max_n, int dims, const char *csv, const char *md) {
                 if (!w) return 1;
                 set_threads(t);
                 for (rep = 0; rep < 3; ++rep) { /* the best of three: a shared machine only slows runs down */
-                    double r = run(w, rep == 0 ? 3 : 0, steps, step_for(n) * (dim == 3 ? 0.5 : 1));
+                    double r = run(w, rep == 0 ? 3 : 0, steps, step_for(n) * (dim == 3 ? 0.5 : 1), NULL);
                     if (r < 0) {
                         pn_mpm_destroy(w);
                         return 1;
@@ -212,7 +215,7 @@ static int sweep(long max_n, int dims, const char *csv, const char *md) {
 int main(int argc, char **argv) {
     int n = 80, steps = 1000, jelly = 0, threads = 0, dim = 2, do_sweep = 0, dims = 12, i;
     long per_block = 10000, max_n = 1000000;
-    double dt = 0, s, mean_y = 0, perturb = 0;
+    double dt = 0, s, mean_y = 0, perturb = 0, plastic = 0;
     const char *csv = NULL, *md = NULL;
     pn_mpm_world *w;
     size_t p;
@@ -245,14 +248,14 @@ int main(int argc, char **argv) {
     if (!(dt > 0)) dt = step_for(n);
     set_threads(threads);
     if (!(w = scene(dim, n, per_block, jelly, perturb))) return 1;
-    s = run(w, 10, steps, dt); /* as the side-by-side harness: 10 untimed steps */
+    s = run(w, 10, steps, dt, &plastic); /* as the side-by-side harness: 10 untimed steps */
     if (s < 0) return 1;
     for (p = 0; p < w->n; ++p) mean_y += (double)w->x[p * (size_t)dim + 1];
     mean_y /= (double)w->n;
     printf("bench_explicit %s real=%s dim=%d n=%d particles=%lu threads=%d steps=%d dt=%g seconds=%.3f "
-           "psteps_per_s=%.4g mean_y=%.6f\n",
+           "psteps_per_s=%.4g mean_y=%.6f plastic_share=%.3f\n",
            jelly ? "jelly" : "snow", sizeof(pn_real) == 4 ? "float" : "double", dim, n, (unsigned long)w->n,
-           max_threads(), steps, dt, s, (double)w->n * steps / s, mean_y);
+           max_threads(), steps, dt, s, (double)w->n * steps / s, mean_y, plastic);
     pn_mpm_destroy(w);
     return 0;
 }

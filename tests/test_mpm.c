@@ -536,6 +536,147 @@ static pn_mpm_world *t_mpm_sand_world(int res, double friction, int *g) {
 
 /* A column collapsing on a frictional floor, explicit and implicit: 1 and 2 OpenMP threads
    give the same bits (the gather P2G and the chunked reductions fix every summation order). */
+/* The explicit step's 2D closed-form Stomakhin clamp and fixed-corotated stress (the vector
+   lanes of pn__mpm_xg2p2_lanes) against the SVD-based return mapping and stress of
+   plastinet.h, on random F: near the identity, stretched past the box in one or both
+   directions, inverted, pure dilations (no deviator: r = 0) and pure rotations. */
+PN_TEST(mpm_snow2_closed_form) {
+    pn_test_rng rng = {2013};
+    pn_material_desc md;
+    pn_material m[2];
+    double worst_z = 0, worst_t = 0, worst_h = 0;
+    int v, k, clamped_count = 0, inverted = 0, flag_mismatch = 0;
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED;
+    md.plastic = PN_PLASTIC_SNOW_STOMAKHIN;
+    md.youngs_modulus_pa = 1.4e5;
+    md.poisson_ratio = 0.2;
+    md.snow_theta_c = 2.5e-2;
+    md.snow_theta_s = 7.5e-3;
+    md.snow_xi = 10;
+    PN_CHECK(pn_material_init(&m[0], &md, NULL) == PN_OK);
+    md.snow_jp_min = 0.6, md.snow_jp_max = 20; /* with the J_p bounds */
+    PN_CHECK(pn_material_init(&m[1], &md, NULL) == PN_OK);
+    for (v = 0; v < 2; ++v)
+        for (k = 0; k < 4000; ++k) {
+            pn_real F[4], Z[4], Z2[4], tau[4], tau2[4], h = (pn_real)pn_test_rng_range(&rng, -0.6, 0.6), hn, hn2 = h;
+            pn_real mu, la, lo, hi, q, r, c, sn, ratio;
+            double R[4], R2[4], big = 1;
+            int i, kind = k % 5, clamped;
+            t_rand_rot(&rng, 2, R);
+            t_rand_rot(&rng, 2, R2);
+            if (kind == 0 || kind == 4) { /* R diag(s0, s1) R2^T (4: R s0, a rotation times a dilation: r = 0) */
+                double s0 = pn_test_rng_range(&rng, 0.9, 1.05), s1 = kind == 4 ? s0 : pn_test_rng_range(&rng, 0.9, 1.05);
+                if (kind == 4) R2[0] = R[0], R2[1] = R[1], R2[2] = R[2], R2[3] = R[3];
+                F[0] = (pn_real)(R[0] * s0 * R2[0] + R[1] * s1 * R2[1]), F[1] = (pn_real)(R[0] * s0 * R2[2] + R[1] * s1 * R2[3]);
+                F[2] = (pn_real)(R[2] * s0 * R2[0] + R[3] * s1 * R2[1]), F[3] = (pn_real)(R[2] * s0 * R2[2] + R[3] * s1 * R2[3]);
+            } else { /* R (I + a perturbation), sometimes reflected (inverted) */
+                double E[4], sc = kind == 1 ? 0.01 : 0.2;
+                for (i = 0; i < 4; ++i) E[i] = (i == 0 || i == 3 ? 1 : 0) + sc * t_gauss(&rng);
+                if (kind == 3) E[1] = -E[1], E[3] = -E[3];
+                F[0] = (pn_real)(R[0] * E[0] + R[1] * E[2]), F[1] = (pn_real)(R[0] * E[1] + R[1] * E[3]);
+                F[2] = (pn_real)(R[2] * E[0] + R[3] * E[2]), F[3] = (pn_real)(R[2] * E[1] + R[3] * E[3]);
+            }
+            if (F[0] * F[3] - F[1] * F[2] < 0) inverted++;
+            if (pn_return_map(&m[v], 2, F, h, Z, &hn, NULL) != PN_OK ||
+                pn_kirchhoff_stress(&m[v], 2, Z, hn, tau) != PN_OK) {
+                PN_CHECK(0);
+                continue;
+            }
+            PN_CHECK(pn__fcr2_params(&m[v], &mu, &la, &lo, &hi));
+            pn__fcr2_norms(F, &q, &r);
+            q = PN__SQRT(q), r = PN__SQRT(r);
+            pn__fcr2_rotation(F, q, &c, &sn);
+            clamped = pn__snow2_clamp(F, q, r, c, sn, lo, hi, Z2, &ratio);
+            if (clamped) { /* as pn__mpm_xg2p2_lanes */
+                hn2 = h + PN__LOG(ratio);
+                if (m[v].snow_h_min < 0 && hn2 < m[v].snow_h_min) hn2 = m[v].snow_h_min;
+                if (m[v].snow_h_max > 0 && hn2 > m[v].snow_h_max) hn2 = m[v].snow_h_max;
+            }
+            clamped_count += clamped;
+            flag_mismatch += clamped != (hn != h || memcmp(Z, F, sizeof Z) != 0);
+            pn__fcr2_stress(Z2, c, sn, mu * pn__hardening(&m[v], hn2), la * pn__hardening(&m[v], hn2), tau2);
+            for (i = 0; i < 4; ++i) {
+                big = fabs((double)tau[i]) > big ? fabs((double)tau[i]) : big;
+                worst_z = fabs((double)(Z[i] - Z2[i])) > worst_z ? fabs((double)(Z[i] - Z2[i])) : worst_z;
+            }
+            for (i = 0; i < 4; ++i)
+                worst_t = fabs((double)(tau[i] - tau2[i])) / big > worst_t ? fabs((double)(tau[i] - tau2[i])) / big : worst_t;
+            worst_h = fabs((double)(hn - hn2)) > worst_h ? fabs((double)(hn - hn2)) : worst_h;
+        }
+    /* independent paths (SVD and the invariants): rounding only. In double 1e-12; in float
+       the SVD's own rounding at the smallest stretches dominates */
+    PN_CHECK_LE(worst_z, sizeof(pn_real) == 4 ? 2e-5 : 1e-12);
+    PN_CHECK_LE(worst_t, sizeof(pn_real) == 4 ? 2e-4 : 1e-10);
+    PN_CHECK_LE(worst_h, sizeof(pn_real) == 4 ? 2e-5 : 1e-12);
+    PN_CHECK(flag_mismatch == 0 && clamped_count > 1000 && inverted > 500);
+    PN_REPORT("8000 random F (%d clamped, %d inverted): max |Z - Z_svd| %.1e, stress %.1e of its largest entry, "
+              "log J_p %.1e; clamp decisions that differ: %d", clamped_count, inverted, worst_z, worst_t, worst_h,
+              flag_mismatch);
+}
+
+/* The explicit step's vector lanes and thread slabs on a scene that exercises them: 2D snow
+   thrown into the floor (clamped and elastic particles) beside a jelly block, and a 3D block
+   falling on the floor; 1 and 2 threads give the same bits. */
+static void t_mpm_threads_explicit(pn_test_ctx *pn__t, int dim) {
+#ifdef _OPENMP
+    pn_real *keep = NULL;
+    size_t n = 0, bytes = 0, plastic = 0;
+    int t, s;
+    for (t = 1; t <= 2; ++t) {
+        pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 64 : 24, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+        double lo[3] = {0.2, 0.15, 0.3}, sz[3] = {0.25, 0.2, 0.3}, lo2[3] = {0.55, 0.3, 0.3}, v[3] = {1, -3, 0};
+        pn_material_desc md;
+        pn_material m;
+        int gs, gj;
+        PN_CHECK(w != NULL);
+        if (!w) return;
+        memset(&md, 0, sizeof md);
+        md.elastic = PN_ELASTIC_FIXED_COROTATED;
+        md.plastic = PN_PLASTIC_SNOW_STOMAKHIN;
+        md.youngs_modulus_pa = 1.4e5;
+        md.poisson_ratio = 0.2;
+        md.snow_theta_c = 2.5e-2;
+        md.snow_theta_s = 7.5e-3;
+        md.snow_xi = 10;
+        pn_material_init(&m, &md, NULL);
+        gs = pn_mpm_add_group(w, &m, 400);
+        gj = t_mpm_group(w, PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE, 1e5);
+        w->desc.parallel_min_particles = 1; /* this small world on 2 threads too */
+        omp_set_num_threads(t);
+        n = t_mpm_block(w, gs, lo, sz, v);
+        n += t_mpm_block(w, gj, lo2, sz, NULL);
+        bytes = sizeof(pn_real) * n * (size_t)dim;
+        plastic = 0;
+        for (s = 0; s < 300; ++s) {
+            pn_mpm_stats st;
+            pn_result r = pn_mpm_step_explicit(w, 2e-4, &st);
+            PN_CHECK(r == PN_OK);
+            if (r != PN_OK) break;
+            plastic += st.plastic;
+        }
+        if (t == 1) {
+            keep = (pn_real *)malloc(bytes * (2 + dim));
+            memcpy(keep, w->x, bytes);
+            memcpy(keep + n * dim, w->v, bytes);
+            memcpy(keep + 2 * n * dim, w->F, bytes * dim);
+        } else {
+            int same = memcmp(keep, w->x, bytes) == 0 && memcmp(keep + n * dim, w->v, bytes) == 0 &&
+                       memcmp(keep + 2 * n * dim, w->F, bytes * dim) == 0;
+            PN_CHECK(same && plastic > 0);
+            PN_REPORT("explicit dim %d, snow and jelly, %zu particles, 300 steps (%zu clamped particle-steps): 1 and 2 "
+                      "threads %s", dim, n, plastic, same ? "bitwise identical" : "DIFFER");
+        }
+        pn_mpm_destroy(w);
+    }
+    free(keep);
+    omp_set_num_threads(2);
+#else
+    (void)pn__t;
+    (void)dim;
+#endif
+}
+
 PN_TEST(mpm_threads_identical) {
 #ifdef _OPENMP
     int implicit, t, g, s;
@@ -571,6 +712,8 @@ PN_TEST(mpm_threads_identical) {
         free(keep);
         omp_set_num_threads(2);
     }
+    t_mpm_threads_explicit(pn__t, 2);
+    t_mpm_threads_explicit(pn__t, 3);
 #else
     PN_REPORT("skipped: built without -fopenmp");
 #endif
@@ -1108,6 +1251,7 @@ static const pn_test_case pn_tests_mpm[] = {
     {"mpm_implicit_pnet_sand_column", mpm_implicit_pnet_sand_column},
     {"mpm_force_error", mpm_force_error},
     {"mpm_threads_identical", mpm_threads_identical},
+    {"mpm_snow2_closed_form", mpm_snow2_closed_form},
     {"mpm_settled_layer_stays", mpm_settled_layer_stays},
     {"mpm_sliding_block_friction", mpm_sliding_block_friction},
     {"mpm_colliders", mpm_colliders},
