@@ -514,6 +514,10 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
 #define PN__MPM_LANES 8 /* >>explicit: particles per batch of the 2D G2P */
 #define PN__MPM_SLABS 256 /* >>explicit: the most threads P2G splits the rows among */
 #define PN__MPM_PAY(d) ((d) == 2 ? 13 : 23) /* >>explicit: reals per P2G record */
+/* >>explicit: entry k of particle p's record in buf: blocks of PN__MPM_LANES particles, entry
+   by entry (the lanes of G2P and P2G load a block's entry as one vector) */
+#define PN__MPM_REC(buf, p, k, pay)                                                               \
+    ((buf)[((size_t)(p) / PN__MPM_LANES * (size_t)(pay) + (size_t)(k)) * PN__MPM_LANES + (size_t)(p) % PN__MPM_LANES])
 #define PN__MPM_CHUNK 1024 /* reductions sum chunks of this size, then the chunks in order */
 #include <stdarg.h>
 
@@ -697,8 +701,8 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     PN__MPM_A(rowcount, (size_t)desc->res[0] + 1, size_t);
     PN__MPM_A(gdense, nodes * 4, pn_real); /* zero: each explicit step leaves it so */
     if (desc->filter_time_s > 0) PN__MPM_A(gdense0, nodes * (size_t)d, pn_real);
-    PN__MPM_A(ppay, cap * (size_t)PN__MPM_PAY(d), pn_real);
-    PN__MPM_A(spay, cap * (size_t)PN__MPM_PAY(d), pn_real);
+    PN__MPM_A(ppay, (cap + PN__MPM_LANES - 1) / PN__MPM_LANES * PN__MPM_LANES * (size_t)PN__MPM_PAY(d), pn_real);
+    PN__MPM_A(spay, (cap + PN__MPM_LANES - 1) / PN__MPM_LANES * PN__MPM_LANES * (size_t)PN__MPM_PAY(d), pn_real);
     PN__MPM_A(prow, cap, int);
     PN__MPM_A(srow, cap, int);
     if (fail) {
@@ -2903,8 +2907,9 @@ static inline int pn__mpm_row_of(const pn_mpm_world *w, const pn_real *x) {
    so the stress impulse of a step dt is dt k (x_i - x_p) (MLS-MPM, Hu et al. 2018); last, the
    state's pn__hardening, which the next G2P reuses while the particle stays elastic. */
 PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real *x, const pn_real *v, const pn_real *C,
-                                 const pn_real *tau, pn_real hard, pn_real *out, const int d) {
-    int i, j, n = 0;
+                                 const pn_real *tau, pn_real hard, pn_real *buf, const int d) {
+    int i, j, n = 0, pay = PN__MPM_PAY(d);
+    pn_real out[PN__MPM_PAY(3)];
     pn_real m = w->mass[p], k = -w->vol0[p] * (4 * w->inv_dx * w->inv_dx); /* no division per particle */
     for (i = 0; i < d; ++i) out[n++] = x[i];
     out[n++] = m;
@@ -2913,19 +2918,20 @@ PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real 
     for (i = 0; i < d; ++i)
         for (j = i; j < d; ++j) out[n++] = k * tau[i * d + j];
     out[n] = hard;
+    for (i = 0; i < pay; ++i) PN__MPM_REC(buf, p, i, pay) = out[i];
 }
 
 /* Particle record r's MLS-MPM contribution to the dense grid, on the stencil rows i0 <= i < i1
    (of 0 .. 2; a thread's slab may hold only some): mass and momentum m v + Q (x_i - x_p),
    Q = m C + dt k; when v0 != NULL also the transfer's own momentum m v + m C (x_i - x_p)
    (AFLIP). The dimension is spelled out: see >>transfer. */
-static inline void pn__mpm_scatter2(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_real *v0, int i0, int i1,
-                                    int mark) {
-    pn_real dx = w->desc.dx_m, m = r[2], fx[3], wx[3], wy[3];
-    pn_real q00 = r[5] + dt * r[9], q01 = r[6] + dt * r[10], q10 = r[7] + dt * r[10], q11 = r[8] + dt * r[11];
+static inline void pn__mpm_scatter2(pn_mpm_world *w, size_t p, pn_real dt, pn_real *v0, int i0, int i1, int mark) {
+    pn_real r[PN__MPM_PAY(2)], dx = w->desc.dx_m, m, fx[3], wx[3], wy[3], q00, q01, q10, q11;
     pn_real *g;
     int base[3], i, j;
     size_t s0 = w->stride[0];
+    for (i = 0; i < PN__MPM_PAY(2); ++i) r[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(2));
+    m = r[2], q00 = r[5] + dt * r[9], q01 = r[6] + dt * r[10], q10 = r[7] + dt * r[10], q11 = r[8] + dt * r[11];
     pn__mpm_base(w, r, base, fx);
     PN__MPM_SPLINE(wx, fx[0]);
     PN__MPM_SPLINE(wy, fx[1]);
@@ -2951,14 +2957,15 @@ static inline void pn__mpm_scatter2(pn_mpm_world *w, const pn_real *r, pn_real d
     }
 }
 
-static inline void pn__mpm_scatter3(pn_mpm_world *w, const pn_real *r, pn_real dt, pn_real *v0, int i0, int i1,
-                                    int mark) {
+static inline void pn__mpm_scatter3(pn_mpm_world *w, size_t p, pn_real dt, pn_real *v0, int i0, int i1, int mark) {
     static const int sym[9] = {0, 1, 2, 1, 3, 4, 2, 4, 5}; /* upper triangle of k */
-    pn_real dx = w->desc.dx_m, m = r[3], fx[3], W[3][3], q[9];
+    pn_real r[PN__MPM_PAY(3)], dx = w->desc.dx_m, m, fx[3], W[3][3], q[9];
     const pn_real *mv = r + 4, *mC = r + 7, *k = r + 16;
     pn_real *g;
     int base[3], i, j, l, c;
     size_t s0 = w->stride[0], s1 = w->stride[1];
+    for (i = 0; i < PN__MPM_PAY(3); ++i) r[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(3));
+    m = r[3];
     pn__mpm_base(w, r, base, fx);
     for (i = 0; i < 3; ++i) PN__MPM_SPLINE(W[i], fx[i]);
     for (c = 0; c < 9; ++c) q[c] = mC[c] + dt * k[sym[c]];
@@ -3005,8 +3012,11 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, const size_t *idx, int n, pn
     pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1];
     int b0[L], b1[L], i, j, l, k;
     size_t s0 = w->stride[0];
-    for (l = 0; l < L; ++l) /* the records (a stride of 13 does not vectorize) */
-        for (k = 0; k < 12; ++k) rec[k][l] = w->ppay[idx[l < n ? l : 0] * (size_t)pay + (size_t)k]; /* past n: lane 0 */
+    if (n == L && idx[0] % L == 0 && idx[L - 1] == idx[0] + L - 1) /* one whole record block */
+        memcpy(rec, &PN__MPM_REC(w->ppay, idx[0], 0, pay), sizeof rec);
+    else
+        for (l = 0; l < L; ++l)
+            for (k = 0; k < 12; ++k) rec[k][l] = PN__MPM_REC(w->ppay, idx[l < n ? l : 0], k, pay); /* past n: lane 0 */
     for (l = 0; l < L; ++l) { /* loops over l innermost: gcc -O2 vectorizes them, and unrolls no inner loop */
         pn_real xc = (rec[0][l] - ox) * inv_dx, yc = (rec[1][l] - oy) * inv_dx;
         q00[l] = rec[5][l] + dt * rec[9][l], q01[l] = rec[6][l] + dt * rec[10][l];
@@ -3044,24 +3054,23 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, const size_t *idx, int n, pn
    row (slabs start at block rows, so no two threads write one mark). The whole grid in one
    slab: every particle, every row (the constant bounds let the compiler unroll the rows). */
 static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
-    int d = w->dim, pay = PN__MPM_PAY(d), whole = r0 == 0 && r1 > w->desc.res[0], nl = 0;
+    int d = w->dim, whole = r0 == 0 && r1 > w->desc.res[0], nl = 0;
     pn_real *v0 = w->gdense0;
     size_t p, idx[PN__MPM_LANES];
     unsigned char mark[PN__MPM_LANES];
     for (p = 0; p < w->n; ++p) {
-        const pn_real *r = w->ppay + p * (size_t)pay;
         int b = w->prow[p];
         if (!w->active[p] || !(whole || (b + 3 > r0 && b < r1))) continue;
         if (d == 2 && !v0) { /* batches of the slab's particles, in order */
             idx[nl] = p, mark[nl] = (unsigned char)(b >= r0);
             if (++nl == PN__MPM_LANES) pn__mpm_scatter2_lanes(w, idx, nl, dt, r0, r1, mark), nl = 0;
         } else if (whole) {
-            if (d == 2) pn__mpm_scatter2(w, r, dt, v0, 0, 3, 1);
-            else pn__mpm_scatter3(w, r, dt, v0, 0, 3, 1);
+            if (d == 2) pn__mpm_scatter2(w, p, dt, v0, 0, 3, 1);
+            else pn__mpm_scatter3(w, p, dt, v0, 0, 3, 1);
         } else {
             int i0 = PN__MAX(r0 - b, 0), i1 = PN__MIN(r1 - b, 3);
-            if (d == 2) pn__mpm_scatter2(w, r, dt, v0, i0, i1, b >= r0);
-            else pn__mpm_scatter3(w, r, dt, v0, i0, i1, b >= r0);
+            if (d == 2) pn__mpm_scatter2(w, p, dt, v0, i0, i1, b >= r0);
+            else pn__mpm_scatter3(w, p, dt, v0, i0, i1, b >= r0);
         }
     }
     if (nl) pn__mpm_scatter2_lanes(w, idx, nl, dt, r0, r1, mark);
@@ -3259,10 +3268,11 @@ PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real 
                                  const pn_real *vc, int lane) {
     const int dd = d * d, pay = PN__MPM_PAY(d);
     int i, j, plastic = 0, stat;
-    const pn_real *F = w->F + p * (size_t)dd, *x = w->ppay + p * (size_t)pay; /* x as P2G saw it */
+    const pn_real *F = w->F + p * (size_t)dd;
     const pn_material *mat = &w->groups[w->group[p]].material;
     pn_real nv[3], ov[3] = {0, 0, 0}, nC[9], Fn[9], Z[9] = {0}, tau[9] = {0}, hn = w->h[p], chk[4] = {0, 0, 0, 0}, fin = 0;
-    pn_real hard = x[pay - 1];
+    pn_real x[3], hard = PN__MPM_REC(w->ppay, p, pay - 1, pay); /* x as P2G saw it */
+    for (i = 0; i < d; ++i) x[i] = PN__MPM_REC(w->ppay, p, i, pay);
     pn_real *sx = w->sx + p * (size_t)d, *sv = w->sv + p * (size_t)d;
     if (vc) { /* found by pn__mpm_xg2p2_lanes */
         for (i = 0; i < 2; ++i) nv[i] = vc[i * PN__MPM_LANES + lane];
@@ -3319,7 +3329,7 @@ PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real 
     }
     for (i = 0; i < d; ++i) sx[i] = PN__MIN(PN__MAX(sx[i], w->wall_lo[i]), w->wall_hi[i]); /* pn__mpm_wall_plane */
     w->srow[p] = pn__mpm_row_of(w, sx);
-    pn__mpm_pack(w, p, sx, sv, nC, tau, hard, w->spay + p * (size_t)pay, d);
+    pn__mpm_pack(w, p, sx, sv, nC, tau, hard, w->spay, d);
     w->pstat[p] = stat;
 }
 
@@ -3356,7 +3366,8 @@ static inline void pn__mpm_sqrt_lanes(pn_real *x) {
    found here (vc: v0, v1, C00, C01, C10, C11 per lane). Elastic states get the bits of
    pn__mpm_xg2p's fast path (the arithmetic is pn__mpm_vel2's and pn__tau_fcr2's, in order). */
 static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, pn_real reach, const pn_real *gpar,
-                                unsigned char *done, pn_real (*vc)[PN__MPM_LANES]) {
+                                unsigned char *done, pn_real (*vc)[PN__MPM_LANES], size_t *n_done, size_t *n_clamped,
+                                pn_real *v2max) {
     enum { L = PN__MPM_LANES, pay = PN__MPM_PAY(2) };
     pn_real fx0[L], fx1[L], wx[3][L], wy[3][L], g00[L], g01[L], g10[L], g11[L], Fn[4][L], tau[4][L], nx[2][L];
     pn_real qq[L], rr[L], mu[L], la[L], lo[L], hi[L], hard[L], k = 4 * w->inv_dx, inv_dx = w->inv_dx;
@@ -3365,11 +3376,12 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     const pn_real *G = w->gdense;
     int b0[L], b1[L], ok[L], clamped[L], i, j, l;
     size_t s0 = w->stride[0], nd[L];
-    const pn_real *pay0 = w->ppay + p0 * (size_t)pay, *F0 = w->F + p0 * 4;
+    const pn_real *F0 = w->F + p0 * 4;
     for (l = 0; l < L; ++l) { /* the inputs (strided, and the group a gather); lanes past n copy lane 0 */
         int src = l < n ? l : 0;
         const pn_real *gp = gpar + 5 * w->group[p0 + (size_t)src];
-        px[l] = pay0[src * pay], py[l] = pay0[src * pay + 1], hard[l] = pay0[src * pay + pay - 1];
+        px[l] = PN__MPM_REC(w->ppay, p0 + (size_t)src, 0, pay), py[l] = PN__MPM_REC(w->ppay, p0 + (size_t)src, 1, pay);
+        hard[l] = PN__MPM_REC(w->ppay, p0 + (size_t)src, pay - 1, pay);
         for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
         ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l];
         mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
@@ -3447,6 +3459,11 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         tau[0][l] = tl[0], tau[1][l] = tl[1], tau[2][l] = tl[2], tau[3][l] = tl[3];
     }
     memcpy(vc[0], v0, sizeof v0), memcpy(vc[1], v1, sizeof v1), memcpy(vc[2], C, sizeof C);
+    for (l = 0; l < L; ++l) { /* the statistics of the finished (the step counts the rest) */
+        pn_real sp = v0[l] * v0[l] + v1[l] * v1[l];
+        *n_done += (size_t)ok[l], *n_clamped += (size_t)(ok[l] & clamped[l]);
+        *v2max = ok[l] && sp > *v2max ? sp : *v2max;
+    }
     for (l = 0; l < n; ++l) {
         size_t p = p0 + (size_t)l;
         pn_real *sx = w->sx + p * 2, *sv = w->sv + p * 2, *sC = w->sC + p * 4, *sF = w->sF + p * 4, t[4];
@@ -3458,7 +3475,7 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         w->sh[p] = hnew[l];
         w->sactive[p] = 1;
         w->srow[p] = pn__mpm_row_of(w, sx);
-        pn__mpm_pack(w, p, sx, sv, sC, t, hard[l], w->spay + p * (size_t)pay, 2);
+        pn__mpm_pack(w, p, sx, sv, sC, t, hard[l], w->spay, 2);
         w->pstat[p] = clamped[l] ? 0x100 : 0;
     }
 }
@@ -3487,8 +3504,8 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
         if (w->pstat[p] != PN_OK) continue;
         w->prow[p] = pn__mpm_row_of(w, x);
         hard = pn__hardening(&w->groups[w->group[p]].material, w->h[p]);
-        if (d == 2) pn__mpm_pack(w, p, x, w->v + p * 2, w->C + p * 4, tau, hard, w->ppay + p * (size_t)PN__MPM_PAY(2), 2);
-        else pn__mpm_pack(w, p, x, w->v + p * 3, w->C + p * 9, tau, hard, w->ppay + p * (size_t)PN__MPM_PAY(3), 3);
+        if (d == 2) pn__mpm_pack(w, p, x, w->v + p * 2, w->C + p * 4, tau, hard, w->ppay, 2);
+        else pn__mpm_pack(w, p, x, w->v + p * 3, w->C + p * 9, tau, hard, w->ppay, 3);
     }
     {
         size_t p;
@@ -3545,11 +3562,12 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
             int nl = (int)PN__MIN((size_t)PN__MPM_LANES, w->n - q0);
             unsigned char done[PN__MPM_LANES] = {0};
             pn_real vc[6][PN__MPM_LANES];
-            if (lanes) pn__mpm_xg2p2_lanes(w, q0, nl, dt, reach, gpar, done, vc);
+            if (lanes) pn__mpm_xg2p2_lanes(w, q0, nl, dt, reach, gpar, done, vc, &n_alive, &n_plastic, &v2max);
             for (q = q0; q < q0 + (size_t)nl; ++q) {
                 const pn_real *sv = w->sv + q * (size_t)d;
                 pn_real sp = 0;
                 int i, stat;
+                if (done[q - q0]) continue; /* counted in the lanes */
                 if (!w->active[q]) { /* retired particles keep their last state */
                     w->pstat[q] = 0;
                     w->sactive[q] = 0;
@@ -3560,10 +3578,8 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
                     w->sh[q] = w->h[q];
                     continue;
                 }
-                if (!done[q - q0]) {
-                    if (d == 2) pn__mpm_xg2p(w, q, dt, flip, reach, 2, lanes ? vc[0] : NULL, (int)(q - q0));
-                    else pn__mpm_xg2p(w, q, dt, flip, reach, 3, NULL, 0);
-                }
+                if (d == 2) pn__mpm_xg2p(w, q, dt, flip, reach, 2, lanes ? vc[0] : NULL, (int)(q - q0));
+                else pn__mpm_xg2p(w, q, dt, flip, reach, 3, NULL, 0);
                 stat = w->pstat[q];
                 any |= stat;
                 n_plastic += (size_t)((stat & 0x100) != 0);
@@ -3668,6 +3684,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
 #undef PN__OMP_FOR
 #undef PN__MPM_SPLINE
 #undef PN__MPM_PAY
+#undef PN__MPM_REC
 #undef PN__MPM_SLABS
 #undef PN__MPM_LANES
 #undef PN__MPM_BLOCK
