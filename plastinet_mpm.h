@@ -2918,7 +2918,8 @@ PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real 
     for (i = 0; i < d; ++i)
         for (j = i; j < d; ++j) out[n++] = k * tau[i * d + j];
     out[n] = hard;
-    for (i = 0; i < pay; ++i) PN__MPM_REC(buf, p, i, pay) = out[i];
+    buf = &PN__MPM_REC(buf, p, 0, pay);
+    for (i = 0; i < pay; ++i) buf[i * PN__MPM_LANES] = out[i];
 }
 
 /* Particle record r's MLS-MPM contribution to the dense grid, on the stencil rows i0 <= i < i1
@@ -3376,12 +3377,11 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     const pn_real *G = w->gdense;
     int b0[L], b1[L], ok[L], clamped[L], i, j, l;
     size_t s0 = w->stride[0], nd[L];
-    const pn_real *F0 = w->F + p0 * 4;
+    const pn_real *F0 = w->F + p0 * 4, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
     for (l = 0; l < L; ++l) { /* the inputs (strided, and the group a gather); lanes past n copy lane 0 */
         int src = l < n ? l : 0;
         const pn_real *gp = gpar + 5 * w->group[p0 + (size_t)src];
-        px[l] = PN__MPM_REC(w->ppay, p0 + (size_t)src, 0, pay), py[l] = PN__MPM_REC(w->ppay, p0 + (size_t)src, 1, pay);
-        hard[l] = PN__MPM_REC(w->ppay, p0 + (size_t)src, pay - 1, pay);
+        px[l] = rb[src], py[l] = rb[L + src], hard[l] = rb[(pay - 1) * L + src];
         for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
         ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l];
         mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
@@ -3464,18 +3464,30 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         *n_done += (size_t)ok[l], *n_clamped += (size_t)(ok[l] & clamped[l]);
         *v2max = ok[l] && sp > *v2max ? sp : *v2max;
     }
+    { /* every lane's P2G record, as pn__mpm_pack, into the record block (a lane that did not
+         finish here is written again by pn__mpm_xg2p) */
+        pn_real *out = &PN__MPM_REC(w->spay, p0, 0, pay), kk = -(4 * w->inv_dx * w->inv_dx);
+        for (l = 0; l < L; ++l) {
+            pn_real m = w->mass[p0 + (size_t)(l < n ? l : 0)], k = w->vol0[p0 + (size_t)(l < n ? l : 0)] * kk;
+            nx[0][l] = PN__MIN(PN__MAX(nx[0][l], w->wall_lo[0]), w->wall_hi[0]); /* pn__mpm_wall_plane */
+            nx[1][l] = PN__MIN(PN__MAX(nx[1][l], w->wall_lo[1]), w->wall_hi[1]);
+            out[l] = nx[0][l], out[L + l] = nx[1][l], out[2 * L + l] = m;
+            out[3 * L + l] = m * v0[l], out[4 * L + l] = m * v1[l];
+            out[5 * L + l] = m * C[0][l], out[6 * L + l] = m * C[1][l], out[7 * L + l] = m * C[2][l], out[8 * L + l] = m * C[3][l];
+            out[9 * L + l] = k * tau[0][l], out[10 * L + l] = k * tau[1][l], out[11 * L + l] = k * tau[3][l];
+            out[12 * L + l] = hard[l];
+        }
+    }
     for (l = 0; l < n; ++l) {
         size_t p = p0 + (size_t)l;
-        pn_real *sx = w->sx + p * 2, *sv = w->sv + p * 2, *sC = w->sC + p * 4, *sF = w->sF + p * 4, t[4];
+        pn_real *sx = w->sx + p * 2, *sv = w->sv + p * 2, *sC = w->sC + p * 4, *sF = w->sF + p * 4;
         done[l] = (unsigned char)ok[l];
         if (!ok[l]) continue;
-        sv[0] = v0[l], sv[1] = v1[l];
-        for (i = 0; i < 2; ++i) sx[i] = PN__MIN(PN__MAX(nx[i][l], w->wall_lo[i]), w->wall_hi[i]); /* pn__mpm_wall_plane */
-        for (i = 0; i < 4; ++i) sC[i] = C[i][l], sF[i] = Fn[i][l], t[i] = tau[i][l];
+        sv[0] = v0[l], sv[1] = v1[l], sx[0] = nx[0][l], sx[1] = nx[1][l];
+        for (i = 0; i < 4; ++i) sC[i] = C[i][l], sF[i] = Fn[i][l];
         w->sh[p] = hnew[l];
         w->sactive[p] = 1;
         w->srow[p] = pn__mpm_row_of(w, sx);
-        pn__mpm_pack(w, p, sx, sv, sC, t, hard[l], w->spay, 2);
         w->pstat[p] = clamped[l] ? 0x100 : 0;
     }
 }
