@@ -2811,17 +2811,17 @@ PN__MPM_INLINE void pn__fcr2_stress(const pn_real *Z, pn_real c, pn_real sn, pn_
    clamped stretch is m' I + beta D, m' and beta r the mean and half difference of the
    clamped s0, s1, so Z = R (m' I + beta D) = (m' - q beta) R + beta F (F itself where nothing
    clamps). The smallest stretch is signed: an inverted F (s1 < 0) clamps back to det > 0.
-   Returns whether it clamped; ratio = |s0 s1| / (z0 z1), the factor on J_p. */
-PN__MPM_INLINE int pn__snow2_clamp(const pn_real *F, pn_real q, pn_real r, pn_real c, pn_real sn, pn_real lo, pn_real hi,
+   Returns 1 if it clamped, else 0 (a real: the lanes keep every flag as wide as their data,
+   or gcc -O2 does not vectorize them in double); ratio = |s0 s1| / (z0 z1), the factor on J_p. */
+PN__MPM_INLINE pn_real pn__snow2_clamp(const pn_real *F, pn_real q, pn_real r, pn_real c, pn_real sn, pn_real lo, pn_real hi,
                                    pn_real *Z, pn_real *ratio) {
     pn_real s0 = q + r, s1 = q - r, z0 = PN__MIN(PN__MAX(s0, lo), hi), z1 = PN__MIN(PN__MAX(s1, lo), hi);
     pn_real beta = (z0 - z1) / 2 / (r + (r > 0 ? 0 : 1)), alpha = (z0 + z1) / 2 - q * beta;
-    int clamped = (z0 != s0) | (z1 != s1);
-    pn_real k = (pn_real)clamped; /* a blend, not a select: gcc would put beta's division under the condition */
+    pn_real k = (z0 != s0) | (z1 != s1) ? 1 : 0; /* a blend, not a select: gcc would put beta's division under the condition */
     Z[0] = F[0] + k * (alpha * c + beta * F[0] - F[0]), Z[1] = F[1] + k * (-alpha * sn + beta * F[1] - F[1]);
     Z[2] = F[2] + k * (alpha * sn + beta * F[2] - F[2]), Z[3] = F[3] + k * (alpha * c + beta * F[3] - F[3]);
     *ratio = PN__FABS(s0 * s1) / (z0 * z1);
-    return clamped;
+    return k;
 }
 
 /* The fast path's parameters of material m: 0 unless it is fixed corotated, elastic or with
@@ -3375,7 +3375,8 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     pn_real rot[2][L], ratio[L], hnew[L], Fin[4][L];
     pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1], v0[L], v1[L], C[4][L], px[L], py[L];
     const pn_real *G = w->gdense;
-    int b0[L], b1[L], ok[L], clamped[L], i, j, l;
+    pn_real ok[L], clamped[L], mass[L], vol[L]; /* flags as reals: see pn__snow2_clamp */
+    int b0[L], b1[L], i, j, l;
     size_t s0 = w->stride[0], nd[L];
     const pn_real *F0 = w->F + p0 * 4, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
     for (l = 0; l < L; ++l) { /* the inputs (strided, and the group a gather); lanes past n copy lane 0 */
@@ -3383,7 +3384,8 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         const pn_real *gp = gpar + 5 * w->group[p0 + (size_t)src];
         px[l] = rb[src], py[l] = rb[L + src], hard[l] = rb[(pay - 1) * L + src];
         for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
-        ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l];
+        ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l] ? 1 : 0;
+        mass[l] = w->mass[p0 + (size_t)src], vol[l] = w->vol0[p0 + (size_t)src];
         mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
     }
     /* every vector loop runs over all L lanes: a constant trip count, which gcc -O2 (its very
@@ -3432,7 +3434,7 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     for (l = 0; l < n; ++l) { /* J_p and the hardening of the clamped (scalar: log and exp) */
         const pn_material *m = &w->groups[w->group[p0 + (size_t)l]].material;
         pn_real hn = w->h[p0 + (size_t)l];
-        if (!clamped[l] || !ok[l]) {
+        if (clamped[l] == 0 || ok[l] == 0) {
             hnew[l] = hn;
             continue;
         }
@@ -3445,32 +3447,32 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     }
     for (l = 0; l < L; ++l) { /* the stress, the move and every check of pn__mpm_xg2p */
         pn_real Zl[4], tl[4], chk;
-        int in;
         Zl[0] = Fn[0][l], Zl[1] = Fn[1][l], Zl[2] = Fn[2][l], Zl[3] = Fn[3][l];
         pn__fcr2_stress(Zl, rot[0][l], rot[1][l], mu[l], la[l], tl);
         nx[0][l] = px[l] + dt * v0[l], nx[1][l] = py[l] + dt * v1[l];
         chk = (Zl[0] - Zl[0]) + (Zl[1] - Zl[1]) + (Zl[2] - Zl[2]) + (Zl[3] - Zl[3]) + (tl[0] - tl[0]) +
               (tl[1] - tl[1]) + (tl[3] - tl[3]) + (C[0][l] - C[0][l]) + (C[1][l] - C[1][l]) +
               (C[2][l] - C[2][l]) + (C[3][l] - C[3][l]) + (v0[l] - v0[l]) + (v1[l] - v1[l]) + (hnew[l] - hnew[l]);
-        in = (chk == 0) & (PN__FABS(v0[l]) <= reach) & (PN__FABS(v1[l]) <= reach);
-        in &= (nx[0][l] >= w->grid_lo[0]) & (nx[0][l] <= w->grid_hi[0]) & (nx[1][l] >= w->grid_lo[1]) &
-              (nx[1][l] <= w->grid_hi[1]);
-        ok[l] &= in;
+        ok[l] = (chk == 0) & (PN__FABS(v0[l]) <= reach) & (PN__FABS(v1[l]) <= reach) & (nx[0][l] >= w->grid_lo[0]) &
+                        (nx[0][l] <= w->grid_hi[0]) & (nx[1][l] >= w->grid_lo[1]) & (nx[1][l] <= w->grid_hi[1])
+                    ? ok[l]
+                    : 0;
         tau[0][l] = tl[0], tau[1][l] = tl[1], tau[2][l] = tl[2], tau[3][l] = tl[3];
     }
     memcpy(vc[0], v0, sizeof v0), memcpy(vc[1], v1, sizeof v1), memcpy(vc[2], C, sizeof C);
     for (l = 0; l < L; ++l) { /* the statistics of the finished (the step counts the rest) */
         pn_real sp = v0[l] * v0[l] + v1[l] * v1[l];
-        *n_done += (size_t)ok[l], *n_clamped += (size_t)(ok[l] & clamped[l]);
-        *v2max = ok[l] && sp > *v2max ? sp : *v2max;
+        *n_done += (size_t)(ok[l] != 0), *n_clamped += (size_t)(ok[l] * clamped[l] != 0);
+        *v2max = ok[l] != 0 && sp > *v2max ? sp : *v2max;
     }
     { /* every lane's P2G record, as pn__mpm_pack, into the record block (a lane that did not
          finish here is written again by pn__mpm_xg2p) */
         pn_real *out = &PN__MPM_REC(w->spay, p0, 0, pay), kk = -(4 * w->inv_dx * w->inv_dx);
+        pn_real wl0 = w->wall_lo[0], wl1 = w->wall_lo[1], wh0 = w->wall_hi[0], wh1 = w->wall_hi[1]; /* out may alias w */
         for (l = 0; l < L; ++l) {
-            pn_real m = w->mass[p0 + (size_t)(l < n ? l : 0)], k = w->vol0[p0 + (size_t)(l < n ? l : 0)] * kk;
-            nx[0][l] = PN__MIN(PN__MAX(nx[0][l], w->wall_lo[0]), w->wall_hi[0]); /* pn__mpm_wall_plane */
-            nx[1][l] = PN__MIN(PN__MAX(nx[1][l], w->wall_lo[1]), w->wall_hi[1]);
+            pn_real m = mass[l], k = vol[l] * kk;
+            nx[0][l] = PN__MIN(PN__MAX(nx[0][l], wl0), wh0); /* pn__mpm_wall_plane */
+            nx[1][l] = PN__MIN(PN__MAX(nx[1][l], wl1), wh1);
             out[l] = nx[0][l], out[L + l] = nx[1][l], out[2 * L + l] = m;
             out[3 * L + l] = m * v0[l], out[4 * L + l] = m * v1[l];
             out[5 * L + l] = m * C[0][l], out[6 * L + l] = m * C[1][l], out[7 * L + l] = m * C[2][l], out[8 * L + l] = m * C[3][l];
@@ -3481,14 +3483,14 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     for (l = 0; l < n; ++l) {
         size_t p = p0 + (size_t)l;
         pn_real *sx = w->sx + p * 2, *sv = w->sv + p * 2, *sC = w->sC + p * 4, *sF = w->sF + p * 4;
-        done[l] = (unsigned char)ok[l];
-        if (!ok[l]) continue;
+        done[l] = (unsigned char)(ok[l] != 0);
+        if (!done[l]) continue;
         sv[0] = v0[l], sv[1] = v1[l], sx[0] = nx[0][l], sx[1] = nx[1][l];
         for (i = 0; i < 4; ++i) sC[i] = C[i][l], sF[i] = Fn[i][l];
         w->sh[p] = hnew[l];
         w->sactive[p] = 1;
         w->srow[p] = pn__mpm_row_of(w, sx);
-        w->pstat[p] = clamped[l] ? 0x100 : 0;
+        w->pstat[p] = clamped[l] != 0 ? 0x100 : 0;
     }
 }
 

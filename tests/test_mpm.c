@@ -587,7 +587,7 @@ PN_TEST(mpm_snow2_closed_form) {
             pn__fcr2_norms(F, &q, &r);
             q = PN__SQRT(q), r = PN__SQRT(r);
             pn__fcr2_rotation(F, q, &c, &sn);
-            clamped = pn__snow2_clamp(F, q, r, c, sn, lo, hi, Z2, &ratio);
+            clamped = pn__snow2_clamp(F, q, r, c, sn, lo, hi, Z2, &ratio) != 0;
             if (clamped) { /* as pn__mpm_xg2p2_lanes */
                 hn2 = h + PN__LOG(ratio);
                 if (m[v].snow_h_min < 0 && hn2 < m[v].snow_h_min) hn2 = m[v].snow_h_min;
