@@ -3165,6 +3165,11 @@ static size_t pn__mpm_xgrid(pn_mpm_world *w, pn_real dt) {
                     if (v0)
                         for (i = 0; i < d; ++i) v0[node * (size_t)d + (size_t)i] /= m;
                     if (!walls_or_colliders) continue;
+                    if (w->n_colliders == 0) { /* only walls: an interior node has no obstacle */
+                        int inside = 1;
+                        for (i = 0; i < d; ++i) inside &= idx[i] > w->wall && idx[i] < w->desc.res[i] - w->wall;
+                        if (inside) continue;
+                    }
                     cn = pn__mpm_obstacle(w, idx, m, w->time_s, dir, vel, &kind, &mu);
                     if (cn) pn__mpm_project(d, cn, kind, dir, vel, mu, g + 1);
                 }
@@ -3459,12 +3464,16 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
                     : 0;
         tau[0][l] = tl[0], tau[1][l] = tl[1], tau[2][l] = tl[2], tau[3][l] = tl[3];
     }
-    memcpy(vc[0], v0, sizeof v0), memcpy(vc[1], v1, sizeof v1), memcpy(vc[2], C, sizeof C);
     for (l = 0; l < L; ++l) { /* the statistics of the finished (the step counts the rest) */
         pn_real sp = v0[l] * v0[l] + v1[l] * v1[l];
         *n_done += (size_t)(ok[l] != 0), *n_clamped += (size_t)(ok[l] * clamped[l] != 0);
         *v2max = ok[l] != 0 && sp > *v2max ? sp : *v2max;
     }
+    for (l = 0; l < n; ++l) /* v and C for the particles pn__mpm_xg2p finishes */
+        if (ok[l] == 0) {
+            memcpy(vc[0], v0, sizeof v0), memcpy(vc[1], v1, sizeof v1), memcpy(vc[2], C, sizeof C);
+            break;
+        }
     { /* every lane's P2G record, as pn__mpm_pack, into the record block (a lane that did not
          finish here is written again by pn__mpm_xg2p) */
         pn_real *out = &PN__MPM_REC(w->spay, p0, 0, pay), kk = -(4 * w->inv_dx * w->inv_dx);
