@@ -309,7 +309,7 @@ typedef struct pn_mpm_world {
     pn_real *ppay, *spay;        /* P2G record of each particle's state (and scratch)        */
     int *prow, *srow;            /* stencil base row (axis 0) of each particle (and scratch) */
     int rec_ok;                  /* ppay belongs to the current state                        */
-    pn_real inv_dx, grid_lo[3], grid_hi[3]; /* 1 / dx; [dx, (res - 1) dx] + origin (>>world) */
+    pn_real inv_dx, grid_lo[3], grid_hi[3]; /* 1 / dx; [0.75 dx, (res - 0.75) dx] + origin (>>world) */
     pn_real wall_lo[3], wall_hi[3]; /* the wall planes [wall dx, (res - wall) dx] + origin   */
 } pn_mpm_world;
 
@@ -650,8 +650,11 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     for (i = d - 2; i >= 0; --i) w->bstride[i] = w->bstride[i + 1] * w->nblk[i + 1];
     w->inv_dx = 1 / desc->dx_m;
     for (i = 0; i < d; ++i) {
-        w->grid_lo[i] = w->desc.origin_m[i] + desc->dx_m;
-        w->grid_hi[i] = w->desc.origin_m[i] + (desc->res[i] - 1) * desc->dx_m;
+        /* where a stencil fits (base node >= 0, base + 2 <= res: [0.5 dx, (res - 0.5) dx)), with
+           a quarter cell to spare for rounding. A wall of one cell has its plane at dx: a
+           particle a hair past it is put back on it, not taken for one that went through */
+        w->grid_lo[i] = w->desc.origin_m[i] + (pn_real)0.75 * desc->dx_m;
+        w->grid_hi[i] = w->desc.origin_m[i] + ((pn_real)desc->res[i] - (pn_real)0.75) * desc->dx_m;
         w->wall_lo[i] = w->desc.origin_m[i] + wall * desc->dx_m;
         w->wall_hi[i] = w->desc.origin_m[i] + (desc->res[i] - wall) * desc->dx_m;
     }
@@ -753,9 +756,9 @@ static int pn__mpm_inside(const pn_mpm_world *w, const pn_real *x) {
     return 1;
 }
 
-/* where the 3^dim stencil stays on the grid: [dx, (res - 1) dx]. A step that ends a particle
-   in the wall band puts it back on the wall's plane (pn__mpm_wall_plane); only one that
-   leaves this region has gone through a wall. */
+/* where the 3^dim stencil stays on the grid, with a quarter cell to spare: [0.75 dx,
+   (res - 0.75) dx]. A step that ends a particle in the wall band puts it back on the wall's
+   plane (pn__mpm_wall_plane); only one that leaves this region has gone through a wall. */
 /* The walls act at their planes, origin + wall dx and origin + (res - wall) dx. The node
    rows on the planes are held with the walls (pn__mpm_obstacle): holding only the rows
    behind them let material sink up to about a cell in, and once particles were put back on
@@ -2817,7 +2820,7 @@ PN__MPM_INLINE pn_real pn__snow2_clamp(const pn_real *F, pn_real q, pn_real r, p
                                    pn_real *Z, pn_real *ratio) {
     pn_real s0 = q + r, s1 = q - r, z0 = PN__MIN(PN__MAX(s0, lo), hi), z1 = PN__MIN(PN__MAX(s1, lo), hi);
     pn_real beta = (z0 - z1) / 2 / (r + (r > 0 ? 0 : 1)), alpha = (z0 + z1) / 2 - q * beta;
-    pn_real k = (z0 != s0) | (z1 != s1) ? 1 : 0; /* a blend, not a select: gcc would put beta's division under the condition */
+    pn_real k = ((z0 != s0) | (z1 != s1)) ? 1 : 0; /* a blend, not a select: gcc would put beta's division under the condition */
     Z[0] = F[0] + k * (alpha * c + beta * F[0] - F[0]), Z[1] = F[1] + k * (-alpha * sn + beta * F[1] - F[1]);
     Z[2] = F[2] + k * (alpha * sn + beta * F[2] - F[2]), Z[3] = F[3] + k * (alpha * c + beta * F[3] - F[3]);
     *ratio = PN__FABS(s0 * s1) / (z0 * z1);
@@ -3458,8 +3461,8 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         chk = (Zl[0] - Zl[0]) + (Zl[1] - Zl[1]) + (Zl[2] - Zl[2]) + (Zl[3] - Zl[3]) + (tl[0] - tl[0]) +
               (tl[1] - tl[1]) + (tl[3] - tl[3]) + (C[0][l] - C[0][l]) + (C[1][l] - C[1][l]) +
               (C[2][l] - C[2][l]) + (C[3][l] - C[3][l]) + (v0[l] - v0[l]) + (v1[l] - v1[l]) + (hnew[l] - hnew[l]);
-        ok[l] = (chk == 0) & (PN__FABS(v0[l]) <= reach) & (PN__FABS(v1[l]) <= reach) & (nx[0][l] >= w->grid_lo[0]) &
-                        (nx[0][l] <= w->grid_hi[0]) & (nx[1][l] >= w->grid_lo[1]) & (nx[1][l] <= w->grid_hi[1])
+        ok[l] = ((chk == 0) & (PN__FABS(v0[l]) <= reach) & (PN__FABS(v1[l]) <= reach) & (nx[0][l] >= w->grid_lo[0]) &
+                 (nx[0][l] <= w->grid_hi[0]) & (nx[1][l] >= w->grid_lo[1]) & (nx[1][l] <= w->grid_hi[1]))
                     ? ok[l]
                     : 0;
         tau[0][l] = tl[0], tau[1][l] = tl[1], tau[2][l] = tl[2], tau[3][l] = tl[3];
