@@ -1543,14 +1543,15 @@ PN__DEF pn_result pn_kirchhoff_stress(const pn_material *m, int d, const pn_real
    ehat (optional), tr e and |ehat|. c shifts the strain (cohesion), v adds a log-volume. */
 static void pn__hencky_split(int d, const pn_real *s, pn_real c, pn_real v, pn_real *e,
                              pn_real *ehat, pn_real *tr, pn_real *r) {
-    pn_real t = 0, r2 = 0, dd = (pn_real)d;
+    pn_real t = 0, r2 = 0, dd = (pn_real)d, el[3] = {0, 0, 0}; /* el: gcc 12 -O3 -march=native
+                                                                 takes e for uninitialized */
     int i;
     for (i = 0; i < d; ++i) {
-        e[i] = PN__LOG(s[i]) - c + v / dd;
-        t += e[i];
+        e[i] = el[i] = PN__LOG(s[i]) - c + v / dd;
+        t += el[i];
     }
     for (i = 0; i < d; ++i) {
-        pn_real x = e[i] - t / dd;
+        pn_real x = el[i] - t / dd;
         if (ehat) ehat[i] = x;
         r2 += x * x;
     }

@@ -3004,23 +3004,61 @@ static inline void pn__mpm_scatter3(pn_mpm_world *w, size_t p, pn_real dt, pn_re
                 }
 }
 
-/* 2D P2G (APIC) of the particles idx[0 .. n - 1] (ascending, n <= PN__MPM_LANES), rows
-   [r0, r1) of axis 0: each one's nine node contributions computed in lanes the compiler can
-   vectorize, then added particle by particle, node by node: pn__mpm_scatter2's arithmetic and
-   order, so the same bits. mark as there, per particle. */
-static void pn__mpm_scatter2_lanes(pn_mpm_world *w, const size_t *idx, int n, pn_real dt, int r0, int r1,
+/* Float nodes take one 4-wide vector add (mass, momentum, the zero pad of a 2D node) where
+   the target has one: the bits of four scalar adds. (Double gains nothing: two adds for three
+   values, and the transposition costs more than it saves.) */
+#if defined(__SSE2__) || defined(__AVX__)
+#define PN__MPM_ADD4 (sizeof(pn_real) == 4)
+#else
+#define PN__MPM_ADD4 0
+#endif
+
+/* t[l][0 .. 3] = (r[0][l], r[1][l], r[2][l], 0), l < PN__MPM_LANES (8), for float: three lane
+   rows turned into one 4-vector per lane, for pn__mpm_add4 */
+static inline void pn__mpm_transpose3(pn_real (*r)[PN__MPM_LANES], pn_real (*t)[4]) {
+#if defined(__SSE2__) || defined(__AVX__)
+    int h;
+    for (h = 0; h < PN__MPM_LANES; h += 4) {
+        __m128 a = _mm_loadu_ps((const float *)r[0] + h), b = _mm_loadu_ps((const float *)r[1] + h);
+        __m128 c = _mm_loadu_ps((const float *)r[2] + h), z = _mm_setzero_ps();
+        _MM_TRANSPOSE4_PS(a, b, c, z);
+        _mm_storeu_ps((float *)t[h], a), _mm_storeu_ps((float *)t[h + 1], b);
+        _mm_storeu_ps((float *)t[h + 2], c), _mm_storeu_ps((float *)t[h + 3], z);
+    }
+#else
+    (void)r, (void)t;
+#endif
+}
+
+/* g[0 .. 3] += c[0 .. 3] in float */
+static inline void pn__mpm_add4(pn_real *g, const pn_real *c) {
+#if defined(__SSE2__) || defined(__AVX__)
+    _mm_storeu_ps((float *)g, _mm_add_ps(_mm_loadu_ps((const float *)g), _mm_loadu_ps((const float *)c)));
+#else
+    (void)g, (void)c;
+#endif
+}
+
+/* 2D P2G (APIC) of n <= PN__MPM_LANES particles, rows [r0, r1) of axis 0: idx[0 .. n - 1]
+   (ascending), or with idx NULL the whole record block of particle p0. Each one's nine node
+   contributions are computed in lanes the compiler can vectorize, then added particle by
+   particle, node by node (mass, momentum and the zero pad of a 2D node in one vector add):
+   pn__mpm_scatter2's arithmetic and order, so the same bits. mark as there, per particle. */
+static void pn__mpm_scatter2_lanes(pn_mpm_world *w, size_t p0, const size_t *idx, int n, pn_real dt, int r0, int r1,
                                    const unsigned char *mark) {
     enum { L = PN__MPM_LANES, pay = PN__MPM_PAY(2) };
-    pn_real rec[12][L], c[9][3][L], fx0[L], fx1[L], wx[3][L], wy[3][L], q00[L], q01[L], q10[L], q11[L];
+    pn_real gat[12][L], c[9][3][L], t[9][L][4], fx0[L], fx1[L], wx[3][L], wy[3][L], q00[L], q01[L], q10[L], q11[L];
     pn_real dx = w->desc.dx_m, inv_dx = w->inv_dx;
     pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1];
+    pn_real(*rec)[L] = gat;
+    unsigned char *bmark = w->bmark;
     int b0[L], b1[L], i, j, l, k;
-    size_t s0 = w->stride[0];
-    if (n == L && idx[0] % L == 0 && idx[L - 1] == idx[0] + L - 1) /* one whole record block */
-        memcpy(rec, &PN__MPM_REC(w->ppay, idx[0], 0, pay), sizeof rec);
+    size_t s0 = w->stride[0], bs0 = w->bstride[0];
+    if (!idx) /* one whole record block */
+        rec = (pn_real(*)[L]) & PN__MPM_REC(w->ppay, p0, 0, pay);
     else
         for (l = 0; l < L; ++l)
-            for (k = 0; k < 12; ++k) rec[k][l] = PN__MPM_REC(w->ppay, idx[l < n ? l : 0], k, pay); /* past n: lane 0 */
+            for (k = 0; k < 12; ++k) gat[k][l] = PN__MPM_REC(w->ppay, idx[l < n ? l : 0], k, pay); /* past n: lane 0 */
     for (l = 0; l < L; ++l) { /* loops over l innermost: gcc -O2 vectorizes them, and unrolls no inner loop */
         pn_real xc = (rec[0][l] - ox) * inv_dx, yc = (rec[1][l] - oy) * inv_dx;
         q00[l] = rec[5][l] + dt * rec[9][l], q01[l] = rec[6][l] + dt * rec[10][l];
@@ -3031,7 +3069,7 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, const size_t *idx, int n, pn
         PN__MPM_SPLINE3(wy[0][l], wy[1][l], wy[2][l], fx1[l]);
     }
     for (i = 0; i < 3; ++i)
-        for (j = 0; j < 3; ++j)
+        for (j = 0; j < 3; ++j) {
             for (l = 0; l < L; ++l) {
                 pn_real ex = ((pn_real)i - fx0[l]) * dx, a0 = rec[3][l] + q00[l] * ex, a1 = rec[4][l] + q10[l] * ex;
                 pn_real ey = ((pn_real)j - fx1[l]) * dx, wt = wx[i][l] * wy[j][l];
@@ -3039,36 +3077,69 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, const size_t *idx, int n, pn
                 c[3 * i + j][1][l] = wt * (a0 + q01[l] * ey);
                 c[3 * i + j][2][l] = wt * (a1 + q11[l] * ey);
             }
+            if (PN__MPM_ADD4) pn__mpm_transpose3(c[3 * i + j], t[3 * i + j]);
+        }
     for (l = 0; l < n; ++l) {
         int i0 = PN__MAX(r0 - b0[l], 0), i1 = PN__MIN(r1 - b0[l], 3);
         pn_real *g = w->gdense + ((size_t)b0[l] * s0 + (size_t)b1[l]) * 4;
-        if (mark[l]) w->bmark[(unsigned)b0[l] / PN__MPM_BLOCK * w->bstride[0] + (unsigned)b1[l] / PN__MPM_BLOCK] = 1;
-        for (i = i0; i < i1; ++i)
-            for (j = 0; j < 3; ++j) {
-                pn_real *gn = g + ((size_t)i * s0 + (size_t)j) * 4;
-                gn[0] += c[3 * i + j][0][l];
-                gn[1] += c[3 * i + j][1][l];
-                gn[2] += c[3 * i + j][2][l];
-            }
+        if (mark[l]) bmark[(unsigned)b0[l] / PN__MPM_BLOCK * bs0 + (unsigned)b1[l] / PN__MPM_BLOCK] = 1;
+        for (i = i0; i < i1; ++i) {
+            pn_real *gi = g + (size_t)i * s0 * 4;
+            if (PN__MPM_ADD4) {
+                pn__mpm_add4(gi, t[3 * i][l]);
+                pn__mpm_add4(gi + 4, t[3 * i + 1][l]);
+                pn__mpm_add4(gi + 8, t[3 * i + 2][l]);
+            } else
+                for (j = 0; j < 3; ++j) {
+                    gi[4 * j] += c[3 * i + j][0][l];
+                    gi[4 * j + 1] += c[3 * i + j][1][l];
+                    gi[4 * j + 2] += c[3 * i + j][2][l];
+                }
+        }
     }
 }
 
 /* One slab of P2G: the particles, in index order, whose stencils reach rows [r0, r1) of axis 0,
    added to those rows only; each marks its base node's block in the slab that holds its base
    row (slabs start at block rows, so no two threads write one mark). The whole grid in one
-   slab: every particle, every row (the constant bounds let the compiler unroll the rows). */
+   slab: every particle, every row (the constant bounds let the compiler unroll the rows). In
+   2D, record blocks whose particles all take part go to the lanes whole; the others' members
+   are gathered into batches (a batch is flushed before a whole block, to keep the order). */
 static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
-    int d = w->dim, whole = r0 == 0 && r1 > w->desc.res[0], nl = 0;
+    enum { L = PN__MPM_LANES };
+    int d = w->dim, whole = r0 == 0 && r1 > w->desc.res[0], nl = 0, l;
     pn_real *v0 = w->gdense0;
-    size_t p, idx[PN__MPM_LANES];
-    unsigned char mark[PN__MPM_LANES];
+    size_t p, idx[L];
+    unsigned char mark[L], bm[L], in[L];
+    const int *prow = w->prow;
+    const unsigned char *active = w->active;
+    if (d == 2 && !v0) {
+        for (p = 0; p < w->n; p += L) {
+            int cnt = (int)PN__MIN((size_t)L, w->n - p), all = cnt == L;
+            for (l = 0; l < cnt; ++l) {
+                int b = prow[p + (size_t)l];
+                in[l] = (unsigned char)(active[p + (size_t)l] && (whole || (b + 3 > r0 && b < r1)));
+                bm[l] = (unsigned char)(b >= r0);
+                all &= in[l];
+            }
+            if (all) {
+                if (nl) pn__mpm_scatter2_lanes(w, 0, idx, nl, dt, r0, r1, mark), nl = 0;
+                pn__mpm_scatter2_lanes(w, p, NULL, L, dt, r0, r1, bm);
+                continue;
+            }
+            for (l = 0; l < cnt; ++l) {
+                if (!in[l]) continue;
+                idx[nl] = p + (size_t)l, mark[nl] = bm[l];
+                if (++nl == L) pn__mpm_scatter2_lanes(w, 0, idx, nl, dt, r0, r1, mark), nl = 0;
+            }
+        }
+        if (nl) pn__mpm_scatter2_lanes(w, 0, idx, nl, dt, r0, r1, mark);
+        return;
+    }
     for (p = 0; p < w->n; ++p) {
-        int b = w->prow[p];
-        if (!w->active[p] || !(whole || (b + 3 > r0 && b < r1))) continue;
-        if (d == 2 && !v0) { /* batches of the slab's particles, in order */
-            idx[nl] = p, mark[nl] = (unsigned char)(b >= r0);
-            if (++nl == PN__MPM_LANES) pn__mpm_scatter2_lanes(w, idx, nl, dt, r0, r1, mark), nl = 0;
-        } else if (whole) {
+        int b = prow[p];
+        if (!active[p] || !(whole || (b + 3 > r0 && b < r1))) continue;
+        if (whole) {
             if (d == 2) pn__mpm_scatter2(w, p, dt, v0, 0, 3, 1);
             else pn__mpm_scatter3(w, p, dt, v0, 0, 3, 1);
         } else {
@@ -3077,7 +3148,6 @@ static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
             else pn__mpm_scatter3(w, p, dt, v0, i0, i1, b >= r0);
         }
     }
-    if (nl) pn__mpm_scatter2_lanes(w, idx, nl, dt, r0, r1, mark);
 }
 
 /* P2G in particle index order. With threads, the rows of axis 0 are cut into as many slabs as
@@ -3387,15 +3457,29 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     int b0[L], b1[L], i, j, l;
     size_t s0 = w->stride[0], nd[L];
     const pn_real *F0 = w->F + p0 * 4, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
-    for (l = 0; l < L; ++l) { /* the inputs (strided, and the group a gather); lanes past n copy lane 0 */
-        int src = l < n ? l : 0;
-        const pn_real *gp = gpar + 5 * w->group[p0 + (size_t)src];
-        px[l] = rb[src], py[l] = rb[L + src], hard[l] = rb[(pay - 1) * L + src];
-        for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
-        ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l] ? 1 : 0;
-        mass[l] = w->mass[p0 + (size_t)src], vol[l] = w->vol0[p0 + (size_t)src];
-        mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
-    }
+    if (n == L) { /* the inputs: contiguous, F strided, the group's parameters a gather */
+        const int *grp = w->group + p0;
+        const unsigned char *act = w->active + p0;
+        const pn_real *ms = w->mass + p0, *vl = w->vol0 + p0;
+        for (l = 0; l < L; ++l) {
+            px[l] = rb[l], py[l] = rb[L + l], hard[l] = rb[(pay - 1) * L + l], mass[l] = ms[l], vol[l] = vl[l];
+            for (i = 0; i < 4; ++i) Fin[i][l] = F0[l * 4 + i];
+        }
+        for (l = 0; l < L; ++l) {
+            const pn_real *gp = gpar + 5 * grp[l];
+            ok[l] = (gp[0] != 0) & (act[l] != 0) ? 1 : 0;
+            mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
+        }
+    } else
+        for (l = 0; l < L; ++l) { /* the same, lanes past n a copy of lane 0 */
+            int src = l < n ? l : 0;
+            const pn_real *gp = gpar + 5 * w->group[p0 + (size_t)src];
+            px[l] = rb[src], py[l] = rb[L + src], hard[l] = rb[(pay - 1) * L + src];
+            for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
+            ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l] ? 1 : 0;
+            mass[l] = w->mass[p0 + (size_t)src], vol[l] = w->vol0[p0 + (size_t)src];
+            mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
+        }
     /* every vector loop runs over all L lanes: a constant trip count, which gcc -O2 (its very
        cheap cost model) vectorizes too */
     for (l = 0; l < L; ++l) { /* pn__mpm_base and the splines */
@@ -3709,6 +3793,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
 
 #undef PN__OMP_FOR
 #undef PN__MPM_SPLINE
+#undef PN__MPM_ADD4
 #undef PN__MPM_PAY
 #undef PN__MPM_REC
 #undef PN__MPM_SLABS
