@@ -513,7 +513,7 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
 #define PN__MPM_BLOCK 4 /* >>explicit: nodes per block edge (>= 3: a stencil reaches one block up) */
 #define PN__MPM_LANES 8 /* >>explicit: particles per batch of the 2D G2P */
 #define PN__MPM_SLABS 256 /* >>explicit: the most threads P2G splits the rows among */
-#define PN__MPM_PAY(d) ((d) == 2 ? 13 : 23) /* >>explicit: reals per P2G record */
+#define PN__MPM_PAY(d) ((d) == 2 ? 4 : 7) /* >>explicit: reals per P2G record */
 /* >>explicit: entry k of particle p's record in buf: blocks of PN__MPM_LANES particles, entry
    by entry (the lanes of G2P and P2G load a block's entry as one vector) */
 #define PN__MPM_REC(buf, p, k, pay)                                                               \
@@ -2905,19 +2905,17 @@ static inline int pn__mpm_row_of(const pn_mpm_world *w, const pn_real *x) {
     return (int)((x[0] - w->desc.origin_m[0]) * w->inv_dx - (pn_real)0.5);
 }
 
-/* What P2G needs of a particle, packed in one record (written by the G2P that made the state,
-   read in index order): x, m, m v, m C and k = -V0 (4/dx^2) tau (symmetric, upper triangle),
+/* What P2G needs of a particle's state beyond x, v, C and m, in one record (written by the G2P
+   that made the state, read in index order): k = -V0 (4/dx^2) tau (symmetric, upper triangle),
    so the stress impulse of a step dt is dt k (x_i - x_p) (MLS-MPM, Hu et al. 2018); last, the
-   state's pn__hardening, which the next G2P reuses while the particle stays elastic. */
-PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real *x, const pn_real *v, const pn_real *C,
-                                 const pn_real *tau, pn_real hard, pn_real *buf, const int d) {
+   state's pn__hardening, which the next G2P reuses while the particle stays elastic. (x, m v
+   and m C are read from the state itself: copies here cost more memory traffic than the
+   multiplications they save, and traffic is what bounds a step on two threads.) */
+PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real *tau, pn_real hard, pn_real *buf,
+                                 const int d) {
     int i, j, n = 0, pay = PN__MPM_PAY(d);
     pn_real out[PN__MPM_PAY(3)];
-    pn_real m = w->mass[p], k = -w->vol0[p] * (4 * w->inv_dx * w->inv_dx); /* no division per particle */
-    for (i = 0; i < d; ++i) out[n++] = x[i];
-    out[n++] = m;
-    for (i = 0; i < d; ++i) out[n++] = m * v[i];
-    for (i = 0; i < d * d; ++i) out[n++] = m * C[i];
+    pn_real k = -w->vol0[p] * (4 * w->inv_dx * w->inv_dx); /* no division per particle */
     for (i = 0; i < d; ++i)
         for (j = i; j < d; ++j) out[n++] = k * tau[i * d + j];
     out[n] = hard;
@@ -2930,19 +2928,22 @@ PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real 
    Q = m C + dt k; when v0 != NULL also the transfer's own momentum m v + m C (x_i - x_p)
    (AFLIP). The dimension is spelled out: see >>transfer. */
 static inline void pn__mpm_scatter2(pn_mpm_world *w, size_t p, pn_real dt, pn_real *v0, int i0, int i1, int mark) {
-    pn_real r[PN__MPM_PAY(2)], dx = w->desc.dx_m, m, fx[3], wx[3], wy[3], q00, q01, q10, q11;
+    pn_real k[3], dx = w->desc.dx_m, m = w->mass[p], fx[3], wx[3], wy[3], q00, q01, q10, q11, mv[2], mC[4];
+    const pn_real *x = w->x + p * 2, *v = w->v + p * 2, *C = w->C + p * 4;
     pn_real *g;
     int base[3], i, j;
     size_t s0 = w->stride[0];
-    for (i = 0; i < PN__MPM_PAY(2); ++i) r[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(2));
-    m = r[2], q00 = r[5] + dt * r[9], q01 = r[6] + dt * r[10], q10 = r[7] + dt * r[10], q11 = r[8] + dt * r[11];
-    pn__mpm_base(w, r, base, fx);
+    for (i = 0; i < 3; ++i) k[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(2));
+    for (i = 0; i < 2; ++i) mv[i] = m * v[i];
+    for (i = 0; i < 4; ++i) mC[i] = m * C[i];
+    q00 = mC[0] + dt * k[0], q01 = mC[1] + dt * k[1], q10 = mC[2] + dt * k[1], q11 = mC[3] + dt * k[2];
+    pn__mpm_base(w, x, base, fx);
     PN__MPM_SPLINE(wx, fx[0]);
     PN__MPM_SPLINE(wy, fx[1]);
     if (mark) w->bmark[(unsigned)base[0] / PN__MPM_BLOCK * w->bstride[0] + (unsigned)base[1] / PN__MPM_BLOCK] = 1;
     g = w->gdense + ((size_t)(base[0] + i0) * s0 + (size_t)base[1]) * 4;
     for (i = i0; i < i1; ++i, g += s0 * 4) {
-        pn_real ex = ((pn_real)i - fx[0]) * dx, a0 = r[3] + q00 * ex, a1 = r[4] + q10 * ex;
+        pn_real ex = ((pn_real)i - fx[0]) * dx, a0 = mv[0] + q00 * ex, a1 = mv[1] + q10 * ex;
         for (j = 0; j < 3; ++j) {
             pn_real ey = ((pn_real)j - fx[1]) * dx, wt = wx[i] * wy[j];
             g[4 * j] += wt * m;
@@ -2955,22 +2956,23 @@ static inline void pn__mpm_scatter2(pn_mpm_world *w, size_t p, pn_real dt, pn_re
         for (i = i0; i < i1; ++i, o += s0 * 2)
             for (j = 0; j < 3; ++j) {
                 pn_real ex = ((pn_real)i - fx[0]) * dx, ey = ((pn_real)j - fx[1]) * dx, wt = wx[i] * wy[j];
-                o[2 * j] += wt * (r[3] + r[5] * ex + r[6] * ey);
-                o[2 * j + 1] += wt * (r[4] + r[7] * ex + r[8] * ey);
+                o[2 * j] += wt * (mv[0] + mC[0] * ex + mC[1] * ey);
+                o[2 * j + 1] += wt * (mv[1] + mC[2] * ex + mC[3] * ey);
             }
     }
 }
 
 static inline void pn__mpm_scatter3(pn_mpm_world *w, size_t p, pn_real dt, pn_real *v0, int i0, int i1, int mark) {
     static const int sym[9] = {0, 1, 2, 1, 3, 4, 2, 4, 5}; /* upper triangle of k */
-    pn_real r[PN__MPM_PAY(3)], dx = w->desc.dx_m, m, fx[3], W[3][3], q[9];
-    const pn_real *mv = r + 4, *mC = r + 7, *k = r + 16;
+    pn_real k[6], dx = w->desc.dx_m, m = w->mass[p], fx[3], W[3][3], q[9], mv[3], mC[9];
+    const pn_real *x = w->x + p * 3, *v = w->v + p * 3, *C = w->C + p * 9;
     pn_real *g;
     int base[3], i, j, l, c;
     size_t s0 = w->stride[0], s1 = w->stride[1];
-    for (i = 0; i < PN__MPM_PAY(3); ++i) r[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(3));
-    m = r[3];
-    pn__mpm_base(w, r, base, fx);
+    for (i = 0; i < 6; ++i) k[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(3));
+    for (i = 0; i < 3; ++i) mv[i] = m * v[i];
+    for (i = 0; i < 9; ++i) mC[i] = m * C[i];
+    pn__mpm_base(w, x, base, fx);
     for (i = 0; i < 3; ++i) PN__MPM_SPLINE(W[i], fx[i]);
     for (c = 0; c < 9; ++c) q[c] = mC[c] + dt * k[sym[c]];
     if (mark)
@@ -3040,25 +3042,38 @@ static inline void pn__mpm_add4(pn_real *g, const pn_real *c) {
 }
 
 /* 2D P2G (APIC) of n <= PN__MPM_LANES particles, rows [r0, r1) of axis 0: idx[0 .. n - 1]
-   (ascending), or with idx NULL the whole record block of particle p0. Each one's nine node
+   (ascending), or with idx NULL the whole block of PN__MPM_LANES from p0. Each one's nine node
    contributions are computed in lanes the compiler can vectorize, then added particle by
    particle, node by node (mass, momentum and the zero pad of a 2D node in one vector add):
    pn__mpm_scatter2's arithmetic and order, so the same bits. mark as there, per particle. */
 static void pn__mpm_scatter2_lanes(pn_mpm_world *w, size_t p0, const size_t *idx, int n, pn_real dt, int r0, int r1,
                                    const unsigned char *mark) {
     enum { L = PN__MPM_LANES, pay = PN__MPM_PAY(2) };
-    pn_real gat[12][L], c[9][3][L], t[9][L][4], fx0[L], fx1[L], wx[3][L], wy[3][L], q00[L], q01[L], q10[L], q11[L];
+    pn_real rec[12][L], c[9][3][L], t[9][L][4], fx0[L], fx1[L], wx[3][L], wy[3][L], q00[L], q01[L], q10[L], q11[L];
     pn_real dx = w->desc.dx_m, inv_dx = w->inv_dx;
     pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1];
-    pn_real(*rec)[L] = gat;
     unsigned char *bmark = w->bmark;
     int b0[L], b1[L], i, j, l, k;
     size_t s0 = w->stride[0], bs0 = w->bstride[0];
-    if (!idx) /* one whole record block */
-        rec = (pn_real(*)[L]) & PN__MPM_REC(w->ppay, p0, 0, pay);
-    else
-        for (l = 0; l < L; ++l)
-            for (k = 0; k < 12; ++k) gat[k][l] = PN__MPM_REC(w->ppay, idx[l < n ? l : 0], k, pay); /* past n: lane 0 */
+    if (!idx) { /* a whole block: x, m, m v, m C (as pn__mpm_scatter2) and the record's k */
+        const pn_real *X = w->x + p0 * 2, *V = w->v + p0 * 2, *Cp = w->C + p0 * 4, *M = w->mass + p0;
+        const pn_real *R = &PN__MPM_REC(w->ppay, p0, 0, pay);
+        for (l = 0; l < L; ++l) {
+            pn_real m = M[l];
+            rec[0][l] = X[2 * l], rec[1][l] = X[2 * l + 1], rec[2][l] = m;
+            rec[3][l] = m * V[2 * l], rec[4][l] = m * V[2 * l + 1];
+            for (k = 0; k < 4; ++k) rec[5 + k][l] = m * Cp[4 * l + k];
+            for (k = 0; k < 3; ++k) rec[9 + k][l] = R[k * L + l];
+        }
+    } else
+        for (l = 0; l < L; ++l) { /* past n: lane 0 */
+            size_t q = idx[l < n ? l : 0];
+            pn_real m = w->mass[q];
+            rec[0][l] = w->x[2 * q], rec[1][l] = w->x[2 * q + 1], rec[2][l] = m;
+            rec[3][l] = m * w->v[2 * q], rec[4][l] = m * w->v[2 * q + 1];
+            for (k = 0; k < 4; ++k) rec[5 + k][l] = m * w->C[4 * q + (size_t)k];
+            for (k = 0; k < 3; ++k) rec[9 + k][l] = PN__MPM_REC(w->ppay, q, k, pay);
+        }
     for (l = 0; l < L; ++l) { /* loops over l innermost: gcc -O2 vectorizes them, and unrolls no inner loop */
         pn_real xc = (rec[0][l] - ox) * inv_dx, yc = (rec[1][l] - oy) * inv_dx;
         q00[l] = rec[5][l] + dt * rec[9][l], q01[l] = rec[6][l] + dt * rec[10][l];
@@ -3350,8 +3365,8 @@ PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real 
     const pn_real *F = w->F + p * (size_t)dd;
     const pn_material *mat = &w->groups[w->group[p]].material;
     pn_real nv[3], ov[3] = {0, 0, 0}, nC[9], Fn[9], Z[9] = {0}, tau[9] = {0}, hn = w->h[p], chk[4] = {0, 0, 0, 0}, fin = 0;
-    pn_real x[3], hard = PN__MPM_REC(w->ppay, p, pay - 1, pay); /* x as P2G saw it */
-    for (i = 0; i < d; ++i) x[i] = PN__MPM_REC(w->ppay, p, i, pay);
+    pn_real x[3], hard = PN__MPM_REC(w->ppay, p, pay - 1, pay);
+    for (i = 0; i < d; ++i) x[i] = w->x[p * (size_t)d + (size_t)i];
     pn_real *sx = w->sx + p * (size_t)d, *sv = w->sv + p * (size_t)d;
     if (vc) { /* found by pn__mpm_xg2p2_lanes */
         for (i = 0; i < 2; ++i) nv[i] = vc[i * PN__MPM_LANES + lane];
@@ -3408,7 +3423,7 @@ PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real 
     }
     for (i = 0; i < d; ++i) sx[i] = PN__MIN(PN__MAX(sx[i], w->wall_lo[i]), w->wall_hi[i]); /* pn__mpm_wall_plane */
     w->srow[p] = pn__mpm_row_of(w, sx);
-    pn__mpm_pack(w, p, sx, sv, nC, tau, hard, w->spay, d);
+    pn__mpm_pack(w, p, tau, hard, w->spay, d);
     w->pstat[p] = stat;
 }
 
@@ -3453,16 +3468,16 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     pn_real rot[2][L], ratio[L], hnew[L], Fin[4][L];
     pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1], v0[L], v1[L], C[4][L], px[L], py[L];
     const pn_real *G = w->gdense;
-    pn_real ok[L], clamped[L], mass[L], vol[L]; /* flags as reals: see pn__snow2_clamp */
+    pn_real ok[L], clamped[L], vol[L]; /* flags as reals: see pn__snow2_clamp */
     int b0[L], b1[L], i, j, l;
     size_t s0 = w->stride[0], nd[L];
-    const pn_real *F0 = w->F + p0 * 4, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
+    const pn_real *F0 = w->F + p0 * 4, *X = w->x + p0 * 2, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
     if (n == L) { /* the inputs: contiguous, F strided, the group's parameters a gather */
         const int *grp = w->group + p0;
         const unsigned char *act = w->active + p0;
-        const pn_real *ms = w->mass + p0, *vl = w->vol0 + p0;
+        const pn_real *vl = w->vol0 + p0;
         for (l = 0; l < L; ++l) {
-            px[l] = rb[l], py[l] = rb[L + l], hard[l] = rb[(pay - 1) * L + l], mass[l] = ms[l], vol[l] = vl[l];
+            px[l] = X[2 * l], py[l] = X[2 * l + 1], hard[l] = rb[(pay - 1) * L + l], vol[l] = vl[l];
             for (i = 0; i < 4; ++i) Fin[i][l] = F0[l * 4 + i];
         }
         for (l = 0; l < L; ++l) {
@@ -3474,10 +3489,10 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         for (l = 0; l < L; ++l) { /* the same, lanes past n a copy of lane 0 */
             int src = l < n ? l : 0;
             const pn_real *gp = gpar + 5 * w->group[p0 + (size_t)src];
-            px[l] = rb[src], py[l] = rb[L + src], hard[l] = rb[(pay - 1) * L + src];
+            px[l] = X[2 * src], py[l] = X[2 * src + 1], hard[l] = rb[(pay - 1) * L + src];
             for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
             ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l] ? 1 : 0;
-            mass[l] = w->mass[p0 + (size_t)src], vol[l] = w->vol0[p0 + (size_t)src];
+            vol[l] = w->vol0[p0 + (size_t)src];
             mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
         }
     /* every vector loop runs over all L lanes: a constant trip count, which gcc -O2 (its very
@@ -3566,14 +3581,10 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         pn_real *out = &PN__MPM_REC(w->spay, p0, 0, pay), kk = -(4 * w->inv_dx * w->inv_dx);
         pn_real wl0 = w->wall_lo[0], wl1 = w->wall_lo[1], wh0 = w->wall_hi[0], wh1 = w->wall_hi[1]; /* out may alias w */
         for (l = 0; l < L; ++l) {
-            pn_real m = mass[l], k = vol[l] * kk;
+            pn_real k = vol[l] * kk;
             nx[0][l] = PN__MIN(PN__MAX(nx[0][l], wl0), wh0); /* pn__mpm_wall_plane */
             nx[1][l] = PN__MIN(PN__MAX(nx[1][l], wl1), wh1);
-            out[l] = nx[0][l], out[L + l] = nx[1][l], out[2 * L + l] = m;
-            out[3 * L + l] = m * v0[l], out[4 * L + l] = m * v1[l];
-            out[5 * L + l] = m * C[0][l], out[6 * L + l] = m * C[1][l], out[7 * L + l] = m * C[2][l], out[8 * L + l] = m * C[3][l];
-            out[9 * L + l] = k * tau[0][l], out[10 * L + l] = k * tau[1][l], out[11 * L + l] = k * tau[3][l];
-            out[12 * L + l] = hard[l];
+            out[l] = k * tau[0][l], out[L + l] = k * tau[1][l], out[2 * L + l] = k * tau[3][l], out[3 * L + l] = hard[l];
         }
     }
     for (l = 0; l < n; ++l) {
@@ -3614,8 +3625,8 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
         if (w->pstat[p] != PN_OK) continue;
         w->prow[p] = pn__mpm_row_of(w, x);
         hard = pn__hardening(&w->groups[w->group[p]].material, w->h[p]);
-        if (d == 2) pn__mpm_pack(w, p, x, w->v + p * 2, w->C + p * 4, tau, hard, w->ppay, 2);
-        else pn__mpm_pack(w, p, x, w->v + p * 3, w->C + p * 9, tau, hard, w->ppay, 3);
+        if (d == 2) pn__mpm_pack(w, p, tau, hard, w->ppay, 2);
+        else pn__mpm_pack(w, p, tau, hard, w->ppay, 3);
     }
     {
         size_t p;
