@@ -3124,8 +3124,8 @@ static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
     enum { L = PN__MPM_LANES };
     int d = w->dim, whole = r0 == 0 && r1 > w->desc.res[0], nl = 0, l;
     pn_real *v0 = w->gdense0;
-    size_t p, idx[L];
-    unsigned char mark[L], bm[L], in[L];
+    size_t p, idx[2 * L];
+    unsigned char mark[2 * L], bm[L], in[L];
     const int *prow = w->prow;
     const unsigned char *active = w->active;
     if (d == 2 && !v0) {
@@ -3133,7 +3133,7 @@ static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
             int cnt = (int)PN__MIN((size_t)L, w->n - p), all = cnt == L;
             for (l = 0; l < cnt; ++l) {
                 int b = prow[p + (size_t)l];
-                in[l] = (unsigned char)(active[p + (size_t)l] && (whole || (b + 3 > r0 && b < r1)));
+                in[l] = (unsigned char)((active[p + (size_t)l] != 0) & (whole | ((b + 3 > r0) & (b < r1))));
                 bm[l] = (unsigned char)(b >= r0);
                 all &= in[l];
             }
@@ -3142,10 +3142,12 @@ static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
                 pn__mpm_scatter2_lanes(w, p, NULL, L, dt, r0, r1, bm);
                 continue;
             }
-            for (l = 0; l < cnt; ++l) {
-                if (!in[l]) continue;
-                idx[nl] = p + (size_t)l, mark[nl] = bm[l];
-                if (++nl == L) pn__mpm_scatter2_lanes(w, 0, idx, nl, dt, r0, r1, mark), nl = 0;
+            for (l = 0; l < cnt; ++l) /* compacted without a branch: membership is random here */
+                idx[nl] = p + (size_t)l, mark[nl] = bm[l], nl += in[l];
+            if (nl >= L) {
+                pn__mpm_scatter2_lanes(w, 0, idx, L, dt, r0, r1, mark);
+                for (l = L; l < nl; ++l) idx[l - L] = idx[l], mark[l - L] = mark[l];
+                nl -= L;
             }
         }
         if (nl) pn__mpm_scatter2_lanes(w, 0, idx, nl, dt, r0, r1, mark);
@@ -3482,7 +3484,7 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         }
         for (l = 0; l < L; ++l) {
             const pn_real *gp = gpar + 5 * grp[l];
-            ok[l] = (gp[0] != 0) & (act[l] != 0) ? 1 : 0;
+            ok[l] = ((gp[0] != 0) & (act[l] != 0)) ? 1 : 0;
             mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
         }
     } else
@@ -3669,13 +3671,20 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
          statistics: integer counts and a max, the same whatever the thread count */
         size_t n_plastic = 0, n_left = 0, n_alive = 0;
         long nb = (long)((w->n + PN__MPM_LANES - 1) / PN__MPM_LANES);
-        int any = 0, g, lanes = d == 2 && flip == 0 && w->gdense0 == NULL;
+        int any = 0, g, lanes = d == 2 && flip == 0 && w->gdense0 == NULL, chunk = 8;
+#if defined(_OPENMP)
+        /* about 16 chunks per thread: enough to even out a busy core, few enough that the
+           chunks' shared edges (every output array's cache line there) and the queue stay rare */
+        chunk = (int)PN__MAX(8L, nb / (16L * omp_get_max_threads()));
+#else
+        (void)chunk;
+#endif
         pn_real gpar[5 * PN_MPM_MAX_GROUPS];
         for (g = 0; g < w->n_groups; ++g)
             gpar[5 * g] = (pn_real)pn__fcr2_params(&w->groups[g].material, gpar + 5 * g + 1, gpar + 5 * g + 2,
                                                    gpar + 5 * g + 3, gpar + 5 * g + 4);
 #if defined(_OPENMP)
-#pragma omp parallel for schedule(dynamic, 8) reduction(+ : n_plastic, n_left, n_alive) reduction(max : v2max) \
+#pragma omp parallel for schedule(dynamic, chunk) reduction(+ : n_plastic, n_left, n_alive) reduction(max : v2max) \
     reduction(| : any) if (w->n >= w->desc.parallel_min_particles)
 #endif
         for (l = 0; l < nb; ++l) { /* batches of PN__MPM_LANES particles */

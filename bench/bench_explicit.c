@@ -19,9 +19,10 @@
          float build's test in tests/run.sh compares float and double against it).
      bench_explicit --sweep [--max 1000000] [--sweep-dim 2|3] [--csv FILE] [--md FILE]
          2D and 3D, 1e3 .. --max particles at about 8 per occupied cell (the grid refined with
-         the count), 1 and 2 threads, the best of three runs of about 1e6 particle-steps each:
-         particle-steps per second, the log-log slope of the time per step against the
-         particle count, and the 2-thread speedup.
+         the count), 1 and 2 threads alternating, the best of three runs of about 3e6
+         particle-steps each: particle-steps per second, the log-log slope of the time per
+         step against the particle count, the 2-thread speedup, and the machine's memory
+         bandwidth on 1 and 2 threads (the ceiling of a memory-bound step's speedup).
    `make bench-explicit` runs both (and the 88-line program beside them when MLS88_DIR names
    a copy of it: bench/mls88_side_by_side.sh). */
 #ifndef _POSIX_C_SOURCE
@@ -150,6 +151,32 @@ static double run(pn_mpm_world *w, int warm, int steps, double dt, double *plast
 
 static double step_for(int n) { return n <= 80 ? 1e-4 : 1e-4 * 80.0 / n * 0.64; }
 
+/* The machine's memory bandwidth on t threads, GB/s: a STREAM-style triad a = b + s c over
+   three arrays of 64 MB (past any cache), the best of five. A step of a big scene streams
+   every particle's state through memory, so where two threads get no more bandwidth than one,
+   no memory-bound step can go twice as fast on two: the sweep prints this beside its
+   speedups. */
+static double triad_gb_s(int t) {
+    size_t n = (size_t)8 << 20, i;
+    double *a = (double *)malloc(sizeof(double) * n * 3), best = 0;
+    int rep;
+    if (!a) return 0;
+    set_threads(t);
+    for (i = 0; i < 3 * n; ++i) a[i] = (double)(i % 7); /* first touch on one thread */
+    for (rep = 0; rep < 5; ++rep) {
+        double t0 = wall_seconds(), s;
+        long li;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static)
+#endif
+        for (li = 0; li < (long)n; ++li) a[li] = a[n + (size_t)li] + 1.5 * a[2 * n + (size_t)li];
+        s = wall_seconds() - t0;
+        if (3.0 * 8 * (double)n / s / 1e9 > best) best = 3.0 * 8 * (double)n / s / 1e9;
+    }
+    free(a);
+    return best;
+}
+
 static int sweep(long max_n, int dims, const char *csv, const char *md) {
     static const long counts[] = {1000, 3000, 10000, 30000, 100000, 300000, 1000000, 3000000};
     FILE *fc = csv ? fopen(csv, "w") : NULL, *fm = md ? fopen(md, "w") : NULL;
@@ -168,25 +195,30 @@ static int sweep(long max_n, int dims, const char *csv, const char *md) {
             int n = (int)(pow((double)np / 8 / (3 * pow(0.16, dim)), 1.0 / dim) + 0.5), steps;
             double rate[2] = {0, 0};
             if (n < 24) n = 24;
-            steps = (int)(1e6 / (double)np);
+            pn_mpm_world *w[2] = {NULL, NULL};
+            double s[2] = {1e30, 1e30};
+            int rep;
+            steps = (int)(3e6 / (double)np);
             if (steps < 3) steps = 3;
-            for (t = 1; t <= tmax; ++t) {
-                pn_mpm_world *w = scene(dim, n, np / 3, 0, 0);
-                double s = 1e30;
-                int rep;
-                if (!w) return 1;
-                set_threads(t);
-                for (rep = 0; rep < 3; ++rep) { /* the best of three: a shared machine only slows runs down */
-                    double r = run(w, rep == 0 ? 3 : 0, steps, step_for(n) * (dim == 3 ? 0.5 : 1), NULL);
+            for (t = 1; t <= tmax; ++t)
+                if (!(w[t - 1] = scene(dim, n, np / 3, 0, 0))) return 1;
+            /* the best of three, 1 and 2 threads alternating (a shared machine only slows runs
+               down, and its speed drifts): each thread count steps its own copy of the scene */
+            for (rep = 0; rep < 3; ++rep)
+                for (t = 1; t <= tmax; ++t) {
+                    double r;
+                    set_threads(t);
+                    r = run(w[t - 1], rep == 0 ? 3 : 0, steps, step_for(n) * (dim == 3 ? 0.5 : 1), NULL);
                     if (r < 0) {
-                        pn_mpm_destroy(w);
+                        pn_mpm_destroy(w[0]), pn_mpm_destroy(w[1]);
                         return 1;
                     }
-                    s = r < s ? r : s;
+                    s[t - 1] = r < s[t - 1] ? r : s[t - 1];
                 }
-                pn_mpm_destroy(w);
-                rate[t - 1] = (double)(np / 3 * 3) * steps / s;
-                if (fc) fprintf(fc, "%d,%ld,%d,%d,%d,%.4f,%.5g\n", dim, np / 3 * 3, n, t, steps, s, rate[t - 1]);
+            for (t = 1; t <= tmax; ++t) {
+                pn_mpm_destroy(w[t - 1]);
+                rate[t - 1] = (double)(np / 3 * 3) * steps / s[t - 1];
+                if (fc) fprintf(fc, "%d,%ld,%d,%d,%d,%.4f,%.5g\n", dim, np / 3 * 3, n, t, steps, s[t - 1], rate[t - 1]);
                 printf("dim %d  particles %8ld  grid %4d  threads %d  %.3g particle-steps/s\n", dim, np / 3 * 3, n, t,
                        rate[t - 1]);
                 fflush(stdout);
@@ -206,6 +238,14 @@ static int sweep(long max_n, int dims, const char *csv, const char *md) {
             printf("dim %d: cost per step ~ particles^%.3f (log-log fit, 1 thread)\n", dim, slope);
             if (fm) fprintf(fm, "| %d | slope of log(time per step) on log(particles), 1 thread: **%.3f** | | | | |\n", dim, slope);
         }
+    }
+    if (tmax > 1) { /* the ceiling of the memory-bound steps' speedup (triad_gb_s) */
+        double b1 = triad_gb_s(1), b2 = triad_gb_s(2);
+        printf("memory bandwidth (triad over 3 x 64 MB): 1 thread %.1f GB/s, 2 threads %.1f GB/s (%.2fx)\n", b1, b2,
+               b2 / b1);
+        if (fm)
+            fprintf(fm, "| | memory bandwidth, triad over 3 x 64 MB | | %.1f GB/s | %.1f GB/s | %.2f |\n", b1, b2,
+                    b2 / b1);
     }
     if (fc) fclose(fc);
     if (fm) fclose(fm);

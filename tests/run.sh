@@ -31,6 +31,20 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
             done
         done
     done
+    # what users build with: the host's vector units (gcc's flow-sensitive warnings differ again)
+    for cc in gcc clang; do
+        command -v "$cc" >/dev/null 2>&1 || continue
+        for cfg in "" "-DPN_REAL=float"; do
+            name="compile $cc -std=c99 -O3 -march=native ${cfg:-default}"
+            # shellcheck disable=SC2086
+            if $cc -std=c99 $W -O3 -march=native $cfg tests/compile_check.c tests/compile_check_tu2.c -lm -o build/compile_check \
+                2>build/compile.log && ./build/compile_check >>build/compile.log 2>&1; then
+                ok "$name"
+            else
+                bad "$name"; sed 's/^/    /' build/compile.log | head -20
+            fi
+        done
+    done
 fi
 
 # 2. the test binaries: test_main (double, every test) and test_float (PN_REAL=float)
