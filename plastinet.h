@@ -136,7 +136,8 @@
           (snow_jp_min, snow_jp_max).
      0.5  explicit MPM: no sort (P2G in particle order, a slab of rows per thread), 2D fixed
           corotated and Stomakhin snow in vector lanes (closed-form clamp); implicit MPM:
-          pn_mpm_implicit_desc.newton_budget, pn_mpm_stats.cg_capped and dt_over_cfl.
+          pn_mpm_implicit_desc.newton_budget, pn_mpm_stats.cg_capped and dt_over_cfl;
+          the P2G record holds only k tau and the hardening (x, v, C read from the state).
 */
 #ifndef PLASTINET_H
 #define PLASTINET_H

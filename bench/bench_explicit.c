@@ -22,7 +22,8 @@
          the count), 1 and 2 threads alternating, the best of three runs of about 3e6
          particle-steps each: particle-steps per second, the log-log slope of the time per
          step against the particle count, the 2-thread speedup, and the machine's memory
-         bandwidth on 1 and 2 threads (the ceiling of a memory-bound step's speedup).
+         bandwidth and vector arithmetic on 1 and 2 threads (the ceilings of a memory-bound
+         and of an arithmetic-bound step's speedup).
    `make bench-explicit` runs both (and the 88-line program beside them when MLS88_DIR names
    a copy of it: bench/mls88_side_by_side.sh). */
 #ifndef _POSIX_C_SOURCE
@@ -177,6 +178,38 @@ static double triad_gb_s(int t) {
     return best;
 }
 
+/* The machine's vector arithmetic on t threads, 1e9 multiply-adds per second: 64 independent
+   float chains per thread (the compiler vectorizes them), the same work on every thread, the
+   best of three. Where two threads get less than twice one's (two virtual cores on one
+   physical core, or a neighbour's load), no arithmetic-bound step can reach 2x either. */
+static double madd_rate(int t) {
+    double best = 0;
+    int rep;
+    set_threads(t);
+    for (rep = 0; rep < 3; ++rep) {
+        double t0 = wall_seconds(), s;
+        int nt = 0;
+        float sink = 0;
+#ifdef _OPENMP
+#pragma omp parallel reduction(+ : sink, nt)
+#endif
+        {
+            float a[64];
+            int i;
+            long it;
+            for (i = 0; i < 64; ++i) a[i] = (float)i;
+            for (it = 0; it < 10000000L; ++it)
+                for (i = 0; i < 64; ++i) a[i] = a[i] * 0.999999f + 1e-7f;
+            for (i = 0; i < 64; ++i) sink += a[i];
+            nt += 1;
+        }
+        s = wall_seconds() - t0;
+        if (sink == 1234.5f) printf(" "); /* keeps the chains */
+        if (nt * 64 * 1e7 / s / 1e9 > best) best = nt * 64 * 1e7 / s / 1e9;
+    }
+    return best;
+}
+
 static int sweep(long max_n, int dims, const char *csv, const char *md) {
     static const long counts[] = {1000, 3000, 10000, 30000, 100000, 300000, 1000000, 3000000};
     FILE *fc = csv ? fopen(csv, "w") : NULL, *fm = md ? fopen(md, "w") : NULL;
@@ -239,13 +272,17 @@ static int sweep(long max_n, int dims, const char *csv, const char *md) {
             if (fm) fprintf(fm, "| %d | slope of log(time per step) on log(particles), 1 thread: **%.3f** | | | | |\n", dim, slope);
         }
     }
-    if (tmax > 1) { /* the ceiling of the memory-bound steps' speedup (triad_gb_s) */
-        double b1 = triad_gb_s(1), b2 = triad_gb_s(2);
+    if (tmax > 1) { /* the ceilings of the speedup: memory (triad_gb_s) and arithmetic (madd_rate) */
+        double b1 = triad_gb_s(1), b2 = triad_gb_s(2), a1 = madd_rate(1), a2 = madd_rate(2);
         printf("memory bandwidth (triad over 3 x 64 MB): 1 thread %.1f GB/s, 2 threads %.1f GB/s (%.2fx)\n", b1, b2,
                b2 / b1);
+        printf("vector arithmetic (independent float multiply-adds): 1 thread %.1fe9/s, 2 threads %.1fe9/s (%.2fx)\n", a1,
+               a2, a2 / a1);
         if (fm)
-            fprintf(fm, "| | memory bandwidth, triad over 3 x 64 MB | | %.1f GB/s | %.1f GB/s | %.2f |\n", b1, b2,
-                    b2 / b1);
+            fprintf(fm,
+                    "| | memory bandwidth, triad over 3 x 64 MB | | %.1f GB/s | %.1f GB/s | %.2f |\n"
+                    "| | vector arithmetic, independent float multiply-adds | | %.1fe9/s | %.1fe9/s | %.2f |\n",
+                    b1, b2, b2 / b1, a1, a2, a2 / a1);
     }
     if (fc) fclose(fc);
     if (fm) fclose(fm);
