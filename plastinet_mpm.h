@@ -3474,6 +3474,7 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     int b0[L], b1[L], i, j, l;
     size_t s0 = w->stride[0], nd[L];
     const pn_real *F0 = w->F + p0 * 4, *X = w->x + p0 * 2, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
+    pn_real glo0 = w->grid_lo[0], glo1 = w->grid_lo[1]; /* where a retired particle's lane gathers (its x may be off the grid) */
     if (n == L) { /* the inputs: contiguous, F strided, the group's parameters a gather */
         const int *grp = w->group + p0;
         const unsigned char *act = w->active + p0;
@@ -3486,6 +3487,7 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
             const pn_real *gp = gpar + 5 * grp[l];
             ok[l] = ((gp[0] != 0) & (act[l] != 0)) ? 1 : 0;
             mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
+            px[l] = act[l] ? px[l] : glo0, py[l] = act[l] ? py[l] : glo1;
         }
     } else
         for (l = 0; l < L; ++l) { /* the same, lanes past n a copy of lane 0 */
@@ -3494,6 +3496,7 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
             px[l] = X[2 * src], py[l] = X[2 * src + 1], hard[l] = rb[(pay - 1) * L + src];
             for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
             ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l] ? 1 : 0;
+            if (!w->active[p0 + (size_t)src]) px[l] = glo0, py[l] = glo1;
             vol[l] = w->vol0[p0 + (size_t)src];
             mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
         }
