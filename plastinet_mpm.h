@@ -3474,20 +3474,21 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     int b0[L], b1[L], i, j, l;
     size_t s0 = w->stride[0], nd[L];
     const pn_real *F0 = w->F + p0 * 4, *X = w->x + p0 * 2, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
-    pn_real glo0 = w->grid_lo[0], glo1 = w->grid_lo[1]; /* where a retired particle's lane gathers (its x may be off the grid) */
+    /* x clamped to the grid: a no-op for an active particle; a retired one's may be anywhere */
+    pn_real glo0 = w->grid_lo[0], glo1 = w->grid_lo[1], ghi0 = w->grid_hi[0], ghi1 = w->grid_hi[1];
     if (n == L) { /* the inputs: contiguous, F strided, the group's parameters a gather */
         const int *grp = w->group + p0;
         const unsigned char *act = w->active + p0;
         const pn_real *vl = w->vol0 + p0;
         for (l = 0; l < L; ++l) {
-            px[l] = X[2 * l], py[l] = X[2 * l + 1], hard[l] = rb[(pay - 1) * L + l], vol[l] = vl[l];
+            px[l] = PN__MIN(PN__MAX(X[2 * l], glo0), ghi0), py[l] = PN__MIN(PN__MAX(X[2 * l + 1], glo1), ghi1);
+            hard[l] = rb[(pay - 1) * L + l], vol[l] = vl[l];
             for (i = 0; i < 4; ++i) Fin[i][l] = F0[l * 4 + i];
         }
         for (l = 0; l < L; ++l) {
             const pn_real *gp = gpar + 5 * grp[l];
             ok[l] = ((gp[0] != 0) & (act[l] != 0)) ? 1 : 0;
             mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
-            px[l] = act[l] ? px[l] : glo0, py[l] = act[l] ? py[l] : glo1;
         }
     } else
         for (l = 0; l < L; ++l) { /* the same, lanes past n a copy of lane 0 */
@@ -3496,7 +3497,7 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
             px[l] = X[2 * src], py[l] = X[2 * src + 1], hard[l] = rb[(pay - 1) * L + src];
             for (i = 0; i < 4; ++i) Fin[i][l] = F0[src * 4 + i];
             ok[l] = l < n && gp[0] != 0 && w->active[p0 + (size_t)l] ? 1 : 0;
-            if (!w->active[p0 + (size_t)src]) px[l] = glo0, py[l] = glo1;
+            px[l] = PN__MIN(PN__MAX(px[l], glo0), ghi0), py[l] = PN__MIN(PN__MAX(py[l], glo1), ghi1);
             vol[l] = w->vol0[p0 + (size_t)src];
             mu[l] = gp[1] * hard[l], la[l] = gp[2] * hard[l], lo[l] = gp[3], hi[l] = gp[4];
         }
