@@ -11,7 +11,29 @@ failed=0
 ok() { passed=$((passed + 1)); echo "ok   $1"; }
 bad() { failed=$((failed + 1)); echo "FAIL $1"; }
 
-# 1. the header in every configuration that matters, under every compiler found
+# 1. the header in every configuration that matters, under every compiler found; two
+# compiles at a time (the machine's two cores), results printed in order
+cc_job() { # PREFIX COMMAND...: build PREFIX.bin, run it; the log and the status beside it
+    pre=$1; shift
+    if "$@" -o "$pre.bin" 2>"$pre.log" && "./$pre.bin" >>"$pre.log" 2>&1; then echo 0 >"$pre.rc"; else echo 1 >"$pre.rc"; fi
+}
+cc_n=0
+cc_flush() {
+    wait
+    k=0
+    while [ $k -lt $cc_n ]; do
+        name=$(cat build/cc_$k.name)
+        if [ "$(cat build/cc_$k.rc)" = 0 ]; then ok "$name"; else bad "$name"; sed 's/^/    /' build/cc_$k.log | head -20; fi
+        k=$((k + 1))
+    done
+    cc_n=0
+}
+cc_launch() { # NAME COMMAND...
+    echo "$1" >build/cc_$cc_n.name; shift
+    cc_job build/cc_$cc_n "$@" &
+    cc_n=$((cc_n + 1))
+    if [ $cc_n -ge 2 ]; then cc_flush; fi
+}
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     for cc in gcc clang g++ clang++; do
         command -v "$cc" >/dev/null 2>&1 || { echo "skip $cc (not installed)"; continue; }
@@ -19,15 +41,9 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
         for cfg in "" "-DPLASTINET_STATIC" "-DPN_REAL=float" "-DPN_NO_STDIO" "-DPN_NO_2D" "-DPN_NO_3D"; do
             # gcc's flow-sensitive warnings (maybe-uninitialized) differ between levels
             for opt in -O1 -O3; do
-                name="compile $cc ${std#-x c++ } $opt ${cfg:-default}"
-                out=build/compile_check
                 if [ "$cfg" = "-DPLASTINET_STATIC" ]; then srcs="tests/compile_check.c"; else srcs="tests/compile_check.c tests/compile_check_tu2.c"; fi
                 # shellcheck disable=SC2086
-                if $cc $std $W $opt $cfg $srcs -lm -o $out 2>build/compile.log && ./$out >>build/compile.log 2>&1; then
-                    ok "$name"
-                else
-                    bad "$name"; sed 's/^/    /' build/compile.log | head -20
-                fi
+                cc_launch "compile $cc ${std#-x c++ } $opt ${cfg:-default}" $cc $std $W $opt $cfg $srcs -lm
             done
         done
     done
@@ -35,16 +51,12 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     for cc in gcc clang; do
         command -v "$cc" >/dev/null 2>&1 || continue
         for cfg in "" "-DPN_REAL=float"; do
-            name="compile $cc -std=c99 -O3 -march=native ${cfg:-default}"
             # shellcheck disable=SC2086
-            if $cc -std=c99 $W -O3 -march=native $cfg tests/compile_check.c tests/compile_check_tu2.c -lm -o build/compile_check \
-                2>build/compile.log && ./build/compile_check >>build/compile.log 2>&1; then
-                ok "$name"
-            else
-                bad "$name"; sed 's/^/    /' build/compile.log | head -20
-            fi
+            cc_launch "compile $cc -std=c99 -O3 -march=native ${cfg:-default}" $cc -std=c99 $W -O3 -march=native $cfg \
+                tests/compile_check.c tests/compile_check_tu2.c -lm
         done
     done
+    cc_flush
 fi
 
 # 2. the test binaries: test_main (double, every test) and test_float (PN_REAL=float)
