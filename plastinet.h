@@ -2688,8 +2688,8 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
     if (pn__model_scaled(mo)) {
         r = pn__pnet_scaled(mo, f->x, pt->x0, pt->h, level, &out, g, H);
         if (r != PN_OK) return r;
-        for (k = 0; k < nf; ++k) g[k] *= s;
-        for (k = 0; k < nf * nf; ++k) H[k] *= s;
+        for (k = 0; level > 0 && k < nf; ++k) g[k] *= s; /* only what was asked is set */
+        for (k = 0; level > 1 && k < nf * nf; ++k) H[k] *= s;
     } else {
         for (i = 0; i < nf; ++i) {
             u[i] = (f->x[i] - pt->x0[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
@@ -2699,8 +2699,8 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
         r = pn_mlp_eval(&mo->mlp, u, level > 0 ? nf : 0, &out, g, level > 1 ? H : NULL);
         if (r != PN_OK) return r;
         /* chain rule through u_k = (x_k - x0_k - shift_k) scale_k */
-        for (k = 0; k < nf; ++k) g[k] *= s * (pn_real)mo->in_scale[k];
-        for (k = 0; k < nf; ++k)
+        for (k = 0; level > 0 && k < nf; ++k) g[k] *= s * (pn_real)mo->in_scale[k];
+        for (k = 0; level > 1 && k < nf; ++k)
             for (l = 0; l < nf; ++l) H[k * nf + l] *= s * (pn_real)(mo->in_scale[k] * mo->in_scale[l]);
     }
     *N = s * out;

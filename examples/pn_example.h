@@ -509,6 +509,7 @@ PN_EX_UNUSED static int pn_ex_choice(const char *prog, const char *a, const char
    value (said on stderr). Flags match whole words only. */
 PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const char *a, const char *v) {
     static const char *const integrators[] = {"explicit", "implicit"};
+    static const char *const linear[] = {"default", "jacobi", "multigrid"};
     double x = 0;
     int ok = 1;
     if (!strcmp(a, "--png")) return c->png = 1;
@@ -531,6 +532,12 @@ PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const cha
     else if (!strcmp(a, "--newton-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.newton_tol = (pn_real)x;
     else if (!strcmp(a, "--cg-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.cg_rel_tol = (pn_real)x;
     else if (!strcmp(a, "--cg-forcing")) ok = pn_ex_number(prog, a, v, &x), c->solver.cg_forcing_max = (pn_real)x;
+    else if (!strcmp(a, "--linear")) {
+        int k = pn_ex_choice(prog, a, v, linear, 3);
+        ok = k >= 0;
+        c->solver.linear_solver = (pn_mpm_linear_solver)(k < 0 ? 0 : k);
+    } else if (!strcmp(a, "--mg-levels")) ok = pn_ex_integer(prog, a, v, &c->solver.mg_levels);
+    else if (!strcmp(a, "--mg-rebuild")) ok = pn_ex_integer(prog, a, v, &c->solver.mg_rebuild);
     else if (!strcmp(a, "--frames")) ok = pn_ex_integer(prog, a, v, &c->frames);
     else if (!strcmp(a, "--fps")) ok = pn_ex_integer(prog, a, v, &c->fps);
     else if (!strcmp(a, "--E")) ok = pn_ex_number(prog, a, v, &c->E);
@@ -552,6 +559,8 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const char *prog, const pn_ex_cli *c, pn
     else if (!(c->solver.newton_tol >= 0)) bad = "--newton-tol must be >= 0 (0: the default)";
     else if (!(c->solver.cg_rel_tol >= 0 && c->solver.cg_rel_tol < 1)) bad = "--cg-tol must be in [0, 1)";
     else if (!(c->solver.cg_forcing_max >= 0 && c->solver.cg_forcing_max < 1)) bad = "--cg-forcing must be in [0, 1)";
+    else if (c->solver.mg_levels < 0 || c->solver.mg_levels > 8) bad = "--mg-levels must be in 1 .. 8 (0: the default)";
+    else if (c->solver.mg_rebuild < 0 || c->solver.mg_rebuild > 1) bad = "--mg-rebuild must be 0 or 1";
     else if (c->frames < 1) bad = "--frames must be >= 1";
     else if (c->fps < 1) bad = "--fps must be >= 1";
     else if (!(c->E >= 0)) bad = "--E must be > 0";
@@ -585,6 +594,8 @@ PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f) {
                "  --regularizer W            PlasticityNet's w [1; < 0: off]\n"
                "  --fixed-point N  --contact-rounds N  --newton-tol X  --cg-tol X  --cg-forcing X\n"
                "                             pn_mpm_implicit_desc [1, 1, and the library's defaults]\n"
+               "  --linear jacobi|multigrid  --mg-levels N  --mg-rebuild 0|1\n"
+               "                             the Newton systems' solver (pn_mpm_implicit_desc) [multigrid, 8, 0]\n"
                "  --force-error              measure the energy's force error (pn_mpm_stats)\n"
                "  --jitter                   particles jittered in their lattice cells\n"
                "  --out DIR                  where frames go (created)\n"
