@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.5 - material point method solvers on plastinet.h.
+/* plastinet_mpm.h - v0.6 - material point method solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -21,6 +21,8 @@
      >>implicit  optimization time integration: Newton + filtered PCG + line search on the
                  incremental potential, fixed point on F0 (PlasticityNet Eqs. 3, 10, 11),
                  active set and lagged friction for separating contact, step halving
+     >>multigrid the implicit Hessian assembled on the active nodes, a Galerkin hierarchy
+                 and coloured block Gauss-Seidel: the V-cycle that preconditions CG
      >>explicit  symplectic Euler with the analytic return mapping after the F update (the
                  reference integrator; Jiang et al. 2016 course notes, Hu et al. 2018 MLS):
                  a dense grid scattered in particle order (threads own slabs of rows), 2D
@@ -165,7 +167,9 @@ typedef struct pn_mpm_group {
 
 /* How the implicit step solves each Newton system (conjugate gradients, preconditioned). */
 typedef enum pn_mpm_linear_solver {
-    PN_MPM_LINEAR_DEFAULT = 0,   /* multigrid                                                 */
+    PN_MPM_LINEAR_DEFAULT = 0,   /* multigrid, or Jacobi for systems of fewer than 4096
+                                    unknowns (about 2000 active nodes in 2D), where assembling
+                                    costs more than the CG iterations it saves              */
     PN_MPM_LINEAR_JACOBI,        /* matrix-free products over the particles, Jacobi (diagonal)
                                     preconditioner: no assembly; iterations grow like
                                     dt / dt_CFL                                              */
@@ -216,12 +220,17 @@ typedef struct pn_mpm_implicit_desc {
     pn_mpm_linear_solver linear_solver; /* [multigrid]                                      */
     int mg_levels;               /* multigrid: at most this many grid levels, the finest
                                     included [8]; 1: symmetric Gauss-Seidel alone           */
+    int pnet_double;             /* nonzero: PlasticityNet evaluated one particle at a time in
+                                    pn_real (pn_pnet_energy, the reference); 0: its network
+                                    over blocks of PN_MLP_LANES particles in float vector
+                                    lanes (pn_pnet_energy_lanes), several times faster [0]  */
     int mg_rebuild;              /* multigrid: when the hierarchy is built. 0: at each solve's
-                                    first Newton iteration, and again only when a later one's
-                                    CG, preconditioned by the kept (lagged) hierarchy, takes
-                                    more than twice the iterations of the last fresh one (CG
-                                    then multiplies by the current Hessian over the
-                                    particles); 1: at every Newton iteration [0]            */
+                                    first Newton iteration; the later ones precondition with
+                                    it (lagged: CG multiplies by their own Hessian over the
+                                    particles) unless that took 1.5 times the CG iterations
+                                    of the fresh one, after which every Newton iteration
+                                    builds its own (tried again every 16 steps); 1: at every
+                                    Newton iteration [0]                                    */
 } pn_mpm_implicit_desc;
 
 /* Statistics of the last step (of a failed implicit step: its first attempt). */
@@ -261,6 +270,9 @@ typedef struct pn_mpm_stats {
 /* >>multigrid: one grid level of the implicit Hessian (internal) */
 #define PN__MPM_MG_MAX 8     /* most grid levels                                               */
 #define PN__MPM_MG_DENSE 192 /* the coarsest level is factored (Cholesky) up to these unknowns */
+#define PN__MPM_MG_MIN 4096  /* PN_MPM_LINEAR_DEFAULT: multigrid from this many unknowns (the
+                                2D sand column: Jacobi 1.3x faster at 450 particles, even at
+                                1830, multigrid 3.7x faster at 7442)                      */
 typedef struct pn__mpm_level {
     int nn[3];                   /* nodes per axis (level l + 1: nn_l / 2 + 1)                */
     size_t stride[3], nodes;     /* flat node = sum idx_a stride_a                             */
@@ -352,6 +364,8 @@ typedef struct pn_mpm_world {
     pn__mpm_level mg[PN__MPM_MG_MAX];
     int mg_max, mg_levels, mg_on; /* levels the grid allows, built, in use this step         */
     int mg_current;              /* the finest level is this Newton iteration's Hessian     */
+    int pnet_lanes;              /* implicit: PlasticityNet in float lanes this step         */
+    int mg_stale;                /* a lagged hierarchy cost too many CG iterations lately    */
     size_t mg_dense_n;           /* unknowns of the factored coarsest level (0: smoothed)      */
     pn_real *mg_dense;
 } pn_mpm_world;
@@ -2157,21 +2171,49 @@ static void pn__mpm_gather_pmat(const pn_mpm_world *w, size_t k, pn_real *out) {
 static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt, int with_derivs,
                                    pn_real *E) {
     int d = w->dim, dd = d * d;
-    long l;
+    long l, nblk = (long)((w->n + PN_MLP_LANES - 1) / PN_MLP_LANES);
     pn_result r;
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n; ++l) {
-        size_t p = (size_t)l;
-        pn_real F[9], psi = 0, *P = w->pP + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
-        int i;
-        w->pscal[p] = 0;
-        w->pstat[p] = 0;
-        if (!w->active[p]) continue;
-        pn__mpm_push(w, p, v, dt, w->F + p * (size_t)dd, F);
-        w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs > 1 ? H : NULL);
-        w->pscal[p] = w->vol0[p] * psi;
-        if (with_derivs && w->pstat[p] == PN_OK) /* pmat (by sorted index) = V dt P */
-            for (i = 0; i < dd; ++i) w->pmat[w->prank[p] * (size_t)dd + (size_t)i] = w->vol0[p] * dt * P[i];
+    for (l = 0; l < nblk; ++l) { /* blocks of PN_MLP_LANES particles: PlasticityNet's in lanes */
+        size_t p0 = (size_t)l * PN_MLP_LANES, p1 = PN__MIN(w->n, p0 + PN_MLP_LANES), p, lp[PN_MLP_LANES];
+        pn_real Fl[PN_MLP_LANES * 9], psil[PN_MLP_LANES], Pl[PN_MLP_LANES * 9], Hl[PN_MLP_LANES * 81];
+        const pn_pnet_point *ptl[PN_MLP_LANES];
+        pn_result stl[PN_MLP_LANES];
+        int nl = 0, gl = -1, i, k;
+        for (p = p0; p < p1; ++p) {
+            pn_real F[9], psi = 0, *P = w->pP + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
+            w->pscal[p] = 0;
+            w->pstat[p] = 0;
+            if (!w->active[p]) continue;
+            pn__mpm_push(w, p, v, dt, w->F + p * (size_t)dd, F);
+            if (w->pnet_lanes && pn__mpm_energy_of(&w->groups[w->group[p]]) == PN_MPM_ENERGY_PNET &&
+                (gl < 0 || gl == w->group[p])) { /* one network per block's lanes */
+                gl = w->group[p];
+                lp[nl] = p;
+                ptl[nl] = &w->ppt[p];
+                memcpy(Fl + nl * dd, F, sizeof(pn_real) * (size_t)dd);
+                nl++;
+                continue;
+            }
+            w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs > 1 ? H : NULL);
+            w->pscal[p] = w->vol0[p] * psi;
+        }
+        if (nl) {
+            pn_pnet_energy_lanes(&w->groups[gl].pnet, nl, ptl, Fl, psil, with_derivs ? Pl : NULL,
+                                 with_derivs > 1 ? Hl : NULL, PN_EVAL_PROJECT_PSD, stl);
+            for (k = 0; k < nl; ++k) {
+                p = lp[k];
+                w->pstat[p] = (int)stl[k];
+                if (stl[k] != PN_OK) continue;
+                w->pscal[p] = w->vol0[p] * psil[k];
+                if (with_derivs) memcpy(w->pP + p * (size_t)dd, Pl + k * dd, sizeof(pn_real) * (size_t)dd);
+                if (with_derivs > 1)
+                    memcpy(w->pH + p * (size_t)(dd * dd), Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
+            }
+        }
+        for (p = p0; with_derivs && p < p1; ++p) /* pmat (by sorted index) = V dt P */
+            if (w->active[p] && w->pstat[p] == PN_OK)
+                for (i = 0; i < dd; ++i) w->pmat[w->prank[p] * (size_t)dd + (size_t)i] = w->vol0[p] * dt * w->pP[p * (size_t)dd + (size_t)i];
     }
     r = pn__mpm_first_error(w, dt);
     if (r != PN_OK) {
@@ -3184,7 +3226,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     pn__mpm_p2g(w);
     pn__mpm_contact(w, w->time_s);
     nd = w->n_act * (size_t)d;
-    w->mg_on = o->linear_solver != PN_MPM_LINEAR_JACOBI;
+    w->pnet_lanes = !o->pnet_double;
+    w->mg_on = o->linear_solver == PN_MPM_LINEAR_MULTIGRID ||
+               (o->linear_solver == PN_MPM_LINEAR_DEFAULT && nd >= PN__MPM_MG_MIN);
     w->mg_levels = 0; /* a new active set: the hierarchy is built afresh */
     st->active_nodes = w->n_act;
     /* v* = momentum / mass + dt g; separating contacts start held where they approach */
@@ -3216,7 +3260,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         if (pass > 0) st->fixed_point_residual = PN__MAX(st->fixed_point_residual, fp_res);
         st->fixed_point_iters++;
         for (round = 0; round < o->contact_rounds; ++round) {
-            int it, cg, cg_fresh = 0, fresh, stale = 0;
+            int it, cg, cg_fresh = 0, fresh, stale = w->mg_stale && w->steps % 16 != 0;
             pn_real eta = 0, gprev = 0, pred = 0; /* forcing: last eta, |S g|, predicted |S g| */
             if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->vsol);
             st->solves++;
@@ -3237,8 +3281,11 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 cg = pn__mpm_pcg(w, dt, o->cg_max, eta, 0, &capped);
                 st->cg_iters += cg;
                 st->mg_builds += w->mg_on && fresh;
-                if (fresh) cg_fresh = cg; /* a lagged hierarchy that costs twice the iterations is rebuilt */
-                stale = !fresh && cg > 2 * cg_fresh + 2;
+                /* a lagged hierarchy that costs half as many iterations again as a fresh one is
+                   rebuilt at every Newton iteration from then on (the energy's Hessian moves
+                   fast: DP's kinks), retried every 16 steps */
+                if (fresh) cg_fresh = cg;
+                if (!fresh) w->mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
                 st->newton_iters++;
                 for (k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
                 if (dmax <= vscale && eta > o->cg_rel_tol) { /* a loose solve may stop Newton early */

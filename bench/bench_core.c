@@ -1,4 +1,7 @@
-/* bench_core: nanoseconds per call of the constitutive core, 2D and 3D.
+/* bench_core: nanoseconds per call of the constitutive core, 2D and 3D, and per particle of
+   the PlasticityNet energy with P and its PSD dP/dF (what an implicit Newton iteration asks
+   of every particle), one particle at a time in double (pn_pnet_energy) against blocks of
+   PN_MLP_LANES in float lanes (pn_pnet_energy_lanes), beside the analytic lagged energy.
    Build: cc -std=c99 -O2 bench/bench_core.c -lm -o bench_core
    Usage: bench_core [--csv FILE] [--reps N]
    Inputs are random F = R1 diag(exp(e)) R2 with e in [-0.3, 0.3]^d, so return mappings see a
@@ -6,6 +9,7 @@
    asserted anywhere. */
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
+#include "../models/pn_models.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
@@ -117,6 +121,68 @@ int main(int argc, char **argv) {
             if (ns[4] >= 0) printf("%12.0f ", ns[4]); else printf("%12s ", "-");
             printf("%12.0f\n", ns[5]);
         }
+    /* PlasticityNet: every shipped energy model at its training material, E = 1e7 Pa, at pairs
+       (F0, F) with F0 from the inputs and F a step of up to 1e-2 from it */
+    printf("\n%-22s %-4s %14s %14s %8s %16s\n", "PlasticityNet model", "dim", "double ns", "lanes ns", "speedup",
+           "lagged+psd ns");
+    for (i = 0; pn_models_all[i]; ++i) {
+        const pn_model *mo = pn_models_all[i]();
+        pn_material m;
+        pn_pnet net;
+        pn_pnet_desc pd;
+        static pn_pnet_point pts[NF];
+        static pn_real F1[9 * NF], P[9 * PN_MLP_LANES], H[81 * PN_MLP_LANES], psi[PN_MLP_LANES];
+        const pn_pnet_point *pp[PN_MLP_LANES];
+        pn_result st[PN_MLP_LANES];
+        double ns[3];
+        long it, n;
+        int k, a;
+        clock_t t0;
+        if (mo->kind != PN_MODEL_ENERGY || pn_model_material(mo, 1e7, &m, NULL) != PN_OK) continue;
+        d = mo->dim;
+        memset(&pd, 0, sizeof pd);
+        pd.energy = mo;
+        if (pn_pnet_init(&net, &pd, &m, d, NULL) != PN_OK) continue;
+        for (k = 0; k < NF; ++k) {
+            const pn_real *F0 = Fs[d - 2] + 9 * k;
+            pn_pnet_prepare(&net, F0, 0, &pts[k], NULL, NULL);
+            for (a = 0; a < d * d; ++a) F1[9 * k + a] = F0[a] + (pn_real)(1e-2 * (((k * 7 + a * 3) % 11) / 5.0 - 1));
+        }
+        n = reps / 8;
+        t0 = clock();
+        for (it = 0; it < n; ++it) {
+            k = (int)(it % NF);
+            pn_pnet_energy(&net, &pts[k], F1 + 9 * k, psi, P, H, PN_EVAL_PROJECT_PSD);
+            sink += H[0];
+        }
+        ns[0] = (double)(clock() - t0) / CLOCKS_PER_SEC * 1e9 / (double)n;
+        t0 = clock();
+        for (it = 0; it < n; it += PN_MLP_LANES) {
+            pn_real Fb[9 * PN_MLP_LANES];
+            for (k = 0; k < PN_MLP_LANES; ++k) {
+                int q = (int)((it + k) % NF);
+                pp[k] = &pts[q];
+                memcpy(Fb + k * d * d, F1 + 9 * q, sizeof(pn_real) * (size_t)(d * d));
+            }
+            pn_pnet_energy_lanes(&net, PN_MLP_LANES, pp, Fb, psi, P, H, PN_EVAL_PROJECT_PSD, st);
+            sink += H[0];
+        }
+        ns[1] = (double)(clock() - t0) / CLOCKS_PER_SEC * 1e9 / (double)n;
+        ns[2] = bench_op(OP_LAGGED, &m, d, Fs[d - 2], reps, &sink); /* + PSD below */
+        {
+            pn_real G[9], hg = 0, hh[81], pp2[9], ps2;
+            pn_lagged_prepare(&m, d, Fs[d - 2], 0, G, &hg);
+            t0 = clock();
+            for (it = 0; it < reps; ++it) {
+                pn_lagged_energy(&m, d, Fs[d - 2] + 9 * (it % NF), G, hg, &ps2, pp2, hh, PN_EVAL_PROJECT_PSD);
+                sink += hh[0];
+            }
+            ns[2] = (double)(clock() - t0) / CLOCKS_PER_SEC * 1e9 / (double)reps;
+        }
+        printf("%-22s %-4d %14.0f %14.0f %7.1fx %16.0f\n", mo->name, d, ns[0], ns[1], ns[0] / ns[1], ns[2]);
+        if (out) fprintf(out, "%d,%s,pnet_energy_P_H_psd_double,%.1f\n%d,%s,pnet_energy_P_H_psd_lanes,%.1f\n", d,
+                         mo->name, ns[0], d, mo->name, ns[1]);
+    }
     if (out) fclose(out);
     fprintf(stderr, "(ns per call; checksum %g)\n", sink);
     return 0;

@@ -42,13 +42,16 @@
    divides a frame) by the mass IoUs of examples/pn_example.h: soft (the formula of
    docs/validation.md; below 1 even for identical fields, so the reference's score against itself
    is its ceiling), min/max (1 for identical fields; the plots use it) and binary occupancy.
-   Then a Young's-modulus sweep of the 2D sand column (1e5 to 1e8 Pa): implicit PlasticityNet
-   at dt 1e-3 s, 1 fixed-point pass, against the fair explicit baseline found at each E (IoU
-   against that baseline, not a converged reference).
+   Then a Young's-modulus sweep of the 2D sand column (1e6 to 1e10 Pa; --sweep-E, at
+   --sweep-res cells, default the 2D res): at each E the fair explicit baseline (searched as
+   above), the reference at half its step, and implicit runs of the lagged and frozen-yield DP
+   energies with multigrid and Jacobi CG (sweep_cfgs), IoU against that reference, and the
+   crossover (the smallest E where implicit is faster than the fair baseline at mean min/max
+   IoU >= 0.90). --sweep-only: the sweep alone.
    Wall time: clock_gettime(CLOCK_MONOTONIC) around the steps only (scene setup and the IoU
    rasterization excluded); processor seconds (clock()) go to the CSV beside it, so a run
    slowed by another process shows as wall > cpu.
-   Writes DIR/bench_mpm.csv, DIR/bench_mpm_esweep.csv, DIR/bench_mpm.svg (mean IoU against
+   Writes DIR/bench_mpm.csv, DIR/bench_mpm_esweep.{csv,md}, DIR/bench_mpm.svg (mean IoU against
    wall seconds per simulated second), DIR/bench_mpm_esweep.svg and DIR/bench_mpm.md (tables
    for the README); progress on stderr. A run that fails (step error, unbounded, over the time
    limit) is a row that says so, with the figures of the frames it completed. */
@@ -99,7 +102,7 @@ typedef struct bench_cfg {
     pn_mpm_implicit_desc solver; /* implicit runs: contact_rounds, cg_forcing_max;
                                     fixed_point_iters is set per run              */
     const double *Es;     /* the sweep                                             */
-    int n_Es;
+    int n_Es, sweep_res;
     const char *out;
 } bench_cfg;
 
@@ -589,50 +592,132 @@ static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FIL
 
 /* ---- the Young's-modulus sweep (2D sand) ----------------------------------------------------- */
 
+/* the sweep's implicit runs at every E: energy, step, passes, linear solver */
+typedef struct sweep_cfg {
+    const char *name;
+    pn_mpm_energy energy;
+    double dt;
+    int fp;
+    pn_mpm_linear_solver linear;
+} sweep_cfg;
+static const sweep_cfg sweep_cfgs[] = {
+    {"lagged, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_MULTIGRID},
+    {"lagged, dt 1e-3, Jacobi", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_JACOBI},
+    {"lagged, dt 4e-3, multigrid", PN_MPM_ENERGY_LAGGED, 4e-3, 1, PN_MPM_LINEAR_MULTIGRID},
+    {"lagged 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID},
+    {"DP 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_DP, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID},
+};
+#define SWEEP_RUNS ((int)(sizeof sweep_cfgs / sizeof sweep_cfgs[0]))
+
 typedef struct sweep_row {
     double E;
-    bench_run fair, imp;
+    bench_run fair, ref, imp[SWEEP_RUNS];
     int found;
 } sweep_row;
 
+/* At each E: the fair explicit baseline (searched), the reference at half its step (the IoU of
+   every run is against it; the fair run's own IoU says how converged the reference is), and
+   the implicit runs of sweep_cfgs (each capped at max_run_s). */
 static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
-    int i, frames = (int)floor(cfg->duration[2] * BENCH_FPS + 0.5);
+    int i, c, frames = (int)floor(cfg->duration[2] * BENCH_FPS + 0.5);
     pn_ex_scene s;
-    size_t nodes = (size_t)(cfg->res[2] + 1) * (size_t)(cfg->res[2] + 1);
-    double *fair;
+    size_t nodes;
+    double *fair, *ref;
     if (frames < 1) frames = 1;
+    pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
+    s.res = cfg->sweep_res;
+    nodes = (size_t)(s.res + 1) * (size_t)(s.res + 1);
     if (!(fair = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
-    fprintf(csv, "E_pa,fair_dt_s,fair_wall_per_sim_s,fair_status,implicit_dt_s,implicit_wall_per_sim_s,"
-                 "implicit_over_fair,mass_iou_mean_vs_fair,mass_iou_min_vs_fair,minmax_iou_mean_vs_fair,"
-                 "minmax_iou_min_vs_fair,newton_per_step,cg_per_step,halved_steps,implicit_status\n");
+    if (!(ref = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
+    fprintf(csv, "E_pa,particles,run,dt_s,fixed_point_iters,linear_solver,wall_per_sim_s,over_fair,"
+                 "minmax_iou_mean_vs_ref,minmax_iou_min_vs_ref,dt_over_cfl,newton_per_step,cg_per_step,"
+                 "halved_steps,cg_capped,status\n");
     for (i = 0; i < cfg->n_Es; ++i) {
         sweep_row *w = &rows[i];
-        double st;
+        double fw;
         pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
-        s.res = cfg->res[2];
+        s.res = cfg->sweep_res;
         if (cfg->filter >= 0) s.filter_s = cfg->filter;
         s.E_pa = cfg->Es[i];
         w->E = s.E_pa;
-        fprintf(stderr, "E sweep, E = %.0e Pa\n", w->E);
+        fprintf(stderr, "E sweep, E = %.0e Pa, res %d\n", w->E, s.res);
         w->found = bench_fair(&s, frames, &w->fair, fair);
-        memset(&w->imp, 0, sizeof w->imp);
-        strcpy(w->imp.role, "implicit");
-        w->imp.implicit = 1;
-        w->imp.energy = PN_MPM_ENERGY_PNET;
-        w->imp.dt = 1e-3;
-        w->imp.fp = 1;
-        bench_run_scene(&s, &w->imp, frames, cfg->max_run_s, &cfg->solver, NULL, w->found ? fair : NULL);
-        bench_progress("sand", 2, &w->fair);
-        bench_progress("sand", 2, &w->imp);
-        st = w->imp.tally.steps ? (double)w->imp.tally.steps : 1;
-        fprintf(csv, "%g,%.6g,%.4g,%s,%g,%.4g,%.4g,%.4f,%.4f,%.4f,%.4f,%.2f,%.1f,%ld,\"%s\"\n", w->E,
-                w->found ? w->fair.dt : 0, w->found ? wall_per_sim(&w->fair) : 0, w->found ? "yes" : "no stable step",
-                w->imp.dt, wall_per_sim(&w->imp), w->found ? wall_per_sim(&w->imp) / wall_per_sim(&w->fair) : 0,
-                w->imp.iou_mean, w->imp.iou_min, w->imp.mm_mean, w->imp.mm_min, w->imp.tally.newton / st,
-                w->imp.tally.cg / st, w->imp.tally.halved, status_detail(&w->imp));
-        fflush(csv);
+        memset(&w->ref, 0, sizeof w->ref);
+        strcpy(w->ref.role, "reference");
+        w->ref.dt = w->found ? w->fair.dt / 2 : 0;
+        if (w->found) {
+            bench_run_scene(&s, &w->ref, frames, 0, NULL, ref, NULL);
+            bench_compare(&w->fair, fair, ref, nodes);
+            bench_progress("sand", 2, &w->fair);
+        }
+        fw = w->found ? wall_per_sim(&w->fair) : 0;
+        fprintf(csv, "%g,%lu,explicit fair,%.6g,0,,%.4g,1,%.4f,%.4f,%.3g,0,0,0,0,\"%s\"\n", w->E,
+                (unsigned long)w->fair.particles, w->fair.dt, fw, w->fair.mm_mean, w->fair.mm_min,
+                w->fair.tally.max_dt_over_cfl, w->found ? "ok" : "no stable step");
+        for (c = 0; c < SWEEP_RUNS; ++c) {
+            bench_run *r = &w->imp[c];
+            pn_mpm_implicit_desc id = cfg->solver;
+            double st;
+            memset(r, 0, sizeof *r);
+            strcpy(r->role, "implicit");
+            r->implicit = 1;
+            r->energy = sweep_cfgs[c].energy;
+            r->dt = sweep_cfgs[c].dt;
+            r->fp = sweep_cfgs[c].fp;
+            id.linear_solver = sweep_cfgs[c].linear;
+            bench_run_scene(&s, r, frames, cfg->max_run_s, &id, NULL, w->found ? ref : NULL);
+            bench_progress("sand", 2, r);
+            st = r->tally.steps ? (double)r->tally.steps : 1;
+            fprintf(csv, "%g,%lu,%s,%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\"\n", w->E,
+                    (unsigned long)r->particles, sweep_cfgs[c].name, r->dt, r->fp,
+                    sweep_cfgs[c].linear == PN_MPM_LINEAR_JACOBI ? "jacobi" : "multigrid", wall_per_sim(r),
+                    fw > 0 ? wall_per_sim(r) / fw : 0, r->mm_mean, r->mm_min, r->tally.max_dt_over_cfl,
+                    r->tally.newton / st, r->tally.cg / st, r->tally.halved, r->tally.cg_capped, status_detail(r));
+            fflush(csv);
+        }
     }
     free(fair);
+    free(ref);
+}
+
+/* The sweep's table, and the crossover: the smallest E where an implicit run is faster than
+   the fair explicit baseline at mean min/max IoU >= 0.90 against the reference. */
+static void write_sweep_md(const char *path, const bench_cfg *cfg, const sweep_row *rows, int n) {
+    FILE *f = fopen(path, "w");
+    int i, c, cross = -1;
+    if (!f) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        return;
+    }
+    fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm) -->\n**Young's modulus sweep**, sand column 2D, "
+               "res %d (%lu particles), %.2f s simulated: at each E the fair explicit baseline (largest stable step, "
+               "searched), the reference (explicit at half that step; every IoU is the mean / min min/max mass IoU "
+               "against it), and the implicit runs (1 fixed-point pass unless said; each capped at %.0f wall s). "
+               "*x fair*: wall time over the fair baseline's, in the same run.\n\n",
+            cfg->sweep_res, n ? (unsigned long)rows[0].fair.particles : 0ul, cfg->duration[2], cfg->max_run_s);
+    fprintf(f, "| E (Pa) | run | dt (s) | dt / dt_CFL | wall s / sim s | x fair | min/max IoU mean / min | "
+               "Newton / CG per step | status |\n|---|---|---|---|---|---|---|---|---|\n");
+    for (i = 0; i < n; ++i) {
+        const sweep_row *w = &rows[i];
+        double fw = w->found ? wall_per_sim(&w->fair) : 0;
+        if (!w->found) fprintf(f, "| %.0e | explicit fair | none stable | | | | | | |\n", w->E);
+        else
+            fprintf(f, "| %.0e | explicit fair | %.3g | %.2f | %.3g | 1 | %.3f / %.3f | | ok |\n", w->E, w->fair.dt,
+                    w->fair.tally.max_dt_over_cfl, fw, w->fair.mm_mean, w->fair.mm_min);
+        for (c = 0; c < SWEEP_RUNS; ++c) {
+            const bench_run *r = &w->imp[c];
+            double st = r->tally.steps ? (double)r->tally.steps : 1, x = fw > 0 ? wall_per_sim(r) / fw : 0;
+            fprintf(f, "| %.0e | %s | %.3g | %.0f | %.3g | %.3g | %.3f / %.3f | %.1f / %.1f | %s |\n", w->E,
+                    sweep_cfgs[c].name, r->dt, r->tally.max_dt_over_cfl, wall_per_sim(r), x, r->mm_mean, r->mm_min,
+                    r->tally.newton / st, r->tally.cg / st, status_detail(r));
+            if (cross < 0 && r->status == RUN_OK && fw > 0 && x < 1 && r->mm_mean >= 0.9) cross = i;
+        }
+    }
+    if (cross >= 0) fprintf(f, "\n**Crossover**: E = %.0e Pa is the smallest E of the sweep where an implicit run is "
+                               "faster than the fair explicit baseline at mean min/max IoU >= 0.90.\n", rows[cross].E);
+    else fprintf(f, "\n**Crossover**: none in this sweep (no implicit run faster than the fair explicit baseline at "
+                    "mean min/max IoU >= 0.90).\n");
+    fclose(f);
 }
 
 /* ---- plots and the markdown report ------------------------------------------------------------ */
@@ -713,7 +798,7 @@ static void write_sweep_svg(const char *path, const sweep_row *rows, int n) {
     for (i = 0; i < n; ++i) {
         double v[2];
         v[0] = rows[i].found ? wall_per_sim(&rows[i].fair) : 0;
-        v[1] = wall_per_sim(&rows[i].imp);
+        v[1] = wall_per_sim(&rows[i].imp[0]);
         for (s = 0; s < 2; ++s)
             if (v[s] > 0) {
                 if (v[s] < lo) lo = v[s];
@@ -738,14 +823,14 @@ static void write_sweep_svg(const char *path, const sweep_row *rows, int n) {
         int first = 1;
         fprintf(f, "<polyline fill='none' stroke='%s' points='", color);
         for (i = 0; i < n; ++i) {
-            const bench_run *r = s ? &rows[i].imp : &rows[i].fair;
+            const bench_run *r = s ? &rows[i].imp[0] : &rows[i].fair;
             if ((!s && !rows[i].found) || wall_per_sim(r) <= 0) continue;
             fprintf(f, "%s%.1f,%.1f", first ? "" : " ", svg_px(&p, rows[i].E), svg_py(&p, wall_per_sim(r)));
             first = 0;
         }
         fprintf(f, "'/>\n");
         for (i = 0; i < n; ++i) {
-            const bench_run *r = s ? &rows[i].imp : &rows[i].fair;
+            const bench_run *r = s ? &rows[i].imp[0] : &rows[i].fair;
             char label[64];
             if ((!s && !rows[i].found) || wall_per_sim(r) <= 0) continue;
             if (s && rows[i].found)
@@ -756,14 +841,13 @@ static void write_sweep_svg(const char *path, const sweep_row *rows, int n) {
         }
     }
     fprintf(f, "<text x='20' y='446' font-size='11'>Black squares: explicit at its largest stable step (dt shown). "
-               "Blue: implicit PlasticityNet, dt 1e-3 s,</text>\n<text x='20' y='462' font-size='11'>1 fixed-point "
-               "pass (time over explicit; min/max mass IoU against the explicit run). Grey (!): failed or "
+               "Blue: implicit lagged, dt 1e-3 s, multigrid,</text>\n<text x='20' y='462' font-size='11'>1 fixed-point "
+               "pass (time over explicit; min/max mass IoU against the reference). Grey (!): failed or "
                "stopped.</text>\n</svg>\n");
     fclose(f);
 }
 
-static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *sc, int n_sc, const sweep_row *rows,
-                     int n_rows) {
+static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *sc, int n_sc) {
     FILE *f = fopen(path, "w");
     int i, k;
     if (!f) {
@@ -812,27 +896,6 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
         for (k = 0; k < s->n_runs; ++k) md_row(f, s->name, s->dim, &s->runs[k], fair_wps);
         fprintf(f, "\n");
     }
-    if (n_rows) {
-        fprintf(f, "**Young's modulus sweep**, sand 2D: implicit PlasticityNet (dt 1e-3 s, 1 fixed-point pass) "
-                   "against the explicit run at its largest stable step at each E (IoU against that run).\n\n");
-        fprintf(f, "| E (Pa) | explicit dt (s) | explicit wall s / sim s | implicit wall s / sim s | implicit / explicit | "
-                   "soft IoU mean / min | min/max IoU mean / min | Newton / CG per step | implicit finite |\n"
-                   "|---|---|---|---|---|---|---|---|---|\n");
-        for (i = 0; i < n_rows; ++i) {
-            const sweep_row *w = &rows[i];
-            double st = w->imp.tally.steps ? (double)w->imp.tally.steps : 1;
-            if (!w->found) {
-                fprintf(f, "| %.0e | none stable | | %.3g | | | | %.1f / %.0f | %s |\n", w->E, wall_per_sim(&w->imp),
-                        w->imp.tally.newton / st, w->imp.tally.cg / st, status_name(&w->imp));
-                continue;
-            }
-            fprintf(f, "| %.0e | %.3g | %.3g | %.3g | %.2f | %.3f / %.3f | %.3f / %.3f | %.1f / %.0f | %s |\n", w->E,
-                    w->fair.dt, wall_per_sim(&w->fair), wall_per_sim(&w->imp),
-                    wall_per_sim(&w->imp) / wall_per_sim(&w->fair), w->imp.iou_mean, w->imp.iou_min, w->imp.mm_mean,
-                    w->imp.mm_min, w->imp.tally.newton / st, w->imp.tally.cg / st,
-                    status_name(&w->imp));
-        }
-    }
     fclose(f);
 }
 
@@ -840,7 +903,8 @@ static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
-                    "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n");
+                    "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
+                    "       [--sweep-only] [--sweep-res N] [--sweep-E E,E,..]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -877,7 +941,9 @@ static unsigned parse_energies(const char *v) {
 int main(int argc, char **argv) {
     static const double dts_full[] = {1e-4, 1e-3, 1e-2}, dts_quick[] = {1e-3, 1e-2};
     static const int fp_full[] = {1, 2, 4}, fp_quick[] = {1, 2};
-    static const double Es_full[] = {1e5, 1e6, 1e7, 1e8}, Es_quick[] = {1e6, 1e7};
+    static const double Es_full[] = {1e6, 1e7, 1e8, 1e9, 1e10}, Es_quick[] = {1e6, 1e7};
+    static double Es_arg[8];
+    int n_Es_arg = 0, sweep_only = 0;
     bench_cfg cfg;
     int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0, n_dts = 0, n_passes = 0, sweep = 1, bad = 0, cost = 0;
     static double dts_arg[8], passes_arg[8];
@@ -902,6 +968,7 @@ int main(int argc, char **argv) {
         if (!strcmp(a, "--quick")) cfg.quick = 1;
         else if (!strcmp(a, "--references")) cfg.refs_only = 1;
         else if (!strcmp(a, "--no-sweep")) sweep = 0;
+        else if (!strcmp(a, "--sweep-only")) sweep_only = 1;
         else if (!strcmp(a, "--no-hardening")) cfg.no_hardening = 1;
         else if (!strcmp(a, "--snowball")) cfg.snowball = 1;
         else if (!strcmp(a, "--cost")) cost = 1;
@@ -911,6 +978,8 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--duration")) duration = atof(v), ++k;
         else if (!strcmp(a, "--res2")) cfg.res[2] = atoi(v), ++k;
         else if (!strcmp(a, "--res3")) cfg.res[3] = atoi(v), ++k;
+        else if (!strcmp(a, "--sweep-res")) cfg.sweep_res = atoi(v), ++k;
+        else if (!strcmp(a, "--sweep-E")) bad |= !(n_Es_arg = parse_list(v, Es_arg)), ++k;
         else if (!strcmp(a, "--max-run-seconds")) cfg.max_run_s = atof(v), ++k;
         else if (!strcmp(a, "--out")) cfg.out = v, ++k;
         else if (!strcmp(a, "--filter")) cfg.filter = atof(v), ++k;
@@ -921,7 +990,8 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--cg-forcing")) bad |= !((cfg.solver.cg_forcing_max = (pn_real)atof(v)) >= 0 && cfg.solver.cg_forcing_max < 1), ++k;
         else { usage(); return 2; }
     }
-    if (bad || only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16) {
+    if (bad || only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16 ||
+        (cfg.sweep_res && cfg.sweep_res < 16)) {
         usage();
         return 2;
     }
@@ -940,7 +1010,9 @@ int main(int argc, char **argv) {
     if (n_passes) cfg.fps_iters = passes_int, cfg.n_fps = n_passes;
     cfg.energy_mask = mask;
     cfg.Es = cfg.quick ? Es_quick : Es_full;
-    cfg.n_Es = cfg.quick ? 2 : 4;
+    cfg.n_Es = cfg.quick ? 2 : 5;
+    if (n_Es_arg) cfg.Es = Es_arg, cfg.n_Es = n_Es_arg;
+    if (!cfg.sweep_res) cfg.sweep_res = cfg.res[2];
     if (!pn_ex_mkdirs(cfg.out)) {
         fprintf(stderr, "bench_mpm: cannot create the folder %s\n", cfg.out);
         return 1;
@@ -967,7 +1039,7 @@ int main(int argc, char **argv) {
         return 1;
     }
     csv_header(csv);
-    for (kind = 0; kind < 2; ++kind)
+    for (kind = 0; kind < 2 && !sweep_only; ++kind)
         for (d = 2; d <= 3; ++d) {
             if ((only >= 0 && only != kind) || (dim_only && dim_only != d)) continue;
             bench_one(&cfg, bench_kind(&cfg, kind), d, &scenes[n_sc++], csv);
@@ -984,11 +1056,15 @@ int main(int argc, char **argv) {
         fclose(esw);
         snprintf(path, sizeof path, "%s/bench_mpm_esweep.svg", cfg.out);
         write_sweep_svg(path, rows, n_rows);
+        snprintf(path, sizeof path, "%s/bench_mpm_esweep.md", cfg.out);
+        write_sweep_md(path, &cfg, rows, n_rows);
     }
-    snprintf(path, sizeof path, "%s/bench_mpm.svg", cfg.out);
-    write_svg(path, scenes, n_sc);
-    snprintf(path, sizeof path, "%s/bench_mpm.md", cfg.out);
-    write_md(path, &cfg, scenes, n_sc, rows, n_rows);
-    fprintf(stderr, "wrote %s/bench_mpm.{csv,svg,md}%s\n", cfg.out, n_rows ? " and bench_mpm_esweep.{csv,svg}" : "");
+    if (n_sc) {
+        snprintf(path, sizeof path, "%s/bench_mpm.svg", cfg.out);
+        write_svg(path, scenes, n_sc);
+        snprintf(path, sizeof path, "%s/bench_mpm.md", cfg.out);
+        write_md(path, &cfg, scenes, n_sc);
+    }
+    fprintf(stderr, "wrote %s/bench_mpm.{csv,svg,md}%s\n", cfg.out, n_rows ? " and bench_mpm_esweep.{csv,svg,md}" : "");
     return 0;
 }

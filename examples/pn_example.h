@@ -519,6 +519,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const cha
     if (!strcmp(a, "--jitter")) return c->jitter = 1;
     if (!strcmp(a, "--quiet")) return c->quiet = 1;
     if (!strcmp(a, "--force-error")) return c->solver.measure_force_error = 1;
+    if (!strcmp(a, "--pnet-double")) return c->solver.pnet_double = 1;
     if (!strcmp(a, "--dim")) ok = pn_ex_integer(prog, a, v, &c->dim);
     else if (!strcmp(a, "--integrator")) ok = (c->implicit = pn_ex_choice(prog, a, v, integrators, 2)) >= 0;
     else if (!strcmp(a, "--energy")) ok = pn_ex__need(prog, a, v), c->energy = v;
@@ -596,6 +597,8 @@ PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f) {
                "                             pn_mpm_implicit_desc [1, 1, and the library's defaults]\n"
                "  --linear jacobi|multigrid  --mg-levels N  --mg-rebuild 0|1\n"
                "                             the Newton systems' solver (pn_mpm_implicit_desc) [multigrid, 8, 0]\n"
+               "  --pnet-double              PlasticityNet one particle at a time in double (the reference;\n"
+               "                             default: its network in float vector lanes)\n"
                "  --force-error              measure the energy's force error (pn_mpm_stats)\n"
                "  --jitter                   particles jittered in their lattice cells\n"
                "  --out DIR                  where frames go (created)\n"

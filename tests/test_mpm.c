@@ -1350,6 +1350,7 @@ PN_TEST(mpm_multigrid_operators) {
         PN_CHECK(w != NULL);
         if (!w) return;
         memset(&id, 0, sizeof id);
+        id.linear_solver = PN_MPM_LINEAR_MULTIGRID; /* the default takes Jacobi at this size */
         for (s = 0; s < 5; ++s) PN_CHECK(pn_mpm_step_implicit(w, 1e-3, &id, NULL) == PN_OK);
         memset(&pr, 0, sizeof pr);
         pr.w = w;
@@ -1430,6 +1431,7 @@ PN_TEST(mpm_multigrid_iterations) {
             w->desc.parallel_min_particles = 1;
             omp_set_num_threads(t);
             memset(&id, 0, sizeof id);
+            id.linear_solver = PN_MPM_LINEAR_MULTIGRID;
             id.mg_levels = 2; /* a coarsest level too large to factor: smoothed */
             for (s = 0; s < 4; ++s) PN_CHECK(pn_mpm_step_implicit(w, 2e-3, &id, NULL) == PN_OK);
             levels = w->mg_levels;
