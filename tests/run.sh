@@ -98,6 +98,12 @@ models=
 # test_main with OpenMP: test_mpm.c checks that 1 and 2 threads give the same bits
 run_bin test_main tests/test_main.c "$models -fopenmp" "$@"
 run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"
+# the float lanes of PlasticityNet in their other spellings: 8-lane vectors (AVX and up, what
+# -march=native gives on x86-64) and the plain-struct path of compilers without vector types
+if [ -z "$1" ]; then
+    run_bin test_lanes_native tests/test_main.c "$models -march=native" pnet_lanes
+    run_bin test_lanes_portable tests/test_main.c "$models -DPN_NO_VECTOR_EXTENSIONS" pnet_lanes
+fi
 run_bin test_render tests/test_render.c "" "$@"
 
 # 3. C against torch (gen/crosscheck.py): the training targets and every shipped model. Runs
