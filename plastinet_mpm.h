@@ -217,7 +217,7 @@ typedef struct pn_mpm_implicit_desc {
     int measure_force_error;     /* nonzero: at each converged step, compare the energy's
                                     force density with the return mapping's T(F) (one return
                                     mapping per particle; see pn_mpm_stats.force_error)    */
-    pn_mpm_linear_solver linear_solver; /* [multigrid]                                      */
+    pn_mpm_linear_solver linear_solver; /* [PN_MPM_LINEAR_DEFAULT]                         */
     int mg_levels;               /* multigrid: at most this many grid levels, the finest
                                     included [8]; 1: symmetric Gauss-Seidel alone           */
     int pnet_double;             /* nonzero: PlasticityNet evaluated one particle at a time in
@@ -2253,10 +2253,10 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
    and A_l+1 = P^T A_l P, so quadratic B-splines' 5^dim coupling stays 5^dim on every level
    (|i - j| <= 2 per axis gives |I - J| <= 2). The smoother is block Gauss-Seidel in 3^dim
    colours (node index mod 3 per axis): rows of one colour are 3 or more apart, so they
-   update independently and any thread count gives the same bits. One V(1,1)-cycle, a
-   forward sweep down and a backward sweep up, is symmetric positive definite whatever
-   the coarse matrices (M + M^T - A = D > 0 for Gauss-Seidel), so it can precondition CG
-   even when the hierarchy is older than the fine matrix. Held contact directions enter as
+   update independently and any thread count gives the same bits. One V-cycle, forward
+   sweeps down and backward sweeps up, is symmetric positive definite whatever the coarse
+   matrices (M + M^T - A = D > 0 for Gauss-Seidel), so it can precondition CG even when
+   the hierarchy is older than the fine matrix. Held contact directions enter as
    A^_kl = S_k^T A_kl S_l (S the contact filter): on the filtered vectors CG works on,
    A^ x = S A x; the held directions have no stiffness, the smoother (a pseudo-inverse of
    each diagonal block) never moves them, and P^T A^ P is the coarse operator of the

@@ -103,6 +103,7 @@ typedef struct bench_cfg {
                                     fixed_point_iters is set per run              */
     const double *Es;     /* the sweep                                             */
     int n_Es, sweep_res;
+    unsigned sweep_mask;  /* bit c: run sweep_cfgs[c]                              */
     const char *out;
 } bench_cfg;
 
@@ -659,6 +660,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             pn_mpm_implicit_desc id = cfg->solver;
             double st;
             memset(r, 0, sizeof *r);
+            if (!(cfg->sweep_mask >> c & 1)) continue;
             strcpy(r->role, "implicit");
             r->implicit = 1;
             r->energy = sweep_cfgs[c].energy;
@@ -668,7 +670,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             bench_run_scene(&s, r, frames, cfg->max_run_s, &id, NULL, w->found ? ref : NULL);
             bench_progress("sand", 2, r);
             st = r->tally.steps ? (double)r->tally.steps : 1;
-            fprintf(csv, "%g,%lu,%s,%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\"\n", w->E,
+            fprintf(csv, "%g,%lu,\"%s\",%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\"\n", w->E,
                     (unsigned long)r->particles, sweep_cfgs[c].name, r->dt, r->fp,
                     sweep_cfgs[c].linear == PN_MPM_LINEAR_JACOBI ? "jacobi" : "multigrid", wall_per_sim(r),
                     fw > 0 ? wall_per_sim(r) / fw : 0, r->mm_mean, r->mm_min, r->tally.max_dt_over_cfl,
@@ -707,6 +709,7 @@ static void write_sweep_md(const char *path, const bench_cfg *cfg, const sweep_r
         for (c = 0; c < SWEEP_RUNS; ++c) {
             const bench_run *r = &w->imp[c];
             double st = r->tally.steps ? (double)r->tally.steps : 1, x = fw > 0 ? wall_per_sim(r) / fw : 0;
+            if (!(cfg->sweep_mask >> c & 1)) continue;
             fprintf(f, "| %.0e | %s | %.3g | %.0f | %.3g | %.3g | %.3f / %.3f | %.1f / %.1f | %s |\n", w->E,
                     sweep_cfgs[c].name, r->dt, r->tally.max_dt_over_cfl, wall_per_sim(r), x, r->mm_mean, r->mm_min,
                     r->tally.newton / st, r->tally.cg / st, status_detail(r));
@@ -904,7 +907,7 @@ static void usage(void) {
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
-                    "       [--sweep-only] [--sweep-res N] [--sweep-E E,E,..]\n");
+                    "       [--sweep-only] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -980,6 +983,13 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--res3")) cfg.res[3] = atoi(v), ++k;
         else if (!strcmp(a, "--sweep-res")) cfg.sweep_res = atoi(v), ++k;
         else if (!strcmp(a, "--sweep-E")) bad |= !(n_Es_arg = parse_list(v, Es_arg)), ++k;
+        else if (!strcmp(a, "--sweep-runs")) {
+            double idx[8];
+            int m = parse_list(v, idx), q;
+            bad |= !m;
+            for (cfg.sweep_mask = 0, q = 0; q < m; ++q) bad |= idx[q] > SWEEP_RUNS, cfg.sweep_mask |= 1u << ((int)idx[q] - 1);
+            ++k;
+        }
         else if (!strcmp(a, "--max-run-seconds")) cfg.max_run_s = atof(v), ++k;
         else if (!strcmp(a, "--out")) cfg.out = v, ++k;
         else if (!strcmp(a, "--filter")) cfg.filter = atof(v), ++k;
@@ -1013,6 +1023,7 @@ int main(int argc, char **argv) {
     cfg.n_Es = cfg.quick ? 2 : 5;
     if (n_Es_arg) cfg.Es = Es_arg, cfg.n_Es = n_Es_arg;
     if (!cfg.sweep_res) cfg.sweep_res = cfg.res[2];
+    if (!cfg.sweep_mask) cfg.sweep_mask = (1u << SWEEP_RUNS) - 1;
     if (!pn_ex_mkdirs(cfg.out)) {
         fprintf(stderr, "bench_mpm: cannot create the folder %s\n", cfg.out);
         return 1;
