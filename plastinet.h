@@ -1,4 +1,4 @@
-/* plastinet.h - v0.6 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.7 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -160,7 +160,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 6
+#define PN_VERSION_MINOR 7
 
 #ifdef __cplusplus
 extern "C" {

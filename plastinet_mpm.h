@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.6 - material point method solvers on plastinet.h.
+/* plastinet_mpm.h - v0.7 - material point method solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -23,6 +23,9 @@
                  active set and lagged friction for separating contact, step halving
      >>multigrid the implicit Hessian assembled on the active nodes, a Galerkin hierarchy
                  and coloured block Gauss-Seidel: the V-cycle that preconditions CG
+     >>stress    the stress formulation of an implicit step: stresses as unknowns,
+                 elasticity as a compliance, plasticity as a projection, projected
+                 Gauss-Seidel over particles and contact nodes (sand at large steps)
      >>explicit  symplectic Euler with the analytic return mapping after the F update (the
                  reference integrator; Jiang et al. 2016 course notes, Hu et al. 2018 MLS):
                  a dense grid scattered in particle order (threads own slabs of rows), 2D
@@ -178,6 +181,19 @@ typedef enum pn_mpm_linear_solver {
                                     iteration: iterations nearly independent of dt / dt_CFL  */
 } pn_mpm_linear_solver;
 
+/* What an implicit step solves for (pn_mpm_implicit_desc.formulation). */
+typedef enum pn_mpm_formulation {
+    PN_MPM_FORMULATION_ENERGY = 0, /* the grid velocities, by Newton on the incremental
+                                    potential of each group's pn_mpm_energy                 */
+    PN_MPM_FORMULATION_STRESS      /* each particle's stress as well: elasticity enters as a
+                                    compliance and plasticity as the return mapping of the
+                                    stress, so plastic flow within the step is exact (Daviet
+                                    and Bertails-Descoubes 2016); solved by projected
+                                    Gauss-Seidel over the particles and the contact nodes.
+                                    StVK-Hencky groups, elastic or Drucker-Prager (sand);
+                                    PN_ERROR_UNSUPPORTED for other materials                */
+} pn_mpm_formulation;
+
 /* Implicit step settings; zeroed fields mean the defaults in brackets. */
 typedef struct pn_mpm_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (PlasticityNet Eq. 10) [1]:
@@ -231,6 +247,15 @@ typedef struct pn_mpm_implicit_desc {
                                     of the fresh one, after which every Newton iteration
                                     builds its own (tried again every 16 steps); 1: at every
                                     Newton iteration [0]                                    */
+    pn_mpm_formulation formulation; /* [PN_MPM_FORMULATION_ENERGY]                          */
+    int sweeps_max;              /* STRESS: Gauss-Seidel sweeps per step; a step that has not
+                                    converged by then fails (PN_ERROR_NOT_CONVERGED, then
+                                    the substeps) [1000]                                     */
+    pn_real sweep_tol;           /* STRESS: converged when the velocity error left, estimated
+                                    from the last sweep's change and the rate of the last two
+                                    (res rho / (1 - rho)), is below sweep_tol dx / dt, nodes
+                                    lighter than the mean particle weighted by their mass
+                                    [1e-4]                                                   */
 } pn_mpm_implicit_desc;
 
 /* Statistics of the last step (of a failed implicit step: its first attempt). */
@@ -265,6 +290,7 @@ typedef struct pn_mpm_stats {
        steps one implicit step stands for (pn_mpm_advance: the largest of its steps; -1 for
        an explicit step taken alone, which does not compute the bound)                      */
     pn_real dt_over_cfl;
+    int sweeps;                  /* FORMULATION_STRESS: Gauss-Seidel sweeps                  */
 } pn_mpm_stats;
 
 /* >>multigrid: one grid level of the implicit Hessian (internal) */
@@ -366,6 +392,8 @@ typedef struct pn_mpm_world {
     int mg_current;              /* the finest level is this Newton iteration's Hessian     */
     int pnet_lanes;              /* implicit: PlasticityNet in float lanes this step         */
     int mg_stale;                /* a lagged hierarchy cost too many CG iterations lately    */
+    int stress_on;               /* this implicit step is FORMULATION_STRESS: pq holds g, not
+                                    F^nT g (>>stress)                                        */
     size_t mg_dense_n;           /* unknowns of the factored coarsest level (0: smoothed)      */
     pn_real *mg_dense;
 } pn_mpm_world;
@@ -1710,7 +1738,14 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
                 for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * wt * gv[i] * dpos[j];
             }
         }
-        pn__mpm_push(w, q, gv_all, dt, w->F + q * (size_t)dd, Fn);
+        if (w->stress_on) { /* pq holds g: F = (I + dt sum v g^T) F^n */
+            pn_real L[9];
+            pn__mpm_push(w, q, gv_all, dt, NULL, L);
+            for (i = 0; i < dd; ++i) L[i] += (i % (d + 1) == 0);
+            pn_mat_mul(d, L, w->F + q * (size_t)dd, Fn);
+        } else {
+            pn__mpm_push(w, q, gv_all, dt, w->F + q * (size_t)dd, Fn);
+        }
         stat = (int)pn_return_map(&g->material, d, Fn, w->h[q], Z, &hn, NULL);
         if (stat == PN_OK && (!pn__all_finite(d, nv) || !pn__all_finite(dd, nC))) stat = PN_ERROR_OVERFLOW;
         if (stat != PN_OK) {
@@ -2082,9 +2117,11 @@ static void pn__mpm_implicit_setup(pn_mpm_world *w) {
         for (s = 0; s < ns; ++s) {
             pn_real dpos[3], *q = w->pq + (j * (size_t)ns + (size_t)s) * (size_t)d;
             pn_real g = 4 / (w->desc.dx_m * w->desc.dx_m) * pn__mpm_weight(w, p, w->slot[s], dpos);
-            for (b = 0; b < d; ++b) { /* q = F^nT g, g = (4/dx^2) w dpos */
+            for (b = 0; b < d; ++b) { /* q = F^nT g, g = (4/dx^2) w dpos (>>stress: g itself) */
                 q[b] = 0;
-                for (a = 0; a < d; ++a) q[b] += Fn[a * d + b] * g * dpos[a];
+                if (w->stress_on) q[b] = g * dpos[b];
+                else
+                    for (a = 0; a < d; ++a) q[b] += Fn[a * d + b] * g * dpos[a];
             }
             w->pdof[j * (size_t)ns + (size_t)s] = w->dof[w->pbase[p] + w->slot_off[s]];
         }
@@ -2909,7 +2946,11 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol,
 }
 
 /* Per-pass preparation of every particle's energy at F0 = F(v) (lagged G, PlasticityNet
-   point); returns max |F0_new - F0_old| in *res (0 on the first pass). */
+   point); returns max |F0_new - F0_old| in *res (0 on the first pass). The DP yield of the
+   first pass comes from F^n, not F(v*): v* is free fall onto the held floor nodes, which
+   compresses the bottom cells by g dt^2 / dx (0.17 at dt = 1/60 s, res 64), a pressure
+   hundreds of times the hydrostatic one, and the column then stands as if elastic (runout
+   -32% at 1/60 s; from F^n -2% with 3 contact rounds). */
 static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real dt, int first,
                                       pn_real *res) {
     int d = w->dim, dd = d * d;
@@ -2937,7 +2978,8 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
         else if (en == PN_MPM_ENERGY_PNET)
             w->pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->ppt[q], NULL, NULL);
         else if (en == PN_MPM_ENERGY_DP)
-            w->pstat[q] = (int)pn_dp_prepare(&g->material, d, F0, w->h[q], &w->pty[q]);
+            w->pstat[q] = (int)pn_dp_prepare(&g->material, d, first ? w->F + q * (size_t)dd : F0, w->h[q],
+                                             &w->pty[q]);
     }
     for (p = 0; p < w->n; ++p) worst = PN__MAX(worst, w->pscal[p]);
     *res = worst;
@@ -3141,6 +3183,7 @@ static void pn__mpm_stats_add(pn_mpm_stats *st, const pn_mpm_stats *sub) {
     st->force_error_regularizer = PN__MAX(st->force_error_regularizer, sub->force_error_regularizer);
     st->apex_fraction = PN__MAX(st->apex_fraction, sub->apex_fraction);
     st->dt_over_cfl = PN__MAX(st->dt_over_cfl, sub->dt_over_cfl);
+    st->sweeps += sub->sweeps;
 }
 
 /* pn_mpm_stats.force_error and its parts at the grid velocities v (serial: a diagnostic). */
@@ -3336,6 +3379,225 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     return PN_OK;
 }
 
+/* ======================================================================================
+   >>stress: the stress formulation (PN_MPM_FORMULATION_STRESS). Unknowns: the grid
+   velocities v and each particle's Kirchhoff stress tau_p, with
+       m_i v_i = m_i v*_i - dt sum_p V_p tau_p g_ip + r_i            (momentum; r: contact)
+       tau_p = Z(tau^_p + dt C : D_p(v)),  D_p = sym(sum_i v_i g_ip^T) (the constitutive law)
+   tau^ the stress of F^n, C the Hencky elasticity (2 mu on the deviator, kappa = lambda +
+   2 mu / d on the trace), Z the Drucker-Prager return mapping of pn_return_map written on
+   stresses: the trace kept, the deviator s scaled back to the cone |s| <= -alpha d (m - m_c)
+   (m = tr tau / d, m_c = d kappa c the cohesion's apex), the apex where m >= m_c. Power
+   balance holds exactly (the force of tau is the adjoint of D), elasticity is a compliance,
+   and plastic flow is exact within the step: no viscosity E dt, however stiff the material
+   (Daviet and Bertails-Descoubes 2016 pose granular MPM this way).
+   Projected Gauss-Seidel: particles in sorted order, each solving its own constitutive law
+   with the rest frozen, then each contact node its velocity projection (the explicit rule,
+   which for one node with mass m is its exact local solve). A particle's stress moves its
+   own D by -dt V_p sym(dtau G_p), G_p = sum_i g_ip g_ip^T / m_i; with G_p replaced by
+   gamma I, gamma >= its largest eigenvalue, the local law has the closed form below and the
+   update never overshoots its exact local solve. The first iterate is tau = tau^: the
+   explicit step's velocities, which is where a quasi-static pile already is. Afterwards the
+   grid-to-particle transfer of >>transfer (F = (I + dt sum v g^T) F^n, then pn_return_map)
+   makes the state, as for the energy formulation. Serial: any thread count, the same bits.
+   ====================================================================================== */
+
+static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, pn_real h, pn_real *Z,
+                                pn_real *h_new, pn_real *tau, int *plastic); /* >>explicit */
+
+/* group g's material in the stress formulation: 0 if it has none */
+static int pn__mpm_stress_ok(const pn_material *m) {
+    return m->elastic == PN_ELASTIC_STVK_HENCKY &&
+           (m->plastic == PN_PLASTIC_NONE || m->plastic == PN_PLASTIC_DRUCKER_PRAGER);
+}
+
+/* the local law of sorted particle j: tau from L = sum v g^T at the current velocities, its
+   stress tau_cur and compliance c = dt V gamma; returns the new stress in tau */
+static void pn__mpm_stress_local(const pn_mpm_world *w, size_t j, const pn_real *L, pn_real c, pn_real dt,
+                                 pn_real *tau) {
+    size_t p = w->order[j];
+    const pn_material *m = &w->groups[w->group[p]].material;
+    int d = w->dim, dd = d * d, i, k;
+    const pn_real *cur = w->pP + j * (size_t)dd, *hat = w->pF0 + j * (size_t)dd;
+    pn_real dr = (pn_real)d, kappa = m->lambda + 2 * m->mu / dr, trL = 0, mcur = 0, mhat = 0;
+    pn_real mc = 0, am, bm, bs, as[9], an = 0, mnew, sc, mu2 = 2 * m->mu * dt, mean;
+    int dp = m->plastic == PN_PLASTIC_DRUCKER_PRAGER;
+    for (i = 0; i < d; ++i) {
+        trL += L[i * d + i];
+        mcur += cur[i * d + i];
+        mhat += hat[i * d + i];
+    }
+    mcur /= dr, mhat /= dr;
+    if (dp) mc = dr * kappa * m->cohesion_strain;
+    /* trial with this particle's own share of D moved to the left: deviator as - bs s,
+       shifted mean am - bm (m - mc) */
+    bs = mu2 * c;
+    bm = kappa * dt * c * dr;
+    am = mhat - mc + kappa * dt * trL + bm * (mcur - mc);
+    if (dp && m->volume_correction) am += kappa * w->h[p];
+    for (i = 0; i < d; ++i)
+        for (k = 0; k < d; ++k) as[i * d + k] = hat[i * d + k] + mu2 * (L[i * d + k] + L[k * d + i]) / 2 + bs * cur[i * d + k];
+    mean = mhat + mu2 * trL / dr + bs * mcur; /* as -= its mean: the deviator */
+    for (i = 0; i < d; ++i) as[i * d + i] -= mean;
+    for (i = 0; i < dd; ++i) an += as[i] * as[i];
+    if (dp && am >= 0) { /* expansion: the apex */
+        for (i = 0; i < dd; ++i) tau[i] = 0;
+        for (i = 0; i < d; ++i) tau[i * d + i] = mc;
+        return;
+    }
+    mnew = am / (1 + bm);
+    sc = 1 / (1 + bs);
+    if (dp) { /* the cone's radius at mnew */
+        pn_real rad = -pn__dp_alpha(m->sin_phi, d) * dr * mnew;
+        if (an * sc * sc > rad * rad) sc = rad / PN__SQRT(an);
+    }
+    for (i = 0; i < dd; ++i) tau[i] = sc * as[i];
+    for (i = 0; i < d; ++i) tau[i * d + i] += mnew + mc;
+}
+
+/* v_k of every stencil node of sorted particle j += -dt V / m_k dtau g */
+static void pn__mpm_stress_apply(pn_mpm_world *w, size_t j, const pn_real *dtau, pn_real dt, pn_real *v) {
+    int d = w->dim, ns = w->ns, s;
+    pn_real sV = dt * w->vol0[w->order[j]];
+    const long *dof = w->pdof + j * (size_t)ns;
+    const pn_real *g = w->pq + j * (size_t)(ns * d);
+    if (d == 2) { /* spelled out: see pn__mpm_push2 */
+        for (s = 0; s < 9; ++s, g += 2) {
+            pn_real f = w->diag[dof[s]] * sV, *vk = v + (size_t)dof[s] * 2;
+            vk[0] -= f * (dtau[0] * g[0] + dtau[1] * g[1]);
+            vk[1] -= f * (dtau[2] * g[0] + dtau[3] * g[1]);
+        }
+        return;
+    }
+    for (s = 0; s < 27; ++s, g += 3) {
+        pn_real f = w->diag[dof[s]] * sV, *vk = v + (size_t)dof[s] * 3;
+        vk[0] -= f * (dtau[0] * g[0] + dtau[1] * g[1] + dtau[2] * g[2]);
+        vk[1] -= f * (dtau[3] * g[0] + dtau[4] * g[1] + dtau[5] * g[2]);
+        vk[2] -= f * (dtau[6] * g[0] + dtau[7] * g[1] + dtau[8] * g[2]);
+    }
+}
+
+/* the contact nodes' Gauss-Seidel: each node's velocity without its contact impulse r,
+   projected by the explicit rule, and r again */
+static void pn__mpm_stress_contact(pn_mpm_world *w, pn_real *v, pn_real *r) {
+    int d = w->dim, i;
+    size_t k;
+    for (k = 0; k < w->n_act; ++k) {
+        pn_real *vk = v + k * (size_t)d, *rk = r + k * (size_t)d, m = w->grid_m[k], fr[3];
+        if (!w->cn[k]) continue;
+        for (i = 0; i < d; ++i) fr[i] = vk[i] - rk[i] * w->diag[k];
+        for (i = 0; i < d; ++i) vk[i] = fr[i];
+        pn__mpm_project(d, w->cn[k], w->ckind[k], w->cdir + k * 9, w->cvel + k * 3, w->cmu[k], vk);
+        for (i = 0; i < d; ++i) rk[i] = m * (vk[i] - fr[i]);
+    }
+}
+
+static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
+    int d = w->dim, dd = d * d, ns = w->ns, i, sweep;
+    size_t k, j, nd, np, total = 0;
+    pn_real *v = w->vsol, *r = w->grad, *v0 = w->vtry, mref = 0, vscale, res = 0, prev = 0, prev2 = 0;
+    pn_result rr;
+    w->stress_on = 1;
+    pn__mpm_bin(w);
+    pn__mpm_implicit_setup(w);
+    w->stress_on = 0; /* set again around the transfer back */
+    pn__mpm_p2g(w);
+    pn__mpm_contact(w, w->time_s);
+    nd = w->n_act * (size_t)d;
+    np = w->start[w->nodes];
+    st->active_nodes = w->n_act;
+    for (k = 0; k < w->n_act; ++k) {
+        pn_real m = w->grid_m[k];
+        w->diag[k] = m > 0 ? 1 / m : 0;
+        for (i = 0; i < d; ++i) {
+            size_t c = k * (size_t)d + (size_t)i;
+            v[c] = w->vstar[c] = m > 0 ? w->grid_v[c] / m + dt * w->desc.gravity[i] : 0;
+            r[c] = 0;
+        }
+    }
+    for (j = 0; j < np; ++j) { /* tau^ (the state's own stress), gamma, the first iterate */
+        size_t p = w->order[j];
+        const pn_material *m = &w->groups[w->group[p]].material;
+        pn_real Z[9], hn, G[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, gam = 0;
+        int plastic, s, a, b;
+        rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->pF0 + j * (size_t)dd, &plastic);
+        if (rr != PN_OK) {
+            w->error_particle = p;
+            return pn__mpm_fail(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
+                                (unsigned long)p, w->group[p], pn_result_string(rr));
+        }
+        total += w->active[p];
+        mref += w->active[p] ? w->mass[p] : 0;
+        for (s = 0; s < ns; ++s) {
+            size_t kk = (size_t)w->pdof[j * (size_t)ns + (size_t)s];
+            const pn_real *g = w->pq + (j * (size_t)ns + (size_t)s) * (size_t)d;
+            for (a = 0; a < d; ++a)
+                for (b = 0; b < d; ++b) G[a * d + b] += g[a] * g[b] * w->diag[kk];
+        }
+        for (a = 0; a < d; ++a) { /* Gershgorin: gamma >= the largest eigenvalue of G */
+            pn_real row = 0;
+            for (b = 0; b < d; ++b) row += PN__FABS(G[a * d + b]);
+            gam = PN__MAX(gam, row);
+        }
+        w->pty[j] = dt * w->vol0[p] * gam;
+        memcpy(w->pP + j * (size_t)dd, w->pF0 + j * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+        pn__mpm_stress_apply(w, j, w->pP + j * (size_t)dd, dt, v);
+    }
+    mref = total ? mref / (pn_real)total : 0;
+    vscale = o->sweep_tol * w->desc.dx_m / dt;
+    pn__mpm_stress_contact(w, v, r);
+    for (sweep = 0; sweep < o->sweeps_max; ++sweep) {
+        memcpy(v0, v, sizeof(pn_real) * nd);
+        for (j = 0; j < np; ++j) {
+            pn_real L[9], tau[9], dtau[9];
+            pn__mpm_push(w, w->order[j], v, 1, NULL, L);
+            pn__mpm_stress_local(w, j, L, w->pty[j], dt, tau);
+            for (i = 0; i < dd; ++i) {
+                dtau[i] = tau[i] - w->pP[j * (size_t)dd + (size_t)i];
+                w->pP[j * (size_t)dd + (size_t)i] = tau[i];
+            }
+            pn__mpm_stress_apply(w, j, dtau, dt, v);
+        }
+        pn__mpm_stress_contact(w, v, r);
+        for (res = 0, k = 0; k < w->n_act; ++k) {
+            pn_real sc = mref > 0 ? PN__MIN(w->grid_m[k] / mref, 1) : 1;
+            for (i = 0; i < d; ++i)
+                res = PN__MAX(res, sc * PN__FABS(v[k * (size_t)d + (size_t)i] - v0[k * (size_t)d + (size_t)i]));
+        }
+        st->sweeps++;
+        if (!pn__finite(res))
+            return pn__mpm_fail(w, PN_ERROR_OVERFLOW, "implicit step of %g s (stress formulation): the velocities "
+                                "overflowed", (double)dt);
+        /* a linear rate rho leaves an error of about res rho / (1 - rho) after a sweep that moved
+           res: stop on that, not on res (a slow, smooth mode moves little per sweep); rho the
+           slower of the last two rates (they are noisy) */
+        if (sweep > 1 && res <= vscale) {
+            pn_real rho = prev > 0 && prev2 > 0 ? PN__MAX(res / prev, prev / prev2) : 1;
+            if (rho < 1 && res * rho <= vscale * (1 - rho)) break;
+        }
+        prev2 = prev;
+        prev = res;
+    }
+    st->newton_residual = PN__MAX(st->newton_residual, res * dt / w->desc.dx_m);
+    if (sweep == o->sweeps_max)
+        return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s (stress formulation): sweeps_max = %d "
+                            "Gauss-Seidel sweeps did not converge (the last one moved the grid by %.3g dx / dt, "
+                            "sweep_tol %g): raise sweeps_max or take a smaller step", (double)dt, o->sweeps_max,
+                            (double)(res * dt / w->desc.dx_m), (double)o->sweep_tol);
+    w->stress_on = 1;
+    rr = pn__mpm_g2p(w, v, dt, st);
+    w->stress_on = 0;
+    if (rr != PN_OK) return rr;
+    w->n_lag = 0; /* no friction memory for a later energy-formulation step */
+    pn__mpm_commit(w, dt, st);
+    return PN_OK;
+}
+
+static pn_result pn__mpm_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
+    return o->formulation == PN_MPM_FORMULATION_STRESS ? pn__mpm_stress_once(w, dt, o, st)
+                                                       : pn__mpm_implicit_once(w, dt, o, st);
+}
+
 static void pn__mpm_backup(pn_mpm_world *w, int restore) {
     int d = w->dim, dd = d * d;
     size_t n = w->n;
@@ -3382,6 +3644,20 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                             "pn_mpm_linear_solver, mg_levels %d < 0 or mg_rebuild %d not 0 or 1", (int)o.linear_solver,
                             o.mg_levels, o.mg_rebuild);
     if (o.mg_levels == 0) o.mg_levels = PN__MPM_MG_MAX;
+    if (o.formulation < PN_MPM_FORMULATION_ENERGY || o.formulation > PN_MPM_FORMULATION_STRESS ||
+        !pn__finite(o.sweep_tol) || o.sweep_tol < 0)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
+                            "pn_mpm_formulation, or sweep_tol %g is not finite and >= 0", (int)o.formulation,
+                            (double)o.sweep_tol);
+    if (o.sweeps_max <= 0) o.sweeps_max = 1000;
+    if (!(o.sweep_tol > 0)) o.sweep_tol = (pn_real)1e-4;
+    if (o.formulation == PN_MPM_FORMULATION_STRESS) {
+        int g;
+        for (g = 0; g < w->n_groups; ++g)
+            if (!pn__mpm_stress_ok(&w->groups[g].material))
+                return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_implicit_desc: the stress formulation takes "
+                                    "StVK-Hencky groups, elastic or Drucker-Prager; group %d is not one", g);
+    }
     if (o.max_halvings == 0) o.max_halvings = 3;
     if (o.max_halvings > 10) o.max_halvings = 10;
     if (o.newton_budget <= 0) { /* the deepest level's full work: half of every level's in full */
@@ -3396,7 +3672,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (pn_mpm_stable_dt(w, &cfl) == PN_OK) cfl = dt / cfl;
     else cfl = -1;
     pn__mpm_stats_clear(&st, o.measure_force_error);
-    first = pn__mpm_implicit_once(w, dt, &o, &st);
+    first = pn__mpm_once(w, dt, &o, &st);
     st.dt_over_cfl = cfl;
     if (first == PN_OK) {
         if (stats) *stats = st;
@@ -3419,7 +3695,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                 pn_mpm_stats sub;
                 pn__mpm_stats_clear(&sub, o.measure_force_error);
                 sub.solves = st.solves; /* numbered on through the substeps */
-                r = pn__mpm_implicit_once(w, dt / (pn_real)n_sub, &o, &sub);
+                r = pn__mpm_once(w, dt / (pn_real)n_sub, &o, &sub);
                 if (r != PN_OK) break;
                 pn__mpm_stats_add(&st, &sub);
                 st.solves = sub.solves;

@@ -42,10 +42,11 @@
    divides a frame) by the mass IoUs of examples/pn_example.h: soft (the formula of
    docs/validation.md; below 1 even for identical fields, so the reference's score against itself
    is its ceiling), min/max (1 for identical fields; the plots use it) and binary occupancy.
-   Then a Young's-modulus sweep of the 2D sand column (1e6 to 1e10 Pa; --sweep-E, at
-   --sweep-res cells, default the 2D res): at each E the fair explicit baseline (searched as
-   above), the reference at half its step, and implicit runs of the lagged and frozen-yield DP
-   energies with multigrid and Jacobi CG (sweep_cfgs), IoU against that reference, and the
+   Then a Young's-modulus sweep of the sand column (1e6 to 1e10 Pa; --sweep-E, at --sweep-res
+   cells, default the res of --sweep-dim, 2D unless said): at each E the fair explicit baseline
+   (searched as above), the reference at half its step, and implicit runs of the lagged and
+   frozen-yield DP energies with multigrid and Jacobi CG and of the stress formulation
+   (sweep_cfgs), IoU against that reference, and the
    crossover (the smallest E where implicit is faster than the fair baseline at mean min/max
    IoU >= 0.90). --sweep-only: the sweep alone.
    Wall time: clock_gettime(CLOCK_MONOTONIC) around the steps only (scene setup and the IoU
@@ -102,7 +103,7 @@ typedef struct bench_cfg {
     pn_mpm_implicit_desc solver; /* implicit runs: contact_rounds, cg_forcing_max;
                                     fixed_point_iters is set per run              */
     const double *Es;     /* the sweep                                             */
-    int n_Es, sweep_res;
+    int n_Es, sweep_res, sweep_dim;
     unsigned sweep_mask;  /* bit c: run sweep_cfgs[c]                              */
     const char *out;
 } bench_cfg;
@@ -253,10 +254,11 @@ static void bench_compare(bench_run *r, const double *fields, const double *ref,
 static void bench_progress(const char *scene, int dim, const bench_run *r) {
     char iou[48] = "";
     if (r->scored) snprintf(iou, sizeof iou, "IoU soft %.3f min/max %.3f, ", r->iou_mean, r->mm_mean);
-    fprintf(stderr, "  %-5s %dD %-9s %-14s dt %-9.3g fp %d: %6.2f wall s/sim s, %sNewton %.1f CG %.0f per step, %s\n",
+    fprintf(stderr, "  %-5s %dD %-9s %-14s dt %-9.3g fp %d: %6.2f wall s/sim s, %sNewton %.1f CG %.0f sweeps %.0f per step, %s\n",
             scene, dim, r->role, energy_name(r), r->dt, r->implicit ? r->fp : 0, wall_per_sim(r), iou,
             r->tally.steps ? (double)r->tally.newton / r->tally.steps : 0.0,
-            r->tally.steps ? (double)r->tally.cg / r->tally.steps : 0.0, status_name(r));
+            r->tally.steps ? (double)r->tally.cg / r->tally.steps : 0.0,
+            r->tally.steps ? (double)r->tally.sweeps / r->tally.steps : 0.0, status_name(r));
 }
 
 /* The fair explicit baseline: the largest stable step, in halvings from the CFL estimate.
@@ -600,13 +602,19 @@ typedef struct sweep_cfg {
     double dt;
     int fp;
     pn_mpm_linear_solver linear;
+    pn_mpm_formulation formulation;
 } sweep_cfg;
 static const sweep_cfg sweep_cfgs[] = {
-    {"lagged, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_MULTIGRID},
-    {"lagged, dt 1e-3, Jacobi", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_JACOBI},
-    {"lagged, dt 4e-3, multigrid", PN_MPM_ENERGY_LAGGED, 4e-3, 1, PN_MPM_LINEAR_MULTIGRID},
-    {"lagged 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID},
-    {"DP 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_DP, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID},
+    {"lagged, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
+    {"lagged, dt 1e-3, Jacobi", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_JACOBI, PN_MPM_FORMULATION_ENERGY},
+    {"lagged, dt 4e-3, multigrid", PN_MPM_ENERGY_LAGGED, 4e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
+    {"lagged 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
+    {"DP 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_DP, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
+    /* the stress formulation (Gauss-Seidel; no linear solver); 2e-2 s: one step per frame
+       of these 25 fps frames' half (1/60 s does not divide them) */
+    {"stress, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS},
+    {"stress, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS},
+    {"stress, dt 2e-2", PN_MPM_ENERGY_DP, 2e-2, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS},
 };
 #define SWEEP_RUNS ((int)(sizeof sweep_cfgs / sizeof sweep_cfgs[0]))
 
@@ -620,28 +628,28 @@ typedef struct sweep_row {
    every run is against it; the fair run's own IoU says how converged the reference is), and
    the implicit runs of sweep_cfgs (each capped at max_run_s). */
 static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
-    int i, c, frames = (int)floor(cfg->duration[2] * BENCH_FPS + 0.5);
+    int i, c, dim = cfg->sweep_dim, frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5);
     pn_ex_scene s;
     size_t nodes;
     double *fair, *ref;
     if (frames < 1) frames = 1;
-    pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
+    pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, cfg->sweep_dim);
     s.res = cfg->sweep_res;
-    nodes = (size_t)(s.res + 1) * (size_t)(s.res + 1);
+    nodes = (size_t)(s.res + 1) * (size_t)(s.res + 1) * (cfg->sweep_dim == 3 ? (size_t)(s.res + 1) : 1);
     if (!(fair = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
     if (!(ref = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
     fprintf(csv, "E_pa,particles,run,dt_s,fixed_point_iters,linear_solver,wall_per_sim_s,over_fair,"
                  "minmax_iou_mean_vs_ref,minmax_iou_min_vs_ref,dt_over_cfl,newton_per_step,cg_per_step,"
-                 "halved_steps,cg_capped,status\n");
+                 "halved_steps,cg_capped,status,sweeps_per_step\n");
     for (i = 0; i < cfg->n_Es; ++i) {
         sweep_row *w = &rows[i];
         double fw;
-        pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
+        pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, dim);
         s.res = cfg->sweep_res;
         if (cfg->filter >= 0) s.filter_s = cfg->filter;
         s.E_pa = cfg->Es[i];
         w->E = s.E_pa;
-        fprintf(stderr, "E sweep, E = %.0e Pa, res %d\n", w->E, s.res);
+        fprintf(stderr, "E sweep, %dD, E = %.0e Pa, res %d\n", dim, w->E, s.res);
         w->found = bench_fair(&s, frames, &w->fair, fair);
         memset(&w->ref, 0, sizeof w->ref);
         strcpy(w->ref.role, "reference");
@@ -649,10 +657,10 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
         if (w->found) {
             bench_run_scene(&s, &w->ref, frames, 0, NULL, ref, NULL);
             bench_compare(&w->fair, fair, ref, nodes);
-            bench_progress("sand", 2, &w->fair);
+            bench_progress("sand", dim, &w->fair);
         }
         fw = w->found ? wall_per_sim(&w->fair) : 0;
-        fprintf(csv, "%g,%lu,explicit fair,%.6g,0,,%.4g,1,%.4f,%.4f,%.3g,0,0,0,0,\"%s\"\n", w->E,
+        fprintf(csv, "%g,%lu,explicit fair,%.6g,0,,%.4g,1,%.4f,%.4f,%.3g,0,0,0,0,\"%s\",0\n", w->E,
                 (unsigned long)w->fair.particles, w->fair.dt, fw, w->fair.mm_mean, w->fair.mm_min,
                 w->fair.tally.max_dt_over_cfl, w->found ? "ok" : "no stable step");
         for (c = 0; c < SWEEP_RUNS; ++c) {
@@ -667,14 +675,18 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             r->dt = sweep_cfgs[c].dt;
             r->fp = sweep_cfgs[c].fp;
             id.linear_solver = sweep_cfgs[c].linear;
+            id.formulation = sweep_cfgs[c].formulation;
             bench_run_scene(&s, r, frames, cfg->max_run_s, &id, NULL, w->found ? ref : NULL);
-            bench_progress("sand", 2, r);
+            bench_progress("sand", dim, r);
             st = r->tally.steps ? (double)r->tally.steps : 1;
-            fprintf(csv, "%g,%lu,\"%s\",%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\"\n", w->E,
+            fprintf(csv, "%g,%lu,\"%s\",%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\",%.1f\n", w->E,
                     (unsigned long)r->particles, sweep_cfgs[c].name, r->dt, r->fp,
-                    sweep_cfgs[c].linear == PN_MPM_LINEAR_JACOBI ? "jacobi" : "multigrid", wall_per_sim(r),
+                    sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS ? "gauss-seidel"
+                    : sweep_cfgs[c].linear == PN_MPM_LINEAR_JACOBI        ? "jacobi"
+                                                                         : "multigrid", wall_per_sim(r),
                     fw > 0 ? wall_per_sim(r) / fw : 0, r->mm_mean, r->mm_min, r->tally.max_dt_over_cfl,
-                    r->tally.newton / st, r->tally.cg / st, r->tally.halved, r->tally.cg_capped, status_detail(r));
+                    r->tally.newton / st, r->tally.cg / st, r->tally.halved, r->tally.cg_capped, status_detail(r),
+                    r->tally.sweeps / st);
             fflush(csv);
         }
     }
@@ -691,12 +703,13 @@ static void write_sweep_md(const char *path, const bench_cfg *cfg, const sweep_r
         fprintf(stderr, "bench_mpm: cannot write %s\n", path);
         return;
     }
-    fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm) -->\n**Young's modulus sweep**, sand column 2D, "
+    fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm) -->\n**Young's modulus sweep**, sand column %dD, "
                "res %d (%lu particles), %.2f s simulated: at each E the fair explicit baseline (largest stable step, "
                "searched), the reference (explicit at half that step; every IoU is the mean / min min/max mass IoU "
                "against it), and the implicit runs (1 fixed-point pass unless said; each capped at %.0f wall s). "
-               "*x fair*: wall time over the fair baseline's, in the same run.\n\n",
-            cfg->sweep_res, n ? (unsigned long)rows[0].fair.particles : 0ul, cfg->duration[2], cfg->max_run_s);
+               "*x fair*: wall time over the fair baseline's, in the same run. The stress-formulation runs "
+               "give Gauss-Seidel sweeps per step in the Newton column.\n\n",
+            cfg->sweep_dim, cfg->sweep_res, n ? (unsigned long)rows[0].fair.particles : 0ul, cfg->duration[cfg->sweep_dim], cfg->max_run_s);
     fprintf(f, "| E (Pa) | run | dt (s) | dt / dt_CFL | wall s / sim s | x fair | min/max IoU mean / min | "
                "Newton / CG per step | status |\n|---|---|---|---|---|---|---|---|---|\n");
     for (i = 0; i < n; ++i) {
@@ -712,7 +725,8 @@ static void write_sweep_md(const char *path, const bench_cfg *cfg, const sweep_r
             if (!(cfg->sweep_mask >> c & 1)) continue;
             fprintf(f, "| %.0e | %s | %.3g | %.0f | %.3g | %.3g | %.3f / %.3f | %.1f / %.1f | %s |\n", w->E,
                     sweep_cfgs[c].name, r->dt, r->tally.max_dt_over_cfl, wall_per_sim(r), x, r->mm_mean, r->mm_min,
-                    r->tally.newton / st, r->tally.cg / st, status_detail(r));
+                    sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS ? r->tally.sweeps / st : r->tally.newton / st,
+                    r->tally.cg / st, status_detail(r));
             if (cross < 0 && r->status == RUN_OK && fw > 0 && x < 1 && r->mm_mean >= 0.9) cross = i;
         }
     }
@@ -907,7 +921,7 @@ static void usage(void) {
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
-                    "       [--sweep-only] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n");
+                    "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -982,6 +996,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--res2")) cfg.res[2] = atoi(v), ++k;
         else if (!strcmp(a, "--res3")) cfg.res[3] = atoi(v), ++k;
         else if (!strcmp(a, "--sweep-res")) cfg.sweep_res = atoi(v), ++k;
+        else if (!strcmp(a, "--sweep-dim")) cfg.sweep_dim = atoi(v), ++k;
         else if (!strcmp(a, "--sweep-E")) bad |= !(n_Es_arg = parse_list(v, Es_arg)), ++k;
         else if (!strcmp(a, "--sweep-runs")) {
             double idx[8];
@@ -1001,7 +1016,7 @@ int main(int argc, char **argv) {
         else { usage(); return 2; }
     }
     if (bad || only == 2 || (dim_only && dim_only != 2 && dim_only != 3) || duration < 0 || !(cfg.filter >= 0 || cfg.filter == -1) || cfg.res[2] < 16 || cfg.res[3] < 16 ||
-        (cfg.sweep_res && cfg.sweep_res < 16)) {
+        (cfg.sweep_res && cfg.sweep_res < 16) || (cfg.sweep_dim && cfg.sweep_dim != 2 && cfg.sweep_dim != 3)) {
         usage();
         return 2;
     }
@@ -1022,7 +1037,8 @@ int main(int argc, char **argv) {
     cfg.Es = cfg.quick ? Es_quick : Es_full;
     cfg.n_Es = cfg.quick ? 2 : 5;
     if (n_Es_arg) cfg.Es = Es_arg, cfg.n_Es = n_Es_arg;
-    if (!cfg.sweep_res) cfg.sweep_res = cfg.res[2];
+    if (!cfg.sweep_dim) cfg.sweep_dim = 2;
+    if (!cfg.sweep_res) cfg.sweep_res = cfg.res[cfg.sweep_dim];
     if (!cfg.sweep_mask) cfg.sweep_mask = (1u << SWEEP_RUNS) - 1;
     if (!pn_ex_mkdirs(cfg.out)) {
         fprintf(stderr, "bench_mpm: cannot create the folder %s\n", cfg.out);

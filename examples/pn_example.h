@@ -384,6 +384,7 @@ typedef struct pn_ex_tally {
     double max_speed_m_s;            /* fastest particle after any step                      */
     double max_dt_over_cfl;          /* largest step over pn_mpm_stable_dt at its start      */
     long cg_capped;                  /* Newton steps whose linear solve stopped at cg_max    */
+    long sweeps;                     /* stress formulation: Gauss-Seidel sweeps              */
     /* pn_mpm_implicit_desc.measure_force_error: per-step values summed (mean = sum / steps) */
     double force_error, force_error_regularizer, apex_fraction;
 } pn_ex_tally;
@@ -405,6 +406,7 @@ PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double 
         if (r != PN_OK) return r;
         if (implicit && (double)st.dt_over_cfl > t->max_dt_over_cfl) t->max_dt_over_cfl = (double)st.dt_over_cfl;
         t->cg_capped += st.cg_capped;
+        t->sweeps += st.sweeps;
         t->steps++;
         t->newton += st.newton_iters;
         t->cg += st.cg_iters;
@@ -537,7 +539,14 @@ PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const cha
         int k = pn_ex_choice(prog, a, v, linear, 3);
         ok = k >= 0;
         c->solver.linear_solver = (pn_mpm_linear_solver)(k < 0 ? 0 : k);
-    } else if (!strcmp(a, "--mg-levels")) ok = pn_ex_integer(prog, a, v, &c->solver.mg_levels);
+    } else if (!strcmp(a, "--formulation")) {
+        static const char *const forms[] = {"energy", "stress"};
+        int k = pn_ex_choice(prog, a, v, forms, 2);
+        ok = k >= 0;
+        c->solver.formulation = (pn_mpm_formulation)(k < 0 ? 0 : k);
+    } else if (!strcmp(a, "--sweeps")) ok = pn_ex_integer(prog, a, v, &c->solver.sweeps_max);
+    else if (!strcmp(a, "--sweep-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.sweep_tol = (pn_real)x;
+    else if (!strcmp(a, "--mg-levels")) ok = pn_ex_integer(prog, a, v, &c->solver.mg_levels);
     else if (!strcmp(a, "--mg-rebuild")) ok = pn_ex_integer(prog, a, v, &c->solver.mg_rebuild);
     else if (!strcmp(a, "--frames")) ok = pn_ex_integer(prog, a, v, &c->frames);
     else if (!strcmp(a, "--fps")) ok = pn_ex_integer(prog, a, v, &c->fps);
@@ -597,6 +606,9 @@ PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f) {
                "                             pn_mpm_implicit_desc [1, 1, and the library's defaults]\n"
                "  --linear jacobi|multigrid  --mg-levels N  --mg-rebuild 0|1\n"
                "                             the Newton systems' solver (pn_mpm_implicit_desc) [multigrid, 8, 0]\n"
+               "  --formulation energy|stress  --sweeps N  --sweep-tol X\n"
+               "                             what implicit steps solve for; the stress formulation's Gauss-Seidel\n"
+               "                             sweeps and tolerance (pn_mpm_implicit_desc) [energy, 1000, 1e-4]\n"
                "  --pnet-double              PlasticityNet one particle at a time in double (the reference;\n"
                "                             default: its network in float vector lanes)\n"
                "  --force-error              measure the energy's force error (pn_mpm_stats)\n"

@@ -66,13 +66,14 @@ int main(int argc, char **argv) {
     printf("{\"scene\": \"sand_column\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
            "\"fixed_point_iters\": %d, \"contact_rounds\": %d, \"E\": %g, \"aspect\": %g, \"boundary\": \"%s\", \"friction\": %g, "
            "\"res\": %d, \"particles\": %lu, \"frames\": %d, \"simulated_s\": %.4f, \"wall_s\": %.3f, \"steps\": %ld, "
-           "\"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
+           "\"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, \"sweeps_per_step\": %.1f, "
            "\"line_search_failures\": %ld, \"runout_m\": %.4f, "
            "\"final_height_m\": %.4f, \"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
            c.dim, c.implicit ? "implicit" : "explicit", c.implicit ? energies[energy] : "return_mapping", c.dt, c.solver.fixed_point_iters, c.solver.contact_rounds,
            sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
            (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
            (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,
+           (double)o.tally.sweeps / (double)o.tally.steps,
            o.tally.line_search_failures, runout, o.hi[1] - pn_ex_scene_floor(&sc), o.tally.max_fixed_point_residual,
            (unsigned long)o.w->left_total);
     pn_ex_json_end(&o.tally, c.solver.measure_force_error && c.implicit);
