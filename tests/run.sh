@@ -92,11 +92,32 @@ run_bin() {
     ./"$bin" "$@" >"$bin.log" 2>&1
     tally "$bin" "$bin.log" $?
 }
+# run_bin_bg NAME SOURCE EXTRA_FLAGS [filter]: the same in the background (the other core);
+# bg_tally NAME collects it
+run_bin_bg() {
+    bin=build/$1$suffix
+    # shellcheck disable=SC2086
+    ( if $CC -std=c99 $W $flags $3 "$2" -lm -o "$bin" 2>"$bin.build"; then
+          shift 3
+          ./"$bin" "$@" >"$bin.log" 2>&1
+          echo $? >"$bin.rc"
+      else
+          echo build >"$bin.rc"
+      fi ) &
+    bg_pid=$!
+}
+bg_tally() {
+    bin=build/$1$suffix
+    wait "$bg_pid"
+    if [ "$(cat "$bin.rc")" = build ]; then bad "build $bin"; sed 's/^/    /' "$bin.build" | head -20; return; fi
+    tally "$bin" "$bin.log" "$(cat "$bin.rc")"
+}
 # the shipped models (models/pn_models.h, written by gen/export.py) are tested when present
 models=
 [ -f models/pn_models.h ] && models=-DPN_TEST_HAVE_MODELS
 # test_main with OpenMP: test_mpm.c checks that 1 and 2 threads give the same bits
-run_bin test_main tests/test_main.c "$models -fopenmp" "$@"
+# test_main, the longest, on one core while the others build and run on the other
+run_bin_bg test_main tests/test_main.c "$models -fopenmp" "$@"
 run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"
 # the float lanes of PlasticityNet in their other spellings: 8-lane vectors (AVX and up, what
 # -march=native gives on x86-64) and the plain-struct path of compilers without vector types
@@ -105,6 +126,7 @@ if [ -z "$1" ]; then
     run_bin test_lanes_portable tests/test_main.c "$models -DPN_NO_VECTOR_EXTENSIONS" pnet_lanes
 fi
 run_bin test_render tests/test_render.c "" "$@"
+bg_tally test_main
 
 # 3. C against torch (gen/crosscheck.py): the training targets and every shipped model. Runs
 #    whenever torch is installed (Debian: apt-get install -y python3-torch); CI requires it.
