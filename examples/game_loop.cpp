@@ -2,9 +2,10 @@
 // sphere that ploughs through it like a player's tool, one pn_mpm_advance call per 60 Hz
 // frame; prints the milliseconds each frame took and what a frame costs per particle.
 // Build: c++ -std=c++17 -O2 examples/game_loop.cpp -o game_loop     (add -fopenmp for threads)
-// Usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--png DIR]
+// Usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--stress] [--png DIR]
 //   --implicit   one implicit step per frame (frozen-yield Drucker-Prager energy) instead of
 //                explicit steps at pn_mpm_stable_dt; the advection limit may still split it
+//   --stress     the same with the stress formulation (PN_MPM_FORMULATION_STRESS)
 //   --png DIR    a picture of every 10th frame (examples/pn_render.h)
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
@@ -24,7 +25,7 @@ namespace {
 struct Options {
     int frames = 120, res = 32;
     double E = 1e6; // Pa: softer than real sand (1e7 - 1e8) so that explicit steps are few
-    bool implicit = false;
+    bool implicit = false, stress = false;
     std::string png;
 };
 
@@ -43,10 +44,12 @@ bool parse(int argc, char **argv, Options &o) {
         };
         double x = 0;
         if (a == "--help" || a == "-h") {
-            std::printf("usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--png DIR]\n");
+            std::printf("usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--stress] [--png DIR]\n");
             std::exit(0);
         } else if (a == "--implicit") {
             o.implicit = true;
+        } else if (a == "--stress") {
+            o.implicit = o.stress = true;
         } else if (a == "--frames" && number(x) && x >= 1) {
             o.frames = static_cast<int>(x);
         } else if (a == "--res" && number(x) && x >= 16 && x <= 256) {
@@ -114,8 +117,11 @@ int main(int argc, char **argv) {
         return std::fprintf(stderr, "game_loop: %s\n", pn_mpm_error(w)), 1;
 
     pn_mpm_advance_desc step{};
+    pn_mpm_implicit_desc solve{};
+    solve.formulation = opt.stress ? PN_MPM_FORMULATION_STRESS : PN_MPM_FORMULATION_ENERGY;
     step.integrator = opt.implicit ? PN_MPM_IMPLICIT : PN_MPM_EXPLICIT;
     step.max_step_s = opt.implicit ? 1 / fps : 0;
+    step.implicit = &solve;
 
     std::vector<unsigned char> rgb;
     pn_render_desc view{};
@@ -131,7 +137,10 @@ int main(int argc, char **argv) {
     }
 
     std::printf("game_loop: %zu particles, %s, E %.3g Pa, grid %d^3\n", n,
-                opt.implicit ? "one implicit step per frame" : "explicit steps at pn_mpm_stable_dt", opt.E, opt.res);
+                opt.stress     ? "one implicit step per frame, stress formulation"
+                : opt.implicit ? "one implicit step per frame"
+                               : "explicit steps at pn_mpm_stable_dt",
+                opt.E, opt.res);
     double total_ms = 0, worst_ms = 0;
     long steps = 0;
     for (int frame = 1; frame <= opt.frames; ++frame) {
