@@ -3399,7 +3399,8 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
    update never overshoots its exact local solve. The first iterate is tau = tau^: the
    explicit step's velocities, which is where a quasi-static pile already is. Afterwards the
    grid-to-particle transfer of >>transfer (F = (I + dt sum v g^T) F^n, then pn_return_map)
-   makes the state, as for the energy formulation. Serial: any thread count, the same bits.
+   makes the state, as for the energy formulation. The sweeps go by colour
+   (pn__mpm_stress_groups), so threads share them and any thread count gives the same bits.
    ====================================================================================== */
 
 static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, pn_real h, pn_real *Z,
@@ -3492,9 +3493,53 @@ static void pn__mpm_stress_contact(pn_mpm_world *w, pn_real *v, pn_real *r) {
     }
 }
 
+/* The sweep's order: the particles grouped by stencil base node (they are sorted by it), the
+   groups by colour (base node index mod 3 per axis, 3^dim colours). Two groups of one colour
+   are at least three nodes apart on some axis, so their 3-wide stencils share no node and a
+   colour's groups can run on any threads at once; within a group the particles go in sorted
+   order, so every thread count gives the same sweep. Group q of colour c: particles
+   grp[2q] .. grp[2q + 1] - 1 (sorted indices), q from cstart[c] to cstart[c + 1] - 1. grp
+   reuses inc (cap ns entries), which only the gather transfer needed before. */
+static void pn__mpm_stress_groups(pn_mpm_world *w, size_t *cstart) {
+    size_t j, np = w->start[w->nodes], count[28] = {0}, ng = 0, *grp = w->inc, *tmp;
+    int c, idx[3], i, d = w->dim, nc = d == 2 ? 9 : 27;
+    tmp = grp + 2 * np; /* unsorted groups: start, end, colour (inc has ns >= 9 per particle) */
+    for (j = 0; j < np;) {
+        size_t b = w->pbase[w->order[j]], e = j + 1;
+        while (e < np && w->pbase[w->order[e]] == b) ++e;
+        pn__mpm_node_index(w, b, idx);
+        for (c = 0, i = d - 1; i >= 0; --i) c = c * 3 + idx[i] % 3;
+        tmp[3 * ng] = j, tmp[3 * ng + 1] = e, tmp[3 * ng + 2] = (size_t)c;
+        count[c + 1]++;
+        ++ng, j = e;
+    }
+    for (c = 0; c < nc; ++c) count[c + 1] += count[c];
+    for (c = 0; c <= nc; ++c) cstart[c] = count[c];
+    for (j = 0; j < ng; ++j) { /* stable: groups keep their sorted order within a colour */
+        size_t q = count[tmp[3 * j + 2]]++;
+        grp[2 * q] = tmp[3 * j], grp[2 * q + 1] = tmp[3 * j + 1];
+    }
+}
+
+/* one Gauss-Seidel pass over sorted particles j0 .. j1 - 1 (one group) */
+static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real dt, pn_real *v) {
+    int dd = w->dim * w->dim, i;
+    size_t j;
+    for (j = j0; j < j1; ++j) {
+        pn_real L[9], tau[9], dtau[9];
+        pn__mpm_push(w, w->order[j], v, 1, NULL, L);
+        pn__mpm_stress_local(w, j, L, w->pty[j], dt, tau);
+        for (i = 0; i < dd; ++i) {
+            dtau[i] = tau[i] - w->pP[j * (size_t)dd + (size_t)i];
+            w->pP[j * (size_t)dd + (size_t)i] = tau[i];
+        }
+        pn__mpm_stress_apply(w, j, dtau, dt, v);
+    }
+}
+
 static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
     int d = w->dim, dd = d * d, ns = w->ns, i, sweep;
-    size_t k, j, nd, np, total = 0;
+    size_t k, j, nd, np, total = 0, cstart[28];
     pn_real *v = w->vsol, *r = w->grad, *v0 = w->vtry, mref = 0, vscale, res = 0, prev = 0, prev2 = 0;
     pn_result rr;
     w->stress_on = 1;
@@ -3546,17 +3591,17 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     mref = total ? mref / (pn_real)total : 0;
     vscale = o->sweep_tol * w->desc.dx_m / dt;
     pn__mpm_stress_contact(w, v, r);
+    pn__mpm_stress_groups(w, cstart);
     for (sweep = 0; sweep < o->sweeps_max; ++sweep) {
+        int c;
         memcpy(v0, v, sizeof(pn_real) * nd);
-        for (j = 0; j < np; ++j) {
-            pn_real L[9], tau[9], dtau[9];
-            pn__mpm_push(w, w->order[j], v, 1, NULL, L);
-            pn__mpm_stress_local(w, j, L, w->pty[j], dt, tau);
-            for (i = 0; i < dd; ++i) {
-                dtau[i] = tau[i] - w->pP[j * (size_t)dd + (size_t)i];
-                w->pP[j * (size_t)dd + (size_t)i] = tau[i];
-            }
-            pn__mpm_stress_apply(w, j, dtau, dt, v);
+        for (c = 0; c < (d == 2 ? 9 : 27); ++c) {
+            long q;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (w->n >= w->desc.parallel_min_particles)
+#endif
+            for (q = (long)cstart[c]; q < (long)cstart[c + 1]; ++q)
+                pn__mpm_stress_group(w, w->inc[2 * (size_t)q], w->inc[2 * (size_t)q + 1], dt, v);
         }
         pn__mpm_stress_contact(w, v, r);
         for (res = 0, k = 0; k < w->n_act; ++k) {
