@@ -1465,24 +1465,41 @@ static pn_mpm_implicit_desc t_stress_desc(void) {
     return id;
 }
 
+/* the stress tests' scene: a 2D world (t_mpm_world) with one StVK-Hencky block of plastic
+   model pl and modulus E at lo, size sz; NULL (a failed check) if any of it fails */
+static pn_mpm_world *t_stress_scene(pn_test_ctx *pn__t, int res, pn_real gy, pn_mpm_boundary b, pn_plastic_model pl,
+                                    double E, const double *lo, const double *sz, size_t *n) {
+    pn_mpm_world *w = t_mpm_world(2, res, gy, b);
+    int g;
+    PN_CHECK(w != NULL);
+    if (!w) return NULL;
+    g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, pl, E);
+    *n = g < 0 ? 0 : t_mpm_block(w, g, lo, sz, NULL);
+    PN_CHECK(*n > 0);
+    if (*n == 0) {
+        pn_mpm_destroy(w);
+        return NULL;
+    }
+    return w;
+}
+
 /* The sand column of mpm_implicit_sand_column, E 1e6 Pa (the explicit bound is about 2e-4
    s): against the explicit reference (dt 5e-5 s), the stress formulation at dt 1e-3 (about 5
    explicit steps) lands within 3% on the runout and 5% on the height, and at one step per
    frame (1/60 s, about 80) within 15% on the runout, finite, nothing lost. */
 PN_TEST(mpm_stress_sand_column) {
-    pn_mpm_world *e = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
-    pn_mpm_world *im = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
-    pn_mpm_world *big = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
     double lo[3] = {0.4, 0.05, 0}, sz[3] = {0.2, 0.3, 0}, xe, xi, xb, ye, yi, yb;
     pn_mpm_implicit_desc id = t_stress_desc();
     pn_mpm_stats st;
     size_t n, p;
     int step, finite = 1, sweeps = 0, sweeps_big = 0;
-    PN_CHECK(e && im && big);
-    if (!e || !im || !big) return;
-    n = t_mpm_block(e, t_mpm_group(e, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e6), lo, sz, NULL);
-    t_mpm_block(im, t_mpm_group(im, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e6), lo, sz, NULL);
-    t_mpm_block(big, t_mpm_group(big, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e6), lo, sz, NULL);
+    pn_mpm_world *e = t_stress_scene(pn__t, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo, sz, &n);
+    pn_mpm_world *im = t_stress_scene(pn__t, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo, sz, &n);
+    pn_mpm_world *big = t_stress_scene(pn__t, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo, sz, &n);
+    if (!e || !im || !big) {
+        pn_mpm_destroy(e), pn_mpm_destroy(im), pn_mpm_destroy(big);
+        return;
+    }
     for (step = 0; step < 6000; ++step) PN_CHECK(pn_mpm_step_explicit(e, 5e-5, NULL) == PN_OK);
     for (step = 0; step < 300; ++step) {
         PN_CHECK(pn_mpm_step_implicit(im, 1e-3, &id, &st) == PN_OK);
@@ -1552,16 +1569,13 @@ PN_TEST(mpm_stress_hydrostatic) {
    (sum_i g_ip = 0): an elastic block thrown spinning keeps its linear momentum to rounding
    through large stress-formulation steps, and keeps its mass. */
 PN_TEST(mpm_stress_momentum) {
-    pn_mpm_world *w = t_mpm_world(2, 64, 0, PN_MPM_BOUNDARY_STICKY);
     double lo[3] = {0.35, 0.35, 0}, sz[3] = {0.25, 0.2, 0}, m0, m1, p0[3], p1[3];
     pn_mpm_implicit_desc id = t_stress_desc();
     size_t n, p;
-    int g, step;
+    int step;
     pn_real mass, mom[3];
-    PN_CHECK(w != NULL);
+    pn_mpm_world *w = t_stress_scene(pn__t, 64, 0, PN_MPM_BOUNDARY_STICKY, PN_PLASTIC_NONE, 1e6, lo, sz, &n);
     if (!w) return;
-    g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_NONE, 1e6);
-    n = t_mpm_block(w, g, lo, sz, NULL);
     for (p = 0; p < n; ++p) { /* spin about the centre plus a drift */
         double rx = w->x[2 * p] - 0.475, ry = w->x[2 * p + 1] - 0.45;
         w->v[2 * p] = 0.3 - 4 * ry;
@@ -1582,18 +1596,13 @@ PN_TEST(mpm_stress_momentum) {
    unknown formulation, a NaN tolerance, and a step whose sweeps cannot converge: each fails
    with its pn_result and a message, and the world is as it was. */
 PN_TEST(mpm_stress_bad_input) {
-    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE);
     double lo[3] = {0.3, 0.15, 0}, sz[3] = {0.3, 0.3, 0}, *copy;
     pn_mpm_implicit_desc id = t_stress_desc();
     pn_material_desc md;
     pn_material snow;
     size_t n, bytes;
-    int g;
-    PN_CHECK(w != NULL);
+    pn_mpm_world *w = t_stress_scene(pn__t, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e7, lo, sz, &n);
     if (!w) return;
-    g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e7);
-    n = t_mpm_block(w, g, lo, sz, NULL);
-    PN_CHECK(n > 0);
     bytes = sizeof(double) * n * 2;
     copy = (double *)malloc(bytes);
     memcpy(copy, w->x, bytes);
