@@ -143,6 +143,11 @@
           pn_mpm_stats.mg_builds); pn_mlp_eval_lanes and pn_pnet_energy_lanes (the network
           in float vector lanes; pnet_double keeps the double path); a positive definite
           Hessian skips the eigen-decomposition of its PSD projection.
+     0.7  implicit MPM: the stress formulation (PN_MPM_FORMULATION_STRESS: stresses as
+          unknowns, projected Gauss-Seidel by colour; sweeps_max, sweep_tol,
+          pn_mpm_stats.sweeps); the frozen-yield DP energy frozen at F^n.
+     0.8  the stress formulation's stresses per cell, or per cell then per particle
+          (pn_mpm_implicit_desc.stress_unknowns, cell_relax).
 */
 #ifndef PLASTINET_H
 #define PLASTINET_H
@@ -160,7 +165,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 7
+#define PN_VERSION_MINOR 8
 
 #ifdef __cplusplus
 extern "C" {

@@ -194,6 +194,21 @@ typedef enum pn_mpm_formulation {
                                     PN_ERROR_UNSUPPORTED for other materials                */
 } pn_mpm_formulation;
 
+/* Where the stress formulation's stresses live (pn_mpm_implicit_desc.stress_unknowns). A cell:
+   the particles that share a stencil base node and a material group, whose stress is solved
+   as one (their volume average); each keeps its own F, moved by the cell's velocity
+   gradient (method.md, stress formulation). */
+typedef enum pn_mpm_stress_unknowns {
+    PN_MPM_STRESS_PARTICLES = 0, /* one per particle, as the explicit step has them          */
+    PN_MPM_STRESS_CELLS,         /* one per cell: 4x (2D) to 8x (3D) fewer unknowns, cheaper
+                                    sweeps and over-relaxation; a coarser stress field, which
+                                    costs accuracy (docs/results.md)                         */
+    PN_MPM_STRESS_CELLS_THEN_PARTICLES /* the cells to 10 sweep_tol first, then the particles
+                                    from their stresses: the per-particle solution, faster
+                                    on stiff material and large piles, slower on soft
+                                    material (docs/results.md)                               */
+} pn_mpm_stress_unknowns;
+
 /* Implicit step settings; zeroed fields mean the defaults in brackets. */
 typedef struct pn_mpm_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (PlasticityNet Eq. 10) [1]:
@@ -248,7 +263,8 @@ typedef struct pn_mpm_implicit_desc {
                                     builds its own (tried again every 16 steps); 1: at every
                                     Newton iteration [0]                                    */
     pn_mpm_formulation formulation; /* [PN_MPM_FORMULATION_ENERGY]                          */
-    int sweeps_max;              /* STRESS: Gauss-Seidel sweeps per step; a step that has not
+    int sweeps_max;              /* STRESS: Gauss-Seidel sweeps per step (per phase of
+                                    PN_MPM_STRESS_CELLS_THEN_PARTICLES); a step that has not
                                     converged by then fails (PN_ERROR_NOT_CONVERGED, then
                                     the substeps) [1000]                                     */
     pn_real sweep_tol;           /* STRESS: converged when the velocity error left, estimated
@@ -256,6 +272,10 @@ typedef struct pn_mpm_implicit_desc {
                                     (res rho / (1 - rho)), is below sweep_tol dx / dt, nodes
                                     lighter than the mean particle weighted by their mass
                                     [1e-4]                                                   */
+    pn_mpm_stress_unknowns stress_unknowns; /* STRESS: where the stresses live
+                                    [PN_MPM_STRESS_PARTICLES]                                */
+    pn_real cell_relax;          /* STRESS, cells: over-relaxation of the cells' Gauss-Seidel
+                                    updates, in [1, 2) [1.8]                                  */
 } pn_mpm_implicit_desc;
 
 /* Statistics of the last step (of a failed implicit step: its first attempt). */
@@ -362,6 +382,9 @@ typedef struct pn_mpm_world {
        node's (j, slot) incidences in the fixed gather order. The Hessian product then
        touches no spline and no sort, and reads neighbours from nearby memory. */
     pn_real *pq;
+    pn_real *pb;                 /* >>stress by cell: sum V_p g_ps over the cell's particles,
+                                    at its first particle's sorted index (allocated by the
+                                    first such step)                                          */
     long *pdof;
     size_t *inc, *inc_start, *prank;
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
@@ -393,7 +416,7 @@ typedef struct pn_mpm_world {
     int pnet_lanes;              /* implicit: PlasticityNet in float lanes this step         */
     int mg_stale;                /* a lagged hierarchy cost too many CG iterations lately    */
     int stress_on;               /* this implicit step is FORMULATION_STRESS: pq holds g, not
-                                    F^nT g (>>stress)                                        */
+                                    F^nT g (>>stress); 2: by cells, whose L makes F          */
     size_t mg_dense_n;           /* unknowns of the factored coarsest level (0: smoothed)      */
     pn_real *mg_dense;
 } pn_mpm_world;
@@ -643,7 +666,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(pq) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(pq) X(pb) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
     X(lnode) X(blnode) X(lval) X(blval) X(bmark) X(bact) X(rowcount) X(gdense) X(gdense0) X(ppay) X(spay) X(prow) X(srow)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -1653,10 +1676,9 @@ static void pn__mpm_p2g(pn_mpm_world *w) {
 /* The dimension is spelled out in the two kernels: with loops of a runtime (or even a
    constant) length of 2 or 3, gcc -O2 keeps the accumulators in memory and this product,
    the inner loop of every Hessian product, runs several times slower. */
-static void pn__mpm_push2(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
-                          const pn_real *base, pn_real *out) {
-    const pn_real *q = w->pq + j * 18;
-    const long *dof = w->pdof + j * 9;
+/* the _at kernels take one stencil's weights q and nodes dof (>>stress: a cell's as well) */
+static void pn__mpm_push2_at(const pn_real *q, const long *dof, const pn_real *v, pn_real dt,
+                             const pn_real *base, pn_real *out) {
     pn_real a00 = 0, a01 = 0, a10 = 0, a11 = 0;
     int s;
     for (s = 0; s < 9; ++s, q += 2) {
@@ -1671,10 +1693,8 @@ static void pn__mpm_push2(const pn_mpm_world *w, size_t j, const pn_real *v, pn_
     out[2] = (base ? base[2] : 0) + dt * a10;
     out[3] = (base ? base[3] : 0) + dt * a11;
 }
-static void pn__mpm_push3(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
-                          const pn_real *base, pn_real *out) {
-    const pn_real *q = w->pq + j * 81;
-    const long *dof = w->pdof + j * 27;
+static void pn__mpm_push3_at(const pn_real *q, const long *dof, const pn_real *v, pn_real dt,
+                             const pn_real *base, pn_real *out) {
     pn_real a[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
     pn_real a00 = 0, a01 = 0, a02 = 0, a10 = 0, a11 = 0, a12 = 0, a20 = 0, a21 = 0, a22 = 0;
     int s, i;
@@ -1692,6 +1712,14 @@ static void pn__mpm_push3(const pn_mpm_world *w, size_t j, const pn_real *v, pn_
     }
     a[0] = a00, a[1] = a01, a[2] = a02, a[3] = a10, a[4] = a11, a[5] = a12, a[6] = a20, a[7] = a21, a[8] = a22;
     for (i = 0; i < 9; ++i) out[i] = (base ? base[i] : 0) + dt * a[i];
+}
+static void pn__mpm_push2(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
+                          const pn_real *base, pn_real *out) { /* by sorted index j */
+    pn__mpm_push2_at(w->pq + j * 18, w->pdof + j * 9, v, dt, base, out);
+}
+static void pn__mpm_push3(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
+                          const pn_real *base, pn_real *out) {
+    pn__mpm_push3_at(w->pq + j * 81, w->pdof + j * 27, v, dt, base, out);
 }
 static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt,
                          const pn_real *base, pn_real *out) { /* by particle index p */
@@ -1738,9 +1766,22 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
                 for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * wt * gv[i] * dpos[j];
             }
         }
-        if (w->stress_on) { /* pq holds g: F = (I + dt sum v g^T) F^n */
+        if (w->stress_on) { /* pq holds g: F = (I + dt sum v g^T) F^n (cells: L_c, >>stress) */
             pn_real L[9];
             pn__mpm_push(w, q, gv_all, dt, NULL, L);
+            if (w->stress_on == 2) { /* the cell's strain rate, the particle's own spin */
+                size_t r = w->inc[2 * w->start[w->nodes] + w->prank[q]];
+                const pn_real *b = w->pb + r * (size_t)(w->ns * d);
+                const long *dof = w->pdof + r * (size_t)w->ns;
+                pn_real Lc[9];
+                int a, e;
+                if (d == 2) pn__mpm_push2_at(b, dof, gv_all, dt / w->phG[r], NULL, Lc);
+                else pn__mpm_push3_at(b, dof, gv_all, dt / w->phG[r], NULL, Lc);
+                for (a = 0; a < d; ++a)
+                    for (e = 0; e < d; ++e)
+                        Lc[a * d + e] = (Lc[a * d + e] + Lc[e * d + a]) / 2 + (L[a * d + e] - L[e * d + a]) / 2;
+                memcpy(L, Lc, sizeof(pn_real) * (size_t)dd);
+            }
             for (i = 0; i < dd; ++i) L[i] += (i % (d + 1) == 0);
             pn_mat_mul(d, L, w->F + q * (size_t)dd, Fn);
         } else {
@@ -3412,14 +3453,12 @@ static int pn__mpm_stress_ok(const pn_material *m) {
            (m->plastic == PN_PLASTIC_NONE || m->plastic == PN_PLASTIC_DRUCKER_PRAGER);
 }
 
-/* the local law of sorted particle j: tau from L = sum v g^T at the current velocities, its
-   stress tau_cur and compliance c = dt V gamma; returns the new stress in tau */
-static void pn__mpm_stress_local(const pn_mpm_world *w, size_t j, const pn_real *L, pn_real c, pn_real dt,
-                                 pn_real *tau) {
-    size_t p = w->order[j];
-    const pn_material *m = &w->groups[w->group[p]].material;
-    int d = w->dim, dd = d * d, i, k;
-    const pn_real *cur = w->pP + j * (size_t)dd, *hat = w->pF0 + j * (size_t)dd;
+/* the local law of one stress unknown (a particle, or a cell): tau from its velocity
+   gradient L at the current velocities, its stress cur, its start stress hat, hardening
+   state h and compliance c = dt V gamma; returns the new stress in tau */
+static void pn__mpm_stress_local(const pn_material *m, int d, const pn_real *hat, const pn_real *cur, pn_real h,
+                                 const pn_real *L, pn_real c, pn_real dt, pn_real *tau) {
+    int dd = d * d, i, k;
     pn_real dr = (pn_real)d, kappa = m->lambda + 2 * m->mu / dr, trL = 0, mcur = 0, mhat = 0;
     pn_real mc = 0, am, bm, bs, as[9], an = 0, mnew, sc, mu2 = 2 * m->mu * dt, mean;
     int dp = m->plastic == PN_PLASTIC_DRUCKER_PRAGER;
@@ -3435,7 +3474,7 @@ static void pn__mpm_stress_local(const pn_mpm_world *w, size_t j, const pn_real 
     bs = mu2 * c;
     bm = kappa * dt * c * dr;
     am = mhat - mc + kappa * dt * trL + bm * (mcur - mc);
-    if (dp && m->volume_correction) am += kappa * w->h[p];
+    if (dp && m->volume_correction) am += kappa * h;
     for (i = 0; i < d; ++i)
         for (k = 0; k < d; ++k) as[i * d + k] = hat[i * d + k] + mu2 * (L[i * d + k] + L[k * d + i]) / 2 + bs * cur[i * d + k];
     mean = mhat + mu2 * trL / dr + bs * mcur; /* as -= its mean: the deviator */
@@ -3456,13 +3495,12 @@ static void pn__mpm_stress_local(const pn_mpm_world *w, size_t j, const pn_real 
     for (i = 0; i < d; ++i) tau[i * d + i] += mnew + mc;
 }
 
-/* v_k of every stencil node of sorted particle j += -dt V / m_k dtau g */
-static void pn__mpm_stress_apply(pn_mpm_world *w, size_t j, const pn_real *dtau, pn_real dt, pn_real *v) {
-    int d = w->dim, ns = w->ns, s;
-    pn_real sV = dt * w->vol0[w->order[j]];
-    const long *dof = w->pdof + j * (size_t)ns;
-    const pn_real *g = w->pq + j * (size_t)(ns * d);
-    if (d == 2) { /* spelled out: see pn__mpm_push2 */
+/* v_k of every stencil node (dof) += -sV / m_k dtau g_k: a particle's force (g its weights, sV =
+   dt V) or a cell's (g = sum V g over its particles, sV = dt) */
+static void pn__mpm_stress_apply(pn_mpm_world *w, const pn_real *g, const long *dof, const pn_real *dtau, pn_real sV,
+                                 pn_real *v) {
+    int s;
+    if (w->dim == 2) { /* spelled out: see pn__mpm_push2 */
         for (s = 0; s < 9; ++s, g += 2) {
             pn_real f = w->diag[dof[s]] * sV, *vk = v + (size_t)dof[s] * 2;
             vk[0] -= f * (dtau[0] * g[0] + dtau[1] * g[1]);
@@ -3521,77 +3559,120 @@ static void pn__mpm_stress_groups(pn_mpm_world *w, size_t *cstart) {
     }
 }
 
-/* one Gauss-Seidel pass over sorted particles j0 .. j1 - 1 (one group) */
-static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real dt, pn_real *v) {
-    int dd = w->dim * w->dim, i;
+/* one Gauss-Seidel pass over the unknowns of sorted particles j0 .. j1 - 1 (one stencil base
+   node): each particle's, or (cells) each cell's at its first particle (pn__mpm_stress_cells) */
+static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real dt, pn_real *v, int cells) {
+    int d = w->dim, dd = d * d, ns = w->ns, i;
     size_t j;
     for (j = j0; j < j1; ++j) {
-        pn_real L[9], tau[9], dtau[9];
-        pn__mpm_push(w, w->order[j], v, 1, NULL, L);
-        pn__mpm_stress_local(w, j, L, w->pty[j], dt, tau);
-        for (i = 0; i < dd; ++i) {
-            dtau[i] = tau[i] - w->pP[j * (size_t)dd + (size_t)i];
-            w->pP[j * (size_t)dd + (size_t)i] = tau[i];
+        pn_real L[9], tau[9], dtau[9], *cur = w->pP + j * (size_t)dd, sV, h;
+        const pn_real *g;
+        const long *dof = w->pdof + j * (size_t)ns;
+        size_t p = w->order[j];
+        const pn_real *hat = w->pF0 + j * (size_t)dd;
+        pn_real c = w->pty[j];
+        if (cells) {
+            pn_real *cell = w->pH + j * (size_t)(dd * dd);
+            if (w->phG[j] == 0) continue;
+            g = w->pb + j * (size_t)(ns * d), sV = dt, h = cell[2 * dd + 1], hat = cell, cur = cell + dd, c = cell[2 * dd];
+            if (d == 2) pn__mpm_push2_at(g, dof, v, 1 / w->phG[j], NULL, L);
+            else pn__mpm_push3_at(g, dof, v, 1 / w->phG[j], NULL, L);
+        } else {
+            g = w->pq + j * (size_t)(ns * d), sV = dt * w->vol0[p], h = w->h[p];
+            pn__mpm_push(w, p, v, 1, NULL, L);
         }
-        pn__mpm_stress_apply(w, j, dtau, dt, v);
+        pn__mpm_stress_local(&w->groups[w->group[p]].material, d, hat, cur, h, L, c, dt, tau);
+        for (i = 0; i < dd; ++i) {
+            dtau[i] = tau[i] - cur[i];
+            cur[i] = tau[i];
+        }
+        pn__mpm_stress_apply(w, g, dof, dtau, sV, v);
     }
 }
 
-static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
-    int d = w->dim, dd = d * d, ns = w->ns, i, sweep;
-    size_t k, j, nd, np, total = 0, cstart[28];
-    pn_real *v = w->vsol, *r = w->grad, *v0 = w->vtry, mref = 0, vscale, res = 0, prev = 0, prev2 = 0;
-    pn_result rr;
-    w->stress_on = 1;
-    pn__mpm_bin(w);
-    pn__mpm_implicit_setup(w);
-    w->stress_on = 0; /* set again around the transfer back */
-    pn__mpm_p2g(w);
-    pn__mpm_contact(w, w->time_s);
-    nd = w->n_act * (size_t)d;
-    np = w->start[w->nodes];
-    st->active_nodes = w->n_act;
-    for (k = 0; k < w->n_act; ++k) {
-        pn_real m = w->grid_m[k];
-        w->diag[k] = m > 0 ? 1 / m : 0;
-        for (i = 0; i < d; ++i) {
-            size_t c = k * (size_t)d + (size_t)i;
-            v[c] = w->vstar[c] = m > 0 ? w->grid_v[c] / m + dt * w->desc.gravity[i] : 0;
-            r[c] = 0;
+/* c = dt V gamma of one unknown: gamma >= the largest eigenvalue of G = sum_s g_s g_s^T / m_s
+   (Gershgorin), g its weights (a cell: sum V g, scaled by 1 / V) */
+static pn_real pn__mpm_stress_compliance(const pn_mpm_world *w, const pn_real *g, const long *dof, pn_real V,
+                                         pn_real dt, pn_real scale) {
+    int d = w->dim, s, a, b;
+    pn_real G[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, gam = 0;
+    for (s = 0; s < w->ns; ++s, g += d)
+        for (a = 0; a < d; ++a)
+            for (b = 0; b < d; ++b) G[a * d + b] += g[a] * g[b] * w->diag[dof[s]] * scale * scale;
+    for (a = 0; a < d; ++a) {
+        pn_real row = 0;
+        for (b = 0; b < d; ++b) row += PN__FABS(G[a * d + b]);
+        gam = PN__MAX(gam, row);
+    }
+    return dt * V * gam;
+}
+
+/* The cells (PN_MPM_STRESS_CELLS): the particles of one stencil base node and one material group
+   share one stress, tau_c = Z(tau^_c + dt C sym(L_c)) with L_c = sum_s v_s b_s^T / V_c,
+   b_s = sum_p V_p g_ps and V_c = sum_p V_p, tau^_c and h_c the volume averages; the force
+   on node s is -tau_c b_s, whose power is -V_c tau_c : L_c, so the pair stays adjoint. A
+   cell lives at its first particle's sorted index r: b in pb, V in phG (0 at its other
+   particles), and in pH (dim^4 >= 2 dim^2 + 2 reals) tau^, tau, c and h; each particle's
+   cell in crep (inc after the colour groups). Material groups mixed in one cell give it one
+   unknown per group. The first iterate is tau^_c, applied to v; the particles' own tau^
+   (pF0) and compliances stay, for a per-particle solve after it. At the end the particles
+   of a cell take its velocity gradient L_c for their F (pn__mpm_g2p), not their own: a
+   velocity field whose L averages to zero over every cell but not at each particle (an
+   hourglass mode) meets no stress, and with their own L the particles' F drift in it (an
+   elastic layer at rest showed stresses 2.3 times the hydrostatic ones, in a sawtooth). */
+static void pn__mpm_stress_cells(pn_mpm_world *w, const size_t *cstart, pn_real dt, pn_real relax, pn_real *v) {
+    int d = w->dim, dd = d * d, ns = w->ns, nsd = ns * d, i;
+    size_t q, nq = cstart[d == 2 ? 9 : 27], *crep = w->inc + 2 * w->start[w->nodes];
+    for (q = 0; q < nq; ++q) {
+        size_t j0 = w->inc[2 * q], j1 = w->inc[2 * q + 1], j, r;
+        for (j = j0; j < j1; ++j) {
+            size_t p = w->order[j];
+            pn_real V = w->vol0[p], *cell;
+            const pn_real *g = w->pq + j * (size_t)nsd, *hat = w->pF0 + j * (size_t)dd;
+            for (r = j0; r < j && !(crep[r] == r && w->group[w->order[r]] == w->group[p]); ++r) {
+            }
+            w->phG[j] = 0;
+            crep[j] = r;
+            if (r == j) { /* the first particle of its group here: the cell's unknown */
+                memset(w->pH + j * (size_t)(dd * dd), 0, sizeof(pn_real) * (size_t)(2 * dd + 2));
+                memset(w->pb + j * (size_t)nsd, 0, sizeof(pn_real) * (size_t)nsd);
+            }
+            cell = w->pH + r * (size_t)(dd * dd);
+            w->phG[r] += V, cell[2 * dd + 1] += V * w->h[p];
+            for (i = 0; i < nsd; ++i) w->pb[r * (size_t)nsd + (size_t)i] += V * g[i];
+            for (i = 0; i < dd; ++i) cell[i] += V * hat[i];
+        }
+        for (j = j0; j < j1; ++j) {
+            pn_real V = w->phG[j], *cell = w->pH + j * (size_t)(dd * dd);
+            const pn_real *b = w->pb + j * (size_t)nsd;
+            const long *dof = w->pdof + j * (size_t)ns;
+            if (V == 0) continue;
+            cell[2 * dd + 1] /= V;
+            for (i = 0; i < dd; ++i) cell[i] /= V, cell[dd + i] = cell[i];
+            cell[2 * dd] = pn__mpm_stress_compliance(w, b, dof, V, dt, 1 / V) / relax;
+            pn__mpm_stress_apply(w, b, dof, cell, dt, v);
         }
     }
-    for (j = 0; j < np; ++j) { /* tau^ (the state's own stress), gamma, the first iterate */
-        size_t p = w->order[j];
-        const pn_material *m = &w->groups[w->group[p]].material;
-        pn_real Z[9], hn, G[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, gam = 0;
-        int plastic, s, a, b;
-        rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->pF0 + j * (size_t)dd, &plastic);
-        if (rr != PN_OK) {
-            w->error_particle = p;
-            return pn__mpm_fail(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
-                                (unsigned long)p, w->group[p], pn_result_string(rr));
-        }
-        total += w->active[p];
-        mref += w->active[p] ? w->mass[p] : 0;
-        for (s = 0; s < ns; ++s) {
-            size_t kk = (size_t)w->pdof[j * (size_t)ns + (size_t)s];
-            const pn_real *g = w->pq + (j * (size_t)ns + (size_t)s) * (size_t)d;
-            for (a = 0; a < d; ++a)
-                for (b = 0; b < d; ++b) G[a * d + b] += g[a] * g[b] * w->diag[kk];
-        }
-        for (a = 0; a < d; ++a) { /* Gershgorin: gamma >= the largest eigenvalue of G */
-            pn_real row = 0;
-            for (b = 0; b < d; ++b) row += PN__FABS(G[a * d + b]);
-            gam = PN__MAX(gam, row);
-        }
-        w->pty[j] = dt * w->vol0[p] * gam;
-        memcpy(w->pP + j * (size_t)dd, w->pF0 + j * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-        pn__mpm_stress_apply(w, j, w->pP + j * (size_t)dd, dt, v);
-    }
-    mref = total ? mref / (pn_real)total : 0;
-    vscale = o->sweep_tol * w->desc.dx_m / dt;
-    pn__mpm_stress_contact(w, v, r);
-    pn__mpm_stress_groups(w, cstart);
+}
+
+/* the cells' stresses handed to their particles (tau_p = tau_c: the same forces, so v stays) */
+static void pn__mpm_stress_uncell(pn_mpm_world *w) {
+    int dd = w->dim * w->dim;
+    size_t j, np = w->start[w->nodes], *crep = w->inc + 2 * np;
+    for (j = 0; j < np; ++j)
+        memcpy(w->pP + j * (size_t)dd, w->pH + crep[j] * (size_t)(dd * dd) + dd, sizeof(pn_real) * (size_t)dd);
+}
+
+/* Gauss-Seidel sweeps (by colour; the cells' or the particles') and the contact nodes' until
+   the velocity error left, estimated, is below sweep_tol dx / dt: a linear rate rho leaves
+   about res rho / (1 - rho) after a sweep that moved res; stop on that, not on res (a slow,
+   smooth mode moves little per sweep); rho the slower of the last two rates (they are noisy) */
+static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_real tol,
+                                       const size_t *cstart, int cells, pn_real mref, pn_real *v, pn_real *r,
+                                       pn_mpm_stats *st) {
+    int d = w->dim, i, sweep;
+    size_t k, nd = w->n_act * (size_t)d;
+    pn_real *v0 = w->vtry, vscale = tol * w->desc.dx_m / dt, res = 0, prev = 0, prev2 = 0;
     for (sweep = 0; sweep < o->sweeps_max; ++sweep) {
         int c;
         memcpy(v0, v, sizeof(pn_real) * nd);
@@ -3601,7 +3682,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
 #pragma omp parallel for schedule(static) if (w->n >= w->desc.parallel_min_particles)
 #endif
             for (q = (long)cstart[c]; q < (long)cstart[c + 1]; ++q)
-                pn__mpm_stress_group(w, w->inc[2 * (size_t)q], w->inc[2 * (size_t)q + 1], dt, v);
+                pn__mpm_stress_group(w, w->inc[2 * (size_t)q], w->inc[2 * (size_t)q + 1], dt, v, cells);
         }
         pn__mpm_stress_contact(w, v, r);
         for (res = 0, k = 0; k < w->n_act; ++k) {
@@ -3613,9 +3694,6 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         if (!pn__finite(res))
             return pn__mpm_fail(w, PN_ERROR_OVERFLOW, "implicit step of %g s (stress formulation): the velocities "
                                 "overflowed", (double)dt);
-        /* a linear rate rho leaves an error of about res rho / (1 - rho) after a sweep that moved
-           res: stop on that, not on res (a slow, smooth mode moves little per sweep); rho the
-           slower of the last two rates (they are noisy) */
         if (sweep > 1 && res <= vscale) {
             pn_real rho = prev > 0 && prev2 > 0 ? PN__MAX(res / prev, prev / prev2) : 1;
             if (rho < 1 && res * rho <= vscale * (1 - rho)) break;
@@ -3626,10 +3704,74 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     st->newton_residual = PN__MAX(st->newton_residual, res * dt / w->desc.dx_m);
     if (sweep == o->sweeps_max)
         return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s (stress formulation): sweeps_max = %d "
-                            "Gauss-Seidel sweeps did not converge (the last one moved the grid by %.3g dx / dt, "
-                            "sweep_tol %g): raise sweeps_max or take a smaller step", (double)dt, o->sweeps_max,
-                            (double)(res * dt / w->desc.dx_m), (double)o->sweep_tol);
+                            "Gauss-Seidel sweeps%s did not converge (the last one moved the grid by %.3g dx / dt, "
+                            "tolerance %g): raise sweeps_max or take a smaller step", (double)dt, o->sweeps_max,
+                            cells ? " of the cells" : "", (double)(res * dt / w->desc.dx_m), (double)tol);
+    return PN_OK;
+}
+
+static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
+    int d = w->dim, dd = d * d, ns = w->ns, i, cells = o->stress_unknowns != PN_MPM_STRESS_PARTICLES;
+    int cascade = o->stress_unknowns == PN_MPM_STRESS_CELLS_THEN_PARTICLES;
+    size_t k, j, np, total = 0, cstart[28];
+    pn_real *v = w->vsol, *r = w->grad, mref = 0;
+    pn_result rr;
+    if (cells && !w->pb) {
+        int fail = 0;
+        w->pb = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(ns * d), sizeof(pn_real), &fail);
+        if (fail)
+            return pn__mpm_fail(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
+                                "for the cells' weights (%lu reals)", (unsigned long)(w->cap * (size_t)(ns * d)));
+    }
     w->stress_on = 1;
+    pn__mpm_bin(w);
+    pn__mpm_implicit_setup(w);
+    w->stress_on = 0; /* set again around the transfer back */
+    pn__mpm_p2g(w);
+    pn__mpm_contact(w, w->time_s);
+    np = w->start[w->nodes];
+    st->active_nodes = w->n_act;
+    for (k = 0; k < w->n_act; ++k) {
+        pn_real m = w->grid_m[k];
+        w->diag[k] = m > 0 ? 1 / m : 0;
+        for (i = 0; i < d; ++i) {
+            size_t c = k * (size_t)d + (size_t)i;
+            v[c] = w->vstar[c] = m > 0 ? w->grid_v[c] / m + dt * w->desc.gravity[i] : 0;
+            r[c] = 0;
+        }
+    }
+    for (j = 0; j < np; ++j) { /* tau^ (the state's own stress), c, the first iterate */
+        size_t p = w->order[j];
+        const pn_material *m = &w->groups[w->group[p]].material;
+        pn_real Z[9], hn;
+        int plastic;
+        rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->pF0 + j * (size_t)dd, &plastic);
+        if (rr != PN_OK) {
+            w->error_particle = p;
+            return pn__mpm_fail(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
+                                (unsigned long)p, w->group[p], pn_result_string(rr));
+        }
+        total += w->active[p];
+        mref += w->active[p] ? w->mass[p] : 0;
+        {
+            const pn_real *g = w->pq + j * (size_t)(ns * d);
+            const long *dof = w->pdof + j * (size_t)ns;
+            w->pty[j] = pn__mpm_stress_compliance(w, g, dof, w->vol0[p], dt, 1);
+            memcpy(w->pP + j * (size_t)dd, w->pF0 + j * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+            if (!cells) pn__mpm_stress_apply(w, g, dof, w->pP + j * (size_t)dd, dt * w->vol0[p], v);
+        }
+    }
+    mref = total ? mref / (pn_real)total : 0;
+    pn__mpm_stress_groups(w, cstart);
+    if (cells) pn__mpm_stress_cells(w, cstart, dt, o->cell_relax, v);
+    pn__mpm_stress_contact(w, v, r);
+    rr = pn__mpm_stress_sweeps(w, dt, o, cascade ? 10 * o->sweep_tol : o->sweep_tol, cstart, cells, mref, v, r, st);
+    if (rr != PN_OK) return rr;
+    if (cascade) { /* the particles from the cells' stresses: the same forces, so v holds */
+        pn__mpm_stress_uncell(w);
+        if ((rr = pn__mpm_stress_sweeps(w, dt, o, o->sweep_tol, cstart, 0, mref, v, r, st)) != PN_OK) return rr;
+    }
+    w->stress_on = cells && !cascade ? 2 : 1;
     rr = pn__mpm_g2p(w, v, dt, st);
     w->stress_on = 0;
     if (rr != PN_OK) return rr;
@@ -3694,8 +3836,14 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
                             "pn_mpm_formulation, or sweep_tol %g is not finite and >= 0", (int)o.formulation,
                             (double)o.sweep_tol);
+    if (!pn__finite(o.cell_relax) || !(o.cell_relax == 0 || (o.cell_relax >= 1 && o.cell_relax < 2)) ||
+        o.stress_unknowns < PN_MPM_STRESS_PARTICLES || o.stress_unknowns > PN_MPM_STRESS_CELLS_THEN_PARTICLES)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: cell_relax %g is not 0 (the "
+                            "default) or in [1, 2), or stress_unknowns %d is not a pn_mpm_stress_unknowns",
+                            (double)o.cell_relax, (int)o.stress_unknowns);
     if (o.sweeps_max <= 0) o.sweeps_max = 1000;
     if (!(o.sweep_tol > 0)) o.sweep_tol = (pn_real)1e-4;
+    if (o.cell_relax == 0) o.cell_relax = (pn_real)1.8;
     if (o.formulation == PN_MPM_FORMULATION_STRESS) {
         int g;
         for (g = 0; g < w->n_groups; ++g)

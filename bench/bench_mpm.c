@@ -6,6 +6,8 @@
                     [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]
                     [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
                     [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
+                    [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..]
+                    [--sweep-runs I,I,..] [--sweep-tol X] [--cell-relax X]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated (the snow press for at most 0.2 s, while its plate goes 0.08 domain_m deep), at
    most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
@@ -45,8 +47,9 @@
    Then a Young's-modulus sweep of the sand column (1e6 to 1e10 Pa; --sweep-E, at --sweep-res
    cells, default the res of --sweep-dim, 2D unless said): at each E the fair explicit baseline
    (searched as above), the reference at half its step, and implicit runs of the lagged and
-   frozen-yield DP energies with multigrid and Jacobi CG and of the stress formulation
-   (sweep_cfgs), IoU against that reference, and the
+   frozen-yield DP energies with multigrid and Jacobi CG and of the stress formulation, its
+   stresses per particle, per cell, and per cell then per particle (sweep_cfgs, numbered from
+   1 for --sweep-runs), IoU against that reference, and the
    crossover (the smallest E where implicit is faster than the fair baseline at mean min/max
    IoU >= 0.90). --sweep-only: the sweep alone.
    Wall time: clock_gettime(CLOCK_MONOTONIC) around the steps only (scene setup and the IoU
@@ -603,18 +606,31 @@ typedef struct sweep_cfg {
     int fp;
     pn_mpm_linear_solver linear;
     pn_mpm_formulation formulation;
+    pn_mpm_stress_unknowns where; /* stress: pn_mpm_implicit_desc.stress_unknowns */
 } sweep_cfg;
 static const sweep_cfg sweep_cfgs[] = {
-    {"lagged, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
-    {"lagged, dt 1e-3, Jacobi", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_JACOBI, PN_MPM_FORMULATION_ENERGY},
-    {"lagged, dt 4e-3, multigrid", PN_MPM_ENERGY_LAGGED, 4e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
-    {"lagged 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
-    {"DP 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_DP, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY},
+    {"lagged, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"lagged, dt 1e-3, Jacobi", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_JACOBI, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"lagged, dt 4e-3, multigrid", PN_MPM_ENERGY_LAGGED, 4e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"lagged 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"DP 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_DP, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
     /* the stress formulation (Gauss-Seidel; no linear solver); 2e-2 s: one step per frame
        of these 25 fps frames' half (1/60 s does not divide them) */
-    {"stress, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS},
-    {"stress, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS},
-    {"stress, dt 2e-2", PN_MPM_ENERGY_DP, 2e-2, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS},
+    {"stress, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
+    {"stress, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
+    {"stress, dt 2e-2", PN_MPM_ENERGY_DP, 2e-2, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
+    {"stress by cell, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
+     PN_MPM_STRESS_CELLS},
+    {"stress by cell, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
+     PN_MPM_STRESS_CELLS},
+    {"stress, cells then particles, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT,
+     PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_CELLS_THEN_PARTICLES},
+    {"stress, cells then particles, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT,
+     PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_CELLS_THEN_PARTICLES},
+    {"stress, dt 5e-4", PN_MPM_ENERGY_DP, 5e-4, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
+     PN_MPM_STRESS_PARTICLES},
+    {"stress, cells then particles, dt 5e-4", PN_MPM_ENERGY_DP, 5e-4, 1, PN_MPM_LINEAR_DEFAULT,
+     PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_CELLS_THEN_PARTICLES},
 };
 #define SWEEP_RUNS ((int)(sizeof sweep_cfgs / sizeof sweep_cfgs[0]))
 
@@ -676,6 +692,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             r->fp = sweep_cfgs[c].fp;
             id.linear_solver = sweep_cfgs[c].linear;
             id.formulation = sweep_cfgs[c].formulation;
+            id.stress_unknowns = sweep_cfgs[c].where;
             bench_run_scene(&s, r, frames, cfg->max_run_s, &id, NULL, w->found ? ref : NULL);
             bench_progress("sand", dim, r);
             st = r->tally.steps ? (double)r->tally.steps : 1;
@@ -921,7 +938,8 @@ static void usage(void) {
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
-                    "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n");
+                    "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n"
+                    "       [--sweep-tol X] [--cell-relax X]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -1011,6 +1029,8 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--dts")) bad |= !(n_dts = parse_list(v, dts_arg)), ++k;
         else if (!strcmp(a, "--passes")) bad |= !(n_passes = parse_list(v, passes_arg)), ++k;
         else if (!strcmp(a, "--energies")) bad |= !(mask = parse_energies(v)), ++k;
+        else if (!strcmp(a, "--sweep-tol")) bad |= !((cfg.solver.sweep_tol = (pn_real)atof(v)) > 0), ++k;
+        else if (!strcmp(a, "--cell-relax")) bad |= !((cfg.solver.cell_relax = (pn_real)atof(v)) >= 1), ++k;
         else if (!strcmp(a, "--contact-rounds")) bad |= (cfg.solver.contact_rounds = atoi(v)) < 1, ++k;
         else if (!strcmp(a, "--cg-forcing")) bad |= !((cfg.solver.cg_forcing_max = (pn_real)atof(v)) >= 0 && cfg.solver.cg_forcing_max < 1), ++k;
         else { usage(); return 2; }

@@ -2,10 +2,13 @@
 // sphere that ploughs through it like a player's tool, one pn_mpm_advance call per 60 Hz
 // frame; prints the milliseconds each frame took and what a frame costs per particle.
 // Build: c++ -std=c++17 -O2 examples/game_loop.cpp -o game_loop     (add -fopenmp for threads)
-// Usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--stress] [--png DIR]
+// Usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--stress] [--stress-cells]
+//                  [--stress-cells-first] [--png DIR]
 //   --implicit   one implicit step per frame (frozen-yield Drucker-Prager energy) instead of
 //                explicit steps at pn_mpm_stable_dt; the advection limit may still split it
 //   --stress     the same with the stress formulation (PN_MPM_FORMULATION_STRESS)
+//   --stress-cells, --stress-cells-first: the stress formulation with a stress per cell, or
+//                per cell then per particle (pn_mpm_implicit_desc.stress_unknowns)
 //   --png DIR    a picture of every 10th frame (examples/pn_render.h)
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
@@ -26,6 +29,7 @@ struct Options {
     int frames = 120, res = 32;
     double E = 1e6; // Pa: softer than real sand (1e7 - 1e8) so that explicit steps are few
     bool implicit = false, stress = false;
+    pn_mpm_stress_unknowns where = PN_MPM_STRESS_PARTICLES;
     std::string png;
 };
 
@@ -44,12 +48,17 @@ bool parse(int argc, char **argv, Options &o) {
         };
         double x = 0;
         if (a == "--help" || a == "-h") {
-            std::printf("usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--stress] [--png DIR]\n");
+            std::printf("usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--stress] [--stress-cells]\n"
+                        "                 [--stress-cells-first] [--png DIR]\n");
             std::exit(0);
         } else if (a == "--implicit") {
             o.implicit = true;
         } else if (a == "--stress") {
             o.implicit = o.stress = true;
+        } else if (a == "--stress-cells") {
+            o.implicit = o.stress = true, o.where = PN_MPM_STRESS_CELLS;
+        } else if (a == "--stress-cells-first") {
+            o.implicit = o.stress = true, o.where = PN_MPM_STRESS_CELLS_THEN_PARTICLES;
         } else if (a == "--frames" && number(x) && x >= 1) {
             o.frames = static_cast<int>(x);
         } else if (a == "--res" && number(x) && x >= 16 && x <= 256) {
@@ -119,6 +128,7 @@ int main(int argc, char **argv) {
     pn_mpm_advance_desc step{};
     pn_mpm_implicit_desc solve{};
     solve.formulation = opt.stress ? PN_MPM_FORMULATION_STRESS : PN_MPM_FORMULATION_ENERGY;
+    solve.stress_unknowns = opt.where;
     step.integrator = opt.implicit ? PN_MPM_IMPLICIT : PN_MPM_EXPLICIT;
     step.max_step_s = opt.implicit ? 1 / fps : 0;
     step.implicit = &solve;

@@ -546,6 +546,13 @@ PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const cha
         c->solver.formulation = (pn_mpm_formulation)(k < 0 ? 0 : k);
     } else if (!strcmp(a, "--sweeps")) ok = pn_ex_integer(prog, a, v, &c->solver.sweeps_max);
     else if (!strcmp(a, "--sweep-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.sweep_tol = (pn_real)x;
+    else if (!strcmp(a, "--cell-relax")) ok = pn_ex_number(prog, a, v, &x), c->solver.cell_relax = (pn_real)x;
+    else if (!strcmp(a, "--stress-unknowns")) {
+        static const char *const where[] = {"particles", "cells", "cells-then-particles"};
+        int k = pn_ex_choice(prog, a, v, where, 3);
+        ok = k >= 0;
+        c->solver.stress_unknowns = (pn_mpm_stress_unknowns)(k < 0 ? 0 : k);
+    }
     else if (!strcmp(a, "--mg-levels")) ok = pn_ex_integer(prog, a, v, &c->solver.mg_levels);
     else if (!strcmp(a, "--mg-rebuild")) ok = pn_ex_integer(prog, a, v, &c->solver.mg_rebuild);
     else if (!strcmp(a, "--frames")) ok = pn_ex_integer(prog, a, v, &c->frames);
@@ -609,6 +616,9 @@ PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f) {
                "  --formulation energy|stress  --sweeps N  --sweep-tol X\n"
                "                             what implicit steps solve for; the stress formulation's Gauss-Seidel\n"
                "                             sweeps and tolerance (pn_mpm_implicit_desc) [energy, 1000, 1e-4]\n"
+               "  --stress-unknowns particles|cells|cells-then-particles  --cell-relax X\n"
+               "                             where the stress formulation's stresses live, and the cells'\n"
+               "                             over-relaxation (pn_mpm_implicit_desc) [particles, 1.8]\n"
                "  --pnet-double              PlasticityNet one particle at a time in double (the reference;\n"
                "                             default: its network in float vector lanes)\n"
                "  --force-error              measure the energy's force error (pn_mpm_stats)\n"
