@@ -4329,11 +4329,14 @@ static void pn__mpm_xp2g(pn_mpm_world *w, pn_real dt) {
     if (w->n >= w->desc.parallel_min_particles) ns = PN__MIN(omp_get_max_threads(), PN__MPM_SLABS);
 #endif
     cut[0] = 0;
-    if (ns > 1) { /* cut the cumulative row histogram at equal shares, at block rows */
-        size_t p, tot = 0, acc = 0;
+    if (ns > 1) { /* cut the cumulative row histogram at equal shares, at block rows. The cut
+                     only balances the threads (any cut gives the same bits), so a sample of
+                     every stride-th particle makes it: a serial pass over all of them cost
+                     4% of a 2D step at 30k particles */
+        size_t p, tot = 0, acc = 0, stride = w->n / 8192 + 1;
         int row, k = 1;
         memset(w->rowcount, 0, sizeof(size_t) * (size_t)rows);
-        for (p = 0; p < w->n; ++p)
+        for (p = 0; p < w->n; p += stride)
             if (w->active[p]) w->rowcount[w->prow[p]]++, tot++;
         for (row = 0; row < rows && k < ns; ++row) {
             acc += w->rowcount[row];
