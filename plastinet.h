@@ -560,6 +560,14 @@ PN_API pn_result pn_pnet_energy_lanes(const pn_pnet *net, int n, const pn_pnet_p
                                       pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags,
                                       pn_result *status);
 
+/* pn_pnet_prepare at n <= PN_MLP_LANES points at once, the network's gradient at F0 in float
+   lanes: F0 and h hold the points one after another (dim^2 and 1 reals each), pt[i] and
+   status[i] each point's result; returns the first point's error, if any. Points prepared
+   here are exact at F0 for pn_pnet_energy_lanes (the same float network on both sides),
+   to about 1e-6 relative for pn_pnet_energy. */
+PN_API pn_result pn_pnet_prepare_lanes(const pn_pnet *net, int n, const pn_real *F0, const pn_real *h,
+                                       pn_pnet_point *pt, pn_result *status);
+
 /* Learned volume-preserving von Mises return mapping (Eqs. 12-13): as pn_return_map, with the
    plastic multiplier from the network: dgamma = min(|e_hat| - r(s, h), |e_hat|) clamped at 0,
    r = r_ref exp(mlp(u)). m must match the model's training material. */
@@ -2477,20 +2485,34 @@ static void pn__vf_activate(pn_activation act, pn__vf z, pn__vf *a, pn__vf *a1, 
 }
 
 /* PN__VW points (lanes) of pn_mlp_eval_lanes: inputs, outputs at lane stride PN_MLP_LANES */
-static void pn__mlp_lanes(const pn_mlp *net, const float *in, int n_diff, int want_h, float *out, float *grad,
-                          float *hess) {
+/* The network in PN__VW lanes: out, the gradient d out / d in_k for k < n_grad (the pass
+   back), and with want_h the Hessian along n_dir directions of the input space, hess[j][c] =
+   s_j^T (d2 out / d in2) s_c: seed NULL takes the unit vectors of the first n_dir inputs,
+   else seed[(c * n_in + i) * L + lane] is input i of direction c. The directions are what
+   the pass forward carries (1 + n_dir vectors per unit, and none without want_h), so a
+   Hessian needed only along a few directions (PlasticityNet's scaled encoding: its d
+   features, not its 2 d + 1 inputs) costs a few passes, not one per input. */
+static void pn__mlp_lanes(const pn_mlp *net, const float *in, const float *seed, int n_grad, int n_dir, int want_h,
+                          float *out, float *grad, float *hess) {
     enum { L = PN_MLP_LANES, W = PN_MLP_MAX_WIDTH, D = PN_MLP_MAX_DIFF };
     /* per unit (and tangent c: 0 the value, 1.. d/dx): a lane vector */
     pn__vf buf[2][(1 + D) * W], d1[PN_MLP_LANES_HIDDEN], d2[PN_MLP_LANES_HIDDEN];
     pn__vf tg[PN_MLP_LANES_HIDDEN * D], lam[2][W], H[D * D];
     int off[PN_MLP_MAX_LAYERS], nl = net->n_layers, l, i, j, c, k, lane, cur = 0, nt, n_in = net->size[0];
-    int want_g = n_diff > 0;
+    int want_g = n_grad > 0 || want_h, n_diff = want_h ? n_dir : 0;
     float tmp[PN__VW];
     nt = 1 + n_diff;
     for (i = 0; i < n_in; ++i) {
         for (lane = 0; lane < PN__VW; ++lane) tmp[lane] = in[i * L + lane];
         memcpy(&buf[0][i], tmp, sizeof tmp);
-        for (c = 1; c < nt; ++c) buf[0][c * n_in + i] = pn__vf_set1(c - 1 == i ? 1.0f : 0.0f);
+        for (c = 1; c < nt; ++c) {
+            if (seed) {
+                for (lane = 0; lane < PN__VW; ++lane) tmp[lane] = seed[((c - 1) * n_in + i) * L + lane];
+                memcpy(&buf[0][c * n_in + i], tmp, sizeof tmp);
+            } else {
+                buf[0][c * n_in + i] = pn__vf_set1(c - 1 == i ? 1.0f : 0.0f);
+            }
+        }
     }
     for (l = 0, k = 0; l < nl; ++l) {
         int n0 = net->size[l], n1 = net->size[l + 1];
@@ -2537,11 +2559,16 @@ static void pn__mlp_lanes(const pn_mlp *net, const float *in, int n_diff, int wa
             int n0 = net->size[l], n1 = net->size[l + 1];
             const float *Wl = net->weight[l];
             pn__vf *mu = lam[1 - lc];
-            for (i = 0; i < n0; ++i) mu[i] = pn__vf_set1(0.0f);
-            for (j = 0; j < n1; ++j) {
-                const float *wj = Wl + (size_t)j * (size_t)n0;
-                pn__vf lj = lam[lc][j];
-                for (i = 0; i < n0; ++i) mu[i] = pn__vf_madd(mu[i], wj[i], lj);
+            for (i = 0; i < n0; i += 4) { /* mu = W^T lam, four inputs at a time: sums in registers */
+                int i1 = i + 1 < n0 ? i + 1 : i, i2 = i + 2 < n0 ? i + 2 : i, i3 = i + 3 < n0 ? i + 3 : i;
+                pn__vf a0 = pn__vf_set1(0.0f), a1 = a0, a2 = a0, a3 = a0;
+                for (j = 0; j < n1; ++j) {
+                    const float *wj = Wl + (size_t)j * (size_t)n0;
+                    pn__vf lj = lam[lc][j];
+                    a0 = pn__vf_madd(a0, wj[i], lj), a1 = pn__vf_madd(a1, wj[i1], lj);
+                    a2 = pn__vf_madd(a2, wj[i2], lj), a3 = pn__vf_madd(a3, wj[i3], lj);
+                }
+                mu[i] = a0, mu[i1] = a1, mu[i2] = a2, mu[i3] = a3; /* past n0: the same sum again */
             }
             if (l > 0) /* mu = d out / da of hidden layer l - 1: its Hessian term, then d out / dz */
                 for (i = 0; i < n0; ++i) {
@@ -2558,10 +2585,10 @@ static void pn__mlp_lanes(const pn_mlp *net, const float *in, int n_diff, int wa
                 }
             lc = 1 - lc;
         }
-        for (j = 0; j < n_diff; ++j) {
-                memcpy(tmp, &lam[lc][j], sizeof tmp);
-                for (lane = 0; lane < PN__VW; ++lane) grad[j * L + lane] = tmp[lane];
-            }
+        for (j = 0; j < n_grad; ++j) {
+            memcpy(tmp, &lam[lc][j], sizeof tmp);
+            for (lane = 0; lane < PN__VW; ++lane) grad[j * L + lane] = tmp[lane];
+        }
         if (want_h)
             for (j = 0; j < n_diff; ++j)
                 for (c = j; c < n_diff; ++c) {
@@ -2571,37 +2598,53 @@ static void pn__mlp_lanes(const pn_mlp *net, const float *in, int n_diff, int wa
     }
 }
 
-PN__DEF pn_result pn_mlp_eval_lanes(const pn_mlp *net, int n, const float *in, int n_diff, float *out, float *grad,
-                                    float *hess) {
+/* pn_mlp_eval_lanes with the directions of pn__mlp_lanes: the gradient over the first n_grad
+   inputs, the Hessian (n_dir x n_dir) along seed's directions (NULL: unit vectors; else
+   every one of the PN_MLP_LANES lanes set), for the first n points (lanes past n repeat the
+   first); outputs only on success */
+static pn_result pn__mlp_eval_lanes_dir(const pn_mlp *net, int n, const float *in, const float *seed, int n_grad,
+                                        int n_dir, float *out, float *grad, float *hess) {
     enum { L = PN_MLP_LANES, D = PN_MLP_MAX_DIFF };
-    float xin[PN_MLP_MAX_WIDTH * L], o[L], g[D * L], h[D * D * L], worst = 0;
-    int l, i, lane, hidden = 0, want_h = hess != NULL && n_diff > 0, nd = (grad != NULL || want_h) ? n_diff : 0;
-    PN_ASSERT(net && in && out);
-    if (!pn__mlp_ok(net) || n < 1 || n > L || n_diff < 0 || n_diff > D || n_diff > net->size[0] ||
-        net->size[net->n_layers] != 1 || net->activation == PN_ACTIVATION_SOFTPLUS)
+    float xin[PN_MLP_MAX_WIDTH * L], o[L], g[PN_MLP_MAX_WIDTH * L];
+    float h[D * D * L], worst = 0;
+    int l, i, lane, hidden = 0, want_h = hess != NULL && n_dir > 0, n_in = net->size[0];
+    if (!pn__mlp_ok(net) || n < 1 || n > L || n_grad < 0 || n_grad > n_in || n_dir < 0 || n_dir > D ||
+        (!seed && n_dir > n_in) || net->size[net->n_layers] != 1 || net->activation == PN_ACTIVATION_SOFTPLUS)
         return PN_ERROR_FORMAT;
     for (l = 1; l < net->n_layers; ++l) hidden += net->size[l];
     if (hidden > PN_MLP_LANES_HIDDEN) return PN_ERROR_FORMAT;
-    for (i = 0; i < net->size[0]; ++i)
-        for (lane = 0; lane < L; ++lane) { /* lanes past n repeat the first point */
+    for (i = 0; i < n_in; ++i)
+        for (lane = 0; lane < L; ++lane) {
             float v = in[i * L + (lane < n ? lane : 0)];
             if (!(v == v) || v > 3.4e38f || v < -3.4e38f) return PN_ERROR_NONFINITE;
             xin[i * L + lane] = v;
         }
-    for (lane = 0; lane < n; lane += PN__VW) pn__mlp_lanes(net, xin + lane, nd, want_h, o + lane, g + lane, h + lane);
-    /* a result that is not finite is an overflow (as pn_mlp_eval says); outputs only on success */
+    for (i = 0; seed && want_h && i < n_dir * n_in * L; ++i)
+        if (!(seed[i] == seed[i]) || seed[i] > 3.4e38f || seed[i] < -3.4e38f) return PN_ERROR_NONFINITE;
+    for (lane = 0; lane < n; lane += PN__VW)
+        pn__mlp_lanes(net, xin + lane, seed ? seed + lane : NULL, n_grad, n_dir, want_h, o + lane, g + lane, h + lane);
+    /* a result that is not finite is an overflow (as pn_mlp_eval says) */
     for (lane = 0; lane < n; ++lane) {
         worst += o[lane] * 0;
-        for (i = 0; i < nd; ++i) worst += g[i * L + lane] * 0;
-        for (i = 0; want_h && i < nd * nd; ++i) worst += h[i * L + lane] * 0;
+        for (i = 0; i < n_grad; ++i) worst += g[i * L + lane] * 0;
+        for (i = 0; want_h && i < n_dir * n_dir; ++i) worst += h[i * L + lane] * 0;
     }
     if (!(worst == 0)) return PN_ERROR_OVERFLOW;
     for (lane = 0; lane < n; ++lane) out[lane] = o[lane];
-    for (i = 0; grad && i < nd; ++i)
+    for (i = 0; grad && i < n_grad; ++i)
         for (lane = 0; lane < n; ++lane) grad[i * L + lane] = g[i * L + lane];
-    for (i = 0; want_h && i < nd * nd; ++i)
+    for (i = 0; want_h && i < n_dir * n_dir; ++i)
         for (lane = 0; lane < n; ++lane) hess[i * L + lane] = h[i * L + lane];
     return PN_OK;
+}
+
+PN__DEF pn_result pn_mlp_eval_lanes(const pn_mlp *net, int n, const float *in, int n_diff, float *out, float *grad,
+                                    float *hess) {
+    int nd;
+    PN_ASSERT(net && in && out);
+    if (n_diff < 0 || n_diff > PN_MLP_MAX_DIFF || !pn__mlp_ok(net) || n_diff > net->size[0]) return PN_ERROR_FORMAT;
+    nd = (grad != NULL || (hess != NULL && n_diff > 0)) ? n_diff : 0;
+    return pn__mlp_eval_lanes_dir(net, n, in, NULL, grad ? nd : 0, hess ? nd : 0, out, grad, hess);
 }
 
 /* ======================================================================================
@@ -2883,23 +2926,31 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
    evaluates it (pn_mlp_eval); mode 1 stops once its inputs u (nu of them, the first nd
    differentiated) are known; mode 2 takes its value, gradient and Hessian from m, gm, hm. */
 typedef struct pn__mlp_io {
-    int mode, nu, nd;
+    int mode, nu, nd, ns; /* inputs, gradient entries, Hessian directions (0: the unit ones) */
     pn_real u[PN_MLP_MAX_WIDTH], m, gm[PN_MLP_MAX_DIFF], hm[PN_MLP_MAX_DIFF * PN_MLP_MAX_DIFF];
+    pn_real seed[3 * PN_MLP_MAX_DIFF]; /* direction c, input i: seed[c nu + i] (ns > 0) */
 } pn__mlp_io;
 
-static pn_result pn__mlp_call(const pn_mlp *mlp, const pn_real *u, int nu, int nd, int want_h, pn__mlp_io *io,
-                              pn_real *m, pn_real *gm, pn_real *hm) {
+/* The network at u: its value m, gradient over the first nd inputs gm and, with want_h, the
+   Hessian hm over them (nd x nd). With lanes (io mode 1: the inputs handed over; mode 2: the
+   results handed back) and ns > 0, the Hessian comes back along the ns directions of seed
+   instead, hm[j ns + c] = seed_j^T H seed_c (pn__mlp_lanes): what the caller's chain rule
+   needs, at a fraction of the cost. */
+static pn_result pn__mlp_call(const pn_mlp *mlp, const pn_real *u, int nu, int nd, int want_h, const pn_real *seed,
+                              int ns, pn__mlp_io *io, pn_real *m, pn_real *gm, pn_real *hm) {
     int i;
     if (!io || io->mode == 0) return pn_mlp_eval(mlp, u, nd, m, gm, want_h ? hm : NULL);
     if (io->mode == 1) {
         memcpy(io->u, u, sizeof(pn_real) * (size_t)nu);
         io->nu = nu;
         io->nd = nd;
+        io->ns = want_h && seed && nu <= PN_MLP_MAX_DIFF ? ns : 0;
+        if (io->ns) memcpy(io->seed, seed, sizeof(pn_real) * (size_t)(ns * nu));
         return PN_OK;
     }
     *m = io->m;
     for (i = 0; i < nd; ++i) gm[i] = io->gm[i];
-    for (i = 0; want_h && i < nd * nd; ++i) hm[i] = io->hm[i];
+    for (i = 0; want_h && i < (io->ns ? io->ns * io->ns : nd * nd); ++i) hm[i] = io->hm[i];
     return PN_OK;
 }
 
@@ -2909,7 +2960,7 @@ static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_
     pn_real c = d == 2 ? 1 : (pn_real)1.5, q0, S, s, qj[3] = {0, 0, 0}, qjl[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
     pn_real sj[3], sjl[3][3]; /* qj, qjl zeroed: gcc -O3 cannot see that nf >= 2 fills them */
     pn_real a[3], a1[3], a2[3], raw[8], u[8], J[7][3], K[7][3][3], m, gm[7], hm[7 * 7];
-    pn_real gr[7], Mj[3], Mjl[3][3];
+    pn_real gr[7], Mj[3], Mjl[3][3], seed[3 * 8];
     pn_result r;
     q0 = y0[0] * y0[0] / d + c * y0[1];
     S = y[0] * y[0] / d + c * y[1] + q0 + (pn_real)(PN__SCALED_EPS * PN__SCALED_EPS);
@@ -2938,17 +2989,23 @@ static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_
     raw[2 * nf] = s;
     raw[2 * nf + 1] = PN__MIN(PN__MAX(h, (pn_real)mo->h_min), (pn_real)mo->h_max);
     for (i = 0; i < nr + 1; ++i) u[i] = (raw[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
-    r = pn__mlp_call(&mo->mlp, u, nr + 1, level > 0 ? nr : 0, level > 1, io, &m, gm, hm);
-    if (r != PN_OK || (io && io->mode == 1)) return r;
-    *N = S * m;
-    if (level < 1) return PN_OK;
-    for (i = 0; i < nr; ++i) gr[i] = gm[i] * (pn_real)mo->in_scale[i];
+    /* J = d raw / d y (nr x nf) and K = d2 raw / d y2, known before the network: with lanes,
+       its Hessian is taken along J's columns (in u), one direction per feature */
     for (k = 0; k < nf; ++k)
         for (j = 0; j < nf; ++j) {
             J[k][j] = (k == j ? a[k] : 0) + (y[k] - y0[k]) * a1[k] * sj[j];
             J[nf + k][j] = y0[k] * a1[k] * sj[j];
         }
     for (j = 0; j < nf; ++j) J[2 * nf][j] = sj[j];
+    for (j = 0; j < nf; ++j) {
+        for (i = 0; i < nr; ++i) seed[j * (nr + 1) + i] = (pn_real)mo->in_scale[i] * J[i][j];
+        seed[j * (nr + 1) + nr] = 0; /* h is not a function of F */
+    }
+    r = pn__mlp_call(&mo->mlp, u, nr + 1, level > 0 ? nr : 0, level > 1, seed, nf, io, &m, gm, hm);
+    if (r != PN_OK || (io && io->mode == 1)) return r;
+    *N = S * m;
+    if (level < 1) return PN_OK;
+    for (i = 0; i < nr; ++i) gr[i] = gm[i] * (pn_real)mo->in_scale[i];
     for (j = 0; j < nf; ++j) {
         Mj[j] = 0;
         for (i = 0; i < nr; ++i) Mj[j] += gr[i] * J[i][j];
@@ -2969,10 +3026,11 @@ static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_
             pn_real acc = 0;
             for (i = 0; i < nr; ++i) {
                 pn_real t = 0;
-                for (k = 0; k < nr; ++k) t += hm[i * nr + k] * (pn_real)mo->in_scale[k] * J[k][l];
+                if (!(io && io->ns)) /* the full Hessian (double path): J^T H J here */
+                    for (k = 0; k < nr; ++k) t += hm[i * nr + k] * (pn_real)mo->in_scale[k] * J[k][l];
                 acc += (pn_real)mo->in_scale[i] * J[i][j] * t + gr[i] * K[i][j][l];
             }
-            Mjl[j][l] = acc;
+            Mjl[j][l] = acc + (io && io->ns ? hm[j * nf + l] : 0);
         }
     for (j = 0; j < nf; ++j)
         for (l = 0; l < nf; ++l) HN[j * nf + l] = qjl[j][l] * m + qj[j] * Mj[l] + qj[l] * Mj[j] + S * Mjl[j][l];
@@ -3000,7 +3058,7 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
             u[nf + i] = (pt->x0[i] - (pn_real)mo->in_shift[nf + i]) * (pn_real)mo->in_scale[nf + i];
         }
         u[2 * nf] = (h - (pn_real)mo->in_shift[2 * nf]) * (pn_real)mo->in_scale[2 * nf];
-        r = pn__mlp_call(&mo->mlp, u, 2 * nf + 1, level > 0 ? nf : 0, level > 1, io, &out, g, H);
+        r = pn__mlp_call(&mo->mlp, u, 2 * nf + 1, level > 0 ? nf : 0, level > 1, NULL, 0, io, &out, g, H);
         if (r != PN_OK || (io && io->mode == 1)) return r;
         /* chain rule through u_k = (x_k - x0_k - shift_k) scale_k */
         for (k = 0; level > 0 && k < nf; ++k) g[k] *= s * (pn_real)mo->in_scale[k];
@@ -3116,7 +3174,8 @@ PN__DEF pn_result pn_pnet_energy_lanes(const pn_pnet *net, int n, const pn_pnet_
     pn__features f[PN_MLP_LANES];
     pn__mlp_io io[PN_MLP_LANES];
     float xin[PN_MLP_MAX_WIDTH * L], m[L], gm[PN_MLP_MAX_DIFF * L], hm[PN_MLP_MAX_DIFF * PN_MLP_MAX_DIFF * L];
-    int d, dd, level, i, k, first = -1, nu = 0, nd = 0;
+    float seed[3 * PN_MLP_MAX_DIFF * L];
+    int d, dd, level, i, k, first = -1, nu = 0, nd = 0, ns = 0, nh;
     pn_result r, worst = PN_OK;
     PN_ASSERT(net && net->energy && pt && F && status);
     if (n < 1 || n > L) return PN_ERROR_INVALID_ARGUMENT;
@@ -3133,14 +3192,16 @@ PN__DEF pn_result pn_pnet_energy_lanes(const pn_pnet *net, int n, const pn_pnet_
         io[i].mode = 1;
         status[i] = pn__pnet_network(net, pt[i], d, &f[i], level, &N, NULL, NULL, &io[i]);
         if (status[i] != PN_OK) continue;
-        if (first < 0) first = i, nu = io[i].nu, nd = io[i].nd;
+        if (first < 0) first = i, nu = io[i].nu, nd = io[i].nd, ns = io[i].ns;
     }
     if (first >= 0) { /* the network in float lanes (points that failed repeat the first good one) */
         for (i = 0; i < L; ++i) {
             int src = i < n && status[i] == PN_OK ? i : first;
             for (k = 0; k < nu; ++k) xin[k * L + i] = (float)io[src].u[k];
+            for (k = 0; k < ns * nu; ++k) seed[k * L + i] = (float)io[src].seed[k];
         }
-        r = pn_mlp_eval_lanes(&net->energy->mlp, L, xin, nd, m, level > 0 ? gm : NULL, level > 1 ? hm : NULL);
+        r = pn__mlp_eval_lanes_dir(&net->energy->mlp, L, xin, ns ? seed : NULL, level > 0 ? nd : 0,
+                                   level > 1 ? (ns ? ns : nd) : 0, m, gm, level > 1 ? hm : NULL);
         for (i = 0; i < n; ++i) {
             pn_real N, gN[9], HN[81];
             if (status[i] != PN_OK) continue;
@@ -3152,11 +3213,72 @@ PN__DEF pn_result pn_pnet_energy_lanes(const pn_pnet *net, int n, const pn_pnet_
             io[i].mode = 2;
             io[i].m = (pn_real)m[i];
             for (k = 0; k < nd; ++k) io[i].gm[k] = (pn_real)gm[k * L + i];
-            for (k = 0; level > 1 && k < nd * nd; ++k) io[i].hm[k] = (pn_real)hm[k * L + i];
+            nh = ns ? ns * ns : nd * nd;
+            for (k = 0; level > 1 && k < nh; ++k) io[i].hm[k] = (pn_real)hm[k * L + i];
             status[i] = pn__pnet_network(net, pt[i], d, &f[i], level, &N, gN, HN, &io[i]);
             if (status[i] == PN_OK)
                 status[i] = pn__pnet_finish(net, pt[i], F + i * dd, level, N, gN, HN, flags, psi ? psi + i : NULL,
                                             P ? P + i * dd : NULL, dPdF ? dPdF + i * dd * dd : NULL);
+        }
+    }
+    for (i = 0; i < n; ++i)
+        if (worst == PN_OK) worst = status[i];
+    return worst;
+}
+
+PN__DEF pn_result pn_pnet_prepare_lanes(const pn_pnet *net, int n, const pn_real *F0, const pn_real *h,
+                                        pn_pnet_point *pt, pn_result *status) {
+    enum { L = PN_MLP_LANES };
+    pn__features f[PN_MLP_LANES];
+    pn__mlp_io io[PN_MLP_LANES];
+    pn_pnet_point q[PN_MLP_LANES]; /* written to pt only where it succeeds */
+    pn_real T[PN_MLP_LANES][9];
+    float xin[PN_MLP_MAX_WIDTH * L], m[L], gm[PN_MLP_MAX_DIFF * L];
+    int d, dd, i, k, first = -1, nu = 0, nd = 0;
+    pn_result r, worst = PN_OK;
+    PN_ASSERT(net && net->energy && F0 && h && pt && status);
+    if (n < 1 || n > L) return PN_ERROR_INVALID_ARGUMENT;
+    d = net->energy->dim;
+    dd = d * d;
+    for (i = 0; i < n; ++i) { /* the return mapping, features and network inputs, in pn_real */
+        const pn_real *Fi = F0 + i * dd;
+        pn_real N, hn;
+        status[i] = pn__check_F(d, Fi);
+        if (status[i] == PN_OK && !pn__finite(h[i])) status[i] = PN_ERROR_NONFINITE;
+        if (status[i] == PN_OK && !(pn_mat_det(d, Fi) > 0)) status[i] = PN_ERROR_INVERTED;
+        if (status[i] == PN_OK)
+            status[i] = net->return_map ? pn_learned_return_map(net->return_map, &net->material, d, Fi, h[i], NULL, &hn, T[i])
+                                        : pn_return_map(&net->material, d, Fi, h[i], NULL, &hn, T[i]);
+        if (status[i] != PN_OK) continue;
+        memset(&q[i], 0, sizeof q[i]);
+        memcpy(q[i].F0, Fi, sizeof(pn_real) * (size_t)dd);
+        q[i].h = h[i];
+        pn__features_eval(d, Fi, 1, &f[i]);
+        for (k = 0; k < f[i].nf; ++k) q[i].x0[k] = f[i].x[k];
+        io[i].mode = 1;
+        status[i] = pn__pnet_network(net, &q[i], d, &f[i], 1, &N, NULL, NULL, &io[i]);
+        if (status[i] == PN_OK && first < 0) first = i, nu = io[i].nu, nd = io[i].nd;
+    }
+    if (first >= 0) {
+        for (i = 0; i < L; ++i) {
+            int src = i < n && status[i] == PN_OK ? i : first;
+            for (k = 0; k < nu; ++k) xin[k * L + i] = (float)io[src].u[k];
+        }
+        r = pn__mlp_eval_lanes_dir(&net->energy->mlp, L, xin, NULL, nd, 0, m, gm, NULL);
+        for (i = 0; i < n; ++i) {
+            pn_real N, gN[9];
+            if (status[i] != PN_OK) continue;
+            if (r != PN_OK) { /* no lane path, or a lane overflowed: one at a time */
+                status[i] = pn_pnet_prepare(net, F0 + i * dd, h[i], &pt[i], NULL, NULL);
+                continue;
+            }
+            io[i].mode = 2;
+            io[i].m = (pn_real)m[i];
+            for (k = 0; k < nd; ++k) io[i].gm[k] = (pn_real)gm[k * L + i];
+            status[i] = pn__pnet_network(net, &q[i], d, &f[i], 1, &N, gN, NULL, &io[i]);
+            for (k = 0; status[i] == PN_OK && k < dd; ++k) q[i].C[k] = gN[k] - T[i][k];
+            if (status[i] == PN_OK && !pn__all_finite(dd, q[i].C)) status[i] = PN_ERROR_OVERFLOW;
+            if (status[i] == PN_OK) pt[i] = q[i];
         }
     }
     for (i = 0; i < n; ++i)

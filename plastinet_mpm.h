@@ -190,7 +190,8 @@ typedef enum pn_mpm_formulation {
                                     stress, so plastic flow within the step is exact (Daviet
                                     and Bertails-Descoubes 2016); solved by projected
                                     Gauss-Seidel over the particles and the contact nodes.
-                                    StVK-Hencky groups, elastic or Drucker-Prager (sand);
+                                    StVK-Hencky groups, elastic or Drucker-Prager (sand),
+                                    and Neo-Hookean snow, elastic or Cam-Clay (snow);
                                     PN_ERROR_UNSUPPORTED for other materials                */
 } pn_mpm_formulation;
 
@@ -2995,32 +2996,51 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol,
 static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real dt, int first,
                                       pn_real *res) {
     int d = w->dim, dd = d * d;
-    long l;
+    long l, nblk = (long)((w->n + PN_MLP_LANES - 1) / PN_MLP_LANES);
     size_t p;
     pn_real worst = 0;
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n; ++l) {
-        size_t q = (size_t)l;
-        const pn_mpm_group *g = &w->groups[w->group[q]];
-        pn_real F0[9], *old = w->pF0 + q * (size_t)dd, diff = 0;
-        pn_mpm_energy en;
-        int i;
-        w->pstat[q] = 0;
-        w->pscal[q] = 0;
-        if (!w->active[q]) continue;
-        pn__mpm_push(w, q, v, dt, w->F + q * (size_t)dd, F0);
-        if (!first)
-            for (i = 0; i < dd; ++i) diff = PN__MAX(diff, PN__FABS(F0[i] - old[i]));
-        w->pscal[q] = diff;
-        memcpy(old, F0, sizeof(pn_real) * (size_t)dd);
-        en = pn__mpm_energy_of(g);
-        if (en == PN_MPM_ENERGY_LAGGED)
-            w->pstat[q] = (int)pn_lagged_prepare(&g->material, d, F0, w->h[q], w->pG + q * (size_t)dd, &w->phG[q]);
-        else if (en == PN_MPM_ENERGY_PNET)
-            w->pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->ppt[q], NULL, NULL);
-        else if (en == PN_MPM_ENERGY_DP)
-            w->pstat[q] = (int)pn_dp_prepare(&g->material, d, first ? w->F + q * (size_t)dd : F0, w->h[q],
-                                             &w->pty[q]);
+    for (l = 0; l < nblk; ++l) { /* blocks of PN_MLP_LANES particles: PlasticityNet's in lanes */
+        size_t p0 = (size_t)l * PN_MLP_LANES, p1 = PN__MIN(w->n, p0 + PN_MLP_LANES), q, lp[PN_MLP_LANES];
+        pn_real Fl[PN_MLP_LANES * 9], hl[PN_MLP_LANES];
+        pn_pnet_point ptl[PN_MLP_LANES];
+        pn_result stl[PN_MLP_LANES];
+        int nl = 0, gl = -1, k;
+        for (q = p0; q < p1; ++q) {
+            const pn_mpm_group *g = &w->groups[w->group[q]];
+            pn_real F0[9], *old = w->pF0 + q * (size_t)dd, diff = 0;
+            pn_mpm_energy en;
+            int i;
+            w->pstat[q] = 0;
+            w->pscal[q] = 0;
+            if (!w->active[q]) continue;
+            pn__mpm_push(w, q, v, dt, w->F + q * (size_t)dd, F0);
+            if (!first)
+                for (i = 0; i < dd; ++i) diff = PN__MAX(diff, PN__FABS(F0[i] - old[i]));
+            w->pscal[q] = diff;
+            memcpy(old, F0, sizeof(pn_real) * (size_t)dd);
+            en = pn__mpm_energy_of(g);
+            if (en == PN_MPM_ENERGY_PNET && w->pnet_lanes && (gl < 0 || gl == w->group[q])) {
+                gl = w->group[q]; /* one network per block's lanes */
+                lp[nl] = q;
+                hl[nl] = w->h[q];
+                memcpy(Fl + nl * dd, F0, sizeof(pn_real) * (size_t)dd);
+                nl++;
+            } else if (en == PN_MPM_ENERGY_LAGGED)
+                w->pstat[q] = (int)pn_lagged_prepare(&g->material, d, F0, w->h[q], w->pG + q * (size_t)dd, &w->phG[q]);
+            else if (en == PN_MPM_ENERGY_PNET)
+                w->pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->ppt[q], NULL, NULL);
+            else if (en == PN_MPM_ENERGY_DP)
+                w->pstat[q] = (int)pn_dp_prepare(&g->material, d, first ? w->F + q * (size_t)dd : F0, w->h[q],
+                                                 &w->pty[q]);
+        }
+        if (nl) {
+            pn_pnet_prepare_lanes(&w->groups[gl].pnet, nl, Fl, hl, ptl, stl);
+            for (k = 0; k < nl; ++k) {
+                w->pstat[lp[k]] = (int)stl[k];
+                if (stl[k] == PN_OK) w->ppt[lp[k]] = ptl[k];
+            }
+        }
     }
     for (p = 0; p < w->n; ++p) worst = PN__MAX(worst, w->pscal[p]);
     *res = worst;
@@ -3449,25 +3469,42 @@ static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, p
 
 /* group g's material in the stress formulation: 0 if it has none */
 static int pn__mpm_stress_ok(const pn_material *m) {
-    return m->elastic == PN_ELASTIC_STVK_HENCKY &&
-           (m->plastic == PN_PLASTIC_NONE || m->plastic == PN_PLASTIC_DRUCKER_PRAGER);
+    return (m->elastic == PN_ELASTIC_STVK_HENCKY &&
+            (m->plastic == PN_PLASTIC_NONE || m->plastic == PN_PLASTIC_DRUCKER_PRAGER)) ||
+           (m->elastic == PN_ELASTIC_NEO_HOOKEAN_SNOW &&
+            (m->plastic == PN_PLASTIC_NONE || m->plastic == PN_PLASTIC_CAM_CLAY));
 }
 
-/* the local law of one stress unknown (a particle, or a cell): tau from its velocity
+/* The local law of one stress unknown (a particle, or a cell): tau from its velocity
    gradient L at the current velocities, its stress cur, its start stress hat, hardening
-   state h and compliance c = dt V gamma; returns the new stress in tau */
+   state h and compliance c = dt V gamma; returns the new stress in tau.
+   The rate law is tau = hat + dt (2 mu dev D + kappa' tr D I), D = sym L. StVK-Hencky:
+   kappa' = kappa, exact in the log strain. Neo-Hookean snow (tau = kappa/2 (J^2 - 1) I +
+   mu J^(-2/d) dev b): its tangent at the start, kappa' = kappa J^2 = kappa + 2 tr(hat) / d
+   on the trace, 2 mu on the deviator (to first order in the elastic shear strain); the
+   transfer back makes the state from F itself, so this only steers the velocities.
+   The return mappings written on stresses, both of which keep the trace in shear and scale
+   the deviator s back radially, |s| <= R(m) (m = tr tau / d):
+   - Drucker-Prager: R = -alpha d (m - m_c), m_c = d kappa c the cohesion's apex; m >= m_c:
+     the apex;
+   - Cam-Clay (pn_return_map's, Gaume et al. 2018 with the hardening frozen at h within the
+     step): with p = -m, (1 + 2 beta) q^2 + M^2 (p + beta p0)(p - p0) <= 0, q^2 = (6 - d)/2
+     |s|^2; outside [-beta p0, p0] in p, the tip (s = 0, p at the bound).
+   Both laws are radial in s, so the particle's own share of D, moved to the left, only
+   shrinks the trial deviator (by 1 + bs) and mean (by 1 + bm): the closed form below. */
 static void pn__mpm_stress_local(const pn_material *m, int d, const pn_real *hat, const pn_real *cur, pn_real h,
                                  const pn_real *L, pn_real c, pn_real dt, pn_real *tau) {
     int dd = d * d, i, k;
     pn_real dr = (pn_real)d, kappa = m->lambda + 2 * m->mu / dr, trL = 0, mcur = 0, mhat = 0;
-    pn_real mc = 0, am, bm, bs, as[9], an = 0, mnew, sc, mu2 = 2 * m->mu * dt, mean;
-    int dp = m->plastic == PN_PLASTIC_DRUCKER_PRAGER;
+    pn_real mc = 0, am, bm, bs, as[9], an = 0, mnew, sc, mu2 = 2 * m->mu * dt, mean, rad2 = -1;
+    int dp = m->plastic == PN_PLASTIC_DRUCKER_PRAGER, cam = m->plastic == PN_PLASTIC_CAM_CLAY;
     for (i = 0; i < d; ++i) {
         trL += L[i * d + i];
         mcur += cur[i * d + i];
         mhat += hat[i * d + i];
     }
     mcur /= dr, mhat /= dr;
+    if (m->elastic == PN_ELASTIC_NEO_HOOKEAN_SNOW) kappa = PN__MAX(kappa + 2 * mhat, (pn_real)1e-3 * kappa);
     if (dp) mc = dr * kappa * m->cohesion_strain;
     /* trial with this particle's own share of D moved to the left: deviator as - bs s,
        shifted mean am - bm (m - mc) */
@@ -3480,17 +3517,18 @@ static void pn__mpm_stress_local(const pn_material *m, int d, const pn_real *hat
     mean = mhat + mu2 * trL / dr + bs * mcur; /* as -= its mean: the deviator */
     for (i = 0; i < d; ++i) as[i * d + i] -= mean;
     for (i = 0; i < dd; ++i) an += as[i] * as[i];
-    if (dp && am >= 0) { /* expansion: the apex */
-        for (i = 0; i < dd; ++i) tau[i] = 0;
-        for (i = 0; i < d; ++i) tau[i * d + i] = mc;
-        return;
-    }
     mnew = am / (1 + bm);
-    sc = 1 / (1 + bs);
-    if (dp) { /* the cone's radius at mnew */
-        pn_real rad = -pn__dp_alpha(m->sin_phi, d) * dr * mnew;
-        if (an * sc * sc > rad * rad) sc = rad / PN__SQRT(an);
+    if (dp && am >= 0) mnew = 0, rad2 = 0; /* expansion: the apex */
+    if (dp && am < 0) rad2 = pn__dp_alpha(m->sin_phi, d) * dr * mnew, rad2 *= rad2;
+    if (cam) { /* p0 and M as pn_return_map's (pn__camclay_eval) */
+        pn_real p0 = (m->lambda + 2 * m->mu / dr) * ((pn_real)1e-5 + PN__SINH(m->xi * PN__MAX(-h, 0)));
+        pn_real M = pn__dp_alpha(m->sin_phi, 3) * dr / PN__SQRT(2 / (6 - dr));
+        pn_real beta = m->beta, p = -mnew;
+        if (p >= p0 || p <= -beta * p0) mnew = p >= p0 ? -p0 : beta * p0, rad2 = 0; /* the tips */
+        else rad2 = -M * M * (p + beta * p0) * (p - p0) / ((1 + 2 * beta) * (6 - dr) / 2);
     }
+    sc = 1 / (1 + bs);
+    if (rad2 >= 0 && an * sc * sc > rad2) sc = PN__SQRT(rad2 / an); /* an > 0 here */
     for (i = 0; i < dd; ++i) tau[i] = sc * as[i];
     for (i = 0; i < d; ++i) tau[i * d + i] += mnew + mc;
 }
@@ -3849,7 +3887,8 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         for (g = 0; g < w->n_groups; ++g)
             if (!pn__mpm_stress_ok(&w->groups[g].material))
                 return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_implicit_desc: the stress formulation takes "
-                                    "StVK-Hencky groups, elastic or Drucker-Prager; group %d is not one", g);
+                                    "StVK-Hencky groups (elastic or Drucker-Prager) and Neo-Hookean snow groups (elastic "
+                                    "or Cam-Clay); group %d is not one", g);
     }
     if (o.max_halvings == 0) o.max_halvings = 3;
     if (o.max_halvings > 10) o.max_halvings = 10;

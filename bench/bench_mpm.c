@@ -7,7 +7,7 @@
                     [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
                     [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
                     [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..]
-                    [--sweep-runs I,I,..] [--sweep-tol X] [--cell-relax X]
+                    [--sweep-runs I,I,..] [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated (the snow press for at most 0.2 s, while its plate goes 0.08 domain_m deep), at
    most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
@@ -51,7 +51,9 @@
    stresses per particle, per cell, and per cell then per particle (sweep_cfgs, numbered from
    1 for --sweep-runs), IoU against that reference, and the
    crossover (the smallest E where implicit is faster than the fair baseline at mean min/max
-   IoU >= 0.90). --sweep-only: the sweep alone.
+   IoU >= 0.90). --sweep-scene snow: the same sweep on the snow press (Neo-Hookean snow with
+   Cam-Clay; every run but the DP energy's), its crossover at mean IoU >= 0.85.
+   --sweep-only: the sweep alone.
    Wall time: clock_gettime(CLOCK_MONOTONIC) around the steps only (scene setup and the IoU
    rasterization excluded); processor seconds (clock()) go to the CSV beside it, so a run
    slowed by another process shows as wall > cpu.
@@ -108,6 +110,7 @@ typedef struct bench_cfg {
     const double *Es;     /* the sweep                                             */
     int n_Es, sweep_res, sweep_dim;
     unsigned sweep_mask;  /* bit c: run sweep_cfgs[c]                              */
+    pn_ex_scene_kind sweep_kind; /* the sweep's scene: the sand column or the snow press */
     const char *out;
 } bench_cfg;
 
@@ -634,6 +637,15 @@ static const sweep_cfg sweep_cfgs[] = {
 };
 #define SWEEP_RUNS ((int)(sizeof sweep_cfgs / sizeof sweep_cfgs[0]))
 
+/* run c of the sweep on its scene: the frozen-yield DP energy is for Drucker-Prager sand */
+static int sweep_applies(const bench_cfg *cfg, int c) {
+    return cfg->sweep_kind == PN_EX_SAND_COLUMN || sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS ||
+           sweep_cfgs[c].energy != PN_MPM_ENERGY_DP;
+}
+
+/* the IoU an implicit run must reach for the crossover: docs/validation.md's bars */
+static double sweep_bar(const bench_cfg *cfg) { return cfg->sweep_kind == PN_EX_SAND_COLUMN ? 0.90 : 0.85; }
+
 typedef struct sweep_row {
     double E;
     bench_run fair, ref, imp[SWEEP_RUNS];
@@ -644,13 +656,14 @@ typedef struct sweep_row {
    every run is against it; the fair run's own IoU says how converged the reference is), and
    the implicit runs of sweep_cfgs (each capped at max_run_s). */
 static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
-    int i, c, dim = cfg->sweep_dim, frames = (int)floor(cfg->duration[dim] * BENCH_FPS + 0.5);
+    int i, c, dim = cfg->sweep_dim, frames;
     pn_ex_scene s;
     size_t nodes;
     double *fair, *ref;
-    if (frames < 1) frames = 1;
-    pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, cfg->sweep_dim);
+    const char *name = cfg->sweep_kind == PN_EX_SAND_COLUMN ? "sand" : "snow";
+    pn_ex_scene_default(&s, cfg->sweep_kind, cfg->sweep_dim);
     s.res = cfg->sweep_res;
+    frames = bench_frames(cfg, &s);
     nodes = (size_t)(s.res + 1) * (size_t)(s.res + 1) * (cfg->sweep_dim == 3 ? (size_t)(s.res + 1) : 1);
     if (!(fair = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
     if (!(ref = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
@@ -660,12 +673,12 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
     for (i = 0; i < cfg->n_Es; ++i) {
         sweep_row *w = &rows[i];
         double fw;
-        pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, dim);
+        pn_ex_scene_default(&s, cfg->sweep_kind, dim);
         s.res = cfg->sweep_res;
         if (cfg->filter >= 0) s.filter_s = cfg->filter;
         s.E_pa = cfg->Es[i];
         w->E = s.E_pa;
-        fprintf(stderr, "E sweep, %dD, E = %.0e Pa, res %d\n", dim, w->E, s.res);
+        fprintf(stderr, "E sweep, %s %dD, E = %.0e Pa, res %d\n", name, dim, w->E, s.res);
         w->found = bench_fair(&s, frames, &w->fair, fair);
         memset(&w->ref, 0, sizeof w->ref);
         strcpy(w->ref.role, "reference");
@@ -673,7 +686,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
         if (w->found) {
             bench_run_scene(&s, &w->ref, frames, 0, NULL, ref, NULL);
             bench_compare(&w->fair, fair, ref, nodes);
-            bench_progress("sand", dim, &w->fair);
+            bench_progress(name, dim, &w->fair);
         }
         fw = w->found ? wall_per_sim(&w->fair) : 0;
         fprintf(csv, "%g,%lu,explicit fair,%.6g,0,,%.4g,1,%.4f,%.4f,%.3g,0,0,0,0,\"%s\",0\n", w->E,
@@ -684,17 +697,19 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             pn_mpm_implicit_desc id = cfg->solver;
             double st;
             memset(r, 0, sizeof *r);
-            if (!(cfg->sweep_mask >> c & 1)) continue;
+            if (!(cfg->sweep_mask >> c & 1) || !sweep_applies(cfg, c)) continue;
             strcpy(r->role, "implicit");
             r->implicit = 1;
             r->energy = sweep_cfgs[c].energy;
+            if (cfg->sweep_kind != PN_EX_SAND_COLUMN && r->energy == PN_MPM_ENERGY_DP)
+                r->energy = PN_MPM_ENERGY_LAGGED; /* the stress runs use none; DP is sand's */
             r->dt = sweep_cfgs[c].dt;
             r->fp = sweep_cfgs[c].fp;
             id.linear_solver = sweep_cfgs[c].linear;
             id.formulation = sweep_cfgs[c].formulation;
             id.stress_unknowns = sweep_cfgs[c].where;
             bench_run_scene(&s, r, frames, cfg->max_run_s, &id, NULL, w->found ? ref : NULL);
-            bench_progress("sand", dim, r);
+            bench_progress(name, dim, r);
             st = r->tally.steps ? (double)r->tally.steps : 1;
             fprintf(csv, "%g,%lu,\"%s\",%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\",%.1f\n", w->E,
                     (unsigned long)r->particles, sweep_cfgs[c].name, r->dt, r->fp,
@@ -712,21 +727,25 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
 }
 
 /* The sweep's table, and the crossover: the smallest E where an implicit run is faster than
-   the fair explicit baseline at mean min/max IoU >= 0.90 against the reference. */
+   the fair explicit baseline at mean min/max IoU >= sweep_bar (sand 0.90, snow 0.85) against
+   the reference. */
 static void write_sweep_md(const char *path, const bench_cfg *cfg, const sweep_row *rows, int n) {
     FILE *f = fopen(path, "w");
     int i, c, cross = -1;
+    double bar = sweep_bar(cfg);
+    pn_ex_scene sc;
+    pn_ex_scene_default(&sc, cfg->sweep_kind, cfg->sweep_dim);
     if (!f) {
         fprintf(stderr, "bench_mpm: cannot write %s\n", path);
         return;
     }
-    fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm) -->\n**Young's modulus sweep**, sand column %dD, "
+    fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm) -->\n**Young's modulus sweep**, %s %dD, "
                "res %d (%lu particles), %.2f s simulated: at each E the fair explicit baseline (largest stable step, "
                "searched), the reference (explicit at half that step; every IoU is the mean / min min/max mass IoU "
                "against it), and the implicit runs (1 fixed-point pass unless said; each capped at %.0f wall s). "
                "*x fair*: wall time over the fair baseline's, in the same run. The stress-formulation runs "
                "give Gauss-Seidel sweeps per step in the Newton column.\n\n",
-            cfg->sweep_dim, cfg->sweep_res, n ? (unsigned long)rows[0].fair.particles : 0ul, cfg->duration[cfg->sweep_dim], cfg->max_run_s);
+            cfg->sweep_kind == PN_EX_SAND_COLUMN ? "sand column" : "snow press", cfg->sweep_dim, cfg->sweep_res, n ? (unsigned long)rows[0].fair.particles : 0ul, (double)bench_frames(cfg, &sc) / BENCH_FPS, cfg->max_run_s);
     fprintf(f, "| E (Pa) | run | dt (s) | dt / dt_CFL | wall s / sim s | x fair | min/max IoU mean / min | "
                "Newton / CG per step | status |\n|---|---|---|---|---|---|---|---|---|\n");
     for (i = 0; i < n; ++i) {
@@ -739,18 +758,18 @@ static void write_sweep_md(const char *path, const bench_cfg *cfg, const sweep_r
         for (c = 0; c < SWEEP_RUNS; ++c) {
             const bench_run *r = &w->imp[c];
             double st = r->tally.steps ? (double)r->tally.steps : 1, x = fw > 0 ? wall_per_sim(r) / fw : 0;
-            if (!(cfg->sweep_mask >> c & 1)) continue;
+            if (!(cfg->sweep_mask >> c & 1) || !sweep_applies(cfg, c)) continue;
             fprintf(f, "| %.0e | %s | %.3g | %.0f | %.3g | %.3g | %.3f / %.3f | %.1f / %.1f | %s |\n", w->E,
                     sweep_cfgs[c].name, r->dt, r->tally.max_dt_over_cfl, wall_per_sim(r), x, r->mm_mean, r->mm_min,
                     sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS ? r->tally.sweeps / st : r->tally.newton / st,
                     r->tally.cg / st, status_detail(r));
-            if (cross < 0 && r->status == RUN_OK && fw > 0 && x < 1 && r->mm_mean >= 0.9) cross = i;
+            if (cross < 0 && r->status == RUN_OK && fw > 0 && x < 1 && r->mm_mean >= bar) cross = i;
         }
     }
     if (cross >= 0) fprintf(f, "\n**Crossover**: E = %.0e Pa is the smallest E of the sweep where an implicit run is "
-                               "faster than the fair explicit baseline at mean min/max IoU >= 0.90.\n", rows[cross].E);
+                               "faster than the fair explicit baseline at mean min/max IoU >= %.2f.\n", rows[cross].E, bar);
     else fprintf(f, "\n**Crossover**: none in this sweep (no implicit run faster than the fair explicit baseline at "
-                    "mean min/max IoU >= 0.90).\n");
+                    "mean min/max IoU >= %.2f).\n", bar);
     fclose(f);
 }
 
@@ -939,7 +958,7 @@ static void usage(void) {
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
                     "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n"
-                    "       [--sweep-tol X] [--cell-relax X]\n");
+                    "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -1015,6 +1034,11 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--res3")) cfg.res[3] = atoi(v), ++k;
         else if (!strcmp(a, "--sweep-res")) cfg.sweep_res = atoi(v), ++k;
         else if (!strcmp(a, "--sweep-dim")) cfg.sweep_dim = atoi(v), ++k;
+        else if (!strcmp(a, "--sweep-scene")) {
+            cfg.sweep_kind = !strcmp(v, "snow") ? PN_EX_SNOW_PRESS : PN_EX_SAND_COLUMN;
+            bad |= strcmp(v, "snow") && strcmp(v, "sand");
+            ++k;
+        }
         else if (!strcmp(a, "--sweep-E")) bad |= !(n_Es_arg = parse_list(v, Es_arg)), ++k;
         else if (!strcmp(a, "--sweep-runs")) {
             double idx[8];
@@ -1093,7 +1117,7 @@ int main(int argc, char **argv) {
         }
     fclose(csv);
     snprintf(path, sizeof path, "%s/bench_mpm_esweep.csv", cfg.out);
-    if ((only < 0 || only == 0) && (!dim_only || dim_only == 2) && !cfg.refs_only && sweep) {
+    if ((only < 0 || only == 0 || sweep_only) && (!dim_only || dim_only == 2) && !cfg.refs_only && sweep) {
         if (!(esw = fopen(path, "w"))) {
             fprintf(stderr, "bench_mpm: cannot write %s\n", path);
             return 1;

@@ -1703,10 +1703,44 @@ static void t_lanes_block(pn_test_ctx *pn__t, const pn_pnet *net, int dim, int n
     }
 }
 
+/* pn_pnet_prepare_lanes against pn_pnet_prepare at n random F0 (lane bad, if >= 0, inverted):
+   F0, h and the features exactly, C to float precision of the network's gradient (relative
+   to |C| + |T(F0)|, T the return mapping's stress, which C subtracts); the inverted lane
+   refused alone and its point left as it was. Returns the worst relative error of C. */
+static double t_prepare_lanes(pn_test_ctx *pn__t, const pn_pnet *net, int dim, int n, int bad, pn_test_rng *rng) {
+    pn_real F0[PN_MLP_LANES * 9], h[PN_MLP_LANES], T[9];
+    pn_pnet_point pt[PN_MLP_LANES], ref, keep;
+    pn_result st[PN_MLP_LANES];
+    int dd = dim * dim, i, k, same = 1;
+    double worst = 0;
+    for (i = 0; i < n; ++i) {
+        for (k = 0; k < dd; ++k) F0[i * dd + k] = (pn_real)((k % (dim + 1) == 0 ? 1 : 0) + pn_test_rng_range(rng, -0.05, 0.05));
+        if (i == bad) for (k = 0; k < dim; ++k) F0[i * dd + k] = -F0[i * dd + k]; /* a row negated: det < 0 */
+        h[i] = 0;
+    }
+    memset(&keep, 0x5a, sizeof keep);
+    for (i = 0; i < n; ++i) pt[i] = keep;
+    PN_CHECK((pn_pnet_prepare_lanes(net, n, F0, h, pt, st) == PN_OK) == (bad < 0 || bad >= n));
+    for (i = 0; i < n; ++i) {
+        double num = 0, den = 0;
+        if (i == bad) {
+            PN_CHECK(st[i] == PN_ERROR_INVERTED && memcmp(&pt[i], &keep, sizeof keep) == 0);
+            continue;
+        }
+        PN_CHECK(st[i] == PN_OK && pn_pnet_prepare(net, F0 + i * dd, h[i], &ref, NULL, T) == PN_OK);
+        same &= memcmp(ref.F0, pt[i].F0, sizeof ref.F0) == 0 && ref.h == pt[i].h &&
+                memcmp(ref.x0, pt[i].x0, sizeof(pn_real) * (size_t)(dim == 2 ? 2 : 3)) == 0;
+        for (k = 0; k < dd; ++k) num += fabs((double)(ref.C[k] - pt[i].C[k])), den += fabs((double)ref.C[k]) + fabs((double)T[k]);
+        worst = fmax(worst, num / (den + 1e-300));
+    }
+    PN_CHECK(same);
+    return worst;
+}
+
 PN_TEST(pnet_lanes) {
-    double worst[3] = {0, 0, 0}, mlp_worst = 0;
+    double worst[3] = {0, 0, 0}, mlp_worst = 0, prep_worst = 0;
     int dim, scaled, act, n, rep, k, format_refused;
-    pn_test_rng rng = {4242};
+    pn_test_rng rng = {4242}, rng2 = {77};
     for (dim = 2; dim <= 3; ++dim)
         for (scaled = 0; scaled <= 1; ++scaled)
             for (act = 0; act < 2; ++act) {
@@ -1728,6 +1762,8 @@ PN_TEST(pnet_lanes) {
                 for (n = 1; n <= PN_MLP_LANES; ++n)
                     for (rep = 0; rep < 4; ++rep)
                         t_lanes_block(pn__t, &net, dim, n, &rng, rep % 2 ? 1e-2 : 0.3, rep == 3 ? n / 2 : -1, worst);
+                for (n = 1; n <= PN_MLP_LANES; ++n)
+                    prep_worst = fmax(prep_worst, t_prepare_lanes(pn__t, &net, dim, n, n % 3 == 0 ? n / 2 : -1, &rng2));
                 { /* the network alone, every lane count and n_diff */
                     const pn_mlp *mlp = &tm.model.mlp;
                     int nin = mlp->size[0], nd, i;
@@ -1776,6 +1812,8 @@ PN_TEST(pnet_lanes) {
     PN_REPORT("network alone: worst relative error %.2e (value, gradient, Hessian)", mlp_worst);
     PN_REPORT("PlasticityNet energy, 2D and 3D, raw and scaled, silu and tanh: psi %.2e, P %.2e, dP/dF %.2e",
               worst[0], worst[1], worst[2]);
+    PN_REPORT("pn_pnet_prepare_lanes: F0, h, features exact; C against pn_pnet_prepare %.2e relative", prep_worst);
+    PN_CHECK_LE(prep_worst, 1e-4);
     PN_CHECK_LE(mlp_worst, 1e-5);
     PN_CHECK_LE(worst[0], 5e-5);
     PN_CHECK_LE(worst[1], 1e-4);
