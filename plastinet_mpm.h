@@ -277,6 +277,14 @@ typedef struct pn_mpm_implicit_desc {
                                     [PN_MPM_STRESS_PARTICLES]                                */
     pn_real cell_relax;          /* STRESS, cells: over-relaxation of the cells' Gauss-Seidel
                                     updates, in [1, 2) [1.8]                                  */
+    pn_real energy_rise_tol;     /* a step whose mechanical energy (kinetic, elastic, and
+                                    gravitational above the domain's floor) rises by more than
+                                    this share of it fails (PN_ERROR_STEP_TOO_LARGE, then the
+                                    substeps): a solve that converged to a wrong answer (a
+                                    learned energy driven far from its data) launches
+                                    material, and backward Euler only ever takes energy
+                                    away. Not checked while a collider moves (its work is not
+                                    counted) [0: 0.25; < 0: never]                           */
 } pn_mpm_implicit_desc;
 
 /* Statistics of the last step (of a failed implicit step: its first attempt). */
@@ -312,6 +320,9 @@ typedef struct pn_mpm_stats {
        an explicit step taken alone, which does not compute the bound)                      */
     pn_real dt_over_cfl;
     int sweeps;                  /* FORMULATION_STRESS: Gauss-Seidel sweeps                  */
+    pn_real energy_rise;         /* implicit: the step's change of mechanical energy over its
+                                    size at the start (pn_mpm_implicit_desc.energy_rise_tol;
+                                    the largest over substeps); 0 when not checked           */
 } pn_mpm_stats;
 
 /* >>multigrid: one grid level of the implicit Hessian (internal) */
@@ -1847,6 +1858,55 @@ static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
     w->error[0] = 0;
 }
 
+/* The mechanical energy of a state (x, v, F, h of the active particles): kinetic, elastic
+   (each group's elastic energy at its elastic F) and gravitational above the domain's lowest
+   point along gravity, so every term is >= 0 and the sum is the scale of a change. Serial
+   sums in index order: the same bits for any thread count. 0 if an elastic energy fails. */
+static int pn__mpm_mech_energy(const pn_mpm_world *w, const pn_real *x, const pn_real *v, const pn_real *F,
+                               const pn_real *h, const unsigned char *active, double *e) {
+    int d = w->dim, dd = d * d, i;
+    size_t p;
+    double low = 0, sum = 0;
+    for (i = 0; i < d; ++i) /* the grid's corner lowest along gravity */
+        low += (double)w->desc.gravity[i] * (double)(w->desc.gravity[i] < 0 ? w->grid_lo[i] : w->grid_hi[i]);
+    for (p = 0; p < w->n; ++p) {
+        pn_real psi;
+        double ke = 0, pe = 0;
+        if (!active[p]) continue;
+        if (pn_elastic_energy(&w->groups[w->group[p]].material, d, F + p * (size_t)dd, h[p], &psi, NULL, NULL, 0) != PN_OK)
+            return 0;
+        for (i = 0; i < d; ++i) {
+            ke += (double)v[p * (size_t)d + (size_t)i] * (double)v[p * (size_t)d + (size_t)i];
+            pe += (double)w->desc.gravity[i] * (double)x[p * (size_t)d + (size_t)i];
+        }
+        sum += (double)w->mass[p] * (ke / 2 + (low - pe)) + (double)w->vol0[p] * (double)psi;
+    }
+    *e = sum;
+    return 1;
+}
+
+/* Before pn__mpm_commit: the step's new state (the scratch arrays) against the current one.
+   A rise beyond energy_rise_tol of the current energy fails the step, which leaves the world
+   as it was (nothing is committed yet). */
+static pn_result pn__mpm_energy_guard(pn_mpm_world *w, const pn_mpm_implicit_desc *o, pn_real dt, pn_mpm_stats *st) {
+    double e0, e1, tol = o->energy_rise_tol == 0 ? 0.25 : (double)o->energy_rise_tol;
+    int c;
+    if (tol < 0) return PN_OK;
+    for (c = 0; c < w->n_colliders; ++c)
+        if (w->colliders[c].velocity_m_s[0] != 0 || w->colliders[c].velocity_m_s[1] != 0 ||
+            w->colliders[c].velocity_m_s[2] != 0)
+            return PN_OK;
+    if (!pn__mpm_mech_energy(w, w->x, w->v, w->F, w->h, w->active, &e0) ||
+        !pn__mpm_mech_energy(w, w->sx, w->sv, w->sF, w->sh, w->sactive, &e1) || !(e0 > 0))
+        return PN_OK; /* nothing to measure by: the step's own checks stand */
+    st->energy_rise = PN__MAX(st->energy_rise, (pn_real)((e1 - e0) / e0));
+    if (e1 - e0 > tol * e0)
+        return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "implicit step of %g s: the mechanical energy rose from %.4g J to "
+                            "%.4g J, by %.3g of it (energy_rise_tol %g), with no work done on the material: the solve's "
+                            "answer is wrong for this step; a smaller one holds", (double)dt, e0, e1, (e1 - e0) / e0, tol);
+    return PN_OK;
+}
+
 /* ======================================================================================
    >>contact: each active node gets the obstacle it is in (the domain walls first, then the
    first collider that contains it): up to d orthonormal directions that point out of the
@@ -3245,6 +3305,7 @@ static void pn__mpm_stats_add(pn_mpm_stats *st, const pn_mpm_stats *sub) {
     st->apex_fraction = PN__MAX(st->apex_fraction, sub->apex_fraction);
     st->dt_over_cfl = PN__MAX(st->dt_over_cfl, sub->dt_over_cfl);
     st->sweeps += sub->sweeps;
+    st->energy_rise = PN__MAX(st->energy_rise, sub->energy_rise);
 }
 
 /* pn_mpm_stats.force_error and its parts at the grid velocities v (serial: a diagnostic). */
@@ -3435,6 +3496,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (o->measure_force_error) pn__mpm_force_error(w, w->vsol, dt, st);
     r = pn__mpm_g2p(w, w->vsol, dt, st);
     if (r != PN_OK) return r;
+    if ((r = pn__mpm_energy_guard(w, o, dt, st)) != PN_OK) return r;
     pn__mpm_friction_record(w, dt);
     pn__mpm_commit(w, dt, st);
     return PN_OK;
@@ -3813,6 +3875,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     rr = pn__mpm_g2p(w, v, dt, st);
     w->stress_on = 0;
     if (rr != PN_OK) return rr;
+    if ((rr = pn__mpm_energy_guard(w, o, dt, st)) != PN_OK) return rr;
     w->n_lag = 0; /* no friction memory for a later energy-formulation step */
     pn__mpm_commit(w, dt, st);
     return PN_OK;
@@ -3874,6 +3937,9 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
                             "pn_mpm_formulation, or sweep_tol %g is not finite and >= 0", (int)o.formulation,
                             (double)o.sweep_tol);
+    if (!pn__finite(o.energy_rise_tol))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: energy_rise_tol %g is not finite",
+                            (double)o.energy_rise_tol);
     if (!pn__finite(o.cell_relax) || !(o.cell_relax == 0 || (o.cell_relax >= 1 && o.cell_relax < 2)) ||
         o.stress_unknowns < PN_MPM_STRESS_PARTICLES || o.stress_unknowns > PN_MPM_STRESS_CELLS_THEN_PARTICLES)
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: cell_relax %g is not 0 (the "

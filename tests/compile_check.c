@@ -103,11 +103,22 @@ static void smoke_models(void) {
             CHECK(pn_pnet_energy(&net, &pt, F, &psi, P, H, PN_EVAL_PROJECT_PSD) == PN_OK);
             for (i = 0; i < d * d; ++i) /* exact at F0 (Eq. 8) */
                 CHECK(fabs((double)(P[i] - T[i])) <= 1e-3 * (1 + fabs((double)T[i])) * 1e6);
+            { /* the same point in lanes */
+                const pn_pnet_point *pp = &pt;
+                pn_pnet_point pl;
+                pn_real hh = (pn_real)mo->h_min, P2[9];
+                pn_result st;
+                CHECK(pn_pnet_prepare_lanes(&net, 1, F, &hh, &pl, &st) == PN_OK);
+                CHECK(pn_pnet_energy_lanes(&net, 1, &pp, F, &psi, P2, NULL, 0, &st) == PN_OK);
+                for (i = 0; i < d * d; ++i) CHECK(fabs((double)(P2[i] - P[i])) <= 1e-3 * (1 + fabs((double)P[i])) * 1e6);
+            }
         }
     }
     {
         pn_real in[PN_MLP_MAX_WIDTH] = {0}, out = 0, g[2], h[4]; /* as many inputs as any network has */
+        float inl[PN_MLP_MAX_WIDTH * PN_MLP_LANES] = {0}, outl[PN_MLP_LANES];
         CHECK(pn_mlp_eval(&pn_models_all[0]()->mlp, in, 0, &out, g, h) != PN_ERROR_NONFINITE);
+        CHECK(pn_mlp_eval_lanes(&pn_models_all[0]()->mlp, 1, inl, 0, outl, NULL, NULL) != PN_ERROR_NONFINITE);
     }
 }
 
