@@ -1663,6 +1663,19 @@ PN_TEST(mpm_energy_guard) {
               "the guard)", worst, err, refused, split);
 }
 
+/* the snow of the stress tests: Neo-Hookean + Cam-Clay, E 1e6 Pa, nu 0.3, 45 deg, beta 0.3,
+   xi 3 (the snow scenes' material) */
+static void t_camclay_desc(pn_material_desc *d) {
+    memset(d, 0, sizeof *d);
+    d->elastic = PN_ELASTIC_NEO_HOOKEAN_SNOW;
+    d->plastic = PN_PLASTIC_CAM_CLAY;
+    d->youngs_modulus_pa = 1e6;
+    d->poisson_ratio = 0.3;
+    d->friction_angle_deg = 45;
+    d->camclay_beta = 0.3;
+    d->camclay_xi = 3;
+}
+
 /* The stress formulation's local law (pn__mpm_stress_local) at a frozen velocity gradient of
    zero and no self-compliance is the return mapping written on stresses: for a trial state
    F (stretches of every kind: inside, in shear, past either Cam-Clay tip, past the DP
@@ -1677,14 +1690,9 @@ PN_TEST(mpm_stress_local_law) {
         for (d = 2; d <= 3; ++d) {
             pn_material_desc md;
             pn_material m;
-            memset(&md, 0, sizeof md);
-            md.elastic = mat ? PN_ELASTIC_STVK_HENCKY : PN_ELASTIC_NEO_HOOKEAN_SNOW;
-            md.plastic = mat ? PN_PLASTIC_DRUCKER_PRAGER : PN_PLASTIC_CAM_CLAY;
-            md.youngs_modulus_pa = 1e6;
-            md.poisson_ratio = 0.3;
-            md.friction_angle_deg = mat ? 30 : 45;
-            md.camclay_beta = 0.3;
-            md.camclay_xi = 3;
+            t_camclay_desc(&md);
+            if (mat) /* sand */
+                md.elastic = PN_ELASTIC_STVK_HENCKY, md.plastic = PN_PLASTIC_DRUCKER_PRAGER, md.friction_angle_deg = 30;
             PN_CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
             for (k = 0; k < 400; ++k) {
                 pn_real F[9], S[9] = {0}, tau[9], Z[9], T[9], ref[9], out[9], L[9] = {0}, hn, h = -0.02;
@@ -1736,14 +1744,7 @@ static pn_mpm_world *t_press_world(void) {
     size_t n, p;
     int g;
     if (!w) return NULL;
-    memset(&d, 0, sizeof d);
-    d.elastic = PN_ELASTIC_NEO_HOOKEAN_SNOW;
-    d.plastic = PN_PLASTIC_CAM_CLAY;
-    d.youngs_modulus_pa = 1e6;
-    d.poisson_ratio = 0.3;
-    d.friction_angle_deg = 45;
-    d.camclay_beta = 0.3;
-    d.camclay_xi = 3;
+    t_camclay_desc(&d);
     w->desc.friction = 0.5;
     if (pn_material_init(&m, &d, NULL) != PN_OK || (g = pn_mpm_add_group(w, &m, 400)) < 0) {
         pn_mpm_destroy(w);
