@@ -2964,6 +2964,10 @@ static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_
     pn_result r;
     q0 = y0[0] * y0[0] / d + c * y0[1];
     S = y[0] * y[0] / d + c * y[1] + q0 + (pn_real)(PN__SCALED_EPS * PN__SCALED_EPS);
+    /* q >= 0 exactly (y[1] = log cosh of a stretch difference in 2D, AM-GM sums in 3D), but
+       a float y[1] of a near-isotropic F rounds to -1e-7, below the 1e-12 floor: S < 0 and a
+       NaN. The floor holds it; in double S dips below it by rounding at most (1e-16). */
+    S = PN__MAX(S, (pn_real)(PN__SCALED_EPS * PN__SCALED_EPS));
     s = PN__SQRT(S);
     for (j = 0; j < nf; ++j) {
         qj[j] = j == 0 ? 2 * y[0] / d : (j == 1 ? c : 0);

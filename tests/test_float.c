@@ -4,6 +4,8 @@
    Build: cc -std=c99 -O2 -DPN_REAL=float tests/test_float.c -lm -o build/test_float */
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
+#include "../models/pn_model_sand_2d.h"
+#include "../models/pn_model_sand_3d.h"
 #include "pn_test.h"
 
 typedef char t_fl_requires_float[sizeof(pn_real) == sizeof(float) ? 1 : -1];
@@ -120,9 +122,53 @@ PN_TEST(float_return_mappings) {
         }
 }
 
+/* PlasticityNet sand (the scaled encoding) in float at F0 of every kind that a pile holds,
+   near-isotropic ones included, where a float feature log(I1/2) - log J rounds below zero:
+   prepare and evaluate (one point, and in lanes) without a failure or a non-finite value. */
+PN_TEST(float_pnet_sand) {
+    int d, k, errors = 0, n = 0;
+    pn_test_rng rng;
+    rng.s = 31;
+    for (d = 2; d <= 3; ++d) {
+        const pn_model *mo = d == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
+        pn_material m;
+        pn_pnet net;
+        pn_pnet_desc nd;
+        memset(&nd, 0, sizeof nd);
+        nd.energy = mo;
+        if (pn_model_material(mo, 1e7, &m, NULL) != PN_OK || pn_pnet_init(&net, &nd, &m, d, NULL) != PN_OK) {
+            PN_CHECK(!"PlasticityNet sand in float");
+            return;
+        }
+        for (k = 0; k < 4000; ++k) {
+            pn_real R1[9], R2[9], F0[9], F[9], psi, P[9], H[81], h = 0, psil, Pl[9];
+            double sv[3], spread = k % 4 == 0 ? 0 : k % 4 == 1 ? 1e-6 : k % 4 == 2 ? 1e-3 : 0.05, J = exp(pn_test_rng_range(&rng, -0.05, 0.02));
+            pn_pnet_point pt, ptl;
+            const pn_pnet_point *pp = &ptl;
+            pn_result st;
+            int i;
+            t_fl_rotation(&rng, d, R1);
+            t_fl_rotation(&rng, d, R2);
+            for (i = 0; i < d; ++i) sv[i] = pow(J, 1.0 / d) * exp(pn_test_rng_range(&rng, -spread, spread));
+            t_fl_compose(d, R1, sv, R2, F0);
+            if (pn_mat_det(d, F0) <= 0) continue; /* the two rotations' signs */
+            for (i = 0; i < d * d; ++i) F[i] = F0[i] + (pn_real)pn_test_rng_range(&rng, -1e-4, 1e-4);
+            n++;
+            if (pn_pnet_prepare(&net, F0, h, &pt, NULL, NULL) != PN_OK ||
+                pn_pnet_energy(&net, &pt, F, &psi, P, H, PN_EVAL_PROJECT_PSD) != PN_OK ||
+                pn_pnet_prepare_lanes(&net, 1, F0, &h, &ptl, &st) != PN_OK ||
+                pn_pnet_energy_lanes(&net, 1, &pp, F, &psil, Pl, NULL, 0, &st) != PN_OK)
+                errors++;
+        }
+    }
+    PN_REPORT("%d pairs (F0 isotropic to 5%% anisotropic, J in [0.95, 1.02], 2D and 3D): %d failed", n, errors);
+    PN_CHECK(n > 2000 && errors == 0);
+}
+
 static const pn_test_case pn_tests_float[] = {
     {"float_svd", float_svd},
     {"float_return_mappings", float_return_mappings},
+    {"float_pnet_sand", float_pnet_sand},
 };
 
 int main(int argc, char **argv) {
