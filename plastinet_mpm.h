@@ -129,6 +129,11 @@ typedef struct pn_mpm_desc {
                                     first retry as substeps; pn_mpm_advance picks steps that
                                     respect it) [1]                                          */
     pn_allocator allocator;
+    /* optional: a clock (seconds, any origin, e.g. clock_gettime's CLOCK_MONOTONIC) that
+       implicit steps read between their stages to fill pn_mpm_stats.stage_s; NULL: not
+       measured (the library itself reads no clock) */
+    double (*clock_s)(void *user);
+    void *clock_user;
 } pn_mpm_desc;
 
 /* Analytic collider: grid nodes inside it take its velocity as the boundary says. */
@@ -287,6 +292,18 @@ typedef struct pn_mpm_implicit_desc {
                                     counted) [0: 0.25; < 0: never]                           */
 } pn_mpm_implicit_desc;
 
+/* The stages of an implicit step (pn_mpm_stats.stage_s, with pn_mpm_desc.clock_s). */
+typedef enum pn_mpm_stage {
+    PN_MPM_STAGE_SETUP = 0,      /* binning, particle-to-grid, contact                        */
+    PN_MPM_STAGE_ENERGY,         /* every particle's energy, its derivatives and preparation
+                                    (PlasticityNet's network: here); the stress formulation's
+                                    start stresses                                         */
+    PN_MPM_STAGE_LINEAR,         /* Hessian assembly, multigrid hierarchy, CG                 */
+    PN_MPM_STAGE_SWEEPS,         /* the stress formulation's Gauss-Seidel sweeps              */
+    PN_MPM_STAGE_G2P,            /* grid-to-particle, return mapping, energy guard            */
+    PN_MPM_STAGES
+} pn_mpm_stage;
+
 /* Statistics of the last step (of a failed implicit step: its first attempt). */
 typedef struct pn_mpm_stats {
     size_t particles;            /* active particles                                         */
@@ -323,6 +340,9 @@ typedef struct pn_mpm_stats {
     pn_real energy_rise;         /* implicit: the step's change of mechanical energy over its
                                     size at the start (pn_mpm_implicit_desc.energy_rise_tol;
                                     the largest over substeps); 0 when not checked           */
+    double stage_s[PN_MPM_STAGES]; /* implicit, with pn_mpm_desc.clock_s: seconds in each
+                                    pn_mpm_stage, of the attempt that succeeded (all its
+                                    substeps); else 0                                       */
 } pn_mpm_stats;
 
 /* >>multigrid: one grid level of the implicit Hessian (internal) */
@@ -427,6 +447,7 @@ typedef struct pn_mpm_world {
     int mg_current;              /* the finest level is this Newton iteration's Hessian     */
     int pnet_lanes;              /* implicit: PlasticityNet in float lanes this step         */
     int mg_stale;                /* a lagged hierarchy cost too many CG iterations lately    */
+    double clock_last;           /* pn_mpm_desc.clock_s at the last stage mark                */
     int stress_on;               /* this implicit step is FORMULATION_STRESS: pq holds g, not
                                     F^nT g (>>stress); 2: by cells, whose L makes F          */
     size_t mg_dense_n;           /* unknowns of the factored coarsest level (0: smoothed)      */
@@ -3315,6 +3336,7 @@ static void pn__mpm_stats_clear(pn_mpm_stats *st, int measure) {
 /* st += a later step's sub: counts add up, the state figures are the later one's, the
    residuals and errors the worst (substeps and solves are the caller's) */
 static void pn__mpm_stats_add(pn_mpm_stats *st, const pn_mpm_stats *sub) {
+    int i;
     st->particles = sub->particles;
     st->plastic += sub->plastic;
     st->left_domain += sub->left_domain;
@@ -3335,6 +3357,7 @@ static void pn__mpm_stats_add(pn_mpm_stats *st, const pn_mpm_stats *sub) {
     st->dt_over_cfl = PN__MAX(st->dt_over_cfl, sub->dt_over_cfl);
     st->sweeps += sub->sweeps;
     st->energy_rise = PN__MAX(st->energy_rise, sub->energy_rise);
+    for (i = 0; i < PN_MPM_STAGES; ++i) st->stage_s[i] += sub->stage_s[i];
 }
 
 /* pn_mpm_stats.force_error and its parts at the grid velocities v (serial: a diagnostic). */
@@ -3408,6 +3431,15 @@ static pn_real pn__mpm_forcing(const pn_mpm_implicit_desc *o, int it, pn_real et
     return PN__MIN(PN__MAX(eta, lo), hi);
 }
 
+/* The stage clock: the time since the last mark goes to stage s (< 0: only the mark) */
+static void pn__mpm_mark(pn_mpm_world *w, pn_mpm_stats *st, int s) {
+    double t;
+    if (!w->desc.clock_s) return;
+    t = w->desc.clock_s(w->desc.clock_user);
+    if (s >= 0) st->stage_s[s] += t - w->clock_last;
+    w->clock_last = t;
+}
+
 /* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
 static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
                                        pn_mpm_stats *st) {
@@ -3415,10 +3447,12 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     size_t k, nd;
     pn_result r;
     pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
+    pn__mpm_mark(w, st, -1);
     pn__mpm_bin(w);
     pn__mpm_implicit_setup(w);
     pn__mpm_p2g(w);
     pn__mpm_contact(w, w->time_s);
+    pn__mpm_mark(w, st, PN_MPM_STAGE_SETUP);
     nd = w->n_act * (size_t)d;
     w->pnet_lanes = !o->pnet_double;
     w->mg_on = o->linear_solver == PN_MPM_LINEAR_MULTIGRID ||
@@ -3449,7 +3483,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     for (pass = 0; pass < o->fixed_point_iters; ++pass) {
         pn_real fp_res = 0;
         int round;
+        pn__mpm_mark(w, st, PN_MPM_STAGE_SETUP);
         r = pn__mpm_prepare_pass(w, w->vsol, dt, pass == 0, &fp_res);
+        pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
         if (r != PN_OK) return r;
         if (pass > 0) st->fixed_point_residual = PN__MAX(st->fixed_point_residual, fp_res);
         st->fixed_point_iters++;
@@ -3463,7 +3499,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 if (w->newton_left-- <= 0)
                     return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step: its newton_budget of %d Newton iterations "
                                         "is spent (over its attempts and substeps): take a smaller step", o->newton_budget);
+                pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR); /* the last iteration's bookkeeping */
                 r = pn__mpm_objective(w, w->vsol, dt, 2, &E0);
+                pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
                 if (r != PN_OK) return r;
                 gnorm = pn__mpm_model_norm(w, 0);
                 eta = pn__mpm_forcing(o, it, eta, gprev, pred, gnorm);
@@ -3495,6 +3533,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 /* a small direction from a solve cut at cg_max proves nothing: go on */
                 if (dmax <= vscale && !capped) break;
                 gd = pn__mpm_sum(w, nd, w->grad, w->dir);
+                pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
                 for (;;) { /* backtracking with the Armijo condition */
                     for (k = 0; k < nd; ++k) w->vtry[k] = w->vsol[k] + alpha * w->dir[k];
                     pn__mpm_objective(w, w->vtry, dt, 0, &E1);
@@ -3502,6 +3541,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                     alpha /= 2;
                     if (alpha < (pn_real)1e-10) break;
                 }
+                pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
                 if (alpha < (pn_real)1e-10) { /* no decrease: keep v, count it, stop this round */
                     st->line_search_failures++;
                     break;
@@ -3523,9 +3563,11 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                             "(newton_tol %g, newton_max %d; %d line searches failed): a smaller step converges",
                             (double)dt, (double)last_res, (double)o->newton_tol, o->newton_max, st->line_search_failures);
     if (o->measure_force_error) pn__mpm_force_error(w, w->vsol, dt, st);
+    pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
     r = pn__mpm_g2p(w, w->vsol, dt, st);
+    if (r == PN_OK) r = pn__mpm_energy_guard(w, o, dt, st);
+    pn__mpm_mark(w, st, PN_MPM_STAGE_G2P);
     if (r != PN_OK) return r;
-    if ((r = pn__mpm_energy_guard(w, o, dt, st)) != PN_OK) return r;
     pn__mpm_friction_record(w, dt);
     pn__mpm_commit(w, dt, st);
     return PN_OK;
@@ -3853,6 +3895,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
             return pn__mpm_fail(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
                                 "for the cells' weights (%lu reals)", (unsigned long)(w->cap * (size_t)(ns * d)));
     }
+    pn__mpm_mark(w, st, -1);
     w->stress_on = 1;
     pn__mpm_bin(w);
     pn__mpm_implicit_setup(w);
@@ -3892,6 +3935,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         }
     }
     mref = total ? mref / (pn_real)total : 0;
+    pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY); /* the start stresses (setup counted in) */
     pn__mpm_stress_groups(w, cstart);
     if (cells) pn__mpm_stress_cells(w, cstart, dt, o->cell_relax, v);
     pn__mpm_stress_contact(w, v, r);
@@ -3901,11 +3945,13 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         pn__mpm_stress_uncell(w);
         if ((rr = pn__mpm_stress_sweeps(w, dt, o, o->sweep_tol, cstart, 0, mref, v, r, st)) != PN_OK) return rr;
     }
+    pn__mpm_mark(w, st, PN_MPM_STAGE_SWEEPS);
     w->stress_on = cells && !cascade ? 2 : 1;
     rr = pn__mpm_g2p(w, v, dt, st);
     w->stress_on = 0;
+    if (rr == PN_OK) rr = pn__mpm_energy_guard(w, o, dt, st);
+    pn__mpm_mark(w, st, PN_MPM_STAGE_G2P);
     if (rr != PN_OK) return rr;
-    if ((rr = pn__mpm_energy_guard(w, o, dt, st)) != PN_OK) return rr;
     w->n_lag = 0; /* no friction memory for a later energy-formulation step */
     pn__mpm_commit(w, dt, st);
     return PN_OK;

@@ -669,7 +669,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
     if (!(ref = (double *)malloc(sizeof(double) * nodes * (size_t)frames))) exit(1);
     fprintf(csv, "E_pa,particles,run,dt_s,fixed_point_iters,linear_solver,wall_per_sim_s,over_fair,"
                  "minmax_iou_mean_vs_ref,minmax_iou_min_vs_ref,dt_over_cfl,newton_per_step,cg_per_step,"
-                 "halved_steps,cg_capped,status,sweeps_per_step\n");
+                 "halved_steps,cg_capped,status,sweeps_per_step,setup_s,energy_s,linear_s,sweeps_s,g2p_s\n");
     for (i = 0; i < cfg->n_Es; ++i) {
         sweep_row *w = &rows[i];
         double fw;
@@ -689,7 +689,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             bench_progress(name, dim, &w->fair);
         }
         fw = w->found ? wall_per_sim(&w->fair) : 0;
-        fprintf(csv, "%g,%lu,explicit fair,%.6g,0,,%.4g,1,%.4f,%.4f,%.3g,0,0,0,0,\"%s\",0\n", w->E,
+        fprintf(csv, "%g,%lu,explicit fair,%.6g,0,,%.4g,1,%.4f,%.4f,%.3g,0,0,0,0,\"%s\",0,0,0,0,0,0\n", w->E,
                 (unsigned long)w->fair.particles, w->fair.dt, fw, w->fair.mm_mean, w->fair.mm_min,
                 w->fair.tally.max_dt_over_cfl, w->found ? "ok" : "no stable step");
         for (c = 0; c < SWEEP_RUNS; ++c) {
@@ -711,14 +711,17 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             bench_run_scene(&s, r, frames, cfg->max_run_s, &id, NULL, w->found ? ref : NULL);
             bench_progress(name, dim, r);
             st = r->tally.steps ? (double)r->tally.steps : 1;
-            fprintf(csv, "%g,%lu,\"%s\",%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\",%.1f\n", w->E,
+            fprintf(csv, "%g,%lu,\"%s\",%g,%d,%s,%.4g,%.4g,%.4f,%.4f,%.3g,%.2f,%.1f,%ld,%ld,\"%s\",%.1f,%.4g,%.4g,%.4g,"
+                         "%.4g,%.4g\n", w->E,
                     (unsigned long)r->particles, sweep_cfgs[c].name, r->dt, r->fp,
                     sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS ? "gauss-seidel"
                     : sweep_cfgs[c].linear == PN_MPM_LINEAR_JACOBI        ? "jacobi"
                                                                          : "multigrid", wall_per_sim(r),
                     fw > 0 ? wall_per_sim(r) / fw : 0, r->mm_mean, r->mm_min, r->tally.max_dt_over_cfl,
                     r->tally.newton / st, r->tally.cg / st, r->tally.halved, r->tally.cg_capped, status_detail(r),
-                    r->tally.sweeps / st);
+                    r->tally.sweeps / st, r->tally.stage_s[PN_MPM_STAGE_SETUP], r->tally.stage_s[PN_MPM_STAGE_ENERGY],
+                    r->tally.stage_s[PN_MPM_STAGE_LINEAR], r->tally.stage_s[PN_MPM_STAGE_SWEEPS],
+                    r->tally.stage_s[PN_MPM_STAGE_G2P]);
             fflush(csv);
         }
     }
@@ -747,22 +750,27 @@ static void write_sweep_md(const char *path, const bench_cfg *cfg, const sweep_r
                "give Gauss-Seidel sweeps per step in the Newton column.\n\n",
             cfg->sweep_kind == PN_EX_SAND_COLUMN ? "sand column" : "snow press", cfg->sweep_dim, cfg->sweep_res, n ? (unsigned long)rows[0].fair.particles : 0ul, (double)bench_frames(cfg, &sc) / BENCH_FPS, cfg->max_run_s);
     fprintf(f, "| E (Pa) | run | dt (s) | dt / dt_CFL | wall s / sim s | x fair | min/max IoU mean / min | "
-               "Newton / CG per step | status |\n|---|---|---|---|---|---|---|---|---|\n");
+               "Newton / CG per step | time: setup / energy / linear / sweeps / g2p (%%) | status |\n"
+               "|---|---|---|---|---|---|---|---|---|---|\n");
     for (i = 0; i < n; ++i) {
         const sweep_row *w = &rows[i];
         double fw = w->found ? wall_per_sim(&w->fair) : 0;
-        if (!w->found) fprintf(f, "| %.0e | explicit fair | none stable | | | | | | |\n", w->E);
+        if (!w->found) fprintf(f, "| %.0e | explicit fair | none stable | | | | | | | |\n", w->E);
         else
-            fprintf(f, "| %.0e | explicit fair | %.3g | %.2f | %.3g | 1 | %.3f / %.3f | | ok |\n", w->E, w->fair.dt,
+            fprintf(f, "| %.0e | explicit fair | %.3g | %.2f | %.3g | 1 | %.3f / %.3f | | | ok |\n", w->E, w->fair.dt,
                     w->fair.tally.max_dt_over_cfl, fw, w->fair.mm_mean, w->fair.mm_min);
         for (c = 0; c < SWEEP_RUNS; ++c) {
             const bench_run *r = &w->imp[c];
             double st = r->tally.steps ? (double)r->tally.steps : 1, x = fw > 0 ? wall_per_sim(r) / fw : 0;
             if (!(cfg->sweep_mask >> c & 1) || !sweep_applies(cfg, c)) continue;
-            fprintf(f, "| %.0e | %s | %.3g | %.0f | %.3g | %.3g | %.3f / %.3f | %.1f / %.1f | %s |\n", w->E,
-                    sweep_cfgs[c].name, r->dt, r->tally.max_dt_over_cfl, wall_per_sim(r), x, r->mm_mean, r->mm_min,
+            double sum = 0, sh[PN_MPM_STAGES];
+            int g;
+            for (g = 0; g < PN_MPM_STAGES; ++g) sum += r->tally.stage_s[g];
+            for (g = 0; g < PN_MPM_STAGES; ++g) sh[g] = sum > 0 ? 100 * r->tally.stage_s[g] / sum : 0;
+            fprintf(f, "| %.0e | %s | %.3g | %.0f | %.3g | %.3g | %.3f / %.3f | %.1f / %.1f | %.0f / %.0f / %.0f / %.0f / %.0f | %s |\n",
+                    w->E, sweep_cfgs[c].name, r->dt, r->tally.max_dt_over_cfl, wall_per_sim(r), x, r->mm_mean, r->mm_min,
                     sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS ? r->tally.sweeps / st : r->tally.newton / st,
-                    r->tally.cg / st, status_detail(r));
+                    r->tally.cg / st, sh[0], sh[1], sh[2], sh[3], sh[4], status_detail(r));
             if (cross < 0 && r->status == RUN_OK && fw > 0 && x < 1 && r->mm_mean >= bar) cross = i;
         }
     }

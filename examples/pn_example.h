@@ -52,6 +52,12 @@ PN_EX_UNUSED static double pn_ex_seconds(void) {
 #endif
 }
 
+/* pn_ex_seconds as a pn_mpm_desc.clock_s: the scenes' implicit steps time their stages */
+static double pn_ex__clock(void *user) {
+    (void)user;
+    return pn_ex_seconds();
+}
+
 /* Create folder `path` and its parents (like mkdir -p); 1 when it exists afterwards. */
 PN_EX_UNUSED static int pn_ex_mkdirs(const char *path) {
     char buf[1024];
@@ -244,6 +250,7 @@ static void pn_ex__scene_setup(const pn_ex_scene *s, pn_mpm_desc *wd, pn_mpm_fil
     wd->friction = (pn_real)s->friction;
     wd->filter_time_s = (pn_real)s->filter_s;
     wd->wall_cells = PN_EX_WALL_CELLS;
+    wd->clock_s = pn_ex__clock;
     memset(f, 0, sizeof *f);
     f->per_axis = 2;
     f->jitter = s->jitter;
@@ -385,6 +392,7 @@ typedef struct pn_ex_tally {
     double max_dt_over_cfl;          /* largest step over pn_mpm_stable_dt at its start      */
     long cg_capped;                  /* Newton steps whose linear solve stopped at cg_max    */
     long sweeps;                     /* stress formulation: Gauss-Seidel sweeps              */
+    double stage_s[PN_MPM_STAGES];   /* implicit: seconds per pn_mpm_stage (the scenes' clock) */
     /* pn_mpm_implicit_desc.measure_force_error: per-step values summed (mean = sum / steps) */
     double force_error, force_error_regularizer, apex_fraction;
 } pn_ex_tally;
@@ -395,6 +403,7 @@ typedef struct pn_ex_tally {
 PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double dt_s,
                                           const pn_mpm_implicit_desc *id, long n, pn_ex_tally *t) {
     long k;
+    int i;
     for (k = 0; k < n; ++k) {
         pn_mpm_stats st;
         pn_real cfl = 0;
@@ -407,6 +416,8 @@ PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double 
         if (implicit && (double)st.dt_over_cfl > t->max_dt_over_cfl) t->max_dt_over_cfl = (double)st.dt_over_cfl;
         t->cg_capped += st.cg_capped;
         t->sweeps += st.sweeps;
+        if (implicit)
+            for (i = 0; i < PN_MPM_STAGES; ++i) t->stage_s[i] += st.stage_s[i];
         t->steps++;
         t->newton += st.newton_iters;
         t->cg += st.cg_iters;

@@ -1682,6 +1682,50 @@ PN_TEST(mpm_energy_guard) {
 #endif
 }
 
+/* a clock that ticks once per reading: stage_s then counts the readings that closed each stage */
+static double t_tick(void *user) {
+    return (double)++*(long *)user;
+}
+
+/* pn_mpm_desc.clock_s: an energy-formulation step fills setup, energy, linear and g2p and no
+   sweeps; a stress-formulation step setup or energy, sweeps and g2p and no linear solve; the
+   stages add up to the clock's advance over the step (every interval counted once); without
+   a clock nothing is measured. */
+PN_TEST(mpm_stage_clock) {
+    double lo[3] = {0.4, 0.1, 0}, sz[3] = {0.2, 0.2, 0};
+    size_t n;
+    int k, s;
+    for (k = 0; k < 3; ++k) {
+        pn_mpm_world *w = t_stress_scene(pn__t, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo, sz, &n);
+        pn_mpm_implicit_desc id = t_stress_desc();
+        pn_mpm_stats st;
+        long ticks = 0, before;
+        double sum = 0;
+        if (!w) return;
+        if (k != 1) id.formulation = PN_MPM_FORMULATION_ENERGY;
+        if (k < 2) w->desc.clock_s = t_tick, w->desc.clock_user = &ticks;
+        before = ticks;
+        PN_CHECK(pn_mpm_step_implicit(w, 1e-3, &id, &st) == PN_OK && st.substeps == 1);
+        for (s = 0; s < PN_MPM_STAGES; ++s) {
+            sum += st.stage_s[s];
+            PN_CHECK(st.stage_s[s] >= 0);
+        }
+        if (k == 0)
+            PN_CHECK(st.stage_s[PN_MPM_STAGE_SETUP] > 0 && st.stage_s[PN_MPM_STAGE_ENERGY] > 0 &&
+                     st.stage_s[PN_MPM_STAGE_LINEAR] > 0 && st.stage_s[PN_MPM_STAGE_G2P] > 0 &&
+                     st.stage_s[PN_MPM_STAGE_SWEEPS] == 0);
+        if (k == 1)
+            PN_CHECK(st.stage_s[PN_MPM_STAGE_ENERGY] > 0 && st.stage_s[PN_MPM_STAGE_SWEEPS] > 0 &&
+                     st.stage_s[PN_MPM_STAGE_G2P] > 0 && st.stage_s[PN_MPM_STAGE_LINEAR] == 0);
+        if (k < 2) PN_CHECK(sum == (double)(ticks - before - 1)); /* n readings close n - 1 intervals */
+        if (k == 2) PN_CHECK(sum == 0);
+        PN_REPORT("%s: stage readings setup %g, energy %g, linear %g, sweeps %g, g2p %g", k == 0 ? "energy formulation"
+                  : k == 1 ? "stress formulation" : "no clock", st.stage_s[0], st.stage_s[1], st.stage_s[2], st.stage_s[3],
+                  st.stage_s[4]);
+        pn_mpm_destroy(w);
+    }
+}
+
 /* the snow of the stress tests: Neo-Hookean + Cam-Clay, E 1e6 Pa, nu 0.3, 45 deg, beta 0.3,
    xi 3 (the snow scenes' material) */
 static void t_camclay_desc(pn_material_desc *d) {
@@ -1958,4 +2002,5 @@ static const pn_test_case pn_tests_mpm[] = {
     {"mpm_stress_snow_press", mpm_stress_snow_press},
     {"mpm_stress_local_law", mpm_stress_local_law},
     {"mpm_energy_guard", mpm_energy_guard},
+    {"mpm_stage_clock", mpm_stage_clock},
 };
