@@ -2484,8 +2484,7 @@ static void pn__vf_activate(pn_activation act, pn__vf z, pn__vf *a, pn__vf *a1, 
     }
 }
 
-/* PN__VW points (lanes) of pn_mlp_eval_lanes: inputs, outputs at lane stride PN_MLP_LANES */
-/* The network in PN__VW lanes: out, the gradient d out / d in_k for k < n_grad (the pass
+/* The network at PN__VW points (lanes; inputs and outputs at lane stride PN_MLP_LANES): out, the gradient d out / d in_k for k < n_grad (the pass
    back), and with want_h the Hessian along n_dir directions of the input space, hess[j][c] =
    s_j^T (d2 out / d in2) s_c: seed NULL takes the unit vectors of the first n_dir inputs,
    else seed[(c * n_in + i) * L + lane] is input i of direction c. The directions are what

@@ -1910,29 +1910,36 @@ static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
 
 /* The mechanical energy of a state (x, v, F, h of the active particles): kinetic, elastic
    (each group's elastic energy at its elastic F) and gravitational above the domain's lowest
-   point along gravity, so every term is >= 0 and the sum is the scale of a change. Serial
-   sums in index order: the same bits for any thread count. 0 if an elastic energy fails. */
-static int pn__mpm_mech_energy(const pn_mpm_world *w, const pn_real *x, const pn_real *v, const pn_real *F,
+   point along gravity, so every term is >= 0 and the sum is the scale of a change. Per
+   particle on threads into pscal, summed in fixed chunks (pn__mpm_sum): the same bits for any
+   thread count. 0 if an elastic energy fails. */
+static int pn__mpm_mech_energy(pn_mpm_world *w, const pn_real *x, const pn_real *v, const pn_real *F,
                                const pn_real *h, const unsigned char *active, double *e) {
     int d = w->dim, dd = d * d, i;
-    size_t p;
-    double low = 0, sum = 0;
+    long lp;
+    double low = 0;
     for (i = 0; i < d; ++i) /* the grid's corner lowest along gravity */
         low += (double)w->desc.gravity[i] * (double)(w->desc.gravity[i] < 0 ? w->grid_lo[i] : w->grid_hi[i]);
-    for (p = 0; p < w->n; ++p) {
+    PN__OMP_FOR
+    for (lp = 0; lp < (long)w->n; ++lp) {
+        size_t p = (size_t)lp;
         pn_real psi;
         double ke = 0, pe = 0;
+        int a;
+        w->pscal[p] = 0;
         if (!active[p]) continue;
-        if (pn_elastic_energy(&w->groups[w->group[p]].material, d, F + p * (size_t)dd, h[p], &psi, NULL, NULL, 0) != PN_OK)
-            return 0;
-        for (i = 0; i < d; ++i) {
-            ke += (double)v[p * (size_t)d + (size_t)i] * (double)v[p * (size_t)d + (size_t)i];
-            pe += (double)w->desc.gravity[i] * (double)x[p * (size_t)d + (size_t)i];
+        if (pn_elastic_energy(&w->groups[w->group[p]].material, d, F + p * (size_t)dd, h[p], &psi, NULL, NULL, 0) != PN_OK) {
+            w->pscal[p] = (pn_real)HUGE_VAL - (pn_real)HUGE_VAL; /* a NaN: the sum says it failed */
+            continue;
         }
-        sum += (double)w->mass[p] * (ke / 2 + (low - pe)) + (double)w->vol0[p] * (double)psi;
+        for (a = 0; a < d; ++a) {
+            ke += (double)v[p * (size_t)d + (size_t)a] * (double)v[p * (size_t)d + (size_t)a];
+            pe += (double)w->desc.gravity[a] * (double)x[p * (size_t)d + (size_t)a];
+        }
+        w->pscal[p] = (pn_real)((double)w->mass[p] * (ke / 2 + (low - pe)) + (double)w->vol0[p] * (double)psi);
     }
-    *e = sum;
-    return 1;
+    *e = (double)pn__mpm_sum(w, w->n, w->pscal, NULL);
+    return pn__finite((pn_real)*e);
 }
 
 /* Before pn__mpm_commit: the step's new state (the scratch arrays) against the current one.
