@@ -289,7 +289,10 @@ typedef struct pn_mpm_implicit_desc {
                                     learned energy driven far from its data) launches
                                     material, and backward Euler only ever takes energy
                                     away. Not checked while a collider moves (its work is not
-                                    counted) [0: 0.25; < 0: never]                           */
+                                    counted). Costs two elastic energies per particle [0:
+                                    0.25 for FORMULATION_ENERGY, off for FORMULATION_STRESS,
+                                    whose steps only lose energy; < 0: never; > 0: this
+                                    tolerance for either]                                    */
 } pn_mpm_implicit_desc;
 
 /* The stages of an implicit step (pn_mpm_stats.stage_s, with pn_mpm_desc.clock_s). */
@@ -1946,7 +1949,8 @@ static int pn__mpm_mech_energy(pn_mpm_world *w, const pn_real *x, const pn_real 
    A rise beyond energy_rise_tol of the current energy fails the step, which leaves the world
    as it was (nothing is committed yet). */
 static pn_result pn__mpm_energy_guard(pn_mpm_world *w, const pn_mpm_implicit_desc *o, pn_real dt, pn_mpm_stats *st) {
-    double e0, e1, tol = o->energy_rise_tol == 0 ? 0.25 : (double)o->energy_rise_tol;
+    double e0, e1, tol = (double)o->energy_rise_tol;
+    if (tol == 0) tol = o->formulation == PN_MPM_FORMULATION_STRESS ? -1 : 0.25; /* the default */
     int c;
     if (tol < 0) return PN_OK;
     for (c = 0; c < w->n_colliders; ++c)

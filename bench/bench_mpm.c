@@ -8,6 +8,7 @@
                     [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
                     [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..]
                     [--sweep-runs I,I,..] [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]
+                    [--energy-rise-tol X]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated (the snow press for at most 0.2 s, while its plate goes 0.08 domain_m deep), at
    most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
@@ -966,7 +967,7 @@ static void usage(void) {
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
                     "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n"
-                    "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]\n");
+                    "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X] [--energy-rise-tol X]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -1063,6 +1064,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--energies")) bad |= !(mask = parse_energies(v)), ++k;
         else if (!strcmp(a, "--sweep-tol")) bad |= !((cfg.solver.sweep_tol = (pn_real)atof(v)) > 0), ++k;
         else if (!strcmp(a, "--cell-relax")) bad |= !((cfg.solver.cell_relax = (pn_real)atof(v)) >= 1), ++k;
+        else if (!strcmp(a, "--energy-rise-tol")) cfg.solver.energy_rise_tol = (pn_real)atof(v), ++k;
         else if (!strcmp(a, "--contact-rounds")) bad |= (cfg.solver.contact_rounds = atoi(v)) < 1, ++k;
         else if (!strcmp(a, "--cg-forcing")) bad |= !((cfg.solver.cg_forcing_max = (pn_real)atof(v)) >= 0 && cfg.solver.cg_forcing_max < 1), ++k;
         else { usage(); return 2; }
