@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.7 - material point method solvers on plastinet.h.
+/* plastinet_mpm.h - v0.7 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -31,6 +31,12 @@
                  a dense grid scattered in particle order (threads own slabs of rows), 2D
                  fixed corotated and snow in vector lanes, one SVD per particle-step elsewhere
      >>advance   a frame in as many steps as the physics asks for (pn_mpm_advance)
+     >>newton    what the MPM and FEM implicit steps share: the backtracking line search,
+                 the checks of a group's implicit energy
+     >>fem       finite elements (linear triangles and tetrahedra): meshes and a structured
+                 builder, held and driven nodes, IPC barrier contact with analytic obstacles,
+                 explicit and implicit (Newton, skyline Cholesky in RCM order, CCD-filtered
+                 line search, moving obstacles by augmented Lagrangian) steps
 
    QUICK START (README.md has it as a complete program)
        pn_mpm_desc wd;  pn_mpm_fill_desc f;  pn_mpm_world *w;  pn_material sand;  size_t n;
@@ -624,6 +630,146 @@ PN_API pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt_s, const pn_mp
 /* Total mass (kg) and momentum (kg m/s) of the active particles. */
 PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentum);
 
+/* ======================================================================================
+   FEM: linear triangles (2D) and tetrahedra (3D) with the same materials, energies and
+   return mappings as the particle groups, incremental-potential contact (IPC, Li et al.
+   2020) against analytic obstacles, an explicit and an implicit integrator. Positions are
+   the unknowns; F = Ds(x) Dm^-1 per element, F = Fe Fp with Fp^-1 and h stored per element.
+   ====================================================================================== */
+
+#define PN_FEM_MAX_GROUPS 16
+#define PN_FEM_MAX_OBSTACLES 16
+
+typedef pn_mpm_group pn_fem_group; /* material, density, the implicit energy, its network */
+
+/* Mesh description; zeroed fields mean the defaults in brackets. Elements are positively
+   oriented: det [x1 - x0, x2 - x0 (, x3 - x0)] > 0 (counter-clockwise triangles). */
+typedef struct pn_fem_desc {
+    int dim;                     /* 2 (triangles; plane strain, per metre of thickness) or 3 */
+    size_t n_nodes, n_elements;
+    const pn_real *rest_m;       /* dim reals per node: the rest (and start) positions      */
+    const int *elements;         /* dim + 1 node indices per element                        */
+    const int *element_group;    /* per element, into groups [NULL: all group 0]            */
+    const pn_fem_group *groups;  /* materials; energy and pnet as for pn_mpm_group_set_energy */
+    int n_groups;                /* 1 .. PN_FEM_MAX_GROUPS                                  */
+    pn_real gravity[3];          /* m/s^2                                                   */
+    pn_real contact_distance_m;  /* IPC's dhat: the barrier acts at distances below it
+                                    [1e-3 of the rest bounding box diagonal]               */
+    pn_real contact_stiffness;   /* IPC's kappa (Pa m^(dim - 2)): the barrier energy is kappa
+                                    b(d) per node [0: 0.1 E l^(dim - 1) / dhat, E the
+                                    stiffest material's, l the mean edge: docs/method.md]   */
+    pn_allocator allocator;
+    double (*clock_s)(void *user); /* optional, as pn_mpm_desc.clock_s                       */
+    void *clock_user;
+} pn_fem_desc;
+
+/* Obstacles: half-spaces and boxes of pn_mpm_collider (shape, center_m, normal,
+   half_extent_m, velocity_m_s: translating at a constant velocity; boundary and friction
+   are not used yet). */
+
+typedef struct pn_fem_implicit_desc {
+    int fixed_point_iters;       /* passes of the F0 fixed point (lagged, PlasticityNet) [1] */
+    int newton_max;              /* Newton iterations per minimization [100]                */
+    pn_real newton_tol;          /* stop when max |dx| < newton_tol l dt-free: l the mean
+                                    rest edge length [1e-6]                                 */
+    int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [3]       */
+    /* optional trace: called at every Newton iteration with the incremental potential E at
+       the iterate and max |dx| / l of the step it takes next; `solve` counts the
+       minimizations of the step (each fixed-point pass, augmented-Lagrangian round and
+       substep minimizes a new objective) */
+    void (*trace)(void *user, int solve, int iteration, pn_real energy_j, pn_real residual);
+    void *trace_user;
+} pn_fem_implicit_desc;
+
+typedef struct pn_fem_stats {
+    int substeps, newton_iters, factorizations, fixed_point_iters, line_search_failures;
+    int al_iters;                /* augmented-Lagrangian rounds moving the obstacles        */
+    int solves;                  /* minimizations (passes x rounds x substeps)              */
+    pn_real newton_residual;     /* max |dx| / l at the last Newton iteration               */
+    pn_real min_distance_m;      /* the smallest node-obstacle distance at the step's end
+                                    (and over its line searches: never <= 0)                */
+    size_t plastic;              /* elements the return mapping projected                   */
+    pn_real dt_over_cfl;         /* the step over pn_fem_stable_dt                          */
+    pn_real kappa;               /* the barrier stiffness used                              */
+} pn_fem_stats;
+
+typedef struct pn_fem_mesh {
+    pn_fem_desc desc;            /* the arrays of desc are not kept                          */
+    int dim;
+    size_t n_nodes, n_elems;
+    pn_real *x, *v, *X;          /* positions, velocities, rest positions (dim per node)    */
+    pn_real *mass;               /* lumped node mass (kg; per metre in 2D)                  */
+    int *elem, *egroup;
+    pn_real *Dm_inv, *vol0;      /* per element: rest shape inverse (dim^2), rest volume    */
+    pn_real *Fp_inv, *h;         /* per element: inverse plastic deformation, plastic state */
+    pn_fem_group groups[PN_FEM_MAX_GROUPS];
+    int n_groups;
+    unsigned char *fixed;        /* per node: 0 free, 1 driven (held: velocity 0)           */
+    pn_real *drive;              /* per node: the driven velocity (dim reals)                */
+    pn_mpm_collider obstacles[PN_FEM_MAX_OBSTACLES];
+    int n_obstacles;
+    pn_real time_s, dhat, kappa, edge_mean;
+    long steps;
+    long error_element, error_node; /* the culprit of the last failure, -1: none             */
+    char error[256];
+    void *impl;                  /* solver storage (internal)                               */
+} pn_fem_mesh;
+
+/* Create a mesh. All or nothing: PN_ERROR_DIMENSION, PN_ERROR_INVALID_ARGUMENT (an index out
+   of range, a degenerate or inverted element, no groups, a bad group index or density, half
+   an allocator), PN_ERROR_NONFINITE (a coordinate), PN_ERROR_OUT_OF_MEMORY; why (optional,
+   why_cap bytes) names the element or node at fault. */
+PN_API pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char *why, size_t why_cap);
+PN_API void pn_fem_destroy(pn_fem_mesh *m);
+PN_API const char *pn_fem_error(const pn_fem_mesh *m);
+
+/* The energy implicit steps use for group g (as pn_mpm_group_set_energy). */
+PN_API pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_mpm_energy energy, const pn_pnet *net);
+
+/* Nodes held (velocity NULL) or driven at a constant velocity (dim reals); n nodes by index. */
+PN_API pn_result pn_fem_fix_nodes(pn_fem_mesh *m, size_t n, const int *nodes, const pn_real *velocity_m_s);
+
+/* Add an obstacle (a half-space or a box; copied). Every node must be outside it, further
+   than nothing: PN_ERROR_INVALID_ARGUMENT names a node inside. */
+PN_API pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, int *index);
+
+/* The largest explicit step the mesh allows: 0.5 l / c over the elements (l the smallest
+   altitude, c the P-wave speed), and with obstacles: a quarter of each node's distance to
+   each over their speeds added, and sqrt(m_i / (kappa b''(d_i))) over the nodes within dhat
+   of an obstacle (the barrier's spring). */
+PN_API pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s);
+
+/* One explicit step: symplectic Euler with the barrier's force, the return mapping after
+   the position update. PN_ERROR_STEP_TOO_LARGE (mesh unchanged) if a node would reach an
+   obstacle or an element invert. */
+PN_API pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt_s, pn_fem_stats *stats);
+
+/* One implicit step: the nodal positions minimize
+       1/2 |x - x~|_M^2 + dt^2 (sum_e V_e Psi_e(Fe(x)) + kappa sum b(d(x)))
+   by Newton (PSD-projected element Hessians, a sparse Cholesky factorization in a
+   reverse Cuthill-McKee order) with a backtracking line search whose first step no node
+   can take into an obstacle (continuous collision detection); moving obstacles follow
+   their velocity by an augmented Lagrangian. Then the return mapping of each element. A
+   step that fails is retried as substeps; the mesh is unchanged when it fails. */
+PN_API pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt_s, const pn_fem_implicit_desc *desc,
+                                      pn_fem_stats *stats);
+
+/* Structured meshes for tests and examples: the cells of an nx x ny (x nz) grid over the
+   box lo + [0, size], without those inside the hole (a box in the same frame; a zero size:
+   none), each square split into 2 triangles or each cube into 6 tetrahedra (conforming).
+   With nodes / elements NULL, only counts. */
+typedef struct pn_fem_grid {
+    int dim, cells[3];
+    pn_real lo_m[3], size_m[3];
+    pn_real hole_lo_m[3], hole_size_m[3];
+} pn_fem_grid;
+PN_API pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *elements, size_t *n_nodes,
+                                  size_t *n_elements);
+
+/* Total elastic energy (J; per metre in 2D), kinetic energy and the equivalent plastic strain
+   of an element (von Mises h; otherwise |log of Fp's singular values|). */
+PN_API pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_real *kinetic_j);
+
 #ifdef __cplusplus
 }
 #endif
@@ -667,20 +813,103 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
 
 /* Record why a call failed (pn_mpm_error) and return its code. Without stdio the message is
    the format's text up to its first conversion. */
+static void pn__vmsg(char *buf, size_t cap, const char *fmt, va_list ap) {
+#ifndef PN_NO_STDIO
+    vsnprintf(buf, cap, fmt, ap);
+#else
+    size_t i;
+    (void)ap;
+    for (i = 0; fmt[i] && fmt[i] != '%' && i + 1 < cap; ++i) buf[i] = fmt[i];
+    buf[i] = 0;
+#endif
+}
+
 static pn_result pn__mpm_fail(pn_mpm_world *w, pn_result r, const char *fmt, ...) {
     va_list ap;
     va_start(ap, fmt);
-#ifndef PN_NO_STDIO
-    vsnprintf(w->error, sizeof w->error, fmt, ap);
-#else
-    {
-        size_t i;
-        for (i = 0; fmt[i] && fmt[i] != '%' && i + 1 < sizeof w->error; ++i) w->error[i] = fmt[i];
-        w->error[i] = 0;
-    }
-#endif
+    pn__vmsg(w->error, sizeof w->error, fmt, ap);
     va_end(ap);
     return r;
+}
+
+/* ======================================================================================
+   >>newton: what the MPM and FEM implicit steps share
+   ====================================================================================== */
+
+typedef pn_result (*pn__objective_fn)(void *ctx, const pn_real *x, pn_real *E);
+
+/* Backtracking along dir from x (Armijo): x + alpha dir for alpha = alpha0, alpha0 / 2, ..
+   until f <= E0 + 1e-4 alpha gd (gd = grad . dir < 0). Returns alpha, with xt and *E1 the
+   accepted point, or 0 when no step down to 1e-10 decreases f. A try where f fails (an
+   element turned inside out, a node in an obstacle, a non-finite energy) is no decrease. */
+static pn_real pn__armijo(pn__objective_fn f, void *ctx, size_t n, const pn_real *x, const pn_real *dir, pn_real E0,
+                          pn_real gd, pn_real alpha0, pn_real *xt, pn_real *E1) {
+    pn_real alpha = alpha0;
+    while (alpha >= (pn_real)1e-10) {
+        pn_real e = 0;
+        size_t k;
+        for (k = 0; k < n; ++k) xt[k] = x[k] + alpha * dir[k];
+        if (f(ctx, xt, &e) == PN_OK && e <= E0 + (pn_real)1e-4 * alpha * gd) {
+            *E1 = e;
+            return alpha;
+        }
+        alpha /= 2;
+    }
+    return 0;
+}
+
+/* A group's implicit energy (pn_mpm_group_set_energy, pn_fem_group_set_energy): checks net
+   and the material; msg says why not. */
+static pn_result pn__group_set_energy(pn_mpm_group *gr, int g, int dim, pn_mpm_energy energy, const pn_pnet *net,
+                                      char *msg, size_t cap) {
+    msg[0] = 0;
+#ifdef PN_NO_STDIO
+#define PN__MSG(...) (void)cap, (void)g
+#else
+#define PN__MSG(...) snprintf(msg, cap, __VA_ARGS__)
+#endif
+    if (energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_DP) {
+        PN__MSG("energy %d is not a pn_mpm_energy", (int)energy);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if (energy == PN_MPM_ENERGY_PNET) {
+        const pn_material *a, *b = &gr->material;
+        if (!net || !net->energy) {
+            PN__MSG("PN_MPM_ENERGY_PNET needs a pn_pnet bound with pn_pnet_init");
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+        if (net->energy->dim != dim) {
+            PN__MSG("the network %s is %dD, the world %dD", net->energy->name ? net->energy->name : "", net->energy->dim, dim);
+            return PN_ERROR_DIMENSION;
+        }
+        a = &net->material;
+        /* the solve minimizes the network's energy, the state update return-maps the group's
+           material: they must be the same material, or the two disagree */
+        if (a->plastic != b->plastic || a->elastic != b->elastic || a->E != b->E || a->nu != b->nu ||
+            a->sin_phi != b->sin_phi || a->cohesion_strain != b->cohesion_strain ||
+            a->volume_correction != b->volume_correction || a->yield_stress != b->yield_stress ||
+            a->hardening_modulus != b->hardening_modulus || a->beta != b->beta || a->xi != b->xi ||
+            a->camclay_hardening != b->camclay_hardening) {
+            PN__MSG("the network is bound to another material (E %g Pa, nu %g) than group %d's (E %g Pa, nu %g, or a "
+                    "plastic parameter): bind it with pn_pnet_init to the group's material",
+                    (double)a->E, (double)a->nu, g, (double)b->E, (double)b->nu);
+            return PN_ERROR_INVALID_PARAMETER;
+        }
+    }
+    if (energy == PN_MPM_ENERGY_EXACT_VM && (gr->material.plastic != PN_PLASTIC_VON_MISES ||
+                                             gr->material.elastic != PN_ELASTIC_STVK_HENCKY)) {
+        PN__MSG("EXACT_VM needs group %d to be StVK-Hencky + von Mises", g);
+        return PN_ERROR_UNSUPPORTED;
+    }
+    if (energy == PN_MPM_ENERGY_DP && (gr->material.plastic != PN_PLASTIC_DRUCKER_PRAGER ||
+                                       gr->material.elastic != PN_ELASTIC_STVK_HENCKY)) {
+        PN__MSG("DP needs group %d to be StVK-Hencky + Drucker-Prager", g);
+        return PN_ERROR_UNSUPPORTED;
+    }
+#undef PN__MSG
+    if (energy == PN_MPM_ENERGY_PNET) gr->pnet = *net;
+    gr->energy = energy;
+    return PN_OK;
 }
 
 /* ======================================================================================
@@ -2193,47 +2422,15 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
 
 PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
                                           const pn_pnet *net) {
-    pn_mpm_group *gr;
+    char msg[256];
+    pn_result r;
     PN_ASSERT(w);
     w->error[0] = 0;
     if (g < 0 || g >= w->n_groups)
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: group %d does not exist (%d groups)",
                             g, w->n_groups);
-    if (energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_DP)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: energy %d is not a pn_mpm_energy",
-                            (int)energy);
-    gr = &w->groups[g];
-    if (energy == PN_MPM_ENERGY_PNET) {
-        const pn_material *a, *b = &gr->material;
-        if (!net || !net->energy)
-            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: PN_MPM_ENERGY_PNET needs a "
-                                "pn_pnet bound with pn_pnet_init");
-        if (net->energy->dim != w->dim)
-            return pn__mpm_fail(w, PN_ERROR_DIMENSION, "pn_mpm_group_set_energy: the network %s is %dD, the world %dD",
-                                net->energy->name ? net->energy->name : "", net->energy->dim, w->dim);
-        a = &net->material;
-        /* the solve minimizes the network's energy, the state update return-maps the group's
-           material: they must be the same material, or the two disagree */
-        if (a->plastic != b->plastic || a->elastic != b->elastic || a->E != b->E || a->nu != b->nu ||
-            a->sin_phi != b->sin_phi || a->cohesion_strain != b->cohesion_strain ||
-            a->volume_correction != b->volume_correction || a->yield_stress != b->yield_stress ||
-            a->hardening_modulus != b->hardening_modulus || a->beta != b->beta || a->xi != b->xi ||
-            a->camclay_hardening != b->camclay_hardening)
-            return pn__mpm_fail(w, PN_ERROR_INVALID_PARAMETER, "pn_mpm_group_set_energy: the network is bound to "
-                                "another material (E %g Pa, nu %g) than group %d's (E %g Pa, nu %g, or a plastic "
-                                "parameter): bind it with pn_pnet_init to the group's material",
-                                (double)a->E, (double)a->nu, g, (double)b->E, (double)b->nu);
-        gr->pnet = *net;
-    }
-    if (energy == PN_MPM_ENERGY_EXACT_VM && (gr->material.plastic != PN_PLASTIC_VON_MISES ||
-                                             gr->material.elastic != PN_ELASTIC_STVK_HENCKY))
-        return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_group_set_energy: EXACT_VM needs group %d to be "
-                            "StVK-Hencky + von Mises", g);
-    if (energy == PN_MPM_ENERGY_DP && (gr->material.plastic != PN_PLASTIC_DRUCKER_PRAGER ||
-                                       gr->material.elastic != PN_ELASTIC_STVK_HENCKY))
-        return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_group_set_energy: DP needs group %d to be StVK-Hencky + "
-                            "Drucker-Prager", g);
-    gr->energy = energy;
+    r = pn__group_set_energy(&w->groups[g], g, w->dim, energy, net, msg, sizeof msg);
+    if (r != PN_OK) return pn__mpm_fail(w, r, "pn_mpm_group_set_energy: %s", msg);
     return PN_OK;
 }
 
@@ -2242,24 +2439,31 @@ static pn_mpm_energy pn__mpm_energy_of(const pn_mpm_group *g) {
     return g->material.plastic == PN_PLASTIC_NONE ? PN_MPM_ENERGY_ELASTIC : PN_MPM_ENERGY_LAGGED;
 }
 
+/* A group's implicit energy density at F (a particle's or an element's), with P and the PSD
+   dP/dF when asked: h the plastic state, G and hG the lagged energy's, pt PlasticityNet's
+   point, ty the frozen DP yield stress (each prepared at F0). */
+static pn_result pn__group_psi(const pn_mpm_group *g, int d, const pn_real *F, pn_real h, const pn_real *G, pn_real hG,
+                               const pn_pnet_point *pt, pn_real ty, pn_real *psi, pn_real *P, pn_real *H) {
+    switch (pn__mpm_energy_of(g)) {
+    case PN_MPM_ENERGY_LAGGED:
+        return pn_lagged_energy(&g->material, d, F, G, hG, psi, P, H, PN_EVAL_PROJECT_PSD);
+    case PN_MPM_ENERGY_EXACT_VM:
+        return pn_von_mises_energy(&g->material, d, F, h, psi, P, H, PN_EVAL_PROJECT_PSD);
+    case PN_MPM_ENERGY_PNET:
+        return pn_pnet_energy(&g->pnet, pt, F, psi, P, H, PN_EVAL_PROJECT_PSD);
+    case PN_MPM_ENERGY_DP:
+        return pn_dp_energy(&g->material, d, F, h, ty, psi, P, H, PN_EVAL_PROJECT_PSD);
+    default:
+        return pn_elastic_energy(&g->material, d, F, h, psi, P, H, PN_EVAL_PROJECT_PSD);
+    }
+}
+
 /* Psi_p at F (energy density), with P and the PSD dP/dF when asked. */
 static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, pn_real *psi,
                              pn_real *P, pn_real *H) {
-    const pn_mpm_group *g = &w->groups[w->group[p]];
-    int d = w->dim, dd = d * d;
-    switch (pn__mpm_energy_of(g)) {
-    case PN_MPM_ENERGY_LAGGED:
-        return pn_lagged_energy(&g->material, d, F, w->pG + p * (size_t)dd, w->phG[p], psi, P, H,
-                                PN_EVAL_PROJECT_PSD);
-    case PN_MPM_ENERGY_EXACT_VM:
-        return pn_von_mises_energy(&g->material, d, F, w->h[p], psi, P, H, PN_EVAL_PROJECT_PSD);
-    case PN_MPM_ENERGY_PNET:
-        return pn_pnet_energy(&g->pnet, &w->ppt[p], F, psi, P, H, PN_EVAL_PROJECT_PSD);
-    case PN_MPM_ENERGY_DP:
-        return pn_dp_energy(&g->material, d, F, w->h[p], w->pty[p], psi, P, H, PN_EVAL_PROJECT_PSD);
-    default:
-        return pn_elastic_energy(&g->material, d, F, w->h[p], psi, P, H, PN_EVAL_PROJECT_PSD);
-    }
+    int dd = w->dim * w->dim;
+    return pn__group_psi(&w->groups[w->group[p]], w->dim, F, w->h[p], w->pG + p * (size_t)dd, w->phG[p], &w->ppt[p],
+                         w->pty[p], psi, P, H);
 }
 
 /* Per implicit step, after >>bin, by sorted index j (particle p = order[j]): q_js =
@@ -3452,6 +3656,16 @@ static void pn__mpm_mark(pn_mpm_world *w, pn_mpm_stats *st, int s) {
 }
 
 /* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
+/* the incremental potential's value for the shared line search (>>newton) */
+typedef struct pn__mpm_ls {
+    pn_mpm_world *w;
+    pn_real dt;
+} pn__mpm_ls;
+static pn_result pn__mpm_value(void *ctx, const pn_real *v, pn_real *E) {
+    pn__mpm_ls *ls = (pn__mpm_ls *)ctx;
+    return pn__mpm_objective(ls->w, v, ls->dt, 0, E);
+}
+
 static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
                                        pn_mpm_stats *st) {
     int d = w->dim, i, pass, has_sep = 0, capped = 0; /* capped: the last linear solve stopped at cg_max */
@@ -3545,15 +3759,13 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 if (dmax <= vscale && !capped) break;
                 gd = pn__mpm_sum(w, nd, w->grad, w->dir);
                 pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
-                for (;;) { /* backtracking with the Armijo condition */
-                    for (k = 0; k < nd; ++k) w->vtry[k] = w->vsol[k] + alpha * w->dir[k];
-                    pn__mpm_objective(w, w->vtry, dt, 0, &E1);
-                    if (E1 <= E0 + (pn_real)1e-4 * alpha * gd) break;
-                    alpha /= 2;
-                    if (alpha < (pn_real)1e-10) break;
+                {
+                    pn__mpm_ls ls;
+                    ls.w = w, ls.dt = dt;
+                    alpha = pn__armijo(pn__mpm_value, &ls, nd, w->vsol, w->dir, E0, gd, 1, w->vtry, &E1);
                 }
                 pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
-                if (alpha < (pn_real)1e-10) { /* no decrease: keep v, count it, stop this round */
+                if (alpha == 0) { /* no decrease: keep v, count it, stop this round */
                     st->line_search_failures++;
                     break;
                 }
@@ -5159,6 +5371,1309 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
     return PN_OK;
 }
 
+/* ======================================================================================
+   >>fem: linear triangles and tetrahedra. Element e with nodes n_0 .. n_d: F = Ds Dm^-1,
+   Ds = [x_1 - x_0, ..., x_d - x_0], and the elastic part Fe = F Fp^-1 = Ds B with
+   B = Dm^-1 Fp^-1, so Fe = sum_a x_a q_a^T with q_a the row a of B (a >= 1) and
+   q_0 = -sum_a q_a: the same linear map from unknowns to F as the implicit MPM step's
+   q = F^nT g. Force on node a: -V P q_a; stiffness block (a, b): V sum H[(j m),(k n)] q_am q_bn.
+   ====================================================================================== */
+
+#define PN__FEM_ALIGN(n) (((n) + 7) & ~(size_t)7)
+
+typedef struct pn__fem {
+    size_t nu;                   /* unknowns: dim per node, then dim per moving obstacle     */
+    int n_mov, mov[PN_FEM_MAX_OBSTACLES]; /* moving obstacles, by index                       */
+    size_t *perm, *iperm;        /* RCM: node at position k, position of node i              */
+    size_t *fc, *rs;             /* skyline: first column and start of each row of L        */
+    size_t nnz;
+    pn_real *L;                  /* the Hessian, factored in place (lower, by rows)          */
+    pn_real *xt, *xs, *g, *dir, *xtry, *xbest; /* x~, the iterate, gradient, direction, try  */
+    pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
+    pn_real *eP, *eH;            /* per element: P (dd) and the projected dP/dF (dd^2)       */
+    pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
+    pn_pnet_point *ppt;
+    pn_real *bx, *bv, *bFp, *bh; /* the state before the step (restored on failure)         */
+    pn_real bt;
+    unsigned char *elast;        /* per element: needs det Fe > 0 (all but fixed corotated)  */
+    pn_real al_k;                /* augmented Lagrangian stiffness of the obstacle unknowns  */
+    pn_real al_lam[PN_FEM_MAX_OBSTACLES * 3], target[PN_FEM_MAX_OBSTACLES * 3];
+    pn_real dt, t_end;           /* this step's dt and end time                              */
+    pn_real dmin;                /* the smallest distance the last objective saw             */
+} pn__fem;
+
+static pn_result pn__fem_fail(pn_fem_mesh *m, pn_result r, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    pn__vmsg(m->error, sizeof m->error, fmt, ap);
+    va_end(ap);
+    return r;
+}
+
+static void pn__fem_why(char *why, size_t cap, const char *fmt, ...) {
+    va_list ap;
+    if (!why || !cap) return;
+    va_start(ap, fmt);
+    pn__vmsg(why, cap, fmt, ap);
+    va_end(ap);
+}
+
+/* Ds of element e at positions x (columns x_a - x_0, row-major d x d) */
+static void pn__fem_ds(const pn_fem_mesh *m, size_t e, const pn_real *x, pn_real *Ds) {
+    int d = m->dim, a, i;
+    const int *n = m->elem + e * (size_t)(d + 1);
+    for (a = 1; a <= d; ++a)
+        for (i = 0; i < d; ++i) Ds[i * d + a - 1] = x[(size_t)n[a] * (size_t)d + i] - x[(size_t)n[0] * (size_t)d + i];
+}
+
+/* signed volume of a simplex with edge matrix Ds: det / d! */
+static pn_real pn__fem_volume(int d, const pn_real *Ds) { return pn_mat_det(d, Ds) / (d == 2 ? 2 : 6); }
+
+/* ---- >>fem mesh builder ------------------------------------------------------------------ */
+
+/* the 6 tetrahedra of a cube around its diagonal 0 - 7 (corners by bits x, y, z): conforming
+   when every cube is split the same way (Freudenthal / Kuhn) */
+static const int pn__fem_kuhn[6][4] = {{0, 1, 3, 7}, {0, 1, 5, 7}, {0, 2, 3, 7}, {0, 2, 6, 7}, {0, 4, 5, 7}, {0, 4, 6, 7}};
+
+static int pn__fem_cell_kept(const pn_fem_grid *g, const int *c) {
+    int a, in = 1;
+    for (a = 0; a < g->dim; ++a) {
+        pn_real lo = g->lo_m[a] + g->size_m[a] * c[a] / g->cells[a];
+        pn_real hi = g->lo_m[a] + g->size_m[a] * (c[a] + 1) / g->cells[a], mid = (lo + hi) / 2;
+        if (!(g->hole_size_m[a] > 0)) return 1;
+        in &= mid > g->hole_lo_m[a] && mid < g->hole_lo_m[a] + g->hole_size_m[a];
+    }
+    return !in;
+}
+
+PN__DEF pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *elements, size_t *n_nodes,
+                                   size_t *n_elements) {
+    int d, a, c[3] = {0, 0, 0}, np[3] = {1, 1, 1};
+    size_t total = 1, ne = 0, nn = 0, k;
+    int *map = NULL;
+    if (!g || !n_nodes || !n_elements || (g->dim != 2 && g->dim != 3)) return PN_ERROR_INVALID_ARGUMENT;
+    d = g->dim;
+    for (a = 0; a < d; ++a) {
+        if (g->cells[a] < 1 || g->cells[a] > 4096 || !(g->size_m[a] > 0) || !pn__finite(g->lo_m[a]) ||
+            !pn__finite(g->size_m[a]) || !pn__finite(g->hole_lo_m[a]) || !pn__finite(g->hole_size_m[a]))
+            return PN_ERROR_INVALID_ARGUMENT;
+        np[a] = g->cells[a] + 1;
+        total *= (size_t)np[a];
+    }
+    if (nodes) { /* number the nodes used by kept cells in grid order */
+        map = (int *)PN_MALLOC(sizeof(int) * total, NULL);
+        if (!map) return PN_ERROR_OUT_OF_MEMORY;
+        for (k = 0; k < total; ++k) map[k] = -1;
+    }
+    for (c[2] = 0; c[2] < (d == 3 ? g->cells[2] : 1); ++c[2])
+        for (c[1] = 0; c[1] < g->cells[1]; ++c[1])
+            for (c[0] = 0; c[0] < g->cells[0]; ++c[0]) {
+                int corner[8], b, t;
+                if (!pn__fem_cell_kept(g, c)) continue;
+                for (b = 0; b < (1 << d); ++b) {
+                    int i = c[0] + (b & 1), j = c[1] + (b >> 1 & 1), l = d == 3 ? c[2] + (b >> 2 & 1) : 0;
+                    corner[b] = (int)(((size_t)l * (size_t)np[1] + (size_t)j) * (size_t)np[0] + (size_t)i);
+                    if (map && map[corner[b]] < 0) {
+                        map[corner[b]] = (int)nn;
+                        nodes[nn * (size_t)d] = g->lo_m[0] + g->size_m[0] * i / g->cells[0];
+                        nodes[nn * (size_t)d + 1] = g->lo_m[1] + g->size_m[1] * j / g->cells[1];
+                        if (d == 3) nodes[nn * 3 + 2] = g->lo_m[2] + g->size_m[2] * l / g->cells[2];
+                        nn++;
+                    }
+                }
+                if (d == 2) { /* the diagonal alternates (a symmetric mesh for symmetric loads) */
+                    int alt = (c[0] + c[1]) & 1;
+                    int tri[2][3];
+                    if (!alt) {
+                        tri[0][0] = corner[0], tri[0][1] = corner[1], tri[0][2] = corner[3];
+                        tri[1][0] = corner[0], tri[1][1] = corner[3], tri[1][2] = corner[2];
+                    } else {
+                        tri[0][0] = corner[0], tri[0][1] = corner[1], tri[0][2] = corner[2];
+                        tri[1][0] = corner[1], tri[1][1] = corner[3], tri[1][2] = corner[2];
+                    }
+                    for (t = 0; t < 2; ++t, ++ne)
+                        if (elements)
+                            for (b = 0; b < 3; ++b) elements[ne * 3 + (size_t)b] = map[tri[t][b]];
+                } else {
+                    for (t = 0; t < 6; ++t, ++ne)
+                        if (elements) {
+                            int *el = elements + ne * 4;
+                            for (b = 0; b < 4; ++b) el[b] = map[corner[pn__fem_kuhn[t][b]]];
+                        }
+                }
+            }
+    if (map) {
+        PN_FREE(map, NULL);
+    } else {
+        int *used = (int *)PN_MALLOC(sizeof(int) * total, NULL); /* count the used nodes */
+        if (!used) return PN_ERROR_OUT_OF_MEMORY;
+        memset(used, 0, sizeof(int) * total);
+        for (c[2] = 0; c[2] < (d == 3 ? g->cells[2] : 1); ++c[2])
+            for (c[1] = 0; c[1] < g->cells[1]; ++c[1])
+                for (c[0] = 0; c[0] < g->cells[0]; ++c[0]) {
+                    int b;
+                    if (!pn__fem_cell_kept(g, c)) continue;
+                    for (b = 0; b < (1 << d); ++b) {
+                        size_t id = ((size_t)(d == 3 ? c[2] + (b >> 2 & 1) : 0) * (size_t)np[1] + (size_t)(c[1] + (b >> 1 & 1))) *
+                                        (size_t)np[0] + (size_t)(c[0] + (b & 1));
+                        if (!used[id]) used[id] = 1, nn++;
+                    }
+                }
+        PN_FREE(used, NULL);
+    }
+    if (nodes && elements) /* orient every element positively */
+        for (k = 0; k < ne; ++k) {
+            int *el = elements + k * (size_t)(d + 1), i, b, tmp;
+            pn_real Ds[9];
+            for (b = 1; b <= d; ++b)
+                for (i = 0; i < d; ++i) Ds[i * d + b - 1] = nodes[(size_t)el[b] * (size_t)d + i] - nodes[(size_t)el[0] * (size_t)d + i];
+            if (pn_mat_det(d, Ds) < 0) tmp = el[1], el[1] = el[2], el[2] = tmp;
+        }
+    *n_nodes = nn;
+    *n_elements = ne;
+    return PN_OK;
+}
+
+/* ---- >>fem creation --------------------------------------------------------------------- */
+
+/* Reverse Cuthill-McKee order of the node graph (a skyline of small profile for the
+   Cholesky factor): breadth first from a node of least degree, neighbours by degree,
+   reversed; each connected piece in turn. Node i's neighbours: adj[beg[i] .. end[i]). */
+static void pn__fem_rcm(size_t n, const size_t *beg, const size_t *end, const size_t *adj, size_t *perm,
+                        unsigned char *seen, size_t *deg) {
+    size_t head = 0, tail = 0, i, k;
+    for (i = 0; i < n; ++i) seen[i] = 0, deg[i] = end[i] - beg[i];
+    while (tail < n) {
+        size_t start = n;
+        for (i = 0; i < n; ++i)
+            if (!seen[i] && (start == n || deg[i] < deg[start])) start = i;
+        perm[tail++] = start;
+        seen[start] = 1;
+        while (head < tail) {
+            size_t u = perm[head++], first = tail;
+            for (k = beg[u]; k < end[u]; ++k)
+                if (!seen[adj[k]]) seen[adj[k]] = 1, perm[tail++] = adj[k];
+            for (i = first + 1; i < tail; ++i) { /* insertion sort of the new ones by degree */
+                size_t v = perm[i], j = i;
+                while (j > first && (deg[perm[j - 1]] > deg[v] || (deg[perm[j - 1]] == deg[v] && perm[j - 1] > v))) {
+                    perm[j] = perm[j - 1];
+                    --j;
+                }
+                perm[j] = v;
+            }
+        }
+    }
+    for (i = 0; i < n / 2; ++i) k = perm[i], perm[i] = perm[n - 1 - i], perm[n - 1 - i] = k;
+}
+
+PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
+    pn__fem *s;
+    const pn_allocator *al;
+    if (!m) return;
+    al = &m->desc.allocator;
+    s = (pn__fem *)m->impl;
+    if (s) {
+        pn_free(al, s->perm);
+        pn_free(al, s->fc);
+        pn_free(al, s->L);
+        pn_free(al, s->xt);
+        pn_free(al, s->B);
+        pn_free(al, s->ppt);
+        pn_free(al, s->elast);
+        pn_free(al, s->bx);
+        pn_free(al, s);
+    }
+    pn_free(al, m->x);
+    pn_free(al, m->elem);
+    pn_free(al, m->fixed);
+    pn_free(al, m);
+}
+
+PN__DEF const char *pn_fem_error(const pn_fem_mesh *m) { return m ? m->error : ""; }
+
+/* the arrays of the solver: one block per type (freed in pn_fem_destroy) */
+static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
+    const pn_allocator *al = &m->desc.allocator;
+    int d = m->dim, dd = d * d, dp = d + 1;
+    size_t n = m->n_nodes, ne = m->n_elems, nu = n * (size_t)d + (size_t)(PN_FEM_MAX_OBSTACLES * d), i, k, e;
+    size_t *xadj, *adj, *deg, *cnt;
+    unsigned char *seen;
+    pn__fem *s = (pn__fem *)pn_alloc(al, sizeof(pn__fem));
+    if (!s) return PN_ERROR_OUT_OF_MEMORY;
+    memset(s, 0, sizeof *s);
+    m->impl = s;
+    s->perm = (size_t *)pn_alloc(al, sizeof(size_t) * 2 * n);
+    s->fc = (size_t *)pn_alloc(al, sizeof(size_t) * (2 * nu + 1));
+    s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (6 * PN__FEM_ALIGN(nu)));
+    s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * ne * (size_t)(dd + d * dp + dd + dd * dd + dd + 1 + 1 + dd));
+    s->ppt = (pn_pnet_point *)pn_alloc(al, sizeof(pn_pnet_point) * ne);
+    s->elast = (unsigned char *)pn_alloc(al, ne);
+    s->bx = (pn_real *)pn_alloc(al, sizeof(pn_real) * (2 * n * (size_t)d + ne * (size_t)(dd + 1)));
+    if (!s->perm || !s->fc || !s->xt || !s->B || !s->ppt || !s->elast || !s->bx) return PN_ERROR_OUT_OF_MEMORY;
+    s->bv = s->bx + n * (size_t)d;
+    s->bFp = s->bv + n * (size_t)d;
+    s->bh = s->bFp + ne * (size_t)dd;
+    s->iperm = s->perm + n;
+    s->rs = s->fc + nu;
+    s->g = s->xt + PN__FEM_ALIGN(nu);
+    s->dir = s->g + PN__FEM_ALIGN(nu);
+    s->xtry = s->dir + PN__FEM_ALIGN(nu);
+    s->xbest = s->xtry + PN__FEM_ALIGN(nu);
+    s->xs = s->xbest + PN__FEM_ALIGN(nu);
+    s->q = s->B + ne * (size_t)dd;
+    s->eP = s->q + ne * (size_t)(d * dp);
+    s->eH = s->eP + ne * (size_t)dd;
+    s->pG = s->eH + ne * (size_t)(dd * dd);
+    s->phG = s->pG + ne * (size_t)dd;
+    s->pty = s->phG + ne;
+    s->F0 = s->pty + ne;
+    /* node graph (CSR) for the ordering: temporary */
+    xadj = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
+    cnt = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
+    adj = (size_t *)pn_alloc(al, sizeof(size_t) * (ne * (size_t)(dp * d) + 1));
+    deg = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
+    seen = (unsigned char *)pn_alloc(al, n + 1);
+    if (!xadj || !adj || !deg || !seen || !cnt) {
+        pn_free(al, xadj), pn_free(al, adj), pn_free(al, deg), pn_free(al, seen), pn_free(al, cnt);
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
+    memset(cnt, 0, sizeof(size_t) * (n + 1));
+    for (e = 0; e < ne; ++e)
+        for (i = 0; i < (size_t)dp; ++i) cnt[m->elem[e * (size_t)dp + i]] += (size_t)d;
+    xadj[0] = 0;
+    for (i = 0; i < n; ++i) xadj[i + 1] = xadj[i] + cnt[i];
+    for (i = 0; i < n; ++i) cnt[i] = xadj[i];
+    for (e = 0; e < ne; ++e) /* with repeats: RCM only needs the neighbour sets */
+        for (i = 0; i < (size_t)dp; ++i)
+            for (k = 0; k < (size_t)dp; ++k)
+                if (k != i) adj[cnt[m->elem[e * (size_t)dp + i]]++] = (size_t)m->elem[e * (size_t)dp + k];
+    for (i = 0; i < n; ++i) { /* drop repeats: node i's neighbours are adj[xadj[i] .. cnt[i]) */
+        size_t w = xadj[i], r, j;
+        for (r = xadj[i]; r < cnt[i]; ++r) {
+            for (j = xadj[i]; j < w && adj[j] != adj[r]; ++j) {}
+            if (j == w) adj[w++] = adj[r];
+        }
+        cnt[i] = w;
+    }
+    pn__fem_rcm(n, xadj, cnt, adj, s->perm, seen, deg);
+    for (i = 0; i < n; ++i) s->iperm[s->perm[i]] = i;
+    /* skyline of the node rows (then the obstacle rows, full): first column per dof row */
+    for (i = 0; i < n; ++i) {
+        size_t pos = s->iperm[i], lo = pos, c;
+        for (k = xadj[i]; k < cnt[i]; ++k) lo = PN__MIN(lo, s->iperm[adj[k]]);
+        for (c = 0; c < (size_t)d; ++c) s->fc[pos * (size_t)d + c] = lo * (size_t)d;
+    }
+    for (k = n * (size_t)d; k < nu; ++k) s->fc[k] = 0;
+    s->nnz = 0;
+    for (k = 0; k < nu; ++k) s->rs[k] = s->nnz, s->nnz += k - s->fc[k] + 1;
+    s->rs[nu] = s->nnz;
+    pn_free(al, xadj), pn_free(al, adj), pn_free(al, deg), pn_free(al, seen), pn_free(al, cnt);
+    s->L = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
+    if (!s->L) return PN_ERROR_OUT_OF_MEMORY;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char *why, size_t why_cap) {
+    pn_fem_mesh *m;
+    const pn_allocator *al;
+    int d, dd, dp, g;
+    size_t n, ne, i, e;
+    pn_real lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, diag = 0, emax = 0, esum = 0;
+    long nedge = 0;
+    pn_result r;
+    if (why && why_cap) why[0] = 0;
+    if (!desc || !out) return PN_ERROR_INVALID_ARGUMENT;
+    *out = NULL;
+    d = desc->dim;
+    if (!pn__dim_ok(d)) {
+        pn__fem_why(why, why_cap, "pn_fem_desc.dim is %d: 2 or 3 (and not compiled out by PN_NO_2D / PN_NO_3D)", d);
+        return PN_ERROR_DIMENSION;
+    }
+    dd = d * d, dp = d + 1, n = desc->n_nodes, ne = desc->n_elements;
+    if (!desc->rest_m || !desc->elements || n < (size_t)dp || ne < 1 || n > 0x7fffffff) {
+        pn__fem_why(why, why_cap, "pn_fem_desc: rest_m and elements are required, with at least %d nodes and one element "
+                    "(fewer than 2^31 nodes)", dp);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if (!desc->groups || desc->n_groups < 1 || desc->n_groups > PN_FEM_MAX_GROUPS) {
+        pn__fem_why(why, why_cap, "pn_fem_desc.n_groups is %d: 1 .. %d groups are needed", desc->n_groups, PN_FEM_MAX_GROUPS);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if ((desc->allocator.alloc == NULL) != (desc->allocator.free == NULL)) {
+        pn__fem_why(why, why_cap, "pn_fem_desc.allocator: set both alloc and free, or neither");
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    for (i = 0; i < 3; ++i)
+        if (!pn__finite(desc->gravity[i])) {
+            pn__fem_why(why, why_cap, "pn_fem_desc.gravity[%d] is not finite", (int)i);
+            return PN_ERROR_NONFINITE;
+        }
+    if (!(desc->contact_distance_m >= 0) || !pn__finite(desc->contact_distance_m) || !(desc->contact_stiffness >= 0) ||
+        !pn__finite(desc->contact_stiffness)) {
+        pn__fem_why(why, why_cap, "pn_fem_desc: contact_distance_m and contact_stiffness must be finite and >= 0");
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    for (g = 0; g < desc->n_groups; ++g) {
+        const char *mw = NULL;
+        if (pn_material_check(&desc->groups[g].material, &mw) != PN_OK) {
+            pn__fem_why(why, why_cap, "pn_fem_desc.groups[%d].material: %s", g, mw ? mw : "invalid");
+            return PN_ERROR_INVALID_PARAMETER;
+        }
+        if (!(desc->groups[g].density_kg_m3 > 0) || !pn__finite(desc->groups[g].density_kg_m3)) {
+            pn__fem_why(why, why_cap, "pn_fem_desc.groups[%d].density_kg_m3 must be positive and finite", g);
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+    }
+    for (i = 0; i < n * (size_t)d; ++i)
+        if (!pn__finite(desc->rest_m[i])) {
+            pn__fem_why(why, why_cap, "node %lu: coordinate %d is not finite", (unsigned long)(i / (size_t)d), (int)(i % (size_t)d));
+            return PN_ERROR_NONFINITE;
+        }
+    for (i = 0; i < n; ++i)
+        for (g = 0; g < d; ++g) {
+            pn_real c = desc->rest_m[i * (size_t)d + (size_t)g];
+            lo[g] = i ? PN__MIN(lo[g], c) : c, hi[g] = i ? PN__MAX(hi[g], c) : c;
+        }
+    for (g = 0; g < d; ++g) diag += (hi[g] - lo[g]) * (hi[g] - lo[g]);
+    diag = PN__SQRT(diag);
+    for (e = 0; e < ne; ++e) {
+        const int *el = desc->elements + e * (size_t)dp;
+        pn_real Ds[9], vol, lmax = 0;
+        int a, b;
+        for (a = 0; a < dp; ++a) {
+            if (el[a] < 0 || (size_t)el[a] >= n) {
+                pn__fem_why(why, why_cap, "element %lu: node index %d is out of range (%lu nodes)", (unsigned long)e, el[a],
+                            (unsigned long)n);
+                return PN_ERROR_INVALID_ARGUMENT;
+            }
+            for (b = 0; b < a; ++b)
+                if (el[a] == el[b]) {
+                    pn__fem_why(why, why_cap, "element %lu: node %d appears twice", (unsigned long)e, el[a]);
+                    return PN_ERROR_INVALID_ARGUMENT;
+                }
+        }
+        if (desc->element_group && (desc->element_group[e] < 0 || desc->element_group[e] >= desc->n_groups)) {
+            pn__fem_why(why, why_cap, "element %lu: group %d does not exist (%d groups)", (unsigned long)e, desc->element_group[e],
+                        desc->n_groups);
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+        for (a = 1; a <= d; ++a)
+            for (b = 0; b < d; ++b)
+                Ds[b * d + a - 1] = desc->rest_m[(size_t)el[a] * (size_t)d + (size_t)b] - desc->rest_m[(size_t)el[0] * (size_t)d + (size_t)b];
+        for (a = 0; a < dp; ++a) /* longest edge */
+            for (b = 0; b < a; ++b) {
+                pn_real l2 = 0;
+                int c;
+                for (c = 0; c < d; ++c) {
+                    pn_real t = desc->rest_m[(size_t)el[a] * (size_t)d + (size_t)c] - desc->rest_m[(size_t)el[b] * (size_t)d + (size_t)c];
+                    l2 += t * t;
+                }
+                lmax = PN__MAX(lmax, PN__SQRT(l2));
+                esum += PN__SQRT(l2), nedge++;
+            }
+        vol = pn__fem_volume(d, Ds);
+        /* degenerate: volume below 1e-9 of the longest edge's cube (square) */
+        if (!(PN__FABS(vol) > (pn_real)1e-9 * (d == 2 ? lmax * lmax : lmax * lmax * lmax))) {
+            pn__fem_why(why, why_cap, "element %lu (nodes %d %d %d%s%s) is degenerate: volume %g", (unsigned long)e, el[0], el[1],
+                        el[2], d == 3 ? " ..." : "", "", (double)vol);
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+        if (vol < 0) {
+            pn__fem_why(why, why_cap, "element %lu is inverted (negative volume %g): list its nodes %s", (unsigned long)e,
+                        (double)vol, d == 2 ? "counter-clockwise" : "so that (x1-x0) x (x2-x0) . (x3-x0) > 0");
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+        emax = PN__MAX(emax, lmax);
+    }
+    al = &desc->allocator;
+    m = (pn_fem_mesh *)pn_alloc(al, sizeof *m);
+    if (!m) return PN_ERROR_OUT_OF_MEMORY;
+    memset(m, 0, sizeof *m);
+    m->desc = *desc;
+    m->desc.rest_m = NULL, m->desc.elements = NULL, m->desc.element_group = NULL, m->desc.groups = NULL;
+    m->dim = d, m->n_nodes = n, m->n_elems = ne;
+    m->error_element = m->error_node = -1;
+    m->n_groups = desc->n_groups;
+    for (g = 0; g < desc->n_groups; ++g) m->groups[g] = desc->groups[g];
+    m->x = (pn_real *)pn_alloc(al, sizeof(pn_real) * (n * (size_t)(4 * d + 1) + ne * (size_t)(2 * dd + 2)));
+    m->elem = (int *)pn_alloc(al, sizeof(int) * ne * (size_t)(dp + 1));
+    m->fixed = (unsigned char *)pn_alloc(al, n);
+    if (!m->x || !m->elem || !m->fixed) {
+        pn_fem_destroy(m);
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
+    m->v = m->x + n * (size_t)d;
+    m->X = m->v + n * (size_t)d;
+    m->drive = m->X + n * (size_t)d;
+    m->mass = m->drive + n * (size_t)d;
+    m->Dm_inv = m->mass + n;
+    m->Fp_inv = m->Dm_inv + ne * (size_t)dd;
+    m->vol0 = m->Fp_inv + ne * (size_t)dd;
+    m->h = m->vol0 + ne;
+    m->egroup = m->elem + ne * (size_t)dp;
+    memcpy(m->x, desc->rest_m, sizeof(pn_real) * n * (size_t)d);
+    memcpy(m->X, desc->rest_m, sizeof(pn_real) * n * (size_t)d);
+    memset(m->v, 0, sizeof(pn_real) * n * (size_t)d);
+    memset(m->drive, 0, sizeof(pn_real) * n * (size_t)d);
+    memset(m->mass, 0, sizeof(pn_real) * n);
+    memset(m->fixed, 0, n);
+    memcpy(m->elem, desc->elements, sizeof(int) * ne * (size_t)dp);
+    for (e = 0; e < ne; ++e) {
+        pn_real Ds[9], mass;
+        int a, gi = desc->element_group ? desc->element_group[e] : 0;
+        m->egroup[e] = gi;
+        pn__fem_ds(m, e, m->X, Ds);
+        m->vol0[e] = pn__fem_volume(d, Ds);
+        pn_mat_inverse(d, Ds, m->Dm_inv + e * (size_t)dd);
+        for (a = 0; a < dd; ++a) m->Fp_inv[e * (size_t)dd + (size_t)a] = (a % (d + 1)) == 0;
+        m->h[e] = 0;
+        mass = m->vol0[e] * m->groups[gi].density_kg_m3 / dp; /* lumped: an equal share per node */
+        for (a = 0; a < dp; ++a) m->mass[m->elem[e * (size_t)dp + (size_t)a]] += mass;
+    }
+    for (i = 0; i < n; ++i)
+        if (!(m->mass[i] > 0)) {
+            pn__fem_why(why, why_cap, "node %lu belongs to no element (it would have no mass)", (unsigned long)i);
+            pn_fem_destroy(m);
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+    m->edge_mean = nedge ? esum / (pn_real)nedge : emax;
+    m->dhat = desc->contact_distance_m > 0 ? desc->contact_distance_m : (pn_real)1e-3 * diag;
+    if (desc->contact_stiffness > 0) m->kappa = desc->contact_stiffness;
+    else { /* the barrier's force at dhat / 2, kappa |b'| ~ kappa dhat, holds a stress of 0.1 E on
+              a node's share of the surface, l^(dim - 1): the gap stays near dhat / 2 up to
+              stresses far above yield, and under impacts of rho v c < 0.1 E */
+        pn_real E = 0;
+        for (g = 0; g < m->n_groups; ++g) E = PN__MAX(E, m->groups[g].material.E);
+        m->kappa = (pn_real)0.1 * E * (d == 3 ? m->edge_mean * m->edge_mean : m->edge_mean) / m->dhat;
+    }
+    r = pn__fem_alloc_solver(m);
+    if (r != PN_OK) {
+        pn_fem_destroy(m);
+        pn__fem_why(why, why_cap, "out of memory for a mesh of %lu nodes and %lu elements", (unsigned long)n, (unsigned long)ne);
+        return r;
+    }
+    *out = m;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_mpm_energy energy, const pn_pnet *net) {
+    char msg[256];
+    pn_result r;
+    if (!m) return PN_ERROR_INVALID_ARGUMENT;
+    m->error[0] = 0;
+    if (g < 0 || g >= m->n_groups)
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_group_set_energy: group %d does not exist (%d groups)", g,
+                            m->n_groups);
+    r = pn__group_set_energy(&m->groups[g], g, m->dim, energy, net, msg, sizeof msg);
+    if (r != PN_OK) return pn__fem_fail(m, r, "pn_fem_group_set_energy: %s", msg);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_fem_fix_nodes(pn_fem_mesh *m, size_t n, const int *nodes, const pn_real *velocity_m_s) {
+    size_t k;
+    int i;
+    if (!m) return PN_ERROR_INVALID_ARGUMENT;
+    m->error[0] = 0;
+    if (n && !nodes) return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_fix_nodes: nodes is NULL");
+    for (k = 0; k < n; ++k)
+        if (nodes[k] < 0 || (size_t)nodes[k] >= m->n_nodes)
+            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_fix_nodes: node index %d (entry %lu) is out of range",
+                                nodes[k], (unsigned long)k);
+    if (velocity_m_s)
+        for (i = 0; i < m->dim; ++i)
+            if (!pn__finite(velocity_m_s[i]))
+                return pn__fem_fail(m, PN_ERROR_NONFINITE, "pn_fem_fix_nodes: velocity[%d] is not finite", i);
+    for (k = 0; k < n; ++k) {
+        size_t p = (size_t)nodes[k];
+        m->fixed[p] = 1;
+        for (i = 0; i < m->dim; ++i) m->drive[p * (size_t)m->dim + (size_t)i] = velocity_m_s ? velocity_m_s[i] : 0;
+        for (i = 0; i < m->dim; ++i) m->v[p * (size_t)m->dim + (size_t)i] = velocity_m_s ? velocity_m_s[i] : 0;
+    }
+    return PN_OK;
+}
+
+/* signed distance from x to obstacle c at time t (> 0 outside), and its gradient n */
+static pn_real pn__fem_obstacle_sd(const pn_mpm_collider *c, int d, pn_real t, const pn_real *u, const pn_real *x, pn_real *n) {
+    pn_real r[3], dist = 0;
+    int i;
+    for (i = 0; i < d; ++i) r[i] = x[i] - (c->center_m[i] + t * c->velocity_m_s[i] + (u ? u[i] : 0));
+    if (c->shape == PN_MPM_SHAPE_HALF_SPACE) {
+        pn_real nn = 0;
+        for (i = 0; i < d; ++i) nn += c->normal[i] * c->normal[i];
+        nn = 1 / PN__SQRT(nn);
+        for (i = 0; i < d; ++i) n[i] = c->normal[i] * nn, dist += r[i] * n[i];
+        return dist;
+    } else { /* box */
+        pn_real q[3], out2 = 0, inmax = -1e300;
+        int arg = 0;
+        for (i = 0; i < d; ++i) {
+            q[i] = PN__FABS(r[i]) - c->half_extent_m[i];
+            if (q[i] > 0) out2 += q[i] * q[i];
+            if (q[i] > inmax) inmax = q[i], arg = i;
+        }
+        if (out2 > 0) {
+            dist = PN__SQRT(out2);
+            for (i = 0; i < d; ++i) n[i] = q[i] > 0 ? (r[i] < 0 ? -q[i] : q[i]) / dist : 0;
+            return dist;
+        }
+        for (i = 0; i < d; ++i) n[i] = 0;
+        n[arg] = r[arg] < 0 ? -1 : 1;
+        return inmax;
+    }
+}
+
+PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, int *index) {
+    int i, d;
+    size_t k;
+    pn_real nn = 0, nrm[3];
+    if (!m || !c) return PN_ERROR_INVALID_ARGUMENT;
+    m->error[0] = 0;
+    d = m->dim;
+    if (m->n_obstacles >= PN_FEM_MAX_OBSTACLES)
+        return pn__fem_fail(m, PN_ERROR_CAPACITY, "pn_fem_add_obstacle: the mesh has its %d obstacles", PN_FEM_MAX_OBSTACLES);
+    if (c->shape != PN_MPM_SHAPE_HALF_SPACE && c->shape != PN_MPM_SHAPE_BOX)
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: shape %d: half-spaces and boxes only", (int)c->shape);
+    for (i = 0; i < d; ++i) {
+        if (!pn__finite(c->center_m[i]) || !pn__finite(c->normal[i]) || !pn__finite(c->velocity_m_s[i]) ||
+            !pn__finite(c->half_extent_m[i]))
+            return pn__fem_fail(m, PN_ERROR_NONFINITE, "pn_fem_add_obstacle: a coordinate of axis %d is not finite", i);
+        nn += c->normal[i] * c->normal[i];
+        if (c->shape == PN_MPM_SHAPE_BOX && !(c->half_extent_m[i] > 0))
+            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: half_extent_m[%d] must be > 0", i);
+    }
+    if (c->shape == PN_MPM_SHAPE_HALF_SPACE && !(nn > 0))
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the half-space's normal is zero");
+    for (k = 0; k < m->n_nodes; ++k)
+        if (!(pn__fem_obstacle_sd(c, d, m->time_s, NULL, m->x + k * (size_t)d, nrm) > 0)) {
+            m->error_node = (long)k;
+            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: node %lu is inside the obstacle",
+                                (unsigned long)k);
+        }
+    m->obstacles[m->n_obstacles] = *c;
+    for (i = d; i < 3; ++i) m->obstacles[m->n_obstacles].velocity_m_s[i] = 0;
+    if (index) *index = m->n_obstacles;
+    m->n_obstacles++;
+    return PN_OK;
+}
+
+/* ---- >>fem barrier: IPC's b(d) = -(d - dhat)^2 log(d / dhat) on (0, dhat), 0 beyond ----- */
+
+static void pn__fem_barrier(pn_real dist, pn_real dhat, pn_real *b, pn_real *b1, pn_real *b2) {
+    pn_real t, l;
+    if (dist >= dhat) {
+        *b = *b1 = *b2 = 0;
+        return;
+    }
+    t = dist - dhat, l = PN__LOG(dist / dhat);
+    *b = -t * t * l;
+    *b1 = -2 * t * l - t * t / dist;
+    *b2 = -2 * l - 4 * t / dist + t * t / (dist * dist);
+}
+
+/* ---- >>fem energies per element ------------------------------------------------------- */
+
+/* Psi of element e at Fe with the group's energy (P and the PSD Hessian when asked) */
+static pn_result pn__fem_psi(const pn_fem_mesh *m, size_t e, const pn_real *Fe, pn_real *psi, pn_real *P, pn_real *H) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    int dd = m->dim * m->dim;
+    return pn__group_psi(&m->groups[m->egroup[e]], m->dim, Fe, m->h[e], s->pG + e * (size_t)dd, s->phG[e], &s->ppt[e],
+                         s->pty[e], psi, P, H);
+}
+
+/* Fe = sum_a x_a q_a^T of element e */
+static void pn__fem_fe(const pn_fem_mesh *m, size_t e, const pn_real *x, pn_real *Fe) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    int d = m->dim, dp = d + 1, a, i, j;
+    const int *el = m->elem + e * (size_t)dp;
+    const pn_real *q = s->q + e * (size_t)(d * dp);
+    for (i = 0; i < d * d; ++i) Fe[i] = 0;
+    for (a = 0; a < dp; ++a) {
+        const pn_real *xa = x + (size_t)el[a] * (size_t)d;
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) Fe[i * d + j] += xa[i] * q[a * d + j];
+    }
+}
+
+/* per step: B = Dm^-1 Fp^-1 and the q_a of each element */
+static void pn__fem_setup(pn_fem_mesh *m) {
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = m->dim, dd = d * d, dp = d + 1, a, j;
+    size_t e;
+    for (e = 0; e < m->n_elems; ++e) {
+        pn_real *B = s->B + e * (size_t)dd, *q = s->q + e * (size_t)(d * dp);
+        pn_mat_mul(d, m->Dm_inv + e * (size_t)dd, m->Fp_inv + e * (size_t)dd, B);
+        for (j = 0; j < d; ++j) q[j] = 0;
+        for (a = 1; a <= d; ++a)
+            for (j = 0; j < d; ++j) q[a * d + j] = B[(a - 1) * d + j], q[j] -= B[(a - 1) * d + j];
+        s->elast[e] = m->groups[m->egroup[e]].material.elastic != PN_ELASTIC_FIXED_COROTATED ||
+                      m->groups[m->egroup[e]].material.plastic != PN_PLASTIC_NONE;
+    }
+}
+
+/* ---- >>fem implicit: the incremental potential, its Hessian in the skyline, Cholesky ---- */
+
+/* the skyline row of unknown k (nodes in RCM order, then the moving obstacles) */
+static size_t pn__fem_row(const pn_fem_mesh *m, size_t k) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    size_t nd = m->n_nodes * (size_t)m->dim;
+    if (k >= nd) return k;
+    return s->iperm[k / (size_t)m->dim] * (size_t)m->dim + k % (size_t)m->dim;
+}
+
+static void pn__fem_hadd(pn__fem *s, size_t r, size_t c, pn_real v) {
+    if (r < c) {
+        size_t t = r;
+        r = c, c = t;
+    }
+    s->L[s->rs[r] + c - s->fc[r]] += v;
+}
+
+/* is node k's unknown free (not driven)? */
+#define PN__FEM_FREE(m, node) (!(m)->fixed[node])
+
+/* E(x) at unknowns x (nodes, then the moving obstacles' offsets u); mode 1: and the gradient
+   into s->g; mode 2: and the Hessian into s->L. PN_ERROR_INVERTED for an element turned
+   inside out, PN_ERROR_STEP_TOO_LARGE for a node in an obstacle (the line search backs off
+   both). */
+static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, pn_real *E_out) {
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = m->dim, dd = d * d, dp = d + 1, a, b, i, j, o;
+    size_t n = m->n_nodes, nd = n * (size_t)d, k, e, nu = s->nu;
+    pn_real dt2 = s->dt * s->dt, E = 0, dmin = 1e300;
+    if (mode >= 1) memset(s->g, 0, sizeof(pn_real) * nu);
+    if (mode >= 2) memset(s->L, 0, sizeof(pn_real) * s->rs[nu]);
+    for (k = 0; k < n; ++k) { /* inertia */
+        if (!PN__FEM_FREE(m, k)) continue;
+        for (i = 0; i < d; ++i) {
+            size_t c = k * (size_t)d + (size_t)i;
+            pn_real dx = x[c] - s->xt[c];
+            E += m->mass[k] * dx * dx / 2;
+            if (mode >= 1) s->g[c] += m->mass[k] * dx;
+            if (mode >= 2) pn__fem_hadd(s, pn__fem_row(m, c), pn__fem_row(m, c), m->mass[k]);
+        }
+    }
+    for (e = 0; e < m->n_elems; ++e) {
+        pn_real Fe[9], psi, *P = s->eP + e * (size_t)dd, *H = s->eH + e * (size_t)(dd * dd);
+        const int *el = m->elem + e * (size_t)dp;
+        const pn_real *q = s->q + e * (size_t)(d * dp);
+        pn_real V = m->vol0[e] * dt2;
+        pn_result r;
+        pn__fem_fe(m, e, x, Fe);
+        if (s->elast[e] && !(pn_mat_det(d, Fe) > 0)) {
+            m->error_element = (long)e;
+            return PN_ERROR_INVERTED;
+        }
+        r = pn__fem_psi(m, e, Fe, &psi, mode >= 1 ? P : NULL, mode >= 2 ? H : NULL);
+        if (r != PN_OK || !pn__finite(psi)) {
+            m->error_element = (long)e;
+            return r != PN_OK ? r : PN_ERROR_OVERFLOW;
+        }
+        E += V * psi;
+        if (mode >= 1)
+            for (a = 0; a < dp; ++a) {
+                size_t na = (size_t)el[a];
+                if (!PN__FEM_FREE(m, na)) continue;
+                for (i = 0; i < d; ++i) {
+                    pn_real acc = 0;
+                    for (j = 0; j < d; ++j) acc += P[i * d + j] * q[a * d + j];
+                    s->g[na * (size_t)d + (size_t)i] += V * acc;
+                }
+            }
+        if (mode >= 2)
+            for (a = 0; a < dp; ++a) {
+                size_t na = (size_t)el[a];
+                if (!PN__FEM_FREE(m, na)) continue;
+                for (b = 0; b <= a; ++b) {
+                    size_t nb = (size_t)el[b];
+                    int kk, mm, nn;
+                    if (!PN__FEM_FREE(m, nb)) continue;
+                    for (i = 0; i < d; ++i)
+                        for (kk = 0; kk < d; ++kk) {
+                            pn_real acc = 0;
+                            size_t ra, cb;
+                            if (a == b && kk > i) continue; /* the diagonal block's upper half */
+                            for (mm = 0; mm < d; ++mm)
+                                for (nn = 0; nn < d; ++nn) acc += H[(i * d + mm) * dd + kk * d + nn] * q[a * d + mm] * q[b * d + nn];
+                            ra = pn__fem_row(m, na * (size_t)d + (size_t)i);
+                            cb = pn__fem_row(m, nb * (size_t)d + (size_t)kk);
+                            pn__fem_hadd(s, ra, cb, V * acc);
+                        }
+                }
+            }
+    }
+    for (o = 0; o < m->n_obstacles; ++o) { /* the barrier */
+        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_real *u = NULL;
+        size_t uo = 0;
+        for (j = 0; j < s->n_mov; ++j)
+            if (s->mov[j] == o) uo = nd + (size_t)(j * d), u = x + uo;
+        for (k = 0; k < n; ++k) {
+            pn_real nrm[3], dist, bb, b1, b2, w = dt2 * m->kappa;
+            if (!PN__FEM_FREE(m, k)) continue;
+            dist = pn__fem_obstacle_sd(c, d, u ? m->time_s : s->t_end, u, x + k * (size_t)d, nrm);
+            dmin = PN__MIN(dmin, dist);
+            if (!(dist > 0)) {
+                m->error_node = (long)k;
+                s->dmin = dist;
+                return PN_ERROR_STEP_TOO_LARGE;
+            }
+            if (dist >= m->dhat) continue;
+            pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+            E += w * bb;
+            if (mode >= 1)
+                for (i = 0; i < d; ++i) {
+                    s->g[k * (size_t)d + (size_t)i] += w * b1 * nrm[i];
+                    if (u) s->g[uo + (size_t)i] -= w * b1 * nrm[i];
+                }
+            if (mode >= 2) /* b'' n n^T (the curvature of a box's distance, NSD times b' < 0, dropped) */
+                for (i = 0; i < d; ++i)
+                    for (j = 0; j < d; ++j) {
+                        pn_real hv = w * b2 * nrm[i] * nrm[j];
+                        size_t ri = pn__fem_row(m, k * (size_t)d + (size_t)i), rj = pn__fem_row(m, k * (size_t)d + (size_t)j);
+                        if (j <= i) pn__fem_hadd(s, ri, rj, hv);
+                        if (u) {
+                            if (j <= i) pn__fem_hadd(s, uo + (size_t)i, uo + (size_t)j, hv);
+                            pn__fem_hadd(s, uo + (size_t)i, rj, -hv);
+                        }
+                    }
+        }
+    }
+    for (j = 0; j < s->n_mov; ++j) /* the augmented Lagrangian pulling each obstacle to its target */
+        for (i = 0; i < d; ++i) {
+            size_t c = nd + (size_t)(j * d + i);
+            pn_real du = x[c] - s->target[j * d + i];
+            E += s->al_k * du * du / 2 - s->al_lam[j * d + i] * du;
+            if (mode >= 1) s->g[c] += s->al_k * du - s->al_lam[j * d + i];
+            if (mode >= 2) pn__fem_hadd(s, c, c, s->al_k);
+        }
+    if (mode >= 2) /* driven nodes: identity rows */
+        for (k = 0; k < n; ++k)
+            if (!PN__FEM_FREE(m, k))
+                for (i = 0; i < d; ++i) pn__fem_hadd(s, pn__fem_row(m, k * (size_t)d + (size_t)i), pn__fem_row(m, k * (size_t)d + (size_t)i), 1);
+    s->dmin = dmin;
+    *E_out = E;
+    return pn__finite(E) ? PN_OK : PN_ERROR_OVERFLOW;
+}
+
+/* In-place Cholesky of the skyline matrix's first nu rows; 0 if not positive definite. */
+static int pn__fem_cholesky(pn__fem *s, size_t nu) {
+    size_t r, c, k;
+    for (r = 0; r < nu; ++r) {
+        pn_real *Lr = s->L + s->rs[r], diag;
+        size_t fr = s->fc[r];
+        for (c = fr; c < r; ++c) {
+            const pn_real *Lc = s->L + s->rs[c];
+            size_t fcc = s->fc[c], k0 = PN__MAX(fr, fcc);
+            pn_real acc = Lr[c - fr];
+            for (k = k0; k < c; ++k) acc -= Lr[k - fr] * Lc[k - fcc];
+            Lr[c - fr] = acc / Lc[c - fcc];
+        }
+        diag = Lr[r - fr];
+        for (k = fr; k < r; ++k) diag -= Lr[k - fr] * Lr[k - fr];
+        if (!(diag > 0)) return 0;
+        Lr[r - fr] = PN__SQRT(diag);
+    }
+    return 1;
+}
+
+/* solve L L^T y = b in place (skyline rows) */
+static void pn__fem_solve(const pn__fem *s, size_t nu, pn_real *y) {
+    size_t r, k;
+    for (r = 0; r < nu; ++r) {
+        const pn_real *Lr = s->L + s->rs[r];
+        pn_real acc = y[r];
+        for (k = s->fc[r]; k < r; ++k) acc -= Lr[k - s->fc[r]] * y[k];
+        y[r] = acc / Lr[r - s->fc[r]];
+    }
+    for (r = nu; r-- > 0;) {
+        const pn_real *Lr = s->L + s->rs[r];
+        y[r] /= Lr[r - s->fc[r]];
+        for (k = s->fc[r]; k < r; ++k) y[k] -= Lr[k - s->fc[r]] * y[r];
+    }
+}
+
+/* The largest step along dir (<= 1) no node takes into an obstacle: 0.9 of the first time of
+   contact of each node's straight path with each obstacle (moving with its offset's own step). */
+static pn_real pn__fem_ccd(const pn_fem_mesh *m, const pn_real *x, const pn_real *dir) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    int d = m->dim, o, i, j;
+    size_t k, nd = m->n_nodes * (size_t)d;
+    pn_real amax = 1;
+    for (o = 0; o < m->n_obstacles; ++o) {
+        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_real *u = NULL, *du = NULL;
+        pn_real t = s->t_end;
+        for (j = 0; j < s->n_mov; ++j)
+            if (s->mov[j] == o) u = x + nd + (size_t)(j * d), du = dir + nd + (size_t)(j * d), t = m->time_s;
+        for (k = 0; k < m->n_nodes; ++k) {
+            pn_real r0[3], w[3], hit = 2;
+            const pn_real *xk = x + k * (size_t)d;
+            if (!PN__FEM_FREE(m, k)) continue;
+            for (i = 0; i < d; ++i) {
+                r0[i] = xk[i] - (c->center_m[i] + t * c->velocity_m_s[i] + (u ? u[i] : 0));
+                w[i] = dir[k * (size_t)d + (size_t)i] - (du ? du[i] : 0);
+            }
+            if (c->shape == PN_MPM_SHAPE_HALF_SPACE) {
+                pn_real d0 = 0, rate = 0;
+                for (i = 0; i < d; ++i) d0 += r0[i] * c->normal[i], rate += w[i] * c->normal[i];
+                if (rate < 0) hit = d0 / -rate;
+            } else { /* slabs: the entry of r0 + a w into the box, a in [0, 1] */
+                pn_real lo = 0, hi = 1;
+                for (i = 0; i < d && lo <= hi; ++i) {
+                    pn_real hx = c->half_extent_m[i];
+                    if (w[i] == 0) {
+                        if (r0[i] <= -hx || r0[i] >= hx) lo = 2;
+                    } else {
+                        pn_real a1 = (-hx - r0[i]) / w[i], a2 = (hx - r0[i]) / w[i];
+                        if (a1 > a2) {
+                            pn_real tmp = a1;
+                            a1 = a2, a2 = tmp;
+                        }
+                        lo = PN__MAX(lo, a1), hi = PN__MIN(hi, a2);
+                    }
+                }
+                if (lo <= hi && lo <= 1) hit = lo;
+            }
+            if (hit <= 1) amax = PN__MIN(amax, (pn_real)0.9 * hit);
+        }
+    }
+    return amax;
+}
+
+/* ---- >>fem steps -------------------------------------------------------------------------- */
+
+/* the state before a step, kept (restore = 0) or put back (restore = 1) */
+static void pn__fem_keep(pn_fem_mesh *m, int restore) {
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t nd = m->n_nodes * (size_t)m->dim, ne = m->n_elems, dd = (size_t)(m->dim * m->dim);
+    pn_real *live[4], *kept[4];
+    size_t len[4];
+    int i;
+    live[0] = m->x, kept[0] = s->bx, len[0] = nd;
+    live[1] = m->v, kept[1] = s->bv, len[1] = nd;
+    live[2] = m->Fp_inv, kept[2] = s->bFp, len[2] = ne * dd;
+    live[3] = m->h, kept[3] = s->bh, len[3] = ne;
+    for (i = 0; i < 4; ++i) memcpy(restore ? live[i] : kept[i], restore ? kept[i] : live[i], sizeof(pn_real) * len[i]);
+    if (restore) m->time_s = s->bt;
+    else s->bt = m->time_s;
+}
+#define pn__fem_backup(m) pn__fem_keep(m, 0)
+#define pn__fem_restore(m) pn__fem_keep(m, 1)
+
+/* The return mapping of every element at the new positions (F = Fe Fp: Fp^-1 <- Fp^-1 Fe^-1 Z);
+   the count of projected elements in *plastic. */
+static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = m->dim, dd = d * d, i;
+    size_t e;
+    *plastic = 0;
+    for (e = 0; e < m->n_elems; ++e) {
+        const pn_fem_group *g = &m->groups[m->egroup[e]];
+        pn_real Fe[9], Z[9], Fi[9], T[9], hn, moved = 0;
+        pn_result r;
+        pn__fem_fe(m, e, m->x, Fe);
+        if (s->elast[e] && !(pn_mat_det(d, Fe) > 0)) {
+            m->error_element = (long)e;
+            return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu turned inside out (det Fe = %g)", (unsigned long)e,
+                                (double)pn_mat_det(d, Fe));
+        }
+        if (g->material.plastic == PN_PLASTIC_NONE) continue;
+        r = pn__mpm_energy_of(g) == PN_MPM_ENERGY_PNET && g->pnet.return_map
+                ? pn_learned_return_map(g->pnet.return_map, &g->material, d, Fe, m->h[e], Z, &hn, NULL)
+                : pn_return_map(&g->material, d, Fe, m->h[e], Z, &hn, NULL);
+        if (r != PN_OK || !pn__finite(hn)) {
+            m->error_element = (long)e;
+            return pn__fem_fail(m, r != PN_OK ? r : PN_ERROR_OVERFLOW, "element %lu: the return mapping failed (%s)",
+                                (unsigned long)e, pn_result_string(r != PN_OK ? r : PN_ERROR_OVERFLOW));
+        }
+        for (i = 0; i < dd; ++i) moved = PN__MAX(moved, PN__FABS(Z[i] - Fe[i]));
+        if (moved == 0 && hn == m->h[e]) continue;
+        (*plastic)++;
+        if (pn_mat_inverse(d, Fe, Fi) != PN_OK) {
+            m->error_element = (long)e;
+            return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu: Fe is singular", (unsigned long)e);
+        }
+        pn_mat_mul(d, m->Fp_inv + e * (size_t)dd, Fi, T);
+        pn_mat_mul(d, T, Z, m->Fp_inv + e * (size_t)dd);
+        m->h[e] = hn;
+    }
+    return PN_OK;
+}
+
+static pn_real pn__fem_min_distance(const pn_fem_mesh *m, pn_real t) {
+    pn_real dmin = 1e300, nrm[3];
+    int o;
+    size_t k;
+    for (o = 0; o < m->n_obstacles; ++o)
+        for (k = 0; k < m->n_nodes; ++k)
+            if (PN__FEM_FREE(m, k))
+                dmin = PN__MIN(dmin, pn__fem_obstacle_sd(&m->obstacles[o], m->dim, t, NULL, m->x + k * (size_t)m->dim, nrm));
+    return dmin;
+}
+
+PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
+    const pn__fem *s;
+    int d, dp, a, b, c, o;
+    size_t e, k;
+    pn_real best = 1e300;
+    if (!m || !dt_s) return PN_ERROR_INVALID_ARGUMENT;
+    s = (const pn__fem *)m->impl;
+    (void)s;
+    d = m->dim, dp = d + 1;
+    for (e = 0; e < m->n_elems; ++e) { /* the smallest altitude over the P-wave speed */
+        const pn_fem_group *g = &m->groups[m->egroup[e]];
+        const int *el = m->elem + e * (size_t)dp;
+        pn_real Ds[9], vol, fmax = 0, cp, alt;
+        pn__fem_ds(m, e, m->x, Ds);
+        vol = PN__FABS(pn__fem_volume(d, Ds));
+        for (a = 0; a < dp; ++a) { /* the face opposite node a: its length (2D) or area (3D) */
+            pn_real p[3][3], f;
+            int nf = 0;
+            for (b = 0; b < dp; ++b)
+                if (b != a) {
+                    for (c = 0; c < d; ++c) p[nf][c] = m->x[(size_t)el[b] * (size_t)d + (size_t)c];
+                    nf++;
+                }
+            if (d == 2) f = PN__SQRT((p[1][0] - p[0][0]) * (p[1][0] - p[0][0]) + (p[1][1] - p[0][1]) * (p[1][1] - p[0][1]));
+            else {
+                pn_real u[3], v[3], w[3];
+                for (c = 0; c < 3; ++c) u[c] = p[1][c] - p[0][c], v[c] = p[2][c] - p[0][c];
+                w[0] = u[1] * v[2] - u[2] * v[1], w[1] = u[2] * v[0] - u[0] * v[2], w[2] = u[0] * v[1] - u[1] * v[0];
+                f = PN__SQRT(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / 2;
+            }
+            fmax = PN__MAX(fmax, f);
+        }
+        alt = d * vol / fmax;
+        cp = PN__SQRT((g->material.lambda + 2 * g->material.mu) / g->density_kg_m3);
+        best = PN__MIN(best, (pn_real)0.5 * alt / cp);
+    }
+    for (o = 0; o < m->n_obstacles; ++o) { /* no node closes more than a quarter of its gap per step */
+        const pn_real *vo = m->obstacles[o].velocity_m_s;
+        pn_real so = PN__SQRT(vo[0] * vo[0] + vo[1] * vo[1] + vo[2] * vo[2]);
+        for (k = 0; k < m->n_nodes; ++k) {
+            pn_real nrm[3], v2 = 0, sp, dist = pn__fem_obstacle_sd(&m->obstacles[o], d, m->time_s, NULL, m->x + k * (size_t)d, nrm);
+            for (c = 0; c < d; ++c) v2 += m->v[k * (size_t)d + (size_t)c] * m->v[k * (size_t)d + (size_t)c];
+            sp = PN__SQRT(v2) + so;
+            if (sp > 0 && dist > 0) best = PN__MIN(best, (pn_real)0.25 * dist / sp);
+        }
+    }
+    for (o = 0; o < m->n_obstacles; ++o) /* the barrier's spring at each node within dhat */
+        for (k = 0; k < m->n_nodes; ++k) {
+            pn_real nrm[3], dist = pn__fem_obstacle_sd(&m->obstacles[o], d, m->time_s, NULL, m->x + k * (size_t)d, nrm), bb, b1, b2;
+            if (!PN__FEM_FREE(m, k) || dist >= m->dhat || !(dist > 0)) continue;
+            pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+            best = PN__MIN(best, PN__SQRT(m->mass[k] / (m->kappa * b2)));
+        }
+    *dt_s = best;
+    return PN_OK;
+}
+
+static pn_result pn__fem_check_dt(pn_fem_mesh *m, pn_real dt, const char *who) {
+    if (!(dt > 0) || !pn__finite(dt))
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "%s: dt %g must be positive and finite", who, (double)dt);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats *stats) {
+    pn__fem *s;
+    int d, dd, dp, a, i, j, o;
+    size_t e, k, plastic = 0;
+    pn_result r;
+    pn_real *f;
+    if (!m) return PN_ERROR_INVALID_ARGUMENT;
+    m->error[0] = 0;
+    m->error_element = m->error_node = -1;
+    if ((r = pn__fem_check_dt(m, dt, "pn_fem_step_explicit")) != PN_OK) return r;
+    s = (pn__fem *)m->impl;
+    d = m->dim, dd = d * d, dp = d + 1;
+    if (stats) memset(stats, 0, sizeof *stats);
+    pn__fem_setup(m);
+    pn__fem_backup(m);
+    f = s->g; /* forces */
+    for (k = 0; k < m->n_nodes; ++k)
+        for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] = m->mass[k] * m->desc.gravity[i];
+    for (e = 0; e < m->n_elems; ++e) {
+        const pn_fem_group *g = &m->groups[m->egroup[e]];
+        const int *el = m->elem + e * (size_t)dp;
+        const pn_real *q = s->q + e * (size_t)(d * dp);
+        pn_real Fe[9], P[9];
+        pn__fem_fe(m, e, m->x, Fe);
+        r = pn_elastic_energy(&g->material, d, Fe, m->h[e], NULL, P, NULL, 0);
+        if (r != PN_OK) {
+            m->error_element = (long)e;
+            return pn__fem_fail(m, r, "pn_fem_step_explicit: element %lu: %s", (unsigned long)e, pn_result_string(r));
+        }
+        for (a = 0; a < dp; ++a)
+            for (i = 0; i < d; ++i) {
+                pn_real acc = 0;
+                for (j = 0; j < d; ++j) acc += P[i * d + j] * q[a * d + j];
+                f[(size_t)el[a] * (size_t)d + (size_t)i] -= m->vol0[e] * acc;
+            }
+    }
+    (void)dd;
+    for (o = 0; o < m->n_obstacles; ++o)
+        for (k = 0; k < m->n_nodes; ++k) {
+            pn_real nrm[3], bb, b1, b2, dist = pn__fem_obstacle_sd(&m->obstacles[o], d, m->time_s, NULL, m->x + k * (size_t)d, nrm);
+            if (dist >= m->dhat) continue;
+            pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+            for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] -= m->kappa * b1 * nrm[i];
+        }
+    for (k = 0; k < m->n_nodes; ++k)
+        for (i = 0; i < d; ++i) {
+            size_t c = k * (size_t)d + (size_t)i;
+            m->v[c] = m->fixed[k] ? m->drive[c] : m->v[c] + dt * f[c] / m->mass[k];
+            m->x[c] += dt * m->v[c];
+            if (!pn__finite(m->x[c])) {
+                pn__fem_restore(m);
+                m->error_node = (long)k;
+                return pn__fem_fail(m, PN_ERROR_OVERFLOW, "pn_fem_step_explicit: node %lu's position is not finite: take a "
+                                    "smaller step (pn_fem_stable_dt)", (unsigned long)k);
+            }
+        }
+    if (m->n_obstacles && !(pn__fem_min_distance(m, m->time_s + dt) > 0)) {
+        pn__fem_restore(m);
+        return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: a node would reach an obstacle in a step of %g "
+                            "s: take a smaller step (pn_fem_stable_dt)", (double)dt);
+    }
+    r = pn__fem_return(m, &plastic);
+    if (r != PN_OK) {
+        char msg[256];
+        memcpy(msg, m->error, sizeof msg);
+        pn__fem_restore(m);
+        return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: %s: take a smaller step", msg);
+    }
+    m->time_s += dt;
+    m->steps++;
+    if (stats) {
+        pn_real sdt;
+        stats->substeps = 1;
+        stats->plastic = plastic;
+        stats->min_distance_m = m->n_obstacles ? pn__fem_min_distance(m, m->time_s) : -1;
+        stats->kappa = m->kappa;
+        pn_fem_stable_dt(m, &sdt);
+        stats->dt_over_cfl = dt / sdt;
+    }
+    return PN_OK;
+}
+
+static pn_result pn__fem_objective_value(void *ctx, const pn_real *x, pn_real *E) {
+    return pn__fem_objective((pn_fem_mesh *)ctx, x, 0, E);
+}
+
+/* Newton on the incremental potential from s->xs (feasible) to its minimum. */
+static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o, pn_fem_stats *st) {
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t nu = s->nu, k;
+    int it;
+    pn_real tol = o->newton_tol * m->edge_mean, res = 0;
+    for (it = 0; it < o->newton_max; ++it) {
+        pn_real E0, E1, gd = 0, a0, alpha;
+        pn_result r = pn__fem_objective(m, s->xs, 2, &E0);
+        if (r != PN_OK)
+            return pn__fem_fail(m, r, "implicit step: the energy at an accepted iterate failed (%s, element %ld, node %ld)",
+                                pn_result_string(r), m->error_element, m->error_node);
+        for (k = 0; k < nu; ++k) s->xtry[pn__fem_row(m, k)] = -s->g[k];
+        if (!pn__fem_cholesky(s, nu))
+            return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the Hessian is not positive definite (a "
+                                "material's energy is not convex where it was projected)");
+        st->factorizations++;
+        pn__fem_solve(s, nu, s->xtry);
+        for (res = 0, k = 0; k < nu; ++k) {
+            s->dir[k] = s->xtry[pn__fem_row(m, k)];
+            res = PN__MAX(res, PN__FABS(s->dir[k]));
+            gd += s->g[k] * s->dir[k];
+        }
+        st->newton_iters++;
+        st->newton_residual = res / m->edge_mean;
+        if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / m->edge_mean);
+        if (!pn__finite(res))
+            return pn__fem_fail(m, PN_ERROR_OVERFLOW, "implicit step: the Newton direction is not finite");
+        if (res <= tol && it > 0) return PN_OK; /* the first step is always taken: x^n is no answer */
+        a0 = pn__fem_ccd(m, s->xs, s->dir);
+        alpha = pn__armijo(pn__fem_objective_value, m, nu, s->xs, s->dir, E0, gd, a0, s->xtry, &E1);
+        if (alpha == 0) {
+            st->line_search_failures++;
+            if (res <= 100 * tol) return PN_OK;
+            return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the line search found no decrease at max |dx| = "
+                                "%.3g of the mean edge (newton_tol %g)", (double)(res / m->edge_mean), (double)o->newton_tol);
+        }
+        memcpy(s->xs, s->xtry, sizeof(pn_real) * nu);
+    }
+    if (res <= 100 * tol) return PN_OK;
+    return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped after %d iterations at max |dx| = %.3g "
+                        "of the mean edge (newton_tol %g): a smaller step converges", (double)s->dt, o->newton_max,
+                        (double)(res / m->edge_mean), (double)o->newton_tol);
+}
+
+/* each element's energy prepared at F0 = Fe(x) (fixed point); elements x inverts use x^n */
+static pn_result pn__fem_prepare(pn_fem_mesh *m, const pn_real *x) {
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = m->dim, dd = d * d;
+    size_t e;
+    for (e = 0; e < m->n_elems; ++e) {
+        const pn_fem_group *g = &m->groups[m->egroup[e]];
+        pn_real F0[9];
+        pn_result r = PN_OK;
+        pn_mpm_energy en = pn__mpm_energy_of(g);
+        if (en != PN_MPM_ENERGY_LAGGED && en != PN_MPM_ENERGY_PNET && en != PN_MPM_ENERGY_DP) continue;
+        pn__fem_fe(m, e, x, F0);
+        if (!(pn_mat_det(d, F0) > 0)) pn__fem_fe(m, e, m->x, F0);
+        if (en == PN_MPM_ENERGY_LAGGED) r = pn_lagged_prepare(&g->material, d, F0, m->h[e], s->pG + e * (size_t)dd, &s->phG[e]);
+        else if (en == PN_MPM_ENERGY_PNET) r = pn_pnet_prepare(&g->pnet, F0, m->h[e], &s->ppt[e], NULL, NULL);
+        else r = pn_dp_prepare(&g->material, d, F0, m->h[e], &s->pty[e]);
+        if (r != PN_OK) {
+            m->error_element = (long)e;
+            return pn__fem_fail(m, r, "element %lu: preparing its energy at F0 failed (%s)", (unsigned long)e, pn_result_string(r));
+        }
+    }
+    return PN_OK;
+}
+
+static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_implicit_desc *o, pn_fem_stats *st) {
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = m->dim, dp = d + 1, i, j, pass, round, a;
+    size_t n = m->n_nodes, nd = n * (size_t)d, k, e, plastic = 0;
+    pn_real kmax = 0, tol = o->newton_tol * m->edge_mean;
+    pn_result r;
+    s->dt = dt;
+    s->t_end = m->time_s + dt;
+    pn__fem_setup(m);
+    s->n_mov = 0;
+    for (i = 0; i < m->n_obstacles; ++i) {
+        const pn_real *v = m->obstacles[i].velocity_m_s;
+        if (v[0] != 0 || v[1] != 0 || v[2] != 0) {
+            for (j = 0; j < d; ++j) s->target[s->n_mov * d + j] = v[j] * dt, s->al_lam[s->n_mov * d + j] = 0;
+            s->mov[s->n_mov++] = i;
+        }
+    }
+    s->nu = nd + (size_t)(s->n_mov * d);
+    for (k = 0; k < n; ++k)
+        for (i = 0; i < d; ++i) {
+            size_t c = k * (size_t)d + (size_t)i;
+            if (m->fixed[k]) s->xt[c] = s->xs[c] = m->x[c] + dt * m->drive[c];
+            else s->xt[c] = m->x[c] + dt * m->v[c] + dt * dt * m->desc.gravity[i], s->xs[c] = m->x[c];
+        }
+    for (k = nd; k < s->nu; ++k) s->xs[k] = 0;
+    { /* start at the inertial prediction x~ where it is near (no node moves half an edge),
+         no node passes an obstacle to it and no element is inverted there; else at x^n */
+        pn_real E, far = 0;
+        for (k = 0; k < nd; ++k) s->dir[k] = s->xt[k] - s->xs[k], far = PN__MAX(far, PN__FABS(s->dir[k]));
+        for (k = nd; k < s->nu; ++k) s->dir[k] = 0;
+        if (far <= m->edge_mean / 2 && pn__fem_ccd(m, s->xs, s->dir) >= (pn_real)0.9) {
+            memcpy(s->xtry, s->xs, sizeof(pn_real) * s->nu);
+            for (k = 0; k < nd; ++k) s->xs[k] = s->xt[k];
+            s->al_k = 0;
+            if (pn__fem_prepare(m, s->xt) != PN_OK || pn__fem_objective(m, s->xs, 0, &E) != PN_OK)
+                memcpy(s->xs, s->xtry, sizeof(pn_real) * s->nu);
+        }
+    }
+    /* the obstacles' pull: 1e4 times the stiffest node's diagonal (mass, elements, barrier) */
+    for (e = 0; e < m->n_elems; ++e) {
+        const pn_material *mt = &m->groups[m->egroup[e]].material;
+        const pn_real *q = s->q + e * (size_t)(d * dp);
+        pn_real qq = 0;
+        for (a = 0; a < d * dp; ++a) qq = PN__MAX(qq, q[a] * q[a]);
+        kmax = PN__MAX(kmax, dt * dt * m->vol0[e] * (mt->lambda + 2 * mt->mu) * qq * d);
+    }
+    for (k = 0; k < n; ++k) kmax = PN__MAX(kmax, m->mass[k]);
+    kmax += dt * dt * m->kappa * 10;
+    s->al_k = 1e4 * kmax;
+    for (pass = 0; pass < o->fixed_point_iters; ++pass) {
+        r = pn__fem_prepare(m, pass == 0 ? s->xt : s->xs);
+        if (r != PN_OK) return r;
+        st->fixed_point_iters++;
+        for (round = 0;; ++round) {
+            pn_real off = 0;
+            st->solves++;
+            r = pn__fem_minimize(m, o, st);
+            if (r != PN_OK) return r;
+            if (!s->n_mov) break;
+            st->al_iters++;
+            for (k = nd; k < s->nu; ++k) off = PN__MAX(off, PN__FABS(s->xs[k] - s->target[k - nd]));
+            if (off <= tol) break;
+            if (round >= 30)
+                return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: a moving obstacle is still %g m short "
+                                    "of its position after %d rounds: a smaller step", (double)dt, (double)off, round + 1);
+            for (k = nd; k < s->nu; ++k) s->al_lam[k - nd] -= s->al_k * (s->xs[k] - s->target[k - nd]);
+        }
+    }
+    for (k = 0; k < nd; ++k) m->v[k] = (s->xs[k] - m->x[k]) / dt, m->x[k] = s->xs[k];
+    r = pn__fem_return(m, &plastic);
+    if (r != PN_OK) return r;
+    m->time_s += dt;
+    st->plastic += plastic;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_implicit_desc *desc, pn_fem_stats *stats) {
+    pn_fem_implicit_desc o;
+    pn_fem_stats st;
+    pn_result r;
+    int level;
+    if (!m) return PN_ERROR_INVALID_ARGUMENT;
+    m->error[0] = 0;
+    m->error_element = m->error_node = -1;
+    if ((r = pn__fem_check_dt(m, dt, "pn_fem_step_implicit")) != PN_OK) return r;
+    memset(&o, 0, sizeof o);
+    if (desc) o = *desc;
+    if (!o.fixed_point_iters) o.fixed_point_iters = 1;
+    if (!o.newton_max) o.newton_max = 100;
+    if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
+    if (!o.max_halvings) o.max_halvings = 3;
+    if (o.fixed_point_iters < 0 || o.newton_max < 0 || !pn__finite(o.newton_tol))
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: fixed_point_iters, newton_max and newton_tol "
+                            "must be positive");
+    pn__fem_backup(m);
+    for (level = 0; level <= (o.max_halvings < 0 ? 0 : o.max_halvings); ++level) {
+        int sub, nsub = 1 << level;
+        char first[256] = "";
+        memset(&st, 0, sizeof st);
+        st.substeps = nsub;
+        for (sub = 0, r = PN_OK; sub < nsub && r == PN_OK; ++sub) r = pn__fem_implicit_once(m, dt / nsub, &o, &st);
+        if (r == PN_OK) {
+            m->steps++;
+            st.min_distance_m = m->n_obstacles ? pn__fem_min_distance(m, m->time_s) : -1;
+            st.kappa = m->kappa;
+            {
+                pn_real sdt;
+                pn_fem_stable_dt(m, &sdt);
+                st.dt_over_cfl = dt / sdt;
+            }
+            if (stats) *stats = st;
+            return PN_OK;
+        }
+        if (!level) memcpy(first, m->error, sizeof first);
+        pn__fem_restore(m);
+        if (stats && !level) *stats = st;
+        (void)first;
+    }
+    return r;
+}
+
+PN__DEF pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_real *kinetic_j) {
+    int d, dd;
+    size_t e, k;
+    pn_real el = 0, kin = 0;
+    if (!m) return PN_ERROR_INVALID_ARGUMENT;
+    d = m->dim, dd = d * d;
+    for (e = 0; e < m->n_elems; ++e) {
+        pn_real Ds[9], F[9], Fe[9], psi = 0;
+        pn__fem_ds(m, e, m->x, Ds);
+        pn_mat_mul(d, Ds, m->Dm_inv + e * (size_t)dd, F);
+        pn_mat_mul(d, F, m->Fp_inv + e * (size_t)dd, Fe);
+        if (pn_elastic_energy(&m->groups[m->egroup[e]].material, d, Fe, m->h[e], &psi, NULL, NULL, 0) != PN_OK) return PN_ERROR_INVERTED;
+        el += m->vol0[e] * psi;
+    }
+    for (k = 0; k < m->n_nodes * (size_t)d; ++k) kin += m->mass[k / (size_t)d] * m->v[k] * m->v[k] / 2;
+    if (elastic_j) *elastic_j = el;
+    if (kinetic_j) *kinetic_j = kin;
+    return PN_OK;
+}
+
+#undef PN__FEM_FREE
+#undef pn__fem_backup
+#undef pn__fem_restore
+#undef PN__FEM_ALIGN
 #undef PN__OMP_FOR
 #undef PN__MPM_SPLINE
 #undef PN__MPM_ADD4

@@ -4,7 +4,7 @@
    Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
                     [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]
-                    [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]
+                    [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp,stress] [--no-sweep]
                     [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
                     [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..]
                     [--sweep-runs I,I,..] [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]
@@ -40,7 +40,8 @@
       scene is, a floor under any integrator's distance from the reference;
    3. implicit at dt 1e-4, 1e-3, 1e-2 s with 1, 2 and 4 fixed-point passes, with the
       PlasticityNet energy and with the lagged energy, and for sand also with the frozen-yield
-      Drucker-Prager energy (pn_dp_energy).
+      Drucker-Prager energy (pn_dp_energy); and the stress formulation (one run per dt: it has
+      no fixed point).
    Every run is compared with the reference frame by frame (25 fps, so that every dt above
    divides a frame) by the mass IoUs of examples/pn_example.h: soft (the formula of
    docs/validation.md; below 1 even for identical fields, so the reference's score against itself
@@ -78,6 +79,7 @@ typedef struct bench_run {
     char role[16];        /* reference, ref_check, ref_perturbed, fair, implicit    */
     int implicit, fp;     /* fixed-point passes (implicit)                          */
     pn_mpm_energy energy; /* implicit only                                          */
+    int stress;           /* implicit in the stress formulation (energy: the group's law) */
     double dt;
     run_status status;
     pn_result error;      /* RUN_STEP_FAILED                                        */
@@ -132,6 +134,7 @@ static int bench_frames(const bench_cfg *cfg, const pn_ex_scene *s) {
 
 static const char *energy_name(const bench_run *r) {
     if (!r->implicit) return "return_mapping";
+    if (r->stress) return "stress";
     return r->energy == PN_MPM_ENERGY_PNET     ? "pnet"
            : r->energy == PN_MPM_ENERGY_LAGGED ? "lagged"
            : r->energy == PN_MPM_ENERGY_DP     ? "dp"
@@ -221,6 +224,7 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     memset(&id, 0, sizeof id);
     if (solver) id = *solver;
     id.fixed_point_iters = r->fp;
+    if (r->stress) id.formulation = PN_MPM_FORMULATION_STRESS;
     for (f = 0; f < frames; ++f) {
         double t0 = pn_ex_seconds(), c0 = (double)clock() / CLOCKS_PER_SEC;
         pn_result e = pn_ex_steps(w, r->implicit, r->dt, &id, per_frame, &r->tally);
@@ -427,8 +431,12 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     pn_mpm_world *w;
     const char *why;
     bench_run *r;
-    static const pn_mpm_energy energies_run[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP};
-    int n_energies = kind == PN_EX_SAND_COLUMN ? 3 : 2; /* the DP energy is for Drucker-Prager */
+    /* the last is the stress formulation (its law is the group's: the DP energy's entry only
+       selects sand's Drucker-Prager groups); fixed-point passes do not apply to it, so it runs
+       at the first of them only */
+    static const pn_mpm_energy energies_run[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP,
+                                                 PN_MPM_ENERGY_DP};
+    int n_energies = 4;
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
     if (cfg->filter >= 0) s.filter_s = cfg->filter;
@@ -488,11 +496,13 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     /* 3. implicit */
     for (e = 0; e < n_energies && !cfg->refs_only; ++e)
         for (i = 0; i < cfg->n_dts && (cfg->energy_mask >> e & 1); ++i)
-            for (j = 0; j < cfg->n_fps; ++j) {
+            for (j = 0; j < (e == 3 ? 1 : cfg->n_fps); ++j) {
+                if (e == 2 && kind != PN_EX_SAND_COLUMN) break; /* the DP energy is for Drucker-Prager */
                 r = &out->runs[out->n_runs++];
                 strcpy(r->role, "implicit");
                 r->implicit = 1;
-                r->energy = energies_run[e];
+                r->stress = e == 3;
+                r->energy = e == 3 && kind != PN_EX_SAND_COLUMN ? PN_MPM_ENERGY_LAGGED : energies_run[e];
                 r->dt = cfg->dts[i];
                 r->fp = cfg->fps_iters[j];
                 bench_run_scene(&s, r, frames, cfg->max_run_s, &cfg->solver, NULL, ref);
@@ -831,6 +841,7 @@ static void write_svg(const char *path, const bench_scene *sc, int n_sc) {
             const bench_run *r = &s->runs[k];
             char label[64];
             const char *color = !r->implicit                       ? "#111"
+                                : r->stress                       ? "#b0249a"
                                 : r->energy == PN_MPM_ENERGY_PNET ? "#1f5fbf"
                                 : r->energy == PN_MPM_ENERGY_DP   ? "#2a9d3a"
                                                                   : "#e07b00";
@@ -964,7 +975,7 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
 static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
-                    "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp] [--no-sweep]\n"
+                    "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp,stress] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
                     "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n"
                     "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X] [--energy-rise-tol X]\n");
@@ -985,14 +996,15 @@ static int parse_list(const char *v, double *out) {
     return 0;
 }
 
-/* energies by name into a mask over bench_one's energies_run (pnet, lagged, dp); 0 if unknown */
+/* energies by name into a mask over bench_one's energies_run (pnet, lagged, dp, stress); 0 if
+   unknown */
 static unsigned parse_energies(const char *v) {
-    static const char *names[] = {"pnet", "lagged", "dp"};
+    static const char *names[] = {"pnet", "lagged", "dp", "stress"};
     unsigned mask = 0;
     while (*v) {
         size_t len = strcspn(v, ",");
         int e, hit = 0;
-        for (e = 0; e < 3; ++e)
+        for (e = 0; e < 4; ++e)
             if (strlen(names[e]) == len && !strncmp(v, names[e], len)) mask |= 1u << e, hit = 1;
         if (!hit) return 0;
         v += len;
@@ -1011,7 +1023,7 @@ int main(int argc, char **argv) {
     int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0, n_dts = 0, n_passes = 0, sweep = 1, bad = 0, cost = 0;
     static double dts_arg[8], passes_arg[8];
     static int passes_int[8];
-    unsigned mask = 7;
+    unsigned mask = 15;
     double duration = 0;
     char path[1024];
     FILE *csv, *esw;

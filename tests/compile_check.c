@@ -183,6 +183,47 @@ static void smoke_mpm(int d) {
     pn_mpm_destroy(w);
 }
 
+/* FEM: a square of two triangles (or a cube of six tetrahedra) on a floor, explicit and
+   implicit steps. */
+static void smoke_fem(int d) {
+    pn_fem_grid g;
+    pn_fem_group grp;
+    pn_fem_desc fd;
+    pn_fem_mesh *m = NULL;
+    pn_material_desc md;
+    pn_mpm_collider c;
+    pn_fem_stats st;
+    pn_real X[8 * 3], dt = 0, el_j = 0, kin_j = 0;
+    int el[6 * 4], fix = 0;
+    size_t nn = 0, ne = 0;
+    char why[128];
+    memset(&g, 0, sizeof g);
+    g.dim = d, g.cells[0] = g.cells[1] = g.cells[2] = 1;
+    g.lo_m[1] = (pn_real)0.01, g.size_m[0] = g.size_m[1] = g.size_m[2] = (pn_real)0.1;
+    CHECK(pn_fem_grid_mesh(&g, X, el, &nn, &ne) == PN_OK && nn == (size_t)(1 << d));
+    memset(&md, 0, sizeof md);
+    md.youngs_modulus_pa = 1e5;
+    md.poisson_ratio = (pn_real)0.3;
+    memset(&grp, 0, sizeof grp);
+    CHECK(pn_material_init(&grp.material, &md, NULL) == PN_OK);
+    grp.density_kg_m3 = 1000;
+    memset(&fd, 0, sizeof fd);
+    fd.dim = d, fd.n_nodes = nn, fd.n_elements = ne, fd.rest_m = X, fd.elements = el, fd.groups = &grp, fd.n_groups = 1;
+    fd.gravity[1] = (pn_real)-9.81;
+    CHECK(pn_fem_create(&fd, &m, why, sizeof why) == PN_OK);
+    if (!m) return;
+    memset(&c, 0, sizeof c);
+    c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+    CHECK(pn_fem_add_obstacle(m, &c, NULL) == PN_OK);
+    CHECK(pn_fem_group_set_energy(m, 0, PN_MPM_ENERGY_ELASTIC, NULL) == PN_OK);
+    CHECK(pn_fem_stable_dt(m, &dt) == PN_OK && dt > 0);
+    CHECK(pn_fem_step_explicit(m, dt / 2, &st) == PN_OK);
+    CHECK(pn_fem_step_implicit(m, (pn_real)1e-3, NULL, &st) == PN_OK && pn_fem_error(m)[0] == 0);
+    CHECK(pn_fem_fix_nodes(m, 1, &fix, NULL) == PN_OK);
+    CHECK(pn_fem_energy(m, &el_j, &kin_j) == PN_OK && kin_j > 0);
+    pn_fem_destroy(m);
+}
+
 int main(void) {
     char buf[256];
     pn_material m;
@@ -207,8 +248,12 @@ int main(void) {
     }
 #ifndef PN_NO_2D
     smoke_mpm(2);
+    smoke_fem(2);
 #else
     smoke_mpm(3);
+#endif
+#ifndef PN_NO_3D
+    smoke_fem(3);
 #endif
 #ifndef PN_NO_2D
     smoke(2);

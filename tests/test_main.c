@@ -18,6 +18,7 @@
 #include "test_pnet.c"    /* pn_tests_pnet: MLP, PlasticityNet energy, learned return map */
 #include "test_mpm.c"     /* pn_tests_mpm: explicit MPM on small scenes                 */
 #include "test_scene.c"   /* pn_tests_scene: fill helpers, stable dt, large steps, errors */
+#include "test_fem.c"     /* pn_tests_fem: FEM meshes, energies, contact, Newton        */
 
 #define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
@@ -31,6 +32,7 @@ int main(int argc, char **argv) {
     pn_test_run(pn_tests_pnet, PN_COUNT(pn_tests_pnet), filter, &passed, &failed);
     pn_test_run(pn_tests_mpm, PN_COUNT(pn_tests_mpm), filter, &passed, &failed);
     pn_test_run(pn_tests_scene, PN_COUNT(pn_tests_scene), filter, &passed, &failed);
+    pn_test_run(pn_tests_fem, PN_COUNT(pn_tests_fem), filter, &passed, &failed);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

@@ -1,0 +1,528 @@
+/* test_fem.c - FEM (plastinet_mpm.h >>fem): the structured mesh builder, the patch test,
+   the incremental potential against finite differences, the barrier, continuous collision
+   detection, the Newton line search, a cantilever against Euler-Bernoulli, explicit against
+   implicit, and bad meshes refused. Included by test_main.c. */
+
+/* a mesh of a grid (t_fem_grid), one material, no gravity unless set */
+typedef struct t_fem {
+    pn_real *X;
+    int *el;
+    size_t nn, ne;
+    pn_fem_mesh *m;
+} t_fem;
+
+static pn_fem_group t_fem_group(pn_elastic_model e, pn_plastic_model p, double E, double rho) {
+    pn_fem_group g;
+    pn_material_desc md;
+    memset(&md, 0, sizeof md);
+    md.elastic = e, md.plastic = p, md.youngs_modulus_pa = (pn_real)E, md.poisson_ratio = (pn_real)0.3;
+    md.yield_stress_pa = (pn_real)(3e-3 * E), md.hardening_modulus_pa = (pn_real)(1e-2 * E);
+    memset(&g, 0, sizeof g);
+    pn_material_init(&g.material, &md, NULL);
+    g.density_kg_m3 = (pn_real)rho;
+    return g;
+}
+
+static int t_fem_make(t_fem *t, const pn_fem_grid *g, const pn_fem_group *grp, double gy) {
+    pn_fem_desc fd;
+    char why[256];
+    memset(t, 0, sizeof *t);
+    if (pn_fem_grid_mesh(g, NULL, NULL, &t->nn, &t->ne) != PN_OK) return 0;
+    t->X = (pn_real *)malloc(sizeof(pn_real) * t->nn * (size_t)g->dim);
+    t->el = (int *)malloc(sizeof(int) * t->ne * (size_t)(g->dim + 1));
+    if (!t->X || !t->el || pn_fem_grid_mesh(g, t->X, t->el, &t->nn, &t->ne) != PN_OK) return 0;
+    memset(&fd, 0, sizeof fd);
+    fd.dim = g->dim, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el;
+    fd.groups = grp, fd.n_groups = 1, fd.gravity[1] = (pn_real)gy;
+    if (pn_fem_create(&fd, &t->m, why, sizeof why) != PN_OK) {
+        fprintf(stderr, "  t_fem_make: %s\n", why);
+        return 0;
+    }
+    return 1;
+}
+
+static void t_fem_free(t_fem *t) {
+    pn_fem_destroy(t->m);
+    free(t->X);
+    free(t->el);
+}
+
+static pn_fem_grid t_fem_grid(int dim, int nx, int ny, int nz, double sx, double sy, double sz) {
+    pn_fem_grid g;
+    memset(&g, 0, sizeof g);
+    g.dim = dim, g.cells[0] = nx, g.cells[1] = ny, g.cells[2] = nz;
+    g.size_m[0] = (pn_real)sx, g.size_m[1] = (pn_real)sy, g.size_m[2] = (pn_real)sz;
+    return g;
+}
+
+/* counts, orientation and the exact volume of boxes and frames */
+PN_TEST(fem_grid_mesh) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_fem_grid g = t_fem_grid(dim, 4, 5, 3, 0.4, 0.5, 0.3);
+        size_t nn, ne, e;
+        t_fem t;
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+        double vol = 0, expect;
+        int hole;
+        for (hole = 0; hole < 2; ++hole) {
+            if (hole) { /* a frame: the middle 2 x 3 (x 1) cells out */
+                g.hole_lo_m[0] = (pn_real)0.1, g.hole_lo_m[1] = (pn_real)0.1, g.hole_lo_m[2] = (pn_real)0.1;
+                g.hole_size_m[0] = (pn_real)0.2, g.hole_size_m[1] = (pn_real)0.3, g.hole_size_m[2] = (pn_real)(dim == 3 ? 0.1 : 0);
+            }
+            PN_CHECK(pn_fem_grid_mesh(&g, NULL, NULL, &nn, &ne) == PN_OK);
+            if (dim == 2) {
+                expect = hole ? 0.2 - 0.06 : 0.2;
+                PN_CHECK(ne == (size_t)(hole ? 2 * (20 - 6) : 40));
+                PN_CHECK(nn == (size_t)(hole ? 30 - 2 : 30)); /* the hole's 2 inner nodes go */
+            } else {
+                expect = hole ? 0.06 - 0.006 : 0.06;
+                PN_CHECK(ne == (size_t)(hole ? 6 * (60 - 6) : 360));
+            }
+            if (!t_fem_make(&t, &g, &grp, 0)) {
+                PN_CHECK(0);
+                continue;
+            }
+            PN_CHECK(t.nn == nn && t.ne == ne);
+            for (vol = 0, e = 0; e < t.ne; ++e) {
+                PN_CHECK(t.m->vol0[e] > 0);
+                vol += t.m->vol0[e];
+            }
+            PN_CHECK_NEAR(vol, expect, 1e-12);
+            t_fem_free(&t);
+        }
+    }
+}
+
+/* Patch test: positions x = A X + b give every element F = A, and the elastic forces cancel
+   at every interior node (after one explicit step from rest without gravity, interior nodes
+   stay at rest while the boundary ones feel the unbalanced traction). */
+PN_TEST(fem_patch) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        static const double A[9] = {1.05, 0.02, -0.03, 0.01, 0.97, 0.04, 0.02, -0.01, 1.02};
+        pn_fem_grid g = t_fem_grid(dim, 4, 4, 4, 1, 1, 1);
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+        t_fem t;
+        size_t k, e;
+        double vin = 0, vout = 0, ferr = 0;
+        int i, j;
+        if (!t_fem_make(&t, &g, &grp, 0)) {
+            PN_CHECK(0);
+            continue;
+        }
+        for (k = 0; k < t.nn; ++k)
+            for (i = 0; i < dim; ++i) {
+                double acc = 0.1 * (i + 1);
+                for (j = 0; j < dim; ++j) acc += A[i * 3 + j] * t.X[k * (size_t)dim + (size_t)j];
+                t.m->x[k * (size_t)dim + (size_t)i] = (pn_real)acc;
+            }
+        for (e = 0; e < t.ne; ++e) {
+            pn_real Ds[9], F[9];
+            pn__fem_ds(t.m, e, t.m->x, Ds);
+            pn_mat_mul(dim, Ds, t.m->Dm_inv + e * (size_t)(dim * dim), F);
+            for (i = 0; i < dim; ++i)
+                for (j = 0; j < dim; ++j) ferr = fmax(ferr, fabs(F[i * dim + j] - A[i * 3 + j]));
+        }
+        PN_CHECK_LE(ferr, 1e-13);
+        PN_CHECK(pn_fem_step_explicit(t.m, (pn_real)1e-6, NULL) == PN_OK);
+        for (k = 0; k < t.nn; ++k) {
+            int inside = 1;
+            double v2 = 0;
+            for (i = 0; i < dim; ++i) {
+                double c = t.X[k * (size_t)dim + (size_t)i];
+                inside &= c > 1e-9 && c < 1 - 1e-9;
+                v2 += t.m->v[k * (size_t)dim + (size_t)i] * t.m->v[k * (size_t)dim + (size_t)i];
+            }
+            if (inside) vin = fmax(vin, sqrt(v2));
+            else vout = fmax(vout, sqrt(v2));
+        }
+        PN_CHECK(vout > 0);
+        PN_CHECK_LE(vin, 1e-9 * vout);
+        t_fem_free(&t);
+    }
+}
+
+/* the barrier's derivatives by central differences */
+PN_TEST(fem_barrier_fd) {
+    double dhat = 1e-3, d;
+    for (d = 1e-5; d < 1.2e-3; d *= 1.7) {
+        pn_real b, b1, b2, bp, bm, b1p, b1m, t1, t2;
+        double h = 1e-4 * d;
+        pn__fem_barrier((pn_real)d, (pn_real)dhat, &b, &b1, &b2);
+        pn__fem_barrier((pn_real)(d + h), (pn_real)dhat, &bp, &b1p, &t1);
+        pn__fem_barrier((pn_real)(d - h), (pn_real)dhat, &bm, &b1m, &t2);
+        if (d >= dhat) {
+            PN_CHECK(b == 0 && b1 == 0 && b2 == 0);
+            continue;
+        }
+        PN_CHECK(b > 0 && b1 < 0 && b2 > 0); /* positive, decreasing, convex on (0, dhat) */
+        PN_CHECK_NEAR(b1, (bp - bm) / (2 * h), 1e-6 * fabs(b1) + 1e-12);
+        PN_CHECK_NEAR(b2, (b1p - b1m) / (2 * h), 1e-6 * fabs(b2) + 1e-9);
+    }
+}
+
+static pn_real t_fem_E(pn_fem_mesh *m, const pn_real *x) {
+    pn_real E = 0;
+    if (pn__fem_objective(m, x, 0, &E) != PN_OK) return (pn_real)NAN;
+    return E;
+}
+
+/* The incremental potential's gradient and Hessian against central differences, with an
+   obstacle within dhat of some nodes and a moving one (its offset an unknown), in 2D and 3D,
+   for Neo-Hookean (convex here: the projection changes nothing) and exact von Mises. */
+PN_TEST(fem_objective_fd) {
+    int dim, mat;
+    for (dim = 2; dim <= 3; ++dim)
+        for (mat = 0; mat < 2; ++mat) {
+            pn_fem_grid g = t_fem_grid(dim, 2, 2, 1, 0.02, 0.02, 0.01);
+            pn_fem_group grp = mat ? t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e6, 1000)
+                                   : t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+            pn_mpm_collider c;
+            t_fem t;
+            pn__fem *s;
+            size_t k, l, nu, nd;
+            double gerr = 0, gmax = 0, herr = 0, hmax = 0;
+            pn_real *x, *g0, *gp;
+            unsigned long seed = 7;
+            g.lo_m[1] = (pn_real)2e-5;
+            if (!t_fem_make(&t, &g, &grp, -9.81)) {
+                PN_CHECK(0);
+                continue;
+            }
+            if (mat) PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+            memset(&c, 0, sizeof c);
+            c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1; /* the floor, 2e-5 below */
+            PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
+            memset(&c, 0, sizeof c); /* a box coming down from above */
+            c.shape = PN_MPM_SHAPE_BOX, c.center_m[0] = (pn_real)0.01, c.center_m[1] = (pn_real)(0.02 + 2e-5 + 1.5e-5 + 0.005);
+            c.center_m[2] = (pn_real)0.005, c.half_extent_m[0] = c.half_extent_m[1] = (pn_real)0.005, c.half_extent_m[2] = (pn_real)0.01;
+            c.velocity_m_s[1] = (pn_real)-0.01;
+            PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
+            s = (pn__fem *)t.m->impl;
+            /* the step's setup as pn__fem_implicit_once does it, then a random state */
+            s->dt = (pn_real)1e-3, s->t_end = (pn_real)1e-3;
+            pn__fem_setup(t.m);
+            s->n_mov = 1, s->mov[0] = 1;
+            nd = t.nn * (size_t)dim;
+            nu = s->nu = nd + (size_t)dim;
+            s->al_k = 1;
+            for (k = 0; k < (size_t)dim; ++k) s->target[k] = k == 1 ? (pn_real)-1e-5 : 0, s->al_lam[k] = (pn_real)0.1;
+            x = (pn_real *)malloc(sizeof(pn_real) * nu * 3);
+            g0 = x + nu, gp = g0 + nu;
+            for (k = 0; k < nu; ++k) {
+                seed = seed * 6364136223846793005UL + 1442695040888963407UL;
+                x[k] = (k < nd ? t.m->x[k] : 0) + (pn_real)(2e-6 * ((double)(seed >> 11) / 9007199254740992.0 - 0.5));
+                s->xt[k] = k < nd ? t.m->x[k] : 0;
+            }
+            for (k = 0; k < nd; ++k) x[k] += (pn_real)(k % (size_t)dim == 0 ? 1e-4 * t.X[k + 1] : 0); /* some shear */
+            PN_CHECK(pn__fem_prepare(t.m, x) == PN_OK);
+            {
+                pn_real E0;
+                PN_CHECK(pn__fem_objective(t.m, x, 2, &E0) == PN_OK);
+                PN_CHECK(s->dmin < t.m->dhat); /* the barrier is active */
+            }
+            memcpy(g0, s->g, sizeof(pn_real) * nu);
+            for (k = 0; k < nu; ++k) { /* gradient: central differences of E */
+                pn_real keep = x[k], h = (pn_real)1e-8, Ep, Em;
+                x[k] = keep + h, Ep = t_fem_E(t.m, x);
+                x[k] = keep - h, Em = t_fem_E(t.m, x);
+                x[k] = keep;
+                gerr = fmax(gerr, fabs((Ep - Em) / (2 * h) - g0[k]));
+                gmax = fmax(gmax, fabs(g0[k]));
+            }
+            /* Hessian: central differences of the gradient, column by column */
+            {
+                pn_real E;
+                for (k = 0; k < nu; ++k) {
+                    pn_real keep = x[k], h = (pn_real)1e-9;
+                    x[k] = keep + h;
+                    pn__fem_objective(t.m, x, 1, &E);
+                    memcpy(gp, s->g, sizeof(pn_real) * nu);
+                    x[k] = keep - h;
+                    pn__fem_objective(t.m, x, 1, &E);
+                    x[k] = keep;
+                    for (l = 0; l < nu; ++l) g0[l] = (gp[l] - s->g[l]) / (2 * h); /* column k by FD */
+                    pn__fem_objective(t.m, x, 2, &E);
+                    for (l = 0; l < nu; ++l) {
+                        size_t r = pn__fem_row(t.m, k), cc = pn__fem_row(t.m, l), a = r > cc ? r : cc, b = r > cc ? cc : r;
+                        double an = b >= s->fc[a] ? s->L[s->rs[a] + b - s->fc[a]] : 0;
+                        herr = fmax(herr, fabs(g0[l] - an));
+                        hmax = fmax(hmax, fabs(an));
+                    }
+                }
+            }
+            PN_CHECK(gmax > 0 && hmax > 0);
+            PN_CHECK_LE(gerr, 1e-5 * gmax);
+            PN_CHECK_LE(herr, 1e-4 * hmax);
+            free(x);
+            t_fem_free(&t);
+        }
+}
+
+/* CCD never reports a step past the true first contact: random and grazing straight paths
+   of one node against a half-space and a moving box; the truth by fine sampling. */
+PN_TEST(fem_ccd) {
+    pn_fem_grid g = t_fem_grid(2, 1, 1, 1, 0.01, 0.01, 0.01);
+    pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+    t_fem t;
+    unsigned long seed = 99;
+    int trial, shape, late = 0, hits = 0;
+    if (!t_fem_make(&t, &g, &grp, 0)) {
+        PN_CHECK(0);
+        return;
+    }
+    for (shape = 0; shape < 2; ++shape)
+        for (trial = 0; trial < 2000; ++trial) {
+            pn__fem *s = (pn__fem *)t.m->impl;
+            pn_mpm_collider *c = &t.m->obstacles[0];
+            pn_real x[16], dir[16], nrm[3], amax;
+            double r[8], tru = 2;
+            int i, k;
+            for (i = 0; i < 8; ++i) {
+                seed = seed * 6364136223846793005UL + 1442695040888963407UL;
+                r[i] = (double)(seed >> 11) / 9007199254740992.0 - 0.5;
+            }
+            memset(c, 0, sizeof *c);
+            t.m->n_obstacles = 1;
+            s->n_mov = 0, s->nu = t.nn * 2, s->t_end = 0;
+            t.m->time_s = 0;
+            if (shape == 0) c->shape = PN_MPM_SHAPE_HALF_SPACE, c->normal[0] = (pn_real)r[0], c->normal[1] = (pn_real)(r[1] + 0.7);
+            else {
+                c->shape = PN_MPM_SHAPE_BOX, c->half_extent_m[0] = (pn_real)0.02, c->half_extent_m[1] = (pn_real)0.01;
+                s->n_mov = 1, s->mov[0] = 0, s->nu = t.nn * 2 + 2;
+                c->velocity_m_s[0] = (pn_real)1e-3; /* moving: its offset is an unknown */
+            }
+            c->center_m[0] = (pn_real)(shape ? 0.005 + 0.03 * r[2] : 0), c->center_m[1] = (pn_real)(shape ? -0.02 - 0.005 * fabs(r[3]) : -0.001);
+            for (k = 0; k < 16; ++k) x[k] = dir[k] = 0;
+            for (k = 0; k < (int)t.nn; ++k) x[2 * k] = t.X[2 * k], x[2 * k + 1] = t.X[2 * k + 1];
+            /* node 0 heads for the obstacle; grazing when trial is odd (tangent to it) */
+            dir[0] = (pn_real)(0.02 * r[4]), dir[1] = (pn_real)(-0.03 * (fabs(r[5]) + (trial & 1 ? 0 : 0.2)));
+            if (shape && trial % 3 == 0) dir[8] = (pn_real)(0.01 * r[6]), dir[9] = (pn_real)(0.02 * fabs(r[7])); /* box moves up */
+            if (!(pn__fem_obstacle_sd(c, 2, 0, shape ? x + 8 : NULL, x, nrm) > 0)) continue;
+            amax = pn__fem_ccd(t.m, x, dir);
+            for (i = 1; i <= 20000; ++i) { /* the first sample inside, over twice the step */
+                double a = 2.0 * i / 20000;
+                pn_real p[2], u[2];
+                p[0] = (pn_real)(x[0] + a * dir[0]), p[1] = (pn_real)(x[1] + a * dir[1]);
+                u[0] = (pn_real)(a * dir[8]), u[1] = (pn_real)(a * dir[9]);
+                if (!(pn__fem_obstacle_sd(c, 2, 0, shape ? u : NULL, p, nrm) > 0)) {
+                    tru = a - 2.0 / 20000;
+                    break;
+                }
+            }
+            if (tru <= 1) hits++;
+            if (amax > tru) late++;
+            PN_CHECK(amax > 0 && amax <= 1);
+        }
+    PN_CHECK(hits > 1000);
+    PN_CHECK(late == 0);
+    t.m->n_obstacles = 0;
+    t_fem_free(&t);
+}
+
+/* accepted Newton iterates lower the incremental potential within each minimization */
+typedef struct t_fem_trace {
+    int solve, rises, calls;
+    double last;
+} t_fem_trace;
+
+static void t_fem_trace_fn(void *user, int solve, int it, pn_real E, pn_real res) {
+    t_fem_trace *t = (t_fem_trace *)user;
+    (void)res;
+    if (it > 0 && solve == t->solve && E > t->last) t->rises++;
+    t->solve = solve, t->last = E, t->calls++;
+}
+
+/* a block of metal dropped on the floor and pressed by a plate: every accepted Newton step
+   lowers E, no node ever reaches an obstacle, the plate ends where it is driven */
+PN_TEST(fem_line_search) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_fem_grid g = t_fem_grid(dim, 4, 4, 2, 0.04, 0.04, 0.02);
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
+        pn_fem_implicit_desc id;
+        pn_mpm_collider c;
+        t_fem_trace tr;
+        t_fem t;
+        int step;
+        double dmin = 1;
+        g.lo_m[1] = (pn_real)1e-3;
+        if (!t_fem_make(&t, &g, &grp, -9.81)) {
+            PN_CHECK(0);
+            continue;
+        }
+        PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+        memset(&c, 0, sizeof c);
+        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+        PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
+        c.normal[1] = -1, c.center_m[1] = (pn_real)0.042, c.velocity_m_s[1] = (pn_real)-0.2;
+        PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
+        memset(&tr, 0, sizeof tr);
+        memset(&id, 0, sizeof id);
+        id.trace = t_fem_trace_fn, id.trace_user = &tr;
+        for (step = 0; step < 25; ++step) {
+            pn_fem_stats st;
+            tr.solve = -1;
+            if (pn_fem_step_implicit(t.m, (pn_real)2e-3, &id, &st) != PN_OK) {
+                fprintf(stderr, "  fem_line_search %dD step %d: %s\n", dim, step, pn_fem_error(t.m));
+                PN_CHECK(0);
+                break;
+            }
+            dmin = fmin(dmin, st.min_distance_m);
+        }
+        PN_CHECK(tr.calls > 25);
+        PN_CHECK(tr.rises == 0);
+        PN_CHECK(dmin > 0);
+        { /* crushed: the top within dhat of the plate at 0.042 - 0.2 t (10 mm down) */
+            size_t k;
+            double top = 0;
+            for (k = 0; k < t.nn; ++k) top = fmax(top, t.m->x[k * (size_t)dim + 1]);
+            PN_CHECK(top < 0.042 - 0.2 * 0.05 && top > 0.042 - 0.2 * 0.05 - 2 * t.m->dhat);
+        }
+        t_fem_free(&t);
+    }
+}
+
+/* A static cantilever (plane strain, clamped at x = 0, its own weight): one implicit step
+   of 1000 s is the static solution. Euler-Bernoulli: tip deflection q L^4 / (8 E' I), E' =
+   E / (1 - nu^2), q = rho g H. Linear triangles are stiff in bending (locking): the error
+   is O(h^2), 13% at 4 elements through the depth, 4.1% at 8; so: below 6% at 8, and
+   halving h cuts it by more than 2.5. */
+static double t_fem_cantilever(int nx, int ny) {
+    pn_fem_grid g = t_fem_grid(2, nx, ny, 1, 1, 0.1, 1);
+    pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e7, 1000);
+    t_fem t;
+    int fix[256], nf = 0;
+    size_t k;
+    double tip = 0;
+    if (!t_fem_make(&t, &g, &grp, -9.81)) return 1e9;
+    for (k = 0; k < t.nn; ++k)
+        if (t.X[2 * k] == 0) fix[nf++] = (int)k;
+    if (pn_fem_fix_nodes(t.m, (size_t)nf, fix, NULL) != PN_OK || pn_fem_step_implicit(t.m, 1000, NULL, NULL) != PN_OK) {
+        fprintf(stderr, "  t_fem_cantilever: %s\n", pn_fem_error(t.m));
+        t_fem_free(&t);
+        return 1e9;
+    }
+    for (k = 0; k < t.nn; ++k) /* the mean deflection of the tip section */
+        if (t.X[2 * k] == 1) tip += (t.m->x[2 * k + 1] - t.X[2 * k + 1]) / (ny + 1);
+    t_fem_free(&t);
+    return tip;
+}
+
+PN_TEST(fem_cantilever) {
+    double E = 1e7, nu = 0.3, H = 0.1, eb = -(1000 * 9.81 * H) / (8 * (E / (1 - nu * nu)) * (H * H * H / 12));
+    double e4 = fabs(t_fem_cantilever(40, 4) / eb - 1), e8 = fabs(t_fem_cantilever(80, 8) / eb - 1);
+    PN_CHECK_LE(e8, 0.06);
+    PN_CHECK_LE(2.5 * e8, e4);
+}
+
+/* explicit and implicit agree at a small step: an elastic block dropped on the floor */
+PN_TEST(fem_explicit_implicit) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_fem_grid g = t_fem_grid(dim, 3, 3, 3, 0.03, 0.03, 0.03);
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
+        t_fem a, b;
+        pn_mpm_collider c;
+        pn_real sdt = 0;
+        double T = 0.06, dt_e, err = 0, t_now;
+        long k;
+        g.lo_m[1] = (pn_real)0.01;
+        if (!t_fem_make(&a, &g, &grp, -9.81) || !t_fem_make(&b, &g, &grp, -9.81)) {
+            PN_CHECK(0);
+            continue;
+        }
+        memset(&c, 0, sizeof c);
+        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+        PN_CHECK(pn_fem_add_obstacle(a.m, &c, NULL) == PN_OK && pn_fem_add_obstacle(b.m, &c, NULL) == PN_OK);
+        for (t_now = 0, k = 0; t_now < T - 1e-12 && k < 10000000; ++k) { /* at half the bound of each step */
+            PN_CHECK(pn_fem_stable_dt(a.m, &sdt) == PN_OK && sdt > 0);
+            dt_e = fmin(0.5 * sdt, T - t_now);
+            if (pn_fem_step_explicit(a.m, (pn_real)dt_e, NULL) != PN_OK) {
+                fprintf(stderr, "  explicit step %ld: %s\n", k, pn_fem_error(a.m));
+                PN_CHECK(0);
+                break;
+            }
+            t_now += dt_e;
+        }
+        for (k = 0; k < 12000; ++k) /* backward Euler damps by (omega dt)^2 / 2 a step: the barrier's
+                                         spring, omega ~ 2e4 / s, needs dt ~ 1e-6 */
+            if (pn_fem_step_implicit(b.m, (pn_real)(T / 12000), NULL, NULL) != PN_OK) {
+                fprintf(stderr, "  implicit step %ld: %s\n", k, pn_fem_error(b.m));
+                PN_CHECK(0);
+                break;
+            }
+        for (k = 0; k < (long)(a.nn * (size_t)dim); ++k) err = fmax(err, fabs(a.m->x[k] - b.m->x[k]));
+        PN_CHECK(a.m->x[1] < 0.004); /* it fell onto the floor (at 0.045 s) and bounced */
+        PN_CHECK(a.m->x[1] > 0);
+        PN_CHECK_LE(err, 0.03 * 0.03 * sqrt((double)dim)); /* 3% of the block's diagonal */
+        t_fem_free(&a);
+        t_fem_free(&b);
+    }
+}
+
+/* bad meshes are refused, naming the culprit, and create nothing */
+PN_TEST(fem_bad_mesh) {
+    static const pn_real X[] = {0, 0, 1, 0, 0, 1, 1, 1, 2, 2};
+    static const int good[] = {0, 1, 2, 1, 3, 2};
+    pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+    pn_fem_desc fd;
+    pn_fem_mesh *m = NULL;
+    char why[256];
+    int el[6], i;
+    pn_real Xb[10];
+    memset(&fd, 0, sizeof fd);
+    fd.dim = 2, fd.n_nodes = 4, fd.n_elements = 2, fd.rest_m = X, fd.elements = good, fd.groups = &grp, fd.n_groups = 1;
+    PN_CHECK(pn_fem_create(&fd, &m, why, sizeof why) == PN_OK && m);
+    pn_fem_destroy(m);
+    for (i = 0; i < 7; ++i) {
+        pn_fem_desc bad = fd;
+        pn_result r;
+        const char *needle;
+        memcpy(el, good, sizeof el);
+        memcpy(Xb, X, sizeof Xb);
+        bad.elements = el, bad.rest_m = Xb;
+        switch (i) {
+        case 0: el[4] = 4, needle = "element 1"; break;                       /* index out of range */
+        case 1: el[4] = -1, needle = "element 1"; break;
+        case 2: el[1] = 0, needle = "element 0"; break;                       /* a node twice       */
+        case 3: el[3] = 1, el[4] = 2, el[5] = 3, Xb[6] = 0.5, Xb[7] = 0.5, needle = "element 1"; break; /* degenerate */
+        case 4: el[4] = 2, el[5] = 3, needle = "element 1"; break;            /* inverted           */
+        case 5: Xb[5] = (pn_real)NAN, needle = "node 2"; break;
+        default: bad.n_nodes = 5, needle = "node 4"; break;                   /* a node of no element */
+        }
+        m = (pn_fem_mesh *)1;
+        why[0] = 0;
+        r = pn_fem_create(&bad, &m, why, sizeof why);
+        PN_CHECK(r != PN_OK);
+        PN_CHECK(m == NULL);
+        if (!strstr(why, needle)) {
+            fprintf(stderr, "  case %d: '%s' does not name %s\n", i, why, needle);
+            PN_CHECK(0);
+        }
+    }
+    { /* an obstacle with a node inside is refused, the mesh unchanged */
+        pn_mpm_collider c;
+        PN_CHECK(pn_fem_create(&fd, &m, why, sizeof why) == PN_OK);
+        memset(&c, 0, sizeof c);
+        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.center_m[1] = (pn_real)0.5;
+        PN_CHECK(pn_fem_add_obstacle(m, &c, NULL) == PN_ERROR_INVALID_ARGUMENT);
+        PN_CHECK(strstr(pn_fem_error(m), "node 0") != NULL);
+        PN_CHECK(m->n_obstacles == 0);
+        PN_CHECK(pn_fem_step_implicit(m, (pn_real)NAN, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT);
+        pn_fem_destroy(m);
+    }
+}
+
+static const pn_test_case pn_tests_fem[] = {
+    {"fem_grid_mesh", fem_grid_mesh},
+    {"fem_patch", fem_patch},
+    {"fem_barrier_fd", fem_barrier_fd},
+    {"fem_objective_fd", fem_objective_fd},
+    {"fem_ccd", fem_ccd},
+    {"fem_line_search", fem_line_search},
+    {"fem_cantilever", fem_cantilever},
+    {"fem_explicit_implicit", fem_explicit_implicit},
+    {"fem_bad_mesh", fem_bad_mesh},
+};
