@@ -658,14 +658,17 @@ typedef struct pn_fem_desc {
     pn_real contact_stiffness;   /* IPC's kappa (Pa m^(dim - 2)): the barrier energy is kappa
                                     b(d) per node [0: 0.1 E l^(dim - 1) / dhat, E the
                                     stiffest material's, l the mean edge: docs/method.md]   */
+    pn_real friction_velocity_m_s; /* IPC's epsilon_v: Coulomb friction (each obstacle's
+                                    pn_mpm_collider.friction) is smoothed below this sliding
+                                    speed, a stick that creeps at most that fast [1e-3]      */
     pn_allocator allocator;
     double (*clock_s)(void *user); /* optional, as pn_mpm_desc.clock_s                       */
     void *clock_user;
 } pn_fem_desc;
 
 /* Obstacles: half-spaces and boxes of pn_mpm_collider (shape, center_m, normal,
-   half_extent_m, velocity_m_s: translating at a constant velocity; boundary and friction
-   are not used yet). */
+   half_extent_m, velocity_m_s: translating at a constant velocity; friction: the Coulomb
+   coefficient; boundary is not used: contact is the barrier's). */
 
 typedef struct pn_fem_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (lagged, PlasticityNet) [1] */
@@ -5389,6 +5392,7 @@ typedef struct pn__fem {
     size_t nnz;
     pn_real *L;                  /* the Hessian, factored in place (lower, by rows)          */
     pn_real *xt, *xs, *g, *dir, *xtry, *xbest; /* x~, the iterate, gradient, direction, try  */
+    pn_real *xlag;               /* where friction's normal force and directions are taken   */
     pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
     pn_real *eP, *eH;            /* per element: P (dd) and the projected dP/dF (dd^2)       */
     pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
@@ -5604,7 +5608,7 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     m->impl = s;
     s->perm = (size_t *)pn_alloc(al, sizeof(size_t) * 2 * n);
     s->fc = (size_t *)pn_alloc(al, sizeof(size_t) * (2 * nu + 1));
-    s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (6 * PN__FEM_ALIGN(nu)));
+    s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (7 * PN__FEM_ALIGN(nu)));
     s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * ne * (size_t)(dd + d * dp + dd + dd * dd + dd + 1 + 1 + dd));
     s->ppt = (pn_pnet_point *)pn_alloc(al, sizeof(pn_pnet_point) * ne);
     s->elast = (unsigned char *)pn_alloc(al, ne);
@@ -5620,6 +5624,7 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->xtry = s->dir + PN__FEM_ALIGN(nu);
     s->xbest = s->xtry + PN__FEM_ALIGN(nu);
     s->xs = s->xbest + PN__FEM_ALIGN(nu);
+    s->xlag = s->xs + PN__FEM_ALIGN(nu);
     s->q = s->B + ne * (size_t)dd;
     s->eP = s->q + ne * (size_t)(d * dp);
     s->eH = s->eP + ne * (size_t)dd;
@@ -5709,8 +5714,9 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
             return PN_ERROR_NONFINITE;
         }
     if (!(desc->contact_distance_m >= 0) || !pn__finite(desc->contact_distance_m) || !(desc->contact_stiffness >= 0) ||
-        !pn__finite(desc->contact_stiffness)) {
-        pn__fem_why(why, why_cap, "pn_fem_desc: contact_distance_m and contact_stiffness must be finite and >= 0");
+        !pn__finite(desc->contact_stiffness) || !(desc->friction_velocity_m_s >= 0) || !pn__finite(desc->friction_velocity_m_s)) {
+        pn__fem_why(why, why_cap, "pn_fem_desc: contact_distance_m, contact_stiffness and friction_velocity_m_s must be finite "
+                    "and >= 0");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     for (g = 0; g < desc->n_groups; ++g) {
@@ -5838,6 +5844,7 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
         }
     m->edge_mean = nedge ? esum / (pn_real)nedge : emax;
     m->dhat = desc->contact_distance_m > 0 ? desc->contact_distance_m : (pn_real)1e-3 * diag;
+    if (!(m->desc.friction_velocity_m_s > 0)) m->desc.friction_velocity_m_s = (pn_real)1e-3;
     if (desc->contact_stiffness > 0) m->kappa = desc->contact_stiffness;
     else { /* the barrier's force at dhat / 2, kappa |b'| ~ kappa dhat, holds a stress of 0.1 E on
               a node's share of the surface, l^(dim - 1): the gap stays near dhat / 2 up to
@@ -5938,9 +5945,11 @@ PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, 
             !pn__finite(c->half_extent_m[i]))
             return pn__fem_fail(m, PN_ERROR_NONFINITE, "pn_fem_add_obstacle: a coordinate of axis %d is not finite", i);
         nn += c->normal[i] * c->normal[i];
-        if (c->shape == PN_MPM_SHAPE_BOX && !(c->half_extent_m[i] > 0))
+        if (c->shape == PN_MPM_SHAPE_BOX && !(c->half_extent_m[i] > 0 && pn__finite(c->friction)))
             return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: half_extent_m[%d] must be > 0", i);
     }
+    if (!(c->friction >= 0) || !pn__finite(c->friction))
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: friction must be finite and >= 0");
     if (c->shape == PN_MPM_SHAPE_HALF_SPACE && !(nn > 0))
         return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the half-space's normal is zero");
     for (k = 0; k < m->n_nodes; ++k)
@@ -6129,6 +6138,49 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
                 for (i = 0; i < d; ++i)
                     for (j = 0; j < d; ++j) {
                         pn_real hv = w * b2 * nrm[i] * nrm[j];
+                        size_t ri = pn__fem_row(m, k * (size_t)d + (size_t)i), rj = pn__fem_row(m, k * (size_t)d + (size_t)j);
+                        if (j <= i) pn__fem_hadd(s, ri, rj, hv);
+                        if (u) {
+                            if (j <= i) pn__fem_hadd(s, uo + (size_t)i, uo + (size_t)j, hv);
+                            pn__fem_hadd(s, uo + (size_t)i, rj, -hv);
+                        }
+                    }
+        }
+    }
+    for (o = 0; o < m->n_obstacles; ++o) { /* lagged smoothed Coulomb friction (IPC) */
+        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_real *u = NULL, *ul = NULL;
+        pn_real eps = m->desc.friction_velocity_m_s * s->dt;
+        size_t uo = 0;
+        if (!(c->friction > 0)) continue;
+        for (j = 0; j < s->n_mov; ++j)
+            if (s->mov[j] == o) uo = nd + (size_t)(j * d), u = x + uo, ul = s->xlag + uo;
+        for (k = 0; k < n; ++k) {
+            pn_real nrm[3], w[3], ut[3], dl, bb, b1, b2, wn = 0, y = 0, f0, f1, f1p, coef;
+            if (!PN__FEM_FREE(m, k)) continue;
+            dl = pn__fem_obstacle_sd(c, d, u ? m->time_s : s->t_end, ul, s->xlag + k * (size_t)d, nrm);
+            if (!(dl > 0) || dl >= m->dhat) continue;
+            pn__fem_barrier(dl, m->dhat, &bb, &b1, &b2);
+            coef = dt2 * c->friction * m->kappa * -b1; /* mu lambda, lambda the lagged normal force */
+            for (i = 0; i < d; ++i) w[i] = x[k * (size_t)d + (size_t)i] - m->x[k * (size_t)d + (size_t)i] - (u ? u[i] : 0), wn += w[i] * nrm[i];
+            for (i = 0; i < d; ++i) ut[i] = w[i] - wn * nrm[i], y += ut[i] * ut[i];
+            y = PN__SQRT(y);
+            if (y < eps) { /* f0(y) = -y^3 / (3 eps^2) + y^2 / eps + eps / 3, C1 at eps */
+                f0 = -y * y * y / (3 * eps * eps) + y * y / eps + eps / 3;
+                f1 = -y * y / (eps * eps) + 2 * y / eps;
+                f1p = -2 * y / (eps * eps) + 2 / eps;
+            } else f0 = y, f1 = 1, f1p = 0;
+            E += coef * f0;
+            if (mode >= 1 && y > 0)
+                for (i = 0; i < d; ++i) {
+                    s->g[k * (size_t)d + (size_t)i] += coef * f1 * ut[i] / y;
+                    if (u) s->g[uo + (size_t)i] -= coef * f1 * ut[i] / y;
+                }
+            if (mode >= 2) /* f1' u^ u^T + (f1 / y)(P - u^ u^T) on the tangent plane: PSD */
+                for (i = 0; i < d; ++i)
+                    for (j = 0; j < d; ++j) {
+                        pn_real P = (i == j) - nrm[i] * nrm[j], uu = y > 0 ? ut[i] * ut[j] / (y * y) : 0;
+                        pn_real hv = coef * (y > 0 ? f1p * uu + f1 / y * (P - uu) : 2 / eps * P);
                         size_t ri = pn__fem_row(m, k * (size_t)d + (size_t)i), rj = pn__fem_row(m, k * (size_t)d + (size_t)j);
                         if (j <= i) pn__fem_hadd(s, ri, rj, hv);
                         if (u) {
@@ -6430,6 +6482,27 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
                                     "smaller step (pn_fem_stable_dt)", (unsigned long)k);
             }
         }
+    for (o = 0; o < m->n_obstacles; ++o) { /* Coulomb friction on the new velocities: slows the
+                                                sliding by at most dt mu lambda / m, never reverses it */
+        const pn_mpm_collider *c = &m->obstacles[o];
+        if (!(c->friction > 0)) continue;
+        for (k = 0; k < m->n_nodes; ++k) {
+            pn_real nrm[3], vt[3], vn = 0, sp = 0, bb, b1, b2, cut, dist;
+            if (m->fixed[k]) continue;
+            dist = pn__fem_obstacle_sd(c, d, m->time_s, NULL, s->bx + k * (size_t)d, nrm); /* at x^n */
+            if (!(dist > 0) || dist >= m->dhat) continue;
+            pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+            for (i = 0; i < d; ++i) vt[i] = m->v[k * (size_t)d + (size_t)i] - c->velocity_m_s[i], vn += vt[i] * nrm[i];
+            for (i = 0; i < d; ++i) vt[i] -= vn * nrm[i], sp += vt[i] * vt[i];
+            sp = PN__SQRT(sp);
+            if (!(sp > 0)) continue;
+            cut = PN__MIN(1, dt * c->friction * m->kappa * -b1 / (m->mass[k] * sp));
+            for (i = 0; i < d; ++i) {
+                m->v[k * (size_t)d + (size_t)i] -= cut * vt[i];
+                m->x[k * (size_t)d + (size_t)i] -= dt * cut * vt[i];
+            }
+        }
+    }
     if (m->n_obstacles && !(pn__fem_min_distance(m, m->time_s + dt) > 0)) {
         pn__fem_restore(m);
         return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: a node would reach an obstacle in a step of %g "
@@ -6463,9 +6536,9 @@ static pn_result pn__fem_objective_value(void *ctx, const pn_real *x, pn_real *E
 /* Newton on the incremental potential from s->xs (feasible) to its minimum. */
 static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o, pn_fem_stats *st) {
     pn__fem *s = (pn__fem *)m->impl;
-    size_t nu = s->nu, k;
+    size_t nu = s->nu, nd = m->n_nodes * (size_t)m->dim, k;
     int it;
-    pn_real tol = o->newton_tol * m->edge_mean, res = 0;
+    pn_real tol = o->newton_tol * m->edge_mean, res = 0, gres = 0, gfloor = 0;
     for (it = 0; it < o->newton_max; ++it) {
         pn_real E0, E1, gd = 0, a0, alpha;
         pn_result r = pn__fem_objective(m, s->xs, 2, &E0);
@@ -6478,28 +6551,37 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
                                 "material's energy is not convex where it was projected)");
         st->factorizations++;
         pn__fem_solve(s, nu, s->xtry);
-        for (res = 0, k = 0; k < nu; ++k) {
+        for (res = 0, gres = 0, k = 0; k < nu; ++k) {
             s->dir[k] = s->xtry[pn__fem_row(m, k)];
             res = PN__MAX(res, PN__FABS(s->dir[k]));
             gd += s->g[k] * s->dir[k];
+            if (k < nd && PN__FEM_FREE(m, k / (size_t)m->dim)) gres = PN__MAX(gres, PN__FABS(s->g[k]) / m->mass[k / (size_t)m->dim]);
         }
         st->newton_iters++;
         st->newton_residual = res / m->edge_mean;
         if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / m->edge_mean);
         if (!pn__finite(res))
             return pn__fem_fail(m, PN_ERROR_OVERFLOW, "implicit step: the Newton direction is not finite");
-        if (res <= tol && it > 0) return PN_OK; /* the first step is always taken: x^n is no answer */
+        /* converged: the step is below tol and so is each node's residual force over its mass
+           times dt^2 (the move it would cause through inertia alone). The second matters
+           where a stiff term is flat: at the edge of the barrier's reach b is cubic, Newton
+           converges linearly there, and a small step can leave a force of several weights.
+           Stiff material at large steps cannot resolve forces that finely (the energy's
+           rounding): there 1e-6 of the minimization's first residual is enough. The first
+           step is always taken: x^n is no answer. */
+        if (it == 0) gfloor = PN__MAX(tol, (pn_real)1e-6 * gres); /* or 1e-6 of the first residual */
+        if (res <= tol && gres <= gfloor && it > 0) return PN_OK;
         a0 = pn__fem_ccd(m, s->xs, s->dir);
         alpha = pn__armijo(pn__fem_objective_value, m, nu, s->xs, s->dir, E0, gd, a0, s->xtry, &E1);
         if (alpha == 0) {
             st->line_search_failures++;
-            if (res <= 100 * tol) return PN_OK;
+            if (res <= 100 * tol && gres <= 100 * gfloor) return PN_OK;
             return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the line search found no decrease at max |dx| = "
                                 "%.3g of the mean edge (newton_tol %g)", (double)(res / m->edge_mean), (double)o->newton_tol);
         }
         memcpy(s->xs, s->xtry, sizeof(pn_real) * nu);
     }
-    if (res <= 100 * tol) return PN_OK;
+    if (res <= 100 * tol && gres <= 100 * gfloor) return PN_OK; /* within 100 newton_tol, as MPM's */
     return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped after %d iterations at max |dx| = %.3g "
                         "of the mean edge (newton_tol %g): a smaller step converges", (double)s->dt, o->newton_max,
                         (double)(res / m->edge_mean), (double)o->newton_tol);
@@ -6581,6 +6663,10 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
     for (pass = 0; pass < o->fixed_point_iters; ++pass) {
         r = pn__fem_prepare(m, pass == 0 ? s->xt : s->xs);
         if (r != PN_OK) return r;
+        if (pass == 0) { /* friction's normal forces and directions: at x^n, then each pass's solution */
+            memcpy(s->xlag, m->x, sizeof(pn_real) * nd);
+            for (k = nd; k < s->nu; ++k) s->xlag[k] = 0;
+        } else memcpy(s->xlag, s->xs, sizeof(pn_real) * s->nu);
         st->fixed_point_iters++;
         for (round = 0;; ++round) {
             pn_real off = 0;

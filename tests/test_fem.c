@@ -169,7 +169,8 @@ static pn_real t_fem_E(pn_fem_mesh *m, const pn_real *x) {
 }
 
 /* The incremental potential's gradient and Hessian against central differences, with an
-   obstacle within dhat of some nodes and a moving one (its offset an unknown), in 2D and 3D,
+   obstacle within dhat of some nodes and a moving one (its offset an unknown), both with
+   friction (sliding and in the smoothed stick range), in 2D and 3D,
    for Neo-Hookean (convex here: the projection changes nothing) and exact von Mises. */
 PN_TEST(fem_objective_fd) {
     int dim, mat;
@@ -192,12 +193,12 @@ PN_TEST(fem_objective_fd) {
             }
             if (mat) PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
             memset(&c, 0, sizeof c);
-            c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1; /* the floor, 2e-5 below */
+            c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)0.5; /* the floor, 2e-5 below */
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
             memset(&c, 0, sizeof c); /* a box coming down from above */
             c.shape = PN_MPM_SHAPE_BOX, c.center_m[0] = (pn_real)0.01, c.center_m[1] = (pn_real)(0.02 + 2e-5 + 1.5e-5 + 0.005);
             c.center_m[2] = (pn_real)0.005, c.half_extent_m[0] = c.half_extent_m[1] = (pn_real)0.005, c.half_extent_m[2] = (pn_real)0.01;
-            c.velocity_m_s[1] = (pn_real)-0.01;
+            c.velocity_m_s[1] = (pn_real)-0.01, c.friction = (pn_real)0.3;
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
             s = (pn__fem *)t.m->impl;
             /* the step's setup as pn__fem_implicit_once does it, then a random state */
@@ -217,6 +218,7 @@ PN_TEST(fem_objective_fd) {
             }
             for (k = 0; k < nd; ++k) x[k] += (pn_real)(k % (size_t)dim == 0 ? 1e-4 * t.X[k + 1] : 0); /* some shear */
             PN_CHECK(pn__fem_prepare(t.m, x) == PN_OK);
+            memcpy(s->xlag, x, sizeof(pn_real) * nu); /* friction's normal forces from here */
             {
                 pn_real E0;
                 PN_CHECK(pn__fem_objective(t.m, x, 2, &E0) == PN_OK);
@@ -462,6 +464,54 @@ PN_TEST(fem_explicit_implicit) {
     }
 }
 
+/* Coulomb friction: a block sliding on the floor at v0 stops after v0^2 / (2 mu g), explicit
+   and implicit within 3% (the smoothing lets it creep at most friction_velocity_m_s, 1e-3
+   m/s; the block is elastic, so only nearly rigid) */
+PN_TEST(fem_friction_slide) {
+    int implicit;
+    for (implicit = 0; implicit < 2; ++implicit) {
+        pn_fem_grid g = t_fem_grid(2, 8, 4, 1, 0.1, 0.05, 1);
+        /* explicit: stiff, so that the block's elastic ringing (undamped) barely lifts the
+           nodes off the barrier's reach, where they would lose their friction (at 1e7 Pa
+           it slides 9% too far) */
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, implicit ? 1e7 : 1e9, 1000);
+        pn_mpm_collider c;
+        t_fem t;
+        size_t k;
+        double t_now = 0, T = 0.3, x0 = 0, x1 = 0, mu = 0.5, v0 = 1, expect = v0 * v0 / (2 * mu * 9.81);
+        g.lo_m[1] = (pn_real)1e-5;
+        if (!t_fem_make(&t, &g, &grp, -9.81)) {
+            PN_CHECK(0);
+            continue;
+        }
+        memset(&c, 0, sizeof c);
+        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)mu;
+        PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
+        /* settle on the floor first (at rest), then slide */
+        for (k = 0; k < 50; ++k) PN_CHECK(pn_fem_step_implicit(t.m, (pn_real)1e-3, NULL, NULL) == PN_OK);
+        for (k = 0; k < t.nn; ++k) t.m->v[2 * k] = (pn_real)v0, t.m->v[2 * k + 1] = 0, x0 += t.m->x[2 * k] / (double)t.nn;
+        while (t_now < T - 1e-12) {
+            pn_real sdt = 0;
+            double dt = 1e-3;
+            if (!implicit) {
+                PN_CHECK(pn_fem_stable_dt(t.m, &sdt) == PN_OK);
+                dt = fmin(0.5 * sdt, T - t_now);
+            }
+            if ((implicit ? pn_fem_step_implicit(t.m, (pn_real)dt, NULL, NULL) : pn_fem_step_explicit(t.m, (pn_real)dt, NULL)) != PN_OK) {
+                fprintf(stderr, "  fem_friction_slide: %s\n", pn_fem_error(t.m));
+                PN_CHECK(0);
+                break;
+            }
+            t_now += dt;
+        }
+        for (k = 0; k < t.nn; ++k) x1 += t.m->x[2 * k] / (double)t.nn;
+        printf("    [fem_friction_slide] %s: slid %.4f m, Coulomb %.4f m\n", implicit ? "implicit dt 1e-3" : "explicit",
+               x1 - x0, expect);
+        PN_CHECK_NEAR(x1 - x0, expect, 0.03 * expect);
+        t_fem_free(&t);
+    }
+}
+
 /* bad meshes are refused, naming the culprit, and create nothing */
 PN_TEST(fem_bad_mesh) {
     static const pn_real X[] = {0, 0, 1, 0, 0, 1, 1, 1, 2, 2};
@@ -524,5 +574,6 @@ static const pn_test_case pn_tests_fem[] = {
     {"fem_line_search", fem_line_search},
     {"fem_cantilever", fem_cantilever},
     {"fem_explicit_implicit", fem_explicit_implicit},
+    {"fem_friction_slide", fem_friction_slide},
     {"fem_bad_mesh", fem_bad_mesh},
 };
