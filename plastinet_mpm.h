@@ -6573,6 +6573,13 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
         if (res <= tol && gres <= gfloor && it > 0) return PN_OK;
         a0 = pn__fem_ccd(m, s->xs, s->dir);
         alpha = pn__armijo(pn__fem_objective_value, m, nu, s->xs, s->dir, E0, gd, a0, s->xtry, &E1);
+        if (alpha == 0 && -gd <= (pn_real)1e3 * PN__EPS * PN__FABS(E0) && a0 == 1) {
+            /* the decrease Newton predicts is below the energy's rounding (near a minimum of
+               a large energy): the values cannot judge the step; take it if it is feasible,
+               and let the residuals decide */
+            for (k = 0; k < nu; ++k) s->xtry[k] = s->xs[k] + s->dir[k];
+            if (pn__fem_objective(m, s->xtry, 0, &E1) == PN_OK) alpha = 1;
+        }
         if (alpha == 0) {
             st->line_search_failures++;
             if (res <= 100 * tol && gres <= 100 * gfloor) return PN_OK;
