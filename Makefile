@@ -12,7 +12,7 @@ PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point build/sand_column build/snowball build/materials build/game_loop
+examples: build/material_point build/sand_column build/snowball build/materials build/game_loop build/metal_frame
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
@@ -32,6 +32,13 @@ EXAMPLE_DEPS = examples/pn_example.h examples/pn_render.h plastinet.h plastinet_
 build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/sand_column.c $(LDLIBS) -o $@
+
+# FEM: a steel frame crushed by a plate (build/metal_frame --help; --png --vtu --obj).
+build/metal_frame: examples/metal_frame.c $(EXAMPLE_DEPS) models/pn_model_metal_2d.h models/pn_model_metal_3d.h \
+    models/pn_model_metal_nh_2d.h models/pn_model_metal_nh_3d.h models/pn_model_metal_nh_return_2d.h \
+    models/pn_model_metal_nh_return_3d.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/metal_frame.c $(LDLIBS) -o $@
 
 # A snowball thrown at a frictional floor (build/snowball --help; --png --out DIR for frames).
 build/snowball: examples/snowball.c $(EXAMPLE_DEPS)

@@ -916,6 +916,37 @@ PN_RENDER_UNUSED static void pn_canvas_line(pn_canvas *c, double x0, double y0, 
     pn_canvas__line(c, x0, y0, 1, x1, y1, 1, width, r, g, b, alpha, 0);
 }
 
+/* Filled triangle with corners (x_i, y_i) in pixels, opacity alpha: the pixels whose centres
+   it covers, 4 x 4 samples per pixel for the edges' coverage. */
+PN_RENDER_UNUSED static void pn_canvas_triangle(pn_canvas *c, const double *x, const double *y, int r, int g, int b,
+                                                double alpha) {
+    double area = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]), lo[2], hi[2];
+    int px, py, k;
+    if (!(area != 0) || !pn_render__finite(area)) return;
+    lo[0] = hi[0] = x[0], lo[1] = hi[1] = y[0];
+    for (k = 1; k < 3; ++k) {
+        lo[0] = x[k] < lo[0] ? x[k] : lo[0], hi[0] = x[k] > hi[0] ? x[k] : hi[0];
+        lo[1] = y[k] < lo[1] ? y[k] : lo[1], hi[1] = y[k] > hi[1] ? y[k] : hi[1];
+    }
+    if (lo[0] < 0) lo[0] = 0;
+    if (lo[1] < 0) lo[1] = 0;
+    if (hi[0] > c->w - 1) hi[0] = c->w - 1;
+    if (hi[1] > c->h - 1) hi[1] = c->h - 1;
+    for (py = (int)lo[1]; py <= (int)hi[1]; ++py)
+        for (px = (int)lo[0]; px <= (int)hi[0]; ++px) {
+            int in = 0, sx, sy;
+            for (sy = 0; sy < 4; ++sy)
+                for (sx = 0; sx < 4; ++sx) {
+                    double qx = px + (sx + 0.5) / 4, qy = py + (sy + 0.5) / 4, w0, w1, w2;
+                    w0 = ((x[1] - qx) * (y[2] - qy) - (x[2] - qx) * (y[1] - qy)) / area;
+                    w1 = ((x[2] - qx) * (y[0] - qy) - (x[0] - qx) * (y[2] - qy)) / area;
+                    w2 = 1 - w0 - w1;
+                    in += w0 >= 0 && w1 >= 0 && w2 >= 0;
+                }
+            if (in) pn_canvas__blend(c, px, py, r, g, b, alpha * in / 16.0);
+        }
+}
+
 /* The font: 5 columns by 9 rows (7 above the baseline, 2 for descenders), drawn for this
    file. '#' is ink. Glyphs are proportional (their inked columns plus one of space), except
    digits, which are all 5 wide so that numbers line up. 0xB0 is the degree sign (UTF-8 "\xc2\xb0"). */
