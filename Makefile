@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-explicit bench-deposit clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-fem bench-explicit bench-deposit clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -34,7 +34,7 @@ build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
 	$(CC) $(CFLAGS) examples/sand_column.c $(LDLIBS) -o $@
 
 # FEM: a steel frame crushed by a plate (build/metal_frame --help; --png --vtu --obj).
-build/metal_frame: examples/metal_frame.c $(EXAMPLE_DEPS) models/pn_model_metal_2d.h models/pn_model_metal_3d.h \
+build/metal_frame: examples/metal_frame.c examples/pn_frame.h $(EXAMPLE_DEPS) models/pn_model_metal_2d.h models/pn_model_metal_3d.h \
     models/pn_model_metal_nh_2d.h models/pn_model_metal_nh_3d.h models/pn_model_metal_nh_return_2d.h \
     models/pn_model_metal_nh_return_3d.h
 	@mkdir -p build
@@ -86,6 +86,16 @@ bench-core: bench/bench_core.c bench/bench_util.h plastinet.h
 bench-mpm: build/bench_mpm
 	build/bench_mpm --out build $(BENCH_MPM_FLAGS)
 	@cat build/bench_mpm.md
+
+# FEM: the metal frame, accuracy at a softened stiffness and speed at 200 GPa (bench/bench_fem.c;
+# BENCH_FEM_FLAGS=--dim 3 for 3D, --quick for a smoke test).
+bench-fem: build/bench_fem
+	build/bench_fem --out build $(BENCH_FEM_FLAGS)
+	@cat build/bench_fem.md
+
+build/bench_fem: bench/bench_fem.c examples/pn_frame.h $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/bench_fem.c $(LDLIBS) -o $@
 
 build/bench_mpm: bench/bench_mpm.c $(EXAMPLE_DEPS)
 	@mkdir -p build

@@ -15,12 +15,7 @@
    a one-line JSON summary on stdout. */
 #define PLASTINET_IMPLEMENTATION
 #include "pn_example.h"
-#include "../models/pn_model_metal_2d.h"
-#include "../models/pn_model_metal_3d.h"
-#include "../models/pn_model_metal_nh_2d.h"
-#include "../models/pn_model_metal_nh_3d.h"
-#include "../models/pn_model_metal_nh_return_2d.h"
-#include "../models/pn_model_metal_nh_return_3d.h"
+#include "pn_frame.h"
 
 /* order of sorted vertex triples (qsort) */
 static int cmp3(const void *pa, const void *pb) {
@@ -34,7 +29,7 @@ static int cmp3(const void *pa, const void *pb) {
 typedef struct frame_cli {
     int dim, implicit, frames_per_s, png, vtu, obj, pass;
     const char *energy, *out;
-    double dt, E, speed, wall, h, depth, crush, friction, newton_tol;
+    double dt, E, speed, wall, h, depth, crush, friction, newton_tol, regularizer;
 } frame_cli;
 
 static void usage(FILE *f) {
@@ -56,6 +51,7 @@ static void usage(FILE *f) {
                "  --friction MU             Coulomb coefficient of ground and plate [0.3]\n"
                "  --passes N                F0 fixed-point passes [1]\n"
                "  --newton-tol X            pn_fem_implicit_desc.newton_tol [1e-5]\n"
+               "  --regularizer W           PlasticityNet's w (Eq. 11; -1: off) [1]\n"
                "  --fps N                   frames per simulated second [25]\n"
                "  --png --vtu --obj         outputs (DIR/frame_NNNN.*)\n"
                "  --out DIR                 [build/metal_frame_frames]\n");
@@ -197,22 +193,16 @@ static int write_png(const char *path, const pn_fem_mesh *m, double plate_y, dou
 }
 
 int main(int argc, char **argv) {
-    static const char *const energies[] = {"exact", "pnet", "lagged", "pnet_nh", "nh"};
     frame_cli o;
-    int k, energy, frames, f;
-    long steps = 0, newton = 0, fails = 0;
-    pn_fem_grid g;
-    pn_fem_group grp;
-    pn_fem_desc fd;
+    pn_frame_desc fd;
     pn_fem_mesh *m = NULL;
-    pn_mpm_collider c;
     pn_pnet net;
-    pn_real *X;
-    int *el;
-    size_t nn, ne, e;
+    pn_fem_implicit_desc id;
+    int k, energy, frames, f, fails = 0;
+    long steps = 0, newton = 0;
+    size_t e, i;
     char why[256], path[1024];
-    double H = 0.18, W = 0.1, gap = 1e-4, t_end, wall_s = 0, dmin = 1e300, top0, plate0, hmax = 0;
-    const pn_model *model, *ret = NULL;
+    double t_end, wall_s = 0, dmin = 1e300, hmax = 0, top = 0;
     memset(&o, 0, sizeof o);
     o.dim = 2, o.implicit = 1, o.energy = "exact", o.out = "build/metal_frame_frames", o.dt = 1e-2, o.E = 2e11;
     o.speed = 0.5, o.wall = 0.01, o.h = 0, o.depth = 0.03, o.crush = 0.4, o.friction = 0.3, o.frames_per_s = 25, o.pass = 1;
@@ -251,6 +241,7 @@ int main(int argc, char **argv) {
             else if (!strcmp(a, "--friction")) o.friction = x;
             else if (!strcmp(a, "--passes")) o.pass = (int)x;
             else if (!strcmp(a, "--newton-tol")) o.newton_tol = x;
+            else if (!strcmp(a, "--regularizer")) o.regularizer = x;
             else if (!strcmp(a, "--fps")) o.frames_per_s = (int)x;
             else {
                 fprintf(stderr, "metal_frame: unknown flag '%s' (--help lists them)\n", a);
@@ -258,108 +249,48 @@ int main(int argc, char **argv) {
             }
         }
     }
-    if ((energy = pn_ex_choice("metal_frame", "--energy", o.energy, energies, 5)) < 0) return 2;
-    if (!o.h) o.h = o.dim == 3 ? 5e-3 : 2.5e-3;
+    if ((energy = pn_ex_choice("metal_frame", "--energy", o.energy, pn_frame_energy_names, PN_FRAME_ENERGIES)) < 0) return 2;
+    pn_frame_default(&fd, o.dim);
+    if (!o.h) o.h = fd.h;
     if ((o.dim != 2 && o.dim != 3) || !(o.dt > 0) || !(o.E > 0) || !(o.speed > 0) || !(o.crush > 0 && o.crush < 0.9) ||
-        !(o.wall > 0 && 2 * o.wall < W) || !(o.h > 0 && o.h <= o.wall) || !(o.depth > 0) || !(o.friction >= 0) ||
+        !(o.wall > 0 && 2 * o.wall < fd.width) || !(o.h > 0 && o.h <= o.wall) || !(o.depth > 0) || !(o.friction >= 0) ||
         o.frames_per_s < 1 || o.pass < 1) {
         fprintf(stderr, "metal_frame: a flag is out of range (--help)\n");
         return 2;
     }
-    /* the mesh: a grid of cells of size about h, without the frame's hole */
-    memset(&g, 0, sizeof g);
-    g.dim = o.dim;
-    g.cells[0] = (int)ceil(W / o.h - 1e-9), g.cells[1] = (int)ceil(H / o.h - 1e-9), g.cells[2] = (int)ceil(o.depth / o.h - 1e-9);
-    g.size_m[0] = (pn_real)W, g.size_m[1] = (pn_real)H, g.size_m[2] = (pn_real)o.depth;
-    g.lo_m[1] = (pn_real)gap;
-    g.hole_lo_m[0] = (pn_real)o.wall, g.hole_lo_m[1] = (pn_real)(gap + o.wall), g.hole_lo_m[2] = (pn_real)-1;
-    g.hole_size_m[0] = (pn_real)(W - 2 * o.wall), g.hole_size_m[1] = (pn_real)(H - 2 * o.wall), g.hole_size_m[2] = (pn_real)(o.depth + 2);
-    if (pn_fem_grid_mesh(&g, NULL, NULL, &nn, &ne) != PN_OK) return 1;
-    X = (pn_real *)malloc(sizeof(pn_real) * nn * (size_t)o.dim);
-    el = (int *)malloc(sizeof(int) * ne * (size_t)(o.dim + 1));
-    if (!X || !el || pn_fem_grid_mesh(&g, X, el, &nn, &ne) != PN_OK) return 1;
-    /* steel as the shipped metal models were trained: von Mises on StVK-Hencky (exact, pnet,
-       lagged) or on Neo-Hookean (pnet_nh, nh) */
-    model = energy >= 3 ? (o.dim == 2 ? pn_model_metal_nh_2d() : pn_model_metal_nh_3d())
-                        : (o.dim == 2 ? pn_model_metal_2d() : pn_model_metal_3d());
-    if (energy == 3) ret = o.dim == 2 ? pn_model_metal_nh_return_2d() : pn_model_metal_nh_return_3d();
-    memset(&grp, 0, sizeof grp);
-    if (pn_model_material(model, (pn_real)o.E, &grp.material, NULL) != PN_OK) return 1;
-    grp.density_kg_m3 = 7850;
-    memset(&fd, 0, sizeof fd);
-    fd.dim = o.dim, fd.n_nodes = nn, fd.n_elements = ne, fd.rest_m = X, fd.elements = el, fd.groups = &grp, fd.n_groups = 1;
-    fd.gravity[1] = (pn_real)-9.81;
-    if (pn_fem_create(&fd, &m, why, sizeof why) != PN_OK) {
+    fd.energy = energy, fd.E = o.E, fd.speed = o.speed, fd.wall = o.wall, fd.h = o.h, fd.depth = o.depth, fd.friction = o.friction;
+    fd.regularizer = o.regularizer;
+    if (!pn_frame_create(&fd, &m, &net, why, sizeof why)) {
         fprintf(stderr, "metal_frame: %s\n", why);
         return 1;
     }
-    if (energy == 1 || energy == 3) {
-        pn_pnet_desc pd;
-        const char *w2 = NULL;
-        memset(&pd, 0, sizeof pd);
-        pd.energy = model, pd.return_map = ret;
-        if (pn_pnet_init(&net, &pd, &grp.material, o.dim, &w2) != PN_OK) {
-            fprintf(stderr, "metal_frame: %s\n", w2 ? w2 : "pn_pnet_init failed");
-            return 1;
-        }
-        if (pn_fem_group_set_energy(m, 0, PN_MPM_ENERGY_PNET, &net) != PN_OK) {
-            fprintf(stderr, "metal_frame: %s\n", pn_fem_error(m));
-            return 1;
-        }
-    } else if (pn_fem_group_set_energy(m, 0, energy == 0 ? PN_MPM_ENERGY_EXACT_VM : PN_MPM_ENERGY_LAGGED, NULL) != PN_OK) {
-        fprintf(stderr, "metal_frame: %s\n", pn_fem_error(m));
-        return 1;
-    }
-    memset(&c, 0, sizeof c); /* the ground */
-    c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)o.friction;
-    pn_fem_add_obstacle(m, &c, NULL);
-    plate0 = gap + H + 2 * gap; /* the plate, just above the frame */
-    c.normal[1] = -1, c.center_m[1] = (pn_real)plate0, c.velocity_m_s[1] = (pn_real)-o.speed;
-    pn_fem_add_obstacle(m, &c, NULL);
-    top0 = gap + H;
-    t_end = o.crush * H / o.speed;
+    t_end = o.crush * fd.height / o.speed;
     frames = (int)ceil(t_end * o.frames_per_s - 1e-9);
     if ((o.png || o.vtu || o.obj) && !pn_ex_mkdirs(o.out)) {
         fprintf(stderr, "metal_frame: cannot create %s\n", o.out);
         return 1;
     }
     fprintf(stderr, "metal_frame: %dD, %lu nodes, %lu elements, %s %s, dt %g s, E %g Pa, plate %g m/s, %d frames\n", o.dim,
-            (unsigned long)nn, (unsigned long)ne, o.implicit ? "implicit" : "explicit", o.implicit ? o.energy : "(return mapping)",
-            o.dt, o.E, o.speed, frames);
+            (unsigned long)m->n_nodes, (unsigned long)m->n_elems, o.implicit ? "implicit" : "explicit",
+            o.implicit ? o.energy : "(return mapping)", o.dt, o.E, o.speed, frames);
+    memset(&id, 0, sizeof id);
+    id.fixed_point_iters = o.pass, id.newton_tol = (pn_real)o.newton_tol;
     for (f = 0; f <= frames; ++f) {
-        double t_frame = f == 0 ? 0 : fmin(t_end, (double)f / o.frames_per_s);
-        while (m->time_s < t_frame - 1e-12) {
-            pn_fem_stats st;
-            pn_result r;
-            double t0 = pn_ex_seconds(), dt = fmin(o.dt, t_frame - m->time_s);
-            if (o.implicit) {
-                pn_fem_implicit_desc id;
-                memset(&id, 0, sizeof id);
-                id.fixed_point_iters = o.pass, id.newton_tol = (pn_real)o.newton_tol;
-                r = pn_fem_step_implicit(m, (pn_real)dt, &id, &st);
-            } else {
-                pn_real sdt;
-                pn_fem_stable_dt(m, &sdt);
-                dt = fmin(dt, 0.5 * sdt);
-                r = pn_fem_step_explicit(m, (pn_real)dt, &st);
-            }
-            wall_s += pn_ex_seconds() - t0;
-            if (r != PN_OK) {
-                fprintf(stderr, "\nmetal_frame: step at t = %g s failed: %s\n", (double)m->time_s, pn_fem_error(m));
-                fails++;
-                break;
-            }
-            steps++;
-            newton += st.newton_iters;
-            if (st.min_distance_m < dmin) dmin = st.min_distance_m;
+        double t0 = pn_ex_seconds();
+        int ok = pn_frame_advance(m, f == 0 ? 0 : fmin(t_end, (double)f / o.frames_per_s), o.implicit, o.dt, 0.5, &id, &steps,
+                                  &newton, &dmin);
+        wall_s += pn_ex_seconds() - t0;
+        if (!ok) {
+            fprintf(stderr, "\nmetal_frame: a step at t = %g s failed: %s\n", (double)m->time_s, pn_fem_error(m));
+            fails = 1;
+            break;
         }
-        if (fails) break;
-        for (e = 0; e < ne; ++e) hmax = fmax(hmax, plastic_strain(m, e));
-        fprintf(stderr, "\r  frame %d/%d  t %.3f s  steps %ld  wall %.1f s  max plastic strain %.3f", f, frames, (double)m->time_s, steps,
-                wall_s, hmax);
+        for (e = 0; e < m->n_elems; ++e) hmax = fmax(hmax, plastic_strain(m, e));
+        fprintf(stderr, "\r  frame %d/%d  t %.3f s  steps %ld  wall %.1f s  max plastic strain %.3f", f, frames, (double)m->time_s,
+                steps, wall_s, hmax);
         if (o.png && o.dim == 2) {
             snprintf(path, sizeof path, "%s/frame_%04d.png", o.out, f);
-            if (!write_png(path, m, plate0 - o.speed * m->time_s, m->time_s)) fprintf(stderr, "\nmetal_frame: cannot write %s\n", path);
+            if (!write_png(path, m, pn_frame_plate(&fd, m->time_s), m->time_s)) fprintf(stderr, "\nmetal_frame: cannot write %s\n", path);
         }
         if (o.vtu) {
             snprintf(path, sizeof path, "%s/frame_%04d.vtu", o.out, f);
@@ -371,19 +302,14 @@ int main(int argc, char **argv) {
         }
     }
     fprintf(stderr, "\n");
-    {
-        double top = 0;
-        size_t i;
-        for (i = 0; i < nn; ++i) top = fmax(top, m->x[i * (size_t)o.dim + 1]);
-        printf("{\"dim\": %d, \"nodes\": %lu, \"elements\": %lu, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
-               "\"E\": %g, \"steps\": %ld, \"sim_s\": %.6g, \"wall_s\": %.4g, \"wall_per_sim_s\": %.4g, \"newton_per_step\": %.2f, "
-               "\"min_distance_m\": %.4g, \"max_plastic_strain\": %.4g, \"top_drop_m\": %.5g, \"ok\": %s}\n",
-               o.dim, (unsigned long)nn, (unsigned long)ne, o.implicit ? "implicit" : "explicit", o.implicit ? o.energy : "return_mapping",
-               o.dt, o.E, steps, (double)m->time_s, wall_s, m->time_s > 0 ? wall_s / m->time_s : 0, steps ? (double)newton / steps : 0,
-               dmin, hmax, top0 - top, fails ? "false" : "true");
-    }
+    for (i = 0; i < m->n_nodes; ++i) top = fmax(top, m->x[i * (size_t)o.dim + 1]);
+    printf("{\"dim\": %d, \"nodes\": %lu, \"elements\": %lu, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
+           "\"E\": %g, \"steps\": %ld, \"sim_s\": %.6g, \"wall_s\": %.4g, \"wall_per_sim_s\": %.4g, \"newton_per_step\": %.2f, "
+           "\"min_distance_m\": %.4g, \"max_plastic_strain\": %.4g, \"top_drop_m\": %.5g, \"ok\": %s}\n",
+           o.dim, (unsigned long)m->n_nodes, (unsigned long)m->n_elems, o.implicit ? "implicit" : "explicit",
+           o.implicit ? o.energy : "return_mapping", o.dt, o.E, steps, (double)m->time_s, wall_s,
+           m->time_s > 0 ? wall_s / m->time_s : 0, steps ? (double)newton / steps : 0, dmin, hmax,
+           PN_FRAME_GAP + fd.height - top, fails ? "false" : "true");
     pn_fem_destroy(m);
-    free(X);
-    free(el);
-    return fails ? 1 : 0;
+    return fails;
 }
