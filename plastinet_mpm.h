@@ -759,12 +759,17 @@ PN_API pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt_s, const pn_fem
 
 /* Structured meshes for tests and examples: the cells of an nx x ny (x nz) grid over the
    box lo + [0, size], without those inside the hole (a box in the same frame; a zero size:
-   none), each square split into 2 triangles or each cube into 6 tetrahedra (conforming).
-   With nodes / elements NULL, only counts. */
+   none), each square split into 2 triangles (4 with crossed) or each cube into 6
+   tetrahedra (conforming). With nodes / elements NULL, only counts. */
 typedef struct pn_fem_grid {
     int dim, cells[3];
     pn_real lo_m[3], size_m[3];
     pn_real hole_lo_m[3], hole_size_m[3];
+    int crossed;                 /* 2D: four triangles per square around a node at its centre
+                                    (crossed diagonals), which do not lock under incompressible
+                                    (von Mises) plastic flow as two per square do (Nagtegaal,
+                                    Parks and Rice 1974) [0: two, the diagonal alternating]  */
+    pn_allocator allocator;      /* for the builder's scratch                                */
 } pn_fem_grid;
 PN_API pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *elements, size_t *n_nodes,
                                   size_t *n_elements);
@@ -5455,7 +5460,9 @@ PN__DEF pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *el
     int d, a, c[3] = {0, 0, 0}, np[3] = {1, 1, 1};
     size_t total = 1, ne = 0, nn = 0, k;
     int *map = NULL;
-    if (!g || !n_nodes || !n_elements || (g->dim != 2 && g->dim != 3)) return PN_ERROR_INVALID_ARGUMENT;
+    if (!g || !n_nodes || !n_elements || (g->dim != 2 && g->dim != 3) ||
+        (g->allocator.alloc == NULL) != (g->allocator.free == NULL))
+        return PN_ERROR_INVALID_ARGUMENT;
     d = g->dim;
     for (a = 0; a < d; ++a) {
         if (g->cells[a] < 1 || g->cells[a] > 4096 || !(g->size_m[a] > 0) || !pn__finite(g->lo_m[a]) ||
@@ -5465,7 +5472,7 @@ PN__DEF pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *el
         total *= (size_t)np[a];
     }
     if (nodes) { /* number the nodes used by kept cells in grid order */
-        map = (int *)PN_MALLOC(sizeof(int) * total, NULL);
+        map = (int *)pn_alloc(&g->allocator, sizeof(int) * total);
         if (!map) return PN_ERROR_OUT_OF_MEMORY;
         for (k = 0; k < total; ++k) map[k] = -1;
     }
@@ -5485,7 +5492,23 @@ PN__DEF pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *el
                         nn++;
                     }
                 }
-                if (d == 2) { /* the diagonal alternates (a symmetric mesh for symmetric loads) */
+                if (d == 2 && g->crossed) { /* a centre node, four triangles */
+                    int mid = (int)nn;
+                    if (map) { /* (the counting pass counts it below) */
+                        nodes[nn * 2] = g->lo_m[0] + g->size_m[0] * (c[0] + (pn_real)0.5) / g->cells[0];
+                        nodes[nn * 2 + 1] = g->lo_m[1] + g->size_m[1] * (c[1] + (pn_real)0.5) / g->cells[1];
+                        nn++;
+                    }
+                    if (elements) {
+                        static const int ring[4] = {0, 1, 3, 2}; /* counter-clockwise corners */
+                        for (t = 0; t < 4; ++t) {
+                            elements[(ne + (size_t)t) * 3] = map[corner[ring[t]]];
+                            elements[(ne + (size_t)t) * 3 + 1] = map[corner[ring[(t + 1) % 4]]];
+                            elements[(ne + (size_t)t) * 3 + 2] = mid;
+                        }
+                    }
+                    ne += 4;
+                } else if (d == 2) { /* the diagonal alternates (a symmetric mesh for symmetric loads) */
                     int alt = (c[0] + c[1]) & 1;
                     int tri[2][3];
                     if (!alt) {
@@ -5507,9 +5530,9 @@ PN__DEF pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *el
                 }
             }
     if (map) {
-        PN_FREE(map, NULL);
+        pn_free(&g->allocator, map);
     } else {
-        int *used = (int *)PN_MALLOC(sizeof(int) * total, NULL); /* count the used nodes */
+        int *used = (int *)pn_alloc(&g->allocator, sizeof(int) * total); /* count the used nodes */
         if (!used) return PN_ERROR_OUT_OF_MEMORY;
         memset(used, 0, sizeof(int) * total);
         for (c[2] = 0; c[2] < (d == 3 ? g->cells[2] : 1); ++c[2])
@@ -5522,8 +5545,9 @@ PN__DEF pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *el
                                         (size_t)np[0] + (size_t)(c[0] + (b & 1));
                         if (!used[id]) used[id] = 1, nn++;
                     }
+                    nn += d == 2 && g->crossed; /* the centre */
                 }
-        PN_FREE(used, NULL);
+        pn_free(&g->allocator, used);
     }
     if (nodes && elements) /* orient every element positively */
         for (k = 0; k < ne; ++k) {

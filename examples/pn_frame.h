@@ -27,6 +27,9 @@ typedef struct pn_frame_desc {
     double speed, friction;      /* plate speed (m/s) [0.5]; Coulomb coefficient of ground and
                                     plate [0.3]                                            */
     double regularizer;          /* PlasticityNet's w (pn_pnet_desc.regularizer) [0: 1]      */
+    int alternating;             /* 2D: two triangles per square (the diagonal alternating)
+                                    instead of four around a centre node, which lock less
+                                    under von Mises flow [0]                               */
     double imperfection;         /* the side walls bow out by this much at mid-height (m): a
                                     perfect frame buckles either way, decided by rounding, so
                                     two integrators could take opposite ways [5e-4]        */
@@ -59,7 +62,7 @@ static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **out, pn_pnet *n
     int dim = d->dim, nh = d->energy == PN_FRAME_PNET_NH || d->energy == PN_FRAME_NH;
     *out = NULL;
     memset(&g, 0, sizeof g); /* a grid of cells of size about h, without the frame's hole */
-    g.dim = dim;
+    g.dim = dim, g.crossed = !d->alternating;
     g.cells[0] = (int)ceil(d->width / d->h - 1e-9), g.cells[1] = (int)ceil(d->height / d->h - 1e-9);
     g.cells[2] = (int)ceil(d->depth / d->h - 1e-9);
     g.size_m[0] = (pn_real)d->width, g.size_m[1] = (pn_real)d->height, g.size_m[2] = (pn_real)d->depth;

@@ -55,11 +55,12 @@ static pn_fem_grid t_fem_grid(int dim, int nx, int ny, int nz, double sx, double
     return g;
 }
 
-/* counts, orientation and the exact volume of boxes and frames */
+/* counts, orientation and the exact volume of boxes and frames (2D also crossed) */
 PN_TEST(fem_grid_mesh) {
     int dim;
-    for (dim = 2; dim <= 3; ++dim) {
-        pn_fem_grid g = t_fem_grid(dim, 4, 5, 3, 0.4, 0.5, 0.3);
+    for (dim = 2; dim <= 4; ++dim) {
+        int crossed = dim == 4;
+        pn_fem_grid g = t_fem_grid(crossed ? 2 : dim, 4, 5, 3, 0.4, 0.5, 0.3);
         size_t nn, ne, e;
         t_fem t;
         pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
@@ -70,8 +71,13 @@ PN_TEST(fem_grid_mesh) {
                 g.hole_lo_m[0] = (pn_real)0.1, g.hole_lo_m[1] = (pn_real)0.1, g.hole_lo_m[2] = (pn_real)0.1;
                 g.hole_size_m[0] = (pn_real)0.2, g.hole_size_m[1] = (pn_real)0.3, g.hole_size_m[2] = (pn_real)(dim == 3 ? 0.1 : 0);
             }
+            g.crossed = crossed;
             PN_CHECK(pn_fem_grid_mesh(&g, NULL, NULL, &nn, &ne) == PN_OK);
-            if (dim == 2) {
+            if (crossed) {
+                expect = hole ? 0.2 - 0.06 : 0.2;
+                PN_CHECK(ne == (size_t)(hole ? 4 * (20 - 6) : 80));
+                PN_CHECK(nn == (size_t)(hole ? 30 - 2 + 14 : 30 + 20)); /* and a centre per cell */
+            } else if (dim == 2) {
                 expect = hole ? 0.2 - 0.06 : 0.2;
                 PN_CHECK(ne == (size_t)(hole ? 2 * (20 - 6) : 40));
                 PN_CHECK(nn == (size_t)(hole ? 30 - 2 : 30)); /* the hole's 2 inner nodes go */
