@@ -774,8 +774,8 @@ typedef struct pn_fem_grid {
 PN_API pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *elements, size_t *n_nodes,
                                   size_t *n_elements);
 
-/* Total elastic energy (J; per metre in 2D), kinetic energy and the equivalent plastic strain
-   of an element (von Mises h; otherwise |log of Fp's singular values|). */
+/* Total elastic energy of the elements' Fe and kinetic energy of the nodes (J; per metre of
+   thickness in 2D). PN_ERROR_INVERTED for an element the elastic energy is undefined at. */
 PN_API pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_real *kinetic_j);
 
 #ifdef __cplusplus
@@ -5396,7 +5396,7 @@ typedef struct pn__fem {
     size_t *fc, *rs;             /* skyline: first column and start of each row of L        */
     size_t nnz;
     pn_real *L;                  /* the Hessian, factored in place (lower, by rows)          */
-    pn_real *xt, *xs, *g, *dir, *xtry, *xbest; /* x~, the iterate, gradient, direction, try  */
+    pn_real *xt, *xs, *g, *dir, *xtry; /* x~, the iterate, gradient, direction, a try          */
     pn_real *xlag;               /* where friction's normal force and directions are taken   */
     pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
     pn_real *eP, *eH;            /* per element: P (dd) and the projected dP/dF (dd^2)       */
@@ -5632,7 +5632,7 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     m->impl = s;
     s->perm = (size_t *)pn_alloc(al, sizeof(size_t) * 2 * n);
     s->fc = (size_t *)pn_alloc(al, sizeof(size_t) * (2 * nu + 1));
-    s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (7 * PN__FEM_ALIGN(nu)));
+    s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (6 * PN__FEM_ALIGN(nu)));
     s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * ne * (size_t)(dd + d * dp + dd + dd * dd + dd + 1 + 1 + dd));
     s->ppt = (pn_pnet_point *)pn_alloc(al, sizeof(pn_pnet_point) * ne);
     s->elast = (unsigned char *)pn_alloc(al, ne);
@@ -5646,8 +5646,7 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->g = s->xt + PN__FEM_ALIGN(nu);
     s->dir = s->g + PN__FEM_ALIGN(nu);
     s->xtry = s->dir + PN__FEM_ALIGN(nu);
-    s->xbest = s->xtry + PN__FEM_ALIGN(nu);
-    s->xs = s->xbest + PN__FEM_ALIGN(nu);
+    s->xs = s->xtry + PN__FEM_ALIGN(nu);
     s->xlag = s->xs + PN__FEM_ALIGN(nu);
     s->q = s->B + ne * (size_t)dd;
     s->eP = s->q + ne * (size_t)(d * dp);
@@ -6388,13 +6387,10 @@ static pn_real pn__fem_min_distance(const pn_fem_mesh *m, pn_real t) {
 }
 
 PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
-    const pn__fem *s;
     int d, dp, a, b, c, o;
     size_t e, k;
     pn_real best = 1e300;
     if (!m || !dt_s) return PN_ERROR_INVALID_ARGUMENT;
-    s = (const pn__fem *)m->impl;
-    (void)s;
     d = m->dim, dp = d + 1;
     for (e = 0; e < m->n_elems; ++e) { /* the smallest altitude over the P-wave speed */
         const pn_fem_group *g = &m->groups[m->egroup[e]];
@@ -6452,7 +6448,7 @@ static pn_result pn__fem_check_dt(pn_fem_mesh *m, pn_real dt, const char *who) {
 
 PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats *stats) {
     pn__fem *s;
-    int d, dd, dp, a, i, j, o;
+    int d, dp, a, i, j, o;
     size_t e, k, plastic = 0;
     pn_result r;
     pn_real *f;
@@ -6461,7 +6457,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     m->error_element = m->error_node = -1;
     if ((r = pn__fem_check_dt(m, dt, "pn_fem_step_explicit")) != PN_OK) return r;
     s = (pn__fem *)m->impl;
-    d = m->dim, dd = d * d, dp = d + 1;
+    d = m->dim, dp = d + 1;
     if (stats) memset(stats, 0, sizeof *stats);
     pn__fem_setup(m);
     pn__fem_backup(m);
@@ -6486,7 +6482,6 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
                 f[(size_t)el[a] * (size_t)d + (size_t)i] -= m->vol0[e] * acc;
             }
     }
-    (void)dd;
     for (o = 0; o < m->n_obstacles; ++o)
         for (k = 0; k < m->n_nodes; ++k) {
             pn_real nrm[3], bb, b1, b2, dist = pn__fem_obstacle_sd(&m->obstacles[o], d, m->time_s, NULL, m->x + k * (size_t)d, nrm);
@@ -6743,7 +6738,6 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
     pn__fem_backup(m);
     for (level = 0; level <= (o.max_halvings < 0 ? 0 : o.max_halvings); ++level) {
         int sub, nsub = 1 << level;
-        char first[256] = "";
         memset(&st, 0, sizeof st);
         st.substeps = nsub;
         for (sub = 0, r = PN_OK; sub < nsub && r == PN_OK; ++sub) r = pn__fem_implicit_once(m, dt / nsub, &o, &st);
@@ -6759,10 +6753,8 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
             if (stats) *stats = st;
             return PN_OK;
         }
-        if (!level) memcpy(first, m->error, sizeof first);
         pn__fem_restore(m);
         if (stats && !level) *stats = st;
-        (void)first;
     }
     return r;
 }
