@@ -774,6 +774,27 @@ typedef struct pn_fem_grid {
 PN_API pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *elements, size_t *n_nodes,
                                   size_t *n_elements);
 
+/* Meshes from files users have, parsed from memory (read the file yourself): Gmsh ASCII .msh
+   of versions 2.2 and 4.1 (3-node triangles, type 2, for dim 2; 4-node tetrahedra, type 4, for
+   dim 3; other element types skipped; x, y of each node in 2D) and TetGen .node / .ele
+   (3D; 10-node tetrahedra keep their corners). Elements are reordered to positive
+   orientation; element_tags holds Gmsh's physical tag or TetGen's region attribute (0 when
+   none). The arrays are allocated through al (NULL: malloc): free them with
+   pn_fem_mesh_data_free. A file that does not parse is refused with PN_ERROR_FORMAT and why
+   names its line (and the node or element); nothing is allocated then. Pass the arrays to
+   pn_fem_desc (rest_m = nodes, elements, element_group from element_tags as you map them). */
+typedef struct pn_fem_mesh_data {
+    int dim;
+    size_t n_nodes, n_elements;
+    pn_real *nodes;
+    int *elements, *element_tags;
+} pn_fem_mesh_data;
+PN_API pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const pn_allocator *al, pn_fem_mesh_data *out,
+                                  char *why, size_t why_cap);
+PN_API pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, const char *ele_text, size_t ele_len,
+                                     const pn_allocator *al, pn_fem_mesh_data *out, char *why, size_t why_cap);
+PN_API void pn_fem_mesh_data_free(pn_fem_mesh_data *d, const pn_allocator *al);
+
 /* Total elastic energy of the elements' Fe and kinetic energy of the nodes (J; per metre of
    thickness in 2D). PN_ERROR_INVERTED for an element the elastic energy is undefined at. */
 PN_API pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_real *kinetic_j);
@@ -6777,6 +6798,378 @@ PN__DEF pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_rea
     if (elastic_j) *elastic_j = el;
     if (kinetic_j) *kinetic_j = kin;
     return PN_OK;
+}
+
+/* ---- >>fem loaders: Gmsh .msh (ASCII 2.2 and 4.1), TetGen .node / .ele ------------------- */
+
+typedef struct pn__fem_lex {
+    const char *p, *end;
+    long line;                   /* 1-based line of the next token                          */
+} pn__fem_lex;
+
+/* the next whitespace-separated token into tok (cap bytes, NUL-terminated); 0 at the end or
+   for a token longer than cap - 1. TetGen's '#' comments run to the end of the line. */
+static int pn__fem_tok(pn__fem_lex *L, char *tok, size_t cap, int comments) {
+    size_t n = 0;
+    for (;;) {
+        while (L->p < L->end && (*L->p == ' ' || *L->p == '\t' || *L->p == '\r' || *L->p == '\n')) {
+            if (*L->p == '\n') L->line++;
+            L->p++;
+        }
+        if (comments && L->p < L->end && *L->p == '#') {
+            while (L->p < L->end && *L->p != '\n') L->p++;
+            continue;
+        }
+        break;
+    }
+    if (L->p >= L->end) return 0;
+    while (L->p < L->end && !(*L->p == ' ' || *L->p == '\t' || *L->p == '\r' || *L->p == '\n')) {
+        if (n + 1 >= cap) return 0;
+        tok[n++] = *L->p++;
+    }
+    tok[n] = 0;
+    return 1;
+}
+
+static int pn__fem_long(pn__fem_lex *L, long *v, int comments) {
+    char t[64], *e;
+    long x;
+    if (!pn__fem_tok(L, t, sizeof t, comments)) return 0;
+    x = strtol(t, &e, 10);
+    if (*e || e == t) return 0;
+    *v = x;
+    return 1;
+}
+
+static int pn__fem_real(pn__fem_lex *L, pn_real *v, int comments) {
+    char t[64], *e;
+    double x;
+    if (!pn__fem_tok(L, t, sizeof t, comments)) return 0;
+    x = strtod(t, &e);
+    if (*e || e == t || !(x == x) || x - x != 0) return 0;
+    *v = (pn_real)x;
+    return 1;
+}
+
+/* skip to the line after the next one that starts with `tag` (e.g. "$Nodes"); 0 if none */
+static int pn__fem_section(pn__fem_lex *L, const char *tag) {
+    size_t n = strlen(tag);
+    const char *p = L->p;
+    long line = L->line;
+    while (p < L->end) {
+        int at_start = p == L->p || p[-1] == '\n';
+        if (at_start && (size_t)(L->end - p) >= n && !memcmp(p, tag, n) &&
+            (p + n == L->end || p[n] == '\n' || p[n] == '\r' || p[n] == ' ')) {
+            L->p = p + n;
+            L->line = line;
+            return 1;
+        }
+        if (*p == '\n') line++;
+        p++;
+    }
+    return 0;
+}
+
+PN__DEF void pn_fem_mesh_data_free(pn_fem_mesh_data *d, const pn_allocator *al) {
+    if (!d) return;
+    pn_free(al, d->nodes);
+    pn_free(al, d->elements);
+    pn_free(al, d->element_tags);
+    memset(d, 0, sizeof *d);
+}
+
+/* node id -> index by binary search over ids sorted with their index (pairs) */
+static long pn__fem_find(const long *pairs, size_t n, long id) {
+    size_t lo = 0, hi = n;
+    while (lo < hi) {
+        size_t mid = (lo + hi) / 2;
+        if (pairs[2 * mid] < id) lo = mid + 1;
+        else hi = mid;
+    }
+    return lo < n && pairs[2 * lo] == id ? pairs[2 * lo + 1] : -1;
+}
+
+static void pn__fem_sort_pairs(long *a, size_t n) { /* heap sort by the first of each pair */
+    size_t i, start, end;
+    for (start = n / 2; start-- > 0;)
+        for (i = start;;) {
+            size_t c = 2 * i + 1;
+            long t0, t1;
+            if (c >= n) break;
+            if (c + 1 < n && a[2 * c + 2] > a[2 * c]) c++;
+            if (a[2 * i] >= a[2 * c]) break;
+            t0 = a[2 * i], t1 = a[2 * i + 1], a[2 * i] = a[2 * c], a[2 * i + 1] = a[2 * c + 1], a[2 * c] = t0, a[2 * c + 1] = t1;
+            i = c;
+        }
+    for (end = n; end-- > 1;) {
+        long t0 = a[0], t1 = a[1];
+        a[0] = a[2 * end], a[1] = a[2 * end + 1], a[2 * end] = t0, a[2 * end + 1] = t1;
+        for (i = 0;;) {
+            size_t c = 2 * i + 1;
+            if (c >= end) break;
+            if (c + 1 < end && a[2 * c + 2] > a[2 * c]) c++;
+            if (a[2 * i] >= a[2 * c]) break;
+            t0 = a[2 * i], t1 = a[2 * i + 1], a[2 * i] = a[2 * c], a[2 * i + 1] = a[2 * c + 1], a[2 * c] = t0, a[2 * c + 1] = t1;
+            i = c;
+        }
+    }
+}
+
+/* The loaders' common end: element node ids to indices, orientation, duplicates of ids */
+static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, const pn_allocator *al, char *why, size_t cap) {
+    size_t k, e;
+    int dp = d->dim + 1, a;
+    pn__fem_sort_pairs(ids, d->n_nodes);
+    for (k = 1; k < d->n_nodes; ++k)
+        if (ids[2 * k] == ids[2 * k - 2]) {
+            pn__fem_why(why, cap, "node id %ld appears twice", ids[2 * k]);
+            return PN_ERROR_FORMAT;
+        }
+    for (e = 0; e < d->n_elements; ++e) {
+        int *el = d->elements + e * (size_t)dp;
+        pn_real Ds[9];
+        for (a = 0; a < dp; ++a) {
+            long ix = pn__fem_find(ids, d->n_nodes, (long)el[a]);
+            if (ix < 0) {
+                pn__fem_why(why, cap, "element %lu names node %d, which is not in the file", (unsigned long)e, el[a]);
+                return PN_ERROR_FORMAT;
+            }
+            el[a] = (int)ix;
+        }
+        for (a = 1; a <= d->dim; ++a) { /* orient positively (Gmsh and TetGen may list either way) */
+            int i;
+            for (i = 0; i < d->dim; ++i)
+                Ds[i * d->dim + a - 1] = d->nodes[(size_t)el[a] * (size_t)d->dim + (size_t)i] - d->nodes[(size_t)el[0] * (size_t)d->dim + (size_t)i];
+        }
+        if (pn_mat_det(d->dim, Ds) < 0) {
+            int t = el[1];
+            el[1] = el[2], el[2] = t;
+        }
+    }
+    (void)al;
+    return PN_OK;
+}
+
+/* grow an int array to hold n (capacity doubling; counts in *capn) */
+static int pn__fem_grow(const pn_allocator *al, void **arr, size_t *capn, size_t n, size_t size) {
+    void *p;
+    size_t nc;
+    if (n <= *capn) return 1;
+    nc = *capn ? *capn : 64;
+    while (nc < n) nc *= 2;
+    p = pn_alloc(al, nc * size);
+    if (!p) return 0;
+    if (*arr) memcpy(p, *arr, *capn * size), pn_free(al, *arr);
+    *arr = p;
+    *capn = nc;
+    return 1;
+}
+
+PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const pn_allocator *al, pn_fem_mesh_data *out,
+                                   char *why, size_t cap) {
+    pn__fem_lex L;
+    pn_fem_mesh_data d;
+    long *ids = NULL, v, nblocks, k, j;
+    pn_real version = 0;
+    size_t cap_el = 0, cap_tag = 0, nn = 0;
+    int want = dim == 2 ? 2 : 4, v4; /* Gmsh element types: 2 the 3-node triangle, 4 the 4-node tetrahedron */
+    pn_result r = PN_ERROR_FORMAT;
+    if (why && cap) why[0] = 0;
+    if (!out || (!text && len)) return PN_ERROR_INVALID_ARGUMENT;
+    memset(out, 0, sizeof *out);
+    if (!pn__dim_ok(dim)) return PN_ERROR_DIMENSION;
+    if (al && (al->alloc == NULL) != (al->free == NULL)) return PN_ERROR_INVALID_ARGUMENT;
+    memset(&d, 0, sizeof d);
+    d.dim = dim;
+    L.p = text, L.end = text + len, L.line = 1;
+#define PN__MSH_FAIL(...) do { pn__fem_why(why, cap, __VA_ARGS__); goto fail; } while (0)
+    if (!pn__fem_section(&L, "$MeshFormat") || !pn__fem_real(&L, &version, 0)) PN__MSH_FAIL("line %ld: no $MeshFormat", L.line);
+    if (!(version >= 2 && version < 3) && !(version >= 4 && version < 5))
+        PN__MSH_FAIL("line %ld: MeshFormat %g: versions 2.x and 4.x are read", L.line, (double)version);
+    v4 = version >= 4;
+    if (!pn__fem_long(&L, &v, 0) || v != 0) PN__MSH_FAIL("line %ld: only ASCII .msh files are read (file-type 0)", L.line);
+    if (!pn__fem_section(&L, "$Nodes")) PN__MSH_FAIL("no $Nodes section");
+    if (v4) {
+        long total, minmax;
+        if (!pn__fem_long(&L, &nblocks, 0) || !pn__fem_long(&L, &total, 0) || !pn__fem_long(&L, &minmax, 0) ||
+            !pn__fem_long(&L, &minmax, 0) || nblocks < 0 || total < 0 || total > 0x7fffffffL)
+            PN__MSH_FAIL("line %ld: a bad $Nodes header", L.line);
+        d.n_nodes = (size_t)total;
+    } else {
+        if (!pn__fem_long(&L, &v, 0) || v < 0 || v > 0x7fffffffL) PN__MSH_FAIL("line %ld: a bad node count", L.line);
+        d.n_nodes = (size_t)v, nblocks = 1;
+    }
+    if ((size_t)(L.end - L.p) / 4 < d.n_nodes) PN__MSH_FAIL("line %ld: %lu nodes cannot fit in the rest of the file", L.line, (unsigned long)d.n_nodes);
+    d.nodes = (pn_real *)pn_alloc(al, sizeof(pn_real) * (d.n_nodes ? d.n_nodes : 1) * (size_t)dim);
+    ids = (long *)pn_alloc(al, sizeof(long) * 2 * (d.n_nodes ? d.n_nodes : 1));
+    if (!d.nodes || !ids) {
+        r = PN_ERROR_OUT_OF_MEMORY;
+        PN__MSH_FAIL("out of memory for %lu nodes", (unsigned long)d.n_nodes);
+    }
+    for (k = 0; k < nblocks; ++k) {
+        long in_block = (long)d.n_nodes, param = 0, ent, edim = 0;
+        if (v4 && (!pn__fem_long(&L, &edim, 0) || !pn__fem_long(&L, &ent, 0) || !pn__fem_long(&L, &param, 0) ||
+                   !pn__fem_long(&L, &in_block, 0) || in_block < 0 || (size_t)in_block > d.n_nodes - nn || edim < 0 || edim > 3))
+            PN__MSH_FAIL("line %ld: a bad node block", L.line);
+        if (v4)
+            for (j = 0; j < in_block; ++j) /* v4: the tags first, then the coordinates */
+                if (!pn__fem_long(&L, &ids[2 * (nn + (size_t)j)], 0)) PN__MSH_FAIL("line %ld: a bad node tag", L.line);
+        for (j = 0; j < in_block; ++j) {
+            pn_real xyz[3], skip;
+            size_t at = nn + (size_t)j;
+            int i;
+            if (!v4 && !pn__fem_long(&L, &ids[2 * at], 0)) PN__MSH_FAIL("line %ld: a bad node tag", L.line);
+            for (i = 0; i < 3; ++i)
+                if (!pn__fem_real(&L, &xyz[i], 0)) PN__MSH_FAIL("line %ld: node %ld: a coordinate that is not a finite number", L.line, ids[2 * at]);
+            if (v4 && param) /* the parametric coordinates on the entity: skipped */
+                for (i = 0; i < (int)edim; ++i)
+                    if (!pn__fem_real(&L, &skip, 0)) PN__MSH_FAIL("line %ld: node %ld: a bad parametric coordinate", L.line, ids[2 * at]);
+            for (i = 0; i < dim; ++i) d.nodes[at * (size_t)dim + (size_t)i] = xyz[i];
+            ids[2 * at + 1] = (long)at;
+        }
+        nn += (size_t)in_block;
+    }
+    if (nn != d.n_nodes) PN__MSH_FAIL("line %ld: the node blocks hold %lu nodes, the header says %lu", L.line, (unsigned long)nn,
+                                      (unsigned long)d.n_nodes);
+    if (!pn__fem_section(&L, "$Elements")) PN__MSH_FAIL("no $Elements section");
+    if (v4) {
+        long total, mm;
+        if (!pn__fem_long(&L, &nblocks, 0) || !pn__fem_long(&L, &total, 0) || !pn__fem_long(&L, &mm, 0) || !pn__fem_long(&L, &mm, 0) ||
+            nblocks < 0 || total < 0)
+            PN__MSH_FAIL("line %ld: a bad $Elements header", L.line);
+    } else {
+        if (!pn__fem_long(&L, &v, 0) || v < 0) PN__MSH_FAIL("line %ld: a bad element count", L.line);
+        nblocks = v; /* v2: one element per "block" */
+    }
+    for (k = 0; k < nblocks; ++k) {
+        long type, in_block = 1, tag = 0, ntags, ent;
+        if (v4) {
+            if (!pn__fem_long(&L, &ent, 0) || !pn__fem_long(&L, &tag, 0) || !pn__fem_long(&L, &type, 0) ||
+                !pn__fem_long(&L, &in_block, 0) || in_block < 0)
+                PN__MSH_FAIL("line %ld: a bad element block", L.line);
+        }
+        for (j = 0; j < in_block; ++j) {
+            long id, nv, t, q;
+            if (!pn__fem_long(&L, &id, 0)) PN__MSH_FAIL("line %ld: a bad element", L.line);
+            if (!v4) {
+                if (!pn__fem_long(&L, &type, 0) || !pn__fem_long(&L, &ntags, 0) || ntags < 0 || ntags > 64)
+                    PN__MSH_FAIL("line %ld: element %ld: a bad type or tag count", L.line, id);
+                for (t = 0; t < ntags; ++t) {
+                    if (!pn__fem_long(&L, &q, 0)) PN__MSH_FAIL("line %ld: element %ld: a bad tag", L.line, id);
+                    if (t == 0) tag = q; /* the physical group */
+                }
+            }
+            /* vertices per element type: 15 point, 1 line, 2 triangle, 3 quad, 4 tet, 5 hex, 6 prism, 7 pyramid,
+               8 line3, 9 tri6, 11 tet10 */
+            nv = type == 15 ? 1 : type == 1 ? 2 : type == 2 ? 3 : type == 3 ? 4 : type == 4 ? 4 : type == 5 ? 8 : type == 6 ? 6
+                 : type == 7 ? 5 : type == 8 ? 3 : type == 9 ? 6 : type == 11 ? 10 : -1;
+            if (nv < 0) PN__MSH_FAIL("line %ld: element %ld: type %ld is not read (linear triangles and tetrahedra are)", L.line, id, type);
+            if (type == want) {
+                int *el;
+                if (!pn__fem_grow(al, (void **)&d.elements, &cap_el, (d.n_elements + 1) * (size_t)(dim + 1), sizeof(int)) ||
+                    !pn__fem_grow(al, (void **)&d.element_tags, &cap_tag, d.n_elements + 1, sizeof(int))) {
+                    r = PN_ERROR_OUT_OF_MEMORY;
+                    PN__MSH_FAIL("out of memory at element %ld", id);
+                }
+                el = d.elements + d.n_elements * (size_t)(dim + 1);
+                for (t = 0; t < nv; ++t) {
+                    if (!pn__fem_long(&L, &q, 0) || q < -0x7fffffffL || q > 0x7fffffffL)
+                        PN__MSH_FAIL("line %ld: element %ld: a bad node tag", L.line, id);
+                    el[t] = (int)q;
+                }
+                d.element_tags[d.n_elements++] = (int)(tag > 0x7fffffffL || tag < -0x7fffffffL ? 0 : tag);
+            } else
+                for (t = 0; t < nv; ++t)
+                    if (!pn__fem_long(&L, &q, 0)) PN__MSH_FAIL("line %ld: element %ld: a bad node tag", L.line, id);
+        }
+    }
+    if (!d.n_elements) PN__MSH_FAIL("the file has no %s", dim == 2 ? "3-node triangles (type 2)" : "4-node tetrahedra (type 4)");
+    r = pn__fem_finish(&d, ids, al, why, cap);
+    if (r != PN_OK) goto fail;
+    pn_free(al, ids);
+    *out = d;
+    return PN_OK;
+fail:
+#undef PN__MSH_FAIL
+    pn_free(al, ids);
+    pn_fem_mesh_data_free(&d, al);
+    return r == PN_OK ? PN_ERROR_FORMAT : r;
+}
+
+PN__DEF pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, const char *ele_text, size_t ele_len,
+                                      const pn_allocator *al, pn_fem_mesh_data *out, char *why, size_t cap) {
+    pn__fem_lex L;
+    pn_fem_mesh_data d;
+    long *ids = NULL, n, dimf, nattr, nmark, ne, per, rattr, k;
+    pn_result r = PN_ERROR_FORMAT;
+    if (why && cap) why[0] = 0;
+    if (!out || (!node_text && node_len) || (!ele_text && ele_len)) return PN_ERROR_INVALID_ARGUMENT;
+    memset(out, 0, sizeof *out);
+    if (al && (al->alloc == NULL) != (al->free == NULL)) return PN_ERROR_INVALID_ARGUMENT;
+    if (!pn__dim_ok(3)) return PN_ERROR_DIMENSION;
+    memset(&d, 0, sizeof d);
+    d.dim = 3;
+#define PN__TG_FAIL(...) do { pn__fem_why(why, cap, __VA_ARGS__); goto fail; } while (0)
+    L.p = node_text, L.end = node_text + node_len, L.line = 1;
+    if (!pn__fem_long(&L, &n, 1) || !pn__fem_long(&L, &dimf, 1) || !pn__fem_long(&L, &nattr, 1) || !pn__fem_long(&L, &nmark, 1) ||
+        n < 0 || n > 0x7fffffffL || dimf != 3 || nattr < 0 || nattr > 64 || nmark < 0 || nmark > 1)
+        PN__TG_FAIL(".node line %ld: a bad header (count, dimension 3, attributes, boundary marker 0 or 1)", L.line);
+    if ((size_t)(L.end - L.p) / 4 < (size_t)n) PN__TG_FAIL(".node line %ld: %ld nodes cannot fit in the file", L.line, n);
+    d.n_nodes = (size_t)n;
+    d.nodes = (pn_real *)pn_alloc(al, sizeof(pn_real) * 3 * (d.n_nodes ? d.n_nodes : 1));
+    ids = (long *)pn_alloc(al, sizeof(long) * 2 * (d.n_nodes ? d.n_nodes : 1));
+    if (!d.nodes || !ids) {
+        r = PN_ERROR_OUT_OF_MEMORY;
+        PN__TG_FAIL("out of memory for %ld nodes", n);
+    }
+    for (k = 0; k < n; ++k) {
+        pn_real skip;
+        long ks;
+        int i;
+        if (!pn__fem_long(&L, &ids[2 * k], 1)) PN__TG_FAIL(".node line %ld: a bad node index", L.line);
+        ids[2 * k + 1] = k;
+        for (i = 0; i < 3; ++i)
+            if (!pn__fem_real(&L, &d.nodes[(size_t)k * 3 + (size_t)i], 1))
+                PN__TG_FAIL(".node line %ld: node %ld: a coordinate that is not a finite number", L.line, ids[2 * k]);
+        for (i = 0; i < nattr; ++i)
+            if (!pn__fem_real(&L, &skip, 1)) PN__TG_FAIL(".node line %ld: node %ld: a bad attribute", L.line, ids[2 * k]);
+        if (nmark && !pn__fem_long(&L, &ks, 1)) PN__TG_FAIL(".node line %ld: node %ld: a bad boundary marker", L.line, ids[2 * k]);
+    }
+    L.p = ele_text, L.end = ele_text + ele_len, L.line = 1;
+    if (!pn__fem_long(&L, &ne, 1) || !pn__fem_long(&L, &per, 1) || !pn__fem_long(&L, &rattr, 1) || ne < 0 || ne > 0x7fffffffL ||
+        (per != 4 && per != 10) || (rattr != 0 && rattr != 1))
+        PN__TG_FAIL(".ele line %ld: a bad header (count, 4 or 10 nodes per tetrahedron, region attribute 0 or 1)", L.line);
+    if ((size_t)(L.end - L.p) / 8 < (size_t)ne) PN__TG_FAIL(".ele line %ld: %ld elements cannot fit in the file", L.line, ne);
+    d.n_elements = (size_t)ne;
+    d.elements = (int *)pn_alloc(al, sizeof(int) * 4 * (d.n_elements ? d.n_elements : 1));
+    d.element_tags = (int *)pn_alloc(al, sizeof(int) * (d.n_elements ? d.n_elements : 1));
+    if (!d.elements || !d.element_tags) {
+        r = PN_ERROR_OUT_OF_MEMORY;
+        PN__TG_FAIL("out of memory for %ld elements", ne);
+    }
+    for (k = 0; k < ne; ++k) {
+        long id, q, i;
+        pn_real at = 0;
+        if (!pn__fem_long(&L, &id, 1)) PN__TG_FAIL(".ele line %ld: a bad element index", L.line);
+        for (i = 0; i < per; ++i) {
+            if (!pn__fem_long(&L, &q, 1) || q < -0x7fffffffL || q > 0x7fffffffL)
+                PN__TG_FAIL(".ele line %ld: element %ld: a bad node index", L.line, id);
+            if (i < 4) d.elements[(size_t)k * 4 + (size_t)i] = (int)q;
+        }
+        if (rattr && !pn__fem_real(&L, &at, 1)) PN__TG_FAIL(".ele line %ld: element %ld: a bad region attribute", L.line, id);
+        d.element_tags[k] = at > -2e9 && at < 2e9 ? (int)at : 0;
+    }
+    if (!d.n_elements) PN__TG_FAIL(".ele: no tetrahedra");
+    r = pn__fem_finish(&d, ids, al, why, cap);
+    if (r != PN_OK) goto fail;
+    pn_free(al, ids);
+    *out = d;
+    return PN_OK;
+fail:
+#undef PN__TG_FAIL
+    pn_free(al, ids);
+    pn_fem_mesh_data_free(&d, al);
+    return r == PN_OK ? PN_ERROR_FORMAT : r;
 }
 
 #undef PN__FEM_FREE
