@@ -6916,7 +6916,7 @@ static void pn__fem_sort_pairs(long *a, size_t n) { /* heap sort by the first of
 }
 
 /* The loaders' common end: element node ids to indices, orientation, duplicates of ids */
-static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, const pn_allocator *al, char *why, size_t cap) {
+static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, char *why, size_t cap) {
     size_t k, e;
     int dp = d->dim + 1, a;
     pn__fem_sort_pairs(ids, d->n_nodes);
@@ -6946,11 +6946,24 @@ static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, const pn_allocat
             el[1] = el[2], el[2] = t;
         }
     }
-    (void)al;
     return PN_OK;
 }
 
-/* grow an int array to hold n (capacity doubling; counts in *capn) */
+/* the loaders' end: the ids to indices and the orientation (pn__fem_finish) when r is PN_OK,
+   then d handed to *out, or freed on failure; ids freed either way */
+static pn_result pn__fem_loaded(pn_fem_mesh_data *d, long *ids, const pn_allocator *al, pn_result r, pn_fem_mesh_data *out,
+                                char *why, size_t cap) {
+    if (r == PN_OK) r = pn__fem_finish(d, ids, why, cap);
+    pn_free(al, ids);
+    if (r == PN_OK) {
+        *out = *d;
+        return PN_OK;
+    }
+    pn_fem_mesh_data_free(d, al);
+    return r;
+}
+
+/* grow an array to hold n items of size bytes (capacity doubling; the capacity in *capn) */
 static int pn__fem_grow(const pn_allocator *al, void **arr, size_t *capn, size_t n, size_t size) {
     void *p;
     size_t nc;
@@ -7084,16 +7097,10 @@ PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const 
         }
     }
     if (!d.n_elements) PN__MSH_FAIL("the file has no %s", dim == 2 ? "3-node triangles (type 2)" : "4-node tetrahedra (type 4)");
-    r = pn__fem_finish(&d, ids, al, why, cap);
-    if (r != PN_OK) goto fail;
-    pn_free(al, ids);
-    *out = d;
-    return PN_OK;
+    return pn__fem_loaded(&d, ids, al, PN_OK, out, why, cap);
 fail:
 #undef PN__MSH_FAIL
-    pn_free(al, ids);
-    pn_fem_mesh_data_free(&d, al);
-    return r == PN_OK ? PN_ERROR_FORMAT : r;
+    return pn__fem_loaded(&d, ids, al, r == PN_OK ? PN_ERROR_FORMAT : r, out, why, cap);
 }
 
 PN__DEF pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, const char *ele_text, size_t ele_len,
@@ -7160,16 +7167,10 @@ PN__DEF pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, co
         d.element_tags[k] = at > -2e9 && at < 2e9 ? (int)at : 0;
     }
     if (!d.n_elements) PN__TG_FAIL(".ele: no tetrahedra");
-    r = pn__fem_finish(&d, ids, al, why, cap);
-    if (r != PN_OK) goto fail;
-    pn_free(al, ids);
-    *out = d;
-    return PN_OK;
+    return pn__fem_loaded(&d, ids, al, PN_OK, out, why, cap);
 fail:
 #undef PN__TG_FAIL
-    pn_free(al, ids);
-    pn_fem_mesh_data_free(&d, al);
-    return r == PN_OK ? PN_ERROR_FORMAT : r;
+    return pn__fem_loaded(&d, ids, al, r == PN_OK ? PN_ERROR_FORMAT : r, out, why, cap);
 }
 
 #undef PN__FEM_FREE
