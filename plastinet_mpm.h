@@ -887,6 +887,58 @@ static pn_real pn__armijo(pn__objective_fn f, void *ctx, size_t n, const pn_real
     return 0;
 }
 
+/* What preconditioned CG needs of a solver: y = A x, z = B r, and a dot product (MPM sums in
+   fixed chunks so that any thread count gives the same bits). */
+typedef struct pn__cg_ops {
+    void *ctx;
+    void (*apply)(void *ctx, const pn_real *x, pn_real *y);
+    void (*precond)(void *ctx, const pn_real *r, pn_real *z);
+    pn_real (*dot)(void *ctx, size_t n, const pn_real *a, const pn_real *b);
+} pn__cg_ops;
+
+/* Solve A x = b by preconditioned conjugate gradients to |r| <= rel_tol |b|, b given in r
+   (overwritten by the residual); z, p and q are scratch. warm: start from x (r = b - A x),
+   else from 0. Returns the iterations; *capped when it stopped at max_it short of rel_tol
+   (then x is no solution: never count it as converged). */
+static int pn__pcg(const pn__cg_ops *op, size_t n, pn_real *x, pn_real *r, pn_real *z, pn_real *p, pn_real *q, int max_it,
+                   pn_real rel_tol, int warm, int *capped) {
+    pn_real rz, r0, rr;
+    size_t k;
+    int it;
+    *capped = 0;
+    if (warm) op->apply(op->ctx, x, q);
+    else
+        for (k = 0; k < n; ++k) x[k] = 0;
+    r0 = PN__SQRT(op->dot(op->ctx, n, r, r)); /* |b| */
+    if (warm)
+        for (k = 0; k < n; ++k) r[k] -= q[k];
+    op->precond(op->ctx, r, z);
+    memcpy(p, z, sizeof(pn_real) * n);
+    rz = op->dot(op->ctx, n, r, z);
+    if (r0 == 0) return 0;
+    if (PN__SQRT(op->dot(op->ctx, n, r, r)) <= rel_tol * r0) return 0;
+    for (it = 0; it < max_it; ++it) {
+        pn_real pq, alpha, rz_new, beta;
+        op->apply(op->ctx, p, q);
+        pq = op->dot(op->ctx, n, p, q);
+        if (!(pq > 0)) break; /* A is positive definite: only rounding gets here */
+        alpha = rz / pq;
+        for (k = 0; k < n; ++k) {
+            x[k] += alpha * p[k];
+            r[k] -= alpha * q[k];
+        }
+        rr = PN__SQRT(op->dot(op->ctx, n, r, r));
+        if (rr <= rel_tol * r0) return it + 1;
+        op->precond(op->ctx, r, z);
+        rz_new = op->dot(op->ctx, n, r, z);
+        beta = rz_new / rz;
+        rz = rz_new;
+        for (k = 0; k < n; ++k) p[k] = z[k] + beta * p[k];
+    }
+    *capped = it == max_it;
+    return it;
+}
+
 /* A group's implicit energy (pn_mpm_group_set_energy, pn_fem_group_set_energy): checks net
    and the material; msg says why not. */
 static pn_result pn__group_set_energy(pn_mpm_group *gr, int g, int dim, pn_mpm_energy energy, const pn_pnet *net,
@@ -3282,63 +3334,47 @@ static void pn__mpm_diagonal(pn_mpm_world *w, pn_real dt) {
     }
 }
 
-/* cg_z = S B cg_r: B the V-cycle (multigrid) or the inverse diagonal (Jacobi) */
-static void pn__mpm_precondition(pn_mpm_world *w) {
+/* z = S B r: B the V-cycle (multigrid) or the inverse diagonal (Jacobi) */
+static void pn__mpm_precondition(pn_mpm_world *w, const pn_real *r, pn_real *z) {
     int d = w->dim;
     size_t k, i;
-    if (w->mg_on) pn__mpm_mg_vcycle(w, 0, w->cg_r, w->cg_z);
+    if (w->mg_on) pn__mpm_mg_vcycle(w, 0, r, z);
     for (k = 0; k < w->n_act; ++k) {
         if (!w->mg_on)
-            for (i = 0; i < (size_t)d; ++i) w->cg_z[k * (size_t)d + i] = w->cg_r[k * (size_t)d + i] / w->diag[k * (size_t)d + i];
-        pn__mpm_filter(w, k, w->cg_z + k * (size_t)d);
+            for (i = 0; i < (size_t)d; ++i) z[k * (size_t)d + i] = r[k * (size_t)d + i] / w->diag[k * (size_t)d + i];
+        pn__mpm_filter(w, k, z + k * (size_t)d);
     }
 }
 
-/* Solve S H S dir = -S grad by preconditioned CG to |r| <= rel_tol |S grad|; returns
-   iterations. warm: resume from the dir of the last call (same H and grad). */
+/* the filtered Hessian, the preconditioner and the chunked dot for the shared pn__pcg */
+typedef struct pn__mpm_cg {
+    pn_mpm_world *w;
+    pn_real dt;
+} pn__mpm_cg;
+static void pn__mpm_cg_apply(void *ctx, const pn_real *x, pn_real *y) {
+    pn__mpm_cg *c = (pn__mpm_cg *)ctx;
+    pn__mpm_hess_vec(c->w, x, c->dt, y);
+}
+static void pn__mpm_cg_precond(void *ctx, const pn_real *r, pn_real *z) { pn__mpm_precondition(((pn__mpm_cg *)ctx)->w, r, z); }
+static pn_real pn__mpm_cg_dot(void *ctx, size_t n, const pn_real *a, const pn_real *b) {
+    return pn__mpm_sum(((pn__mpm_cg *)ctx)->w, n, a, b);
+}
+
+/* Solve S H S dir = -S grad by preconditioned CG (>>newton) to |r| <= rel_tol |S grad|;
+   returns iterations. warm: resume from the dir of the last call (same H and grad). */
 static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol, int warm, int *capped) {
-    int d = w->dim, it;
-    size_t nd = w->n_act * (size_t)d, k, i;
-    pn_real rz, r0, rr;
-    *capped = 0;
+    int d = w->dim;
+    size_t k, i;
+    pn__mpm_cg c;
+    pn__cg_ops op;
     if (!warm && !w->mg_on) pn__mpm_diagonal(w, dt);
-    if (warm) pn__mpm_hess_vec(w, w->dir, dt, w->cg_q); /* resume from dir: r = -g - H dir */
     for (k = 0; k < w->n_act; ++k) {
-        for (i = 0; i < (size_t)d; ++i) {
-            size_t c = k * (size_t)d + i;
-            w->cg_r[c] = -w->grad[c];
-            if (!warm) w->dir[c] = 0;
-        }
+        for (i = 0; i < (size_t)d; ++i) w->cg_r[k * (size_t)d + i] = -w->grad[k * (size_t)d + i];
         pn__mpm_filter(w, k, w->cg_r + k * (size_t)d);
     }
-    r0 = PN__SQRT(pn__mpm_sum(w, nd, w->cg_r, w->cg_r)); /* |S g| */
-    if (warm)
-        for (k = 0; k < nd; ++k) w->cg_r[k] -= w->cg_q[k]; /* cg_q is filtered already */
-    pn__mpm_precondition(w);
-    memcpy(w->cg_p, w->cg_z, sizeof(pn_real) * nd);
-    rz = pn__mpm_sum(w, nd, w->cg_r, w->cg_z);
-    if (r0 == 0) return 0;
-    if (PN__SQRT(pn__mpm_sum(w, nd, w->cg_r, w->cg_r)) <= rel_tol * r0) return 0;
-    for (it = 0; it < max_it; ++it) {
-        pn_real pq, alpha, rz_new, beta;
-        pn__mpm_hess_vec(w, w->cg_p, dt, w->cg_q);
-        pq = pn__mpm_sum(w, nd, w->cg_p, w->cg_q);
-        if (!(pq > 0)) break; /* PSD Hessian plus mass: only rounding gets here */
-        alpha = rz / pq;
-        for (k = 0; k < nd; ++k) {
-            w->dir[k] += alpha * w->cg_p[k];
-            w->cg_r[k] -= alpha * w->cg_q[k];
-        }
-        rr = PN__SQRT(pn__mpm_sum(w, nd, w->cg_r, w->cg_r));
-        if (rr <= rel_tol * r0) return it + 1;
-        pn__mpm_precondition(w);
-        rz_new = pn__mpm_sum(w, nd, w->cg_r, w->cg_z);
-        beta = rz_new / rz;
-        rz = rz_new;
-        for (k = 0; k < nd; ++k) w->cg_p[k] = w->cg_z[k] + beta * w->cg_p[k];
-    }
-    *capped = it == max_it; /* stopped short of rel_tol: dir is not the Newton direction */
-    return it;
+    c.w = w, c.dt = dt;
+    op.ctx = &c, op.apply = pn__mpm_cg_apply, op.precond = pn__mpm_cg_precond, op.dot = pn__mpm_cg_dot;
+    return pn__pcg(&op, w->n_act * (size_t)d, w->dir, w->cg_r, w->cg_z, w->cg_p, w->cg_q, max_it, rel_tol, warm, capped);
 }
 
 /* Per-pass preparation of every particle's energy at F0 = F(v) (lagged G, PlasticityNet
