@@ -3346,7 +3346,8 @@ static void pn__mpm_precondition(pn_mpm_world *w, const pn_real *r, pn_real *z) 
     }
 }
 
-/* the filtered Hessian, the preconditioner and the chunked dot for the shared pn__pcg */
+/* the world and the step for the shared solvers (>>newton): the filtered Hessian, the
+   preconditioner and the chunked dot for pn__pcg, the objective for pn__armijo */
 typedef struct pn__mpm_cg {
     pn_mpm_world *w;
     pn_real dt;
@@ -3720,16 +3721,13 @@ static void pn__mpm_mark(pn_mpm_world *w, pn_mpm_stats *st, int s) {
     w->clock_last = t;
 }
 
-/* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
 /* the incremental potential's value for the shared line search (>>newton) */
-typedef struct pn__mpm_ls {
-    pn_mpm_world *w;
-    pn_real dt;
-} pn__mpm_ls;
 static pn_result pn__mpm_value(void *ctx, const pn_real *v, pn_real *E) {
-    pn__mpm_ls *ls = (pn__mpm_ls *)ctx;
-    return pn__mpm_objective(ls->w, v, ls->dt, 0, E);
+    pn__mpm_cg *c = (pn__mpm_cg *)ctx;
+    return pn__mpm_objective(c->w, v, c->dt, 0, E);
 }
+
+/* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
 
 static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
                                        pn_mpm_stats *st) {
@@ -3825,9 +3823,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 gd = pn__mpm_sum(w, nd, w->grad, w->dir);
                 pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
                 {
-                    pn__mpm_ls ls;
-                    ls.w = w, ls.dt = dt;
-                    alpha = pn__armijo(pn__mpm_value, &ls, nd, w->vsol, w->dir, E0, gd, 1, w->vtry, &E1);
+                    pn__mpm_cg c;
+                    c.w = w, c.dt = dt;
+                    alpha = pn__armijo(pn__mpm_value, &c, nd, w->vsol, w->dir, E0, gd, 1, w->vtry, &E1);
                 }
                 pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
                 if (alpha == 0) { /* no decrease: keep v, count it, stop this round */
