@@ -688,6 +688,8 @@ typedef struct pn_fem_stats {
     int substeps, newton_iters, factorizations, fixed_point_iters, line_search_failures;
     int al_iters;                /* augmented-Lagrangian rounds moving the obstacles        */
     int solves;                  /* minimizations (passes x rounds x substeps)              */
+    int cg_iters;                /* conjugate-gradient iterations (self-contact pairs beyond
+                                    the factor's profile make the solve iterative)         */
     pn_real newton_residual;     /* max |dx| / l at the last Newton iteration               */
     pn_real min_distance_m;      /* the smallest node-obstacle distance at the step's end
                                     (and over its line searches: never <= 0)                */
@@ -5453,6 +5455,14 @@ typedef struct pn__fem {
     pn_real *L;                  /* the Hessian, factored in place (lower, by rows)          */
     pn_real *xt, *xs, *g, *dir, *xtry; /* x~, the iterate, gradient, direction, a try          */
     pn_real *xlag;               /* where friction's normal force and directions are taken   */
+    pn_real *A, *cgx, *cgz, *cgp, *cgq; /* self-contact beyond the profile: the unfactored matrix,
+                                    CG's vectors                                           */
+    int *bedge;                  /* 2D: the boundary's edges (node pairs), nbe of them       */
+    size_t *bnode, nbe, nbn;     /* the nodes on the boundary                                */
+    pn_real *ebox;               /* per boundary edge: its box, lo and hi                    */
+    pn_real *off;                /* side list: 6 x 6 blocks of node-edge pairs beyond the profile */
+    int *off_node;               /* their nodes (p, a, b)                                    */
+    size_t n_off, cap_off;
     pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
     pn_real *eP, *eH;            /* per element: P (dd) and the projected dP/dF (dd^2)       */
     pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
@@ -5664,6 +5674,12 @@ PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
         pn_free(al, s->ppt);
         pn_free(al, s->elast);
         pn_free(al, s->bx);
+        pn_free(al, s->A);
+        pn_free(al, s->bedge);
+        pn_free(al, s->bnode);
+        pn_free(al, s->ebox);
+        pn_free(al, s->off);
+        pn_free(al, s->off_node);
         pn_free(al, s);
     }
     pn_free(al, m->x);
@@ -5675,6 +5691,8 @@ PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
 PN__DEF const char *pn_fem_error(const pn_fem_mesh *m) { return m ? m->error : ""; }
 
 /* the arrays of the solver: one block per type (freed in pn_fem_destroy) */
+static void pn__fem_sort_pairs(long *a, size_t n); /* >>fem loaders */
+
 static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     const pn_allocator *al = &m->desc.allocator;
     int d = m->dim, dd = d * d, dp = d + 1;
@@ -5687,7 +5705,7 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     m->impl = s;
     s->perm = (size_t *)pn_alloc(al, sizeof(size_t) * 2 * n);
     s->fc = (size_t *)pn_alloc(al, sizeof(size_t) * (2 * nu + 1));
-    s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (6 * PN__FEM_ALIGN(nu)));
+    s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (11 * PN__FEM_ALIGN(nu)));
     s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * ne * (size_t)(dd + d * dp + dd + dd * dd + dd + 1 + 1 + dd));
     s->ppt = (pn_pnet_point *)pn_alloc(al, sizeof(pn_pnet_point) * ne);
     s->elast = (unsigned char *)pn_alloc(al, ne);
@@ -5703,6 +5721,10 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->xtry = s->dir + PN__FEM_ALIGN(nu);
     s->xs = s->xtry + PN__FEM_ALIGN(nu);
     s->xlag = s->xs + PN__FEM_ALIGN(nu);
+    s->cgx = s->xlag + PN__FEM_ALIGN(nu);
+    s->cgz = s->cgx + PN__FEM_ALIGN(nu);
+    s->cgp = s->cgz + PN__FEM_ALIGN(nu);
+    s->cgq = s->cgp + PN__FEM_ALIGN(nu);
     s->q = s->B + ne * (size_t)dd;
     s->eP = s->q + ne * (size_t)(d * dp);
     s->eH = s->eP + ne * (size_t)dd;
@@ -5753,6 +5775,47 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     pn_free(al, xadj), pn_free(al, adj), pn_free(al, deg), pn_free(al, seen), pn_free(al, cnt);
     s->L = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
     if (!s->L) return PN_ERROR_OUT_OF_MEMORY;
+    if (d == 2) { /* the boundary: the edges of one triangle only (sorted node pairs, counted) */
+        long *key = (long *)pn_alloc(al, sizeof(long) * 2 * 3 * ne);
+        size_t nk = 3 * ne, q, j;
+        if (!key) return PN_ERROR_OUT_OF_MEMORY;
+        for (e = 0; e < ne; ++e)
+            for (i = 0; i < 3; ++i) {
+                long u = m->elem[3 * e + i], v = m->elem[3 * e + (i + 1) % 3];
+                key[2 * (3 * e + i)] = PN__MIN(u, v) * (long)n + PN__MAX(u, v), key[2 * (3 * e + i) + 1] = 0;
+            }
+        pn__fem_sort_pairs(key, nk);
+        for (q = 0; q < nk; q = j) {
+            for (j = q + 1; j < nk && key[2 * j] == key[2 * q]; ++j) {}
+            s->nbe += j - q == 1;
+        }
+        s->bedge = (int *)pn_alloc(al, sizeof(int) * (2 * s->nbe + 1));
+        s->bnode = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
+        s->ebox = (pn_real *)pn_alloc(al, sizeof(pn_real) * (4 * s->nbe + 1));
+        s->cap_off = 8 * n + 64;
+        s->off = (pn_real *)pn_alloc(al, sizeof(pn_real) * 36 * s->cap_off);
+        s->off_node = (int *)pn_alloc(al, sizeof(int) * 3 * s->cap_off);
+        s->A = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
+        if (!s->bedge || !s->bnode || !s->ebox || !s->off || !s->off_node || !s->A) {
+            pn_free(al, key);
+            return PN_ERROR_OUT_OF_MEMORY;
+        }
+        s->nbe = 0;
+        for (q = 0; q < nk; q = j) {
+            for (j = q + 1; j < nk && key[2 * j] == key[2 * q]; ++j) {}
+            if (j - q == 1) s->bedge[2 * s->nbe] = (int)(key[2 * q] / (long)n), s->bedge[2 * s->nbe + 1] = (int)(key[2 * q] % (long)n), s->nbe++;
+        }
+        pn_free(al, key);
+        {
+            unsigned char *on = (unsigned char *)pn_alloc(al, n);
+            if (!on) return PN_ERROR_OUT_OF_MEMORY;
+            memset(on, 0, n);
+            for (q = 0; q < 2 * s->nbe; ++q) on[s->bedge[q]] = 1;
+            for (q = 0; q < n; ++q)
+                if (on[q]) s->bnode[s->nbn++] = q;
+            pn_free(al, on);
+        }
+    }
     return PN_OK;
 }
 
@@ -6118,6 +6181,219 @@ static void pn__fem_hadd(pn__fem *s, size_t r, size_t c, pn_real v) {
 /* is node k's unknown free (not driven)? */
 #define PN__FEM_FREE(m, node) (!(m)->fixed[node])
 
+/* ---- >>fem self-contact (2D): IPC's point-edge barrier between the boundary's nodes and
+   edges. d the point-segment distance of node p to edge (a, b), p not on the edge; the same
+   b(d) as against obstacles. Pairs whose Hessian couples nodes outside the skyline's profile
+   (two walls of the mesh far apart in the RCM order) go to a side list: the solve is then
+   preconditioned CG on the full Hessian with the skyline factor (holding those pairs'
+   diagonal blocks) as the preconditioner. -------------------------------------------------- */
+
+/* squared distance s of point p to segment (a, b) in 2D with its gradient g and Hessian H
+   (6 x 6) over (p, a, b) */
+static pn_real pn__fem_pe(const pn_real *p, const pn_real *a, const pn_real *b, pn_real *g, pn_real *H) {
+    pn_real e[2], w[2], L, t;
+    int i, j;
+    e[0] = b[0] - a[0], e[1] = b[1] - a[1], w[0] = p[0] - a[0], w[1] = p[1] - a[1];
+    L = e[0] * e[0] + e[1] * e[1];
+    t = L > 0 ? (w[0] * e[0] + w[1] * e[1]) / L : 0;
+    for (i = 0; i < 36; ++i) H[i] = 0;
+    if (t <= 0 || t >= 1) { /* nearest to an end: |p - q|^2, q = a or b */
+        int q = t <= 0 ? 1 : 2;
+        pn_real dq[2];
+        dq[0] = p[0] - (q == 1 ? a : b)[0], dq[1] = p[1] - (q == 1 ? a : b)[1];
+        for (i = 0; i < 6; ++i) g[i] = 0;
+        for (i = 0; i < 2; ++i) {
+            g[i] = 2 * dq[i], g[2 * q + i] = -2 * dq[i];
+            H[i * 6 + i] = 2, H[(2 * q + i) * 6 + 2 * q + i] = 2;
+            H[i * 6 + 2 * q + i] = H[(2 * q + i) * 6 + i] = -2;
+        }
+        return dq[0] * dq[0] + dq[1] * dq[1];
+    } else { /* the interior: s = c^2 / L, c = e x w */
+        /* e = E x, w = W x over x = (p, a, b): E = [0, -I, I], W = [I, -I, 0] */
+        static const pn_real E0[6] = {0, 0, -1, 0, 1, 0}, E1[6] = {0, 0, 0, -1, 0, 1};
+        static const pn_real W0[6] = {1, 0, -1, 0, 0, 0}, W1[6] = {0, 1, 0, -1, 0, 0};
+        pn_real c = e[0] * w[1] - e[1] * w[0], gc[6], gL[6], s;
+        for (i = 0; i < 6; ++i) {
+            gc[i] = E0[i] * w[1] + e[0] * W1[i] - E1[i] * w[0] - e[1] * W0[i];
+            gL[i] = 2 * (e[0] * E0[i] + e[1] * E1[i]);
+        }
+        s = c * c / L;
+        for (i = 0; i < 6; ++i) g[i] = 2 * c * gc[i] / L - c * c * gL[i] / (L * L);
+        for (i = 0; i < 6; ++i)
+            for (j = 0; j < 6; ++j) {
+                pn_real hc = E0[i] * W1[j] + W1[i] * E0[j] - E1[i] * W0[j] - W0[i] * E1[j];
+                pn_real hL = 2 * (E0[i] * E0[j] + E1[i] * E1[j]);
+                H[i * 6 + j] = 2 * gc[i] * gc[j] / L + 2 * c * hc / L - 2 * c / (L * L) * (gc[i] * gL[j] + gL[i] * gc[j]) +
+                               2 * c * c / (L * L * L) * gL[i] * gL[j] - c * c / (L * L) * hL;
+            }
+        return s;
+    }
+}
+
+/* Is the block of nodes i and j inside the skyline's profile? */
+static int pn__fem_in_profile(const pn_fem_mesh *m, size_t i, size_t j) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    size_t pi = s->iperm[i], pj = s->iperm[j], lo = PN__MIN(pi, pj), hi = PN__MAX(pi, pj);
+    return lo * (size_t)m->dim >= s->fc[hi * (size_t)m->dim];
+}
+
+/* The boundary edges' boxes (grown by grow) for the pair search: lo, hi per edge */
+static void pn__fem_edge_boxes(const pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real alpha, pn_real grow) {
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t k;
+    int i;
+    for (k = 0; k < s->nbe; ++k) {
+        const pn_real *a = x + 2 * (size_t)s->bedge[2 * k], *b = x + 2 * (size_t)s->bedge[2 * k + 1];
+        for (i = 0; i < 2; ++i) {
+            pn_real lo = PN__MIN(a[i], b[i]), hi = PN__MAX(a[i], b[i]);
+            if (dir) { /* swept by alpha dir */
+                pn_real a1 = a[i] + alpha * dir[2 * (size_t)s->bedge[2 * k] + (size_t)i], b1 = b[i] + alpha * dir[2 * (size_t)s->bedge[2 * k + 1] + (size_t)i];
+                lo = PN__MIN(lo, PN__MIN(a1, b1)), hi = PN__MAX(hi, PN__MAX(a1, b1));
+            }
+            s->ebox[4 * k + (size_t)i] = lo - grow, s->ebox[4 * k + 2 + (size_t)i] = hi + grow;
+        }
+    }
+}
+
+/* node p's point and edge k's overlap in their boxes (p swept too when dir) */
+static int pn__fem_pair_near(const pn__fem *s, size_t k, const pn_real *p, const pn_real *pd, pn_real alpha) {
+    int i;
+    for (i = 0; i < 2; ++i) {
+        pn_real lo = p[i], hi = p[i];
+        if (pd) lo = PN__MIN(lo, p[i] + alpha * pd[i]), hi = PN__MAX(hi, p[i] + alpha * pd[i]);
+        if (hi < s->ebox[4 * k + (size_t)i] || lo > s->ebox[4 * k + 2 + (size_t)i]) return 0;
+    }
+    return 1;
+}
+
+/* The barrier of every near node-edge pair into E (and g, the skyline or the side list by
+   mode); the smallest distance into *dmin; PN_ERROR_STEP_TOO_LARGE with error_node set when
+   a node touches an edge. */
+static pn_result pn__fem_self(pn_fem_mesh *m, const pn_real *x, int mode, pn_real *E, pn_real *dmin) {
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t q, k;
+    pn_real w = s->dt * s->dt * m->kappa;
+    if (mode >= 2) s->n_off = 0;
+    if (!s->nbe) return PN_OK;
+    pn__fem_edge_boxes(m, x, NULL, 0, m->dhat);
+    for (q = 0; q < s->nbn; ++q) {
+        size_t p = s->bnode[q];
+        if (!PN__FEM_FREE(m, p)) continue;
+        for (k = 0; k < s->nbe; ++k) {
+            size_t na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1], nodes[3];
+            pn_real g6[6], H6[36], sq, dist, bb, b1, b2;
+            int i, j;
+            if (na == p || nb == p || !pn__fem_pair_near(s, k, x + 2 * p, NULL, 0)) continue;
+            sq = pn__fem_pe(x + 2 * p, x + 2 * na, x + 2 * nb, g6, H6);
+            dist = PN__SQRT(sq);
+            *dmin = PN__MIN(*dmin, dist);
+            if (!(dist > 0)) {
+                m->error_node = (long)p;
+                return PN_ERROR_STEP_TOO_LARGE;
+            }
+            if (dist >= m->dhat) continue;
+            pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+            *E += w * bb;
+            nodes[0] = p, nodes[1] = na, nodes[2] = nb;
+            if (mode >= 1) /* grad b(d) = b' grad s / (2 d) */
+                for (i = 0; i < 6; ++i)
+                    if (PN__FEM_FREE(m, nodes[i / 2])) s->g[nodes[i / 2] * 2 + (size_t)(i % 2)] += w * b1 * g6[i] / (2 * dist);
+            if (mode >= 2) { /* b'' grad d grad d^T + b' hess d, projected: PSD */
+                int full = pn__fem_in_profile(m, p, na) && pn__fem_in_profile(m, p, nb);
+                for (i = 0; i < 6; ++i)
+                    for (j = 0; j < 6; ++j) {
+                        pn_real gi = g6[i] / (2 * dist), gj = g6[j] / (2 * dist);
+                        H6[i * 6 + j] = w * (b2 * gi * gj + b1 * (H6[i * 6 + j] / (2 * dist) - g6[i] * g6[j] / (4 * dist * dist * dist)));
+                    }
+                pn_sym_project_psd(6, H6);
+                if (!full && s->n_off >= s->cap_off)
+                    return pn__fem_fail(m, PN_ERROR_CAPACITY, "self-contact: more than %lu node-edge pairs outside the "
+                                        "Hessian's profile", (unsigned long)s->cap_off);
+                for (i = 0; i < 6; ++i)
+                    for (j = 0; j <= i; ++j) {
+                        size_t ni = nodes[i / 2], nj = nodes[j / 2];
+                        if (!PN__FEM_FREE(m, ni) || !PN__FEM_FREE(m, nj)) continue;
+                        if (full || ni == nj) pn__fem_hadd(s, pn__fem_row(m, ni * 2 + (size_t)(i % 2)), pn__fem_row(m, nj * 2 + (size_t)(j % 2)),
+                                                           H6[i * 6 + j]);
+                    }
+                if (!full) { /* the off-diagonal node blocks go to the side list */
+                    pn_real *o = s->off + 36 * s->n_off;
+                    for (i = 0; i < 6; ++i)
+                        for (j = 0; j < 6; ++j) {
+                            int free2 = PN__FEM_FREE(m, nodes[i / 2]) && PN__FEM_FREE(m, nodes[j / 2]);
+                            o[i * 6 + j] = i / 2 != j / 2 && free2 ? H6[i * 6 + j] : 0;
+                        }
+                    for (i = 0; i < 3; ++i) s->off_node[3 * s->n_off + (size_t)i] = (int)nodes[i];
+                    s->n_off++;
+                }
+            }
+        }
+    }
+    return PN_OK;
+}
+
+/* the largest step along dir no boundary node takes through a boundary edge: additive CCD
+   (Li, Kaufman and Jiang 2021): advance while the distance cannot have closed, by 0.9 of
+   distance over the bound of the pair's relative motion, and stop at a tenth of the
+   starting distance */
+static pn_real pn__fem_self_ccd(const pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real amax) {
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t q, k;
+    pn_real best = amax;
+    if (!s->nbe) return amax;
+    pn__fem_edge_boxes(m, x, dir, amax, 0);
+    for (q = 0; q < s->nbn; ++q) {
+        size_t p = s->bnode[q];
+        if (!PN__FEM_FREE(m, p)) continue;
+        for (k = 0; k < s->nbe; ++k) {
+            size_t na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1], n3[3];
+            pn_real mean[2], lp = 0, la = 0, t = 0, d0, g6[6], H6[36];
+            int i, j, it;
+            if (na == p || nb == p || !pn__fem_pair_near(s, k, x + 2 * p, dir + 2 * p, amax)) continue;
+            n3[0] = p, n3[1] = na, n3[2] = nb;
+            for (i = 0; i < 2; ++i) mean[i] = (dir[2 * p + (size_t)i] + dir[2 * na + (size_t)i] + dir[2 * nb + (size_t)i]) / 3;
+            for (j = 0; j < 3; ++j) { /* the motion bound after the common translation */
+                pn_real v2 = 0;
+                for (i = 0; i < 2; ++i) v2 += (dir[2 * n3[j] + (size_t)i] - mean[i]) * (dir[2 * n3[j] + (size_t)i] - mean[i]);
+                if (j == 0) lp = PN__SQRT(v2);
+                else la = PN__MAX(la, PN__SQRT(v2));
+            }
+            lp += la;
+            if (!(lp > 0)) continue;
+            d0 = PN__SQRT(pn__fem_pe(x + 2 * p, x + 2 * na, x + 2 * nb, g6, H6));
+            for (it = 0; it < 1000; ++it) {
+                pn_real y[6], d, step;
+                for (j = 0; j < 3; ++j)
+                    for (i = 0; i < 2; ++i) y[2 * j + i] = x[2 * n3[j] + (size_t)i] + t * dir[2 * n3[j] + (size_t)i];
+                d = PN__SQRT(pn__fem_pe(y, y + 2, y + 4, g6, H6));
+                if (it > 0 && d < (pn_real)0.1 * d0) break;
+                step = (pn_real)0.9 * d / lp;
+                if (t + step >= best) {
+                    t = best;
+                    break;
+                }
+                t += step;
+            }
+            best = PN__MIN(best, t);
+        }
+    }
+    return best;
+}
+
+/* y += the side list's blocks times x (unknowns in skyline row order) */
+static void pn__fem_off_apply(const pn_fem_mesh *m, const pn_real *x, pn_real *y) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    size_t q;
+    int i, j;
+    for (q = 0; q < s->n_off; ++q) {
+        const pn_real *o = s->off + 36 * q;
+        size_t row[6];
+        for (i = 0; i < 6; ++i) row[i] = pn__fem_row(m, (size_t)s->off_node[3 * q + (size_t)(i / 2)] * 2 + (size_t)(i % 2));
+        for (i = 0; i < 6; ++i)
+            for (j = 0; j < 6; ++j) y[row[i]] += o[i * 6 + j] * x[row[j]];
+    }
+}
+
 /* E(x) at unknowns x (nodes, then the moving obstacles' offsets u); mode 1: and the gradient
    into s->g; mode 2: and the Hessian into s->L. PN_ERROR_INVERTED for an element turned
    inside out, PN_ERROR_STEP_TOO_LARGE for a node in an obstacle (the line search backs off
@@ -6223,6 +6499,13 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
                             pn__fem_hadd(s, uo + (size_t)i, rj, -hv);
                         }
                     }
+        }
+    }
+    if (s->nbe) { /* self-contact */
+        pn_result r = pn__fem_self(m, x, mode, &E, &dmin);
+        if (r != PN_OK) {
+            s->dmin = dmin;
+            return r;
         }
     }
     for (o = 0; o < m->n_obstacles; ++o) { /* lagged smoothed Coulomb friction (IPC) */
@@ -6430,20 +6713,65 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
     return PN_OK;
 }
 
-static pn_real pn__fem_min_distance(const pn_fem_mesh *m, pn_real t) {
-    pn_real dmin = 1e300, nrm[3];
-    int o;
-    size_t k;
-    for (o = 0; o < m->n_obstacles; ++o)
-        for (k = 0; k < m->n_nodes; ++k)
-            if (PN__FEM_FREE(m, k))
-                dmin = PN__MIN(dmin, pn__fem_obstacle_sd(&m->obstacles[o], m->dim, t, NULL, m->x + k * (size_t)m->dim, nrm));
+/* The smallest node-obstacle distance with the obstacles at time t, and (2D) node-edge
+   distance of the boundary; with gap_speed and spring (optional, for pn_fem_stable_dt): the
+   least over the contacts of a quarter of the gap over the closing speeds' bound, and of
+   sqrt(m / (kappa b''(d))) within dhat. */
+static pn_real pn__fem_contacts(const pn_fem_mesh *m, pn_real t, pn_real *gap_speed, pn_real *spring) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    pn_real dmin = 1e300, nrm[3], bb, b1, b2;
+    int o, d = m->dim, i;
+    size_t k, q;
+    for (o = 0; o < m->n_obstacles; ++o) {
+        const pn_real *vo = m->obstacles[o].velocity_m_s;
+        pn_real so = PN__SQRT(vo[0] * vo[0] + vo[1] * vo[1] + vo[2] * vo[2]);
+        for (k = 0; k < m->n_nodes; ++k) {
+            pn_real dist, v2 = 0, sp;
+            if (!PN__FEM_FREE(m, k)) continue;
+            dist = pn__fem_obstacle_sd(&m->obstacles[o], d, t, NULL, m->x + k * (size_t)d, nrm);
+            dmin = PN__MIN(dmin, dist);
+            if (!gap_speed || !(dist > 0)) continue;
+            for (i = 0; i < d; ++i) v2 += m->v[k * (size_t)d + (size_t)i] * m->v[k * (size_t)d + (size_t)i];
+            sp = PN__SQRT(v2) + so;
+            if (sp > 0) *gap_speed = PN__MIN(*gap_speed, (pn_real)0.25 * dist / sp);
+            if (dist < m->dhat) {
+                pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+                *spring = PN__MIN(*spring, PN__SQRT(m->mass[k] / (m->kappa * b2)));
+            }
+        }
+    }
+    for (q = 0; q < s->nbn; ++q) { /* self-contact (2D) */
+        size_t p = s->bnode[q];
+        for (k = 0; k < s->nbe; ++k) {
+            size_t na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1], n3[3];
+            pn_real g6[6], H6[36], dist, sp = 0, mm;
+            int j;
+            if (na == p || nb == p) continue;
+            dist = PN__SQRT(pn__fem_pe(m->x + 2 * p, m->x + 2 * na, m->x + 2 * nb, g6, H6));
+            dmin = PN__MIN(dmin, dist);
+            if (!gap_speed || !(dist > 0) || dist > 4 * m->dhat) continue;
+            n3[0] = p, n3[1] = na, n3[2] = nb;
+            for (j = 0; j < 3; ++j) { /* |v_p| + max(|v_a|, |v_b|) bounds the closing speed */
+                pn_real sj = PN__SQRT(m->v[2 * n3[j]] * m->v[2 * n3[j]] + m->v[2 * n3[j] + 1] * m->v[2 * n3[j] + 1]);
+                sp = j == 0 ? sj : j == 1 ? sj : PN__MAX(sp, sj);
+            }
+            sp += PN__SQRT(m->v[2 * p] * m->v[2 * p] + m->v[2 * p + 1] * m->v[2 * p + 1]);
+            if (sp > 0) *gap_speed = PN__MIN(*gap_speed, (pn_real)0.25 * dist / sp);
+            if (dist < m->dhat) {
+                pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+                mm = PN__MIN(m->mass[p], PN__MIN(m->mass[na], m->mass[nb]));
+                *spring = PN__MIN(*spring, PN__SQRT(mm / (m->kappa * b2)));
+            }
+        }
+    }
     return dmin;
 }
 
+static pn_real pn__fem_min_distance(const pn_fem_mesh *m, pn_real t) { return pn__fem_contacts(m, t, NULL, NULL); }
+
 PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
-    int d, dp, a, b, c, o;
-    size_t e, k;
+    int d, dp, a, b, c;
+    size_t e;
     pn_real best = 1e300;
     if (!m || !dt_s) return PN_ERROR_INVALID_ARGUMENT;
     d = m->dim, dp = d + 1;
@@ -6474,23 +6802,11 @@ PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
         cp = PN__SQRT((g->material.lambda + 2 * g->material.mu) / g->density_kg_m3);
         best = PN__MIN(best, (pn_real)0.5 * alt / cp);
     }
-    for (o = 0; o < m->n_obstacles; ++o) { /* no node closes more than a quarter of its gap per step */
-        const pn_real *vo = m->obstacles[o].velocity_m_s;
-        pn_real so = PN__SQRT(vo[0] * vo[0] + vo[1] * vo[1] + vo[2] * vo[2]);
-        for (k = 0; k < m->n_nodes; ++k) {
-            pn_real nrm[3], v2 = 0, sp, dist = pn__fem_obstacle_sd(&m->obstacles[o], d, m->time_s, NULL, m->x + k * (size_t)d, nrm);
-            for (c = 0; c < d; ++c) v2 += m->v[k * (size_t)d + (size_t)c] * m->v[k * (size_t)d + (size_t)c];
-            sp = PN__SQRT(v2) + so;
-            if (sp > 0 && dist > 0) best = PN__MIN(best, (pn_real)0.25 * dist / sp);
-        }
+    { /* contacts: no node closes more than a quarter of its gap per step; the barrier's spring */
+        pn_real gs = 1e300, sp = 1e300;
+        pn__fem_contacts(m, m->time_s, &gs, &sp);
+        best = PN__MIN(best, PN__MIN(gs, sp));
     }
-    for (o = 0; o < m->n_obstacles; ++o) /* the barrier's spring at each node within dhat */
-        for (k = 0; k < m->n_nodes; ++k) {
-            pn_real nrm[3], dist = pn__fem_obstacle_sd(&m->obstacles[o], d, m->time_s, NULL, m->x + k * (size_t)d, nrm), bb, b1, b2;
-            if (!PN__FEM_FREE(m, k) || dist >= m->dhat || !(dist > 0)) continue;
-            pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
-            best = PN__MIN(best, PN__SQRT(m->mass[k] / (m->kappa * b2)));
-        }
     *dt_s = best;
     return PN_OK;
 }
@@ -6516,7 +6832,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     if (stats) memset(stats, 0, sizeof *stats);
     pn__fem_setup(m);
     pn__fem_backup(m);
-    f = s->g; /* forces */
+    f = s->xtry; /* forces */
     for (k = 0; k < m->n_nodes; ++k)
         for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] = m->mass[k] * m->desc.gravity[i];
     for (e = 0; e < m->n_elems; ++e) {
@@ -6544,6 +6860,17 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
             pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
             for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] -= m->kappa * b1 * nrm[i];
         }
+    if (s->nbe) { /* the self-contact barrier's forces: its gradient with dt = 1 */
+        pn_real Es = 0, dm = 1e300;
+        memset(s->g, 0, sizeof(pn_real) * m->n_nodes * (size_t)d);
+        s->dt = 1;
+        r = pn__fem_self(m, m->x, 1, &Es, &dm);
+        if (r != PN_OK) {
+            pn__fem_restore(m);
+            return pn__fem_fail(m, r, "pn_fem_step_explicit: node %ld touches an edge of the mesh", m->error_node);
+        }
+        for (k = 0; k < m->n_nodes * (size_t)d; ++k) f[k] -= s->g[k];
+    }
     for (k = 0; k < m->n_nodes; ++k)
         for (i = 0; i < d; ++i) {
             size_t c = k * (size_t)d + (size_t)i;
@@ -6556,6 +6883,14 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
                                     "smaller step (pn_fem_stable_dt)", (unsigned long)k);
             }
         }
+    if (s->nbe) { /* self-contact must not be crossed within the step either */
+        for (k = 0; k < m->n_nodes * (size_t)d; ++k) s->dir[k] = m->x[k] - s->bx[k];
+        if (pn__fem_self_ccd(m, s->bx, s->dir, 1) < 1) {
+            pn__fem_restore(m);
+            return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: a boundary node would close on an edge "
+                                "of the mesh in a step of %g s: take a smaller step (pn_fem_stable_dt)", (double)dt);
+        }
+    }
     for (o = 0; o < m->n_obstacles; ++o) { /* Coulomb friction on the new velocities: slows the
                                                 sliding by at most dt mu lambda / m, never reverses it */
         const pn_mpm_collider *c = &m->obstacles[o];
@@ -6603,6 +6938,37 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     return PN_OK;
 }
 
+/* the shared CG (>>newton) on the skyline matrix plus the side list, in row order */
+static void pn__fem_cg_apply(void *ctx, const pn_real *x, pn_real *y) {
+    const pn_fem_mesh *m = (const pn_fem_mesh *)ctx;
+    const pn__fem *s = (const pn__fem *)m->impl;
+    size_t r, c, nu = s->nu;
+    for (r = 0; r < nu; ++r) y[r] = 0;
+    for (r = 0; r < nu; ++r) {
+        const pn_real *Ar = s->A + s->rs[r];
+        size_t f = s->fc[r];
+        for (c = f; c < r; ++c) {
+            y[r] += Ar[c - f] * x[c];
+            y[c] += Ar[c - f] * x[r];
+        }
+        y[r] += Ar[r - f] * x[r];
+    }
+    pn__fem_off_apply(m, x, y);
+}
+static void pn__fem_cg_precond(void *ctx, const pn_real *r, pn_real *z) {
+    const pn_fem_mesh *m = (const pn_fem_mesh *)ctx;
+    const pn__fem *s = (const pn__fem *)m->impl;
+    memcpy(z, r, sizeof(pn_real) * s->nu);
+    pn__fem_solve(s, s->nu, z);
+}
+static pn_real pn__fem_cg_dot(void *ctx, size_t n, const pn_real *a, const pn_real *b) {
+    pn_real acc = 0;
+    size_t k;
+    (void)ctx;
+    for (k = 0; k < n; ++k) acc += a[k] * b[k];
+    return acc;
+}
+
 static pn_result pn__fem_objective_value(void *ctx, const pn_real *x, pn_real *E) {
     return pn__fem_objective((pn_fem_mesh *)ctx, x, 0, E);
 }
@@ -6620,11 +6986,19 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
             return pn__fem_fail(m, r, "implicit step: the energy at an accepted iterate failed (%s, element %ld, node %ld)",
                                 pn_result_string(r), m->error_element, m->error_node);
         for (k = 0; k < nu; ++k) s->xtry[pn__fem_row(m, k)] = -s->g[k];
+        if (s->n_off) memcpy(s->A, s->L, sizeof(pn_real) * s->rs[nu]); /* kept for CG's products */
         if (!pn__fem_cholesky(s, nu))
             return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the Hessian is not positive definite (a "
                                 "material's energy is not convex where it was projected)");
         st->factorizations++;
-        pn__fem_solve(s, nu, s->xtry);
+        if (s->n_off) { /* self-contact beyond the profile: CG on the whole Hessian, the factor preconditions */
+            pn__cg_ops op;
+            int capped;
+            op.ctx = m, op.apply = pn__fem_cg_apply, op.precond = pn__fem_cg_precond, op.dot = pn__fem_cg_dot;
+            st->cg_iters += pn__pcg(&op, nu, s->cgx, s->xtry, s->cgz, s->cgp, s->cgq, 200, (pn_real)1e-10, 0, &capped);
+            memcpy(s->xtry, s->cgx, sizeof(pn_real) * nu); /* capped: still a descent direction (CG from 0) */
+        } else
+            pn__fem_solve(s, nu, s->xtry);
         for (res = 0, gres = 0, k = 0; k < nu; ++k) {
             s->dir[k] = s->xtry[pn__fem_row(m, k)];
             res = PN__MAX(res, PN__FABS(s->dir[k]));
@@ -6645,7 +7019,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
            step is always taken: x^n is no answer. */
         if (it == 0) gfloor = PN__MAX(tol, (pn_real)1e-6 * gres); /* or 1e-6 of the first residual */
         if (res <= tol && gres <= gfloor && it > 0) return PN_OK;
-        a0 = pn__fem_ccd(m, s->xs, s->dir);
+        a0 = pn__fem_self_ccd(m, s->xs, s->dir, pn__fem_ccd(m, s->xs, s->dir));
         alpha = pn__armijo(pn__fem_objective_value, m, nu, s->xs, s->dir, E0, gd, a0, s->xtry, &E1);
         if (alpha == 0 && -gd <= (pn_real)1e3 * PN__EPS * PN__FABS(E0) && a0 == 1) {
             /* the decrease Newton predicts is below the energy's rounding (near a minimum of
@@ -6722,7 +7096,7 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
         pn_real E, far = 0;
         for (k = 0; k < nd; ++k) s->dir[k] = s->xt[k] - s->xs[k], far = PN__MAX(far, PN__FABS(s->dir[k]));
         for (k = nd; k < s->nu; ++k) s->dir[k] = 0;
-        if (far <= m->edge_mean / 2 && pn__fem_ccd(m, s->xs, s->dir) >= (pn_real)0.9) {
+        if (far <= m->edge_mean / 2 && pn__fem_self_ccd(m, s->xs, s->dir, pn__fem_ccd(m, s->xs, s->dir)) >= (pn_real)0.9) {
             memcpy(s->xtry, s->xs, sizeof(pn_real) * s->nu);
             for (k = 0; k < nd; ++k) s->xs[k] = s->xt[k];
             s->al_k = 0;

@@ -521,6 +521,120 @@ PN_TEST(fem_friction_slide) {
     }
 }
 
+/* point-segment squared distance: gradient and Hessian against central differences, in the
+   interior and beyond either end */
+PN_TEST(fem_point_edge_fd) {
+    unsigned long seed = 4242;
+    int trial, region[3] = {0, 0, 0};
+    double gerr = 0, herr = 0;
+    for (trial = 0; trial < 300; ++trial) {
+        pn_real x[6], g[6], H[36], gp[6], gm[6], Ht[36], sq, e2[2], t;
+        int i, j;
+        for (i = 0; i < 6; ++i) {
+            seed = seed * 6364136223846793005UL + 1442695040888963407UL;
+            x[i] = (pn_real)((double)(seed >> 11) / 9007199254740992.0 - 0.5);
+        }
+        sq = pn__fem_pe(x, x + 2, x + 4, g, H);
+        e2[0] = x[4] - x[2], e2[1] = x[5] - x[3];
+        t = ((x[0] - x[2]) * e2[0] + (x[1] - x[3]) * e2[1]) / (e2[0] * e2[0] + e2[1] * e2[1]);
+        if (fabs(t) < 1e-3 || fabs(t - 1) < 1e-3) continue; /* the kinks between the regions */
+        region[t <= 0 ? 0 : t >= 1 ? 2 : 1]++;
+        for (i = 0; i < 6; ++i) {
+            pn_real keep = x[i], h = (pn_real)1e-6, sp, sm;
+            x[i] = keep + h, sp = pn__fem_pe(x, x + 2, x + 4, gp, Ht);
+            x[i] = keep - h, sm = pn__fem_pe(x, x + 2, x + 4, gm, Ht);
+            x[i] = keep;
+            gerr = fmax(gerr, fabs((sp - sm) / (2 * h) - g[i]) / (fabs(g[i]) + 1e-3));
+            for (j = 0; j < 6; ++j) herr = fmax(herr, fabs((gp[j] - gm[j]) / (2 * h) - H[j * 6 + i]) / (fabs(H[j * 6 + i]) + 1e-2));
+        }
+        PN_CHECK(sq >= 0);
+    }
+    PN_CHECK(region[0] > 20 && region[1] > 20 && region[2] > 20);
+    PN_CHECK_LE(gerr, 1e-6);
+    PN_CHECK_LE(herr, 1e-5);
+}
+
+/* Self-contact: two elastic blocks of one mesh, one thrown at the other (no gravity). No
+   boundary node ever reaches an edge of the other block (smallest distance > 0 at every
+   step, and no node inside a triangle of the other block), momentum is kept (the
+   barrier's forces are internal), and they part with the thrown one slower than the hit
+   one. Implicit at 1e-3 s and explicit. */
+PN_TEST(fem_self_contact) {
+    int implicit;
+    for (implicit = 0; implicit < 2; ++implicit) {
+        pn_fem_grid g = t_fem_grid(2, 4, 4, 1, 0.04, 0.04, 1);
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
+        pn_fem_desc fd;
+        pn_fem_mesh *m = NULL;
+        size_t nn, ne, k, half;
+        pn_real *X;
+        int *el, step;
+        char why[256];
+        double p0 = 0, p1 = 0, dmin = 1, t = 0, T = 0.2, overlap = 0;
+        pn_fem_grid_mesh(&g, NULL, NULL, &nn, &ne);
+        X = (pn_real *)malloc(sizeof(pn_real) * 4 * nn);
+        el = (int *)malloc(sizeof(int) * 6 * ne);
+        pn_fem_grid_mesh(&g, X, el, &nn, &ne);
+        for (k = 0; k < nn; ++k) X[2 * (nn + k)] = X[2 * k] + (pn_real)0.05, X[2 * (nn + k) + 1] = X[2 * k + 1]; /* the second block, level */
+        for (k = 0; k < 3 * ne; ++k) el[3 * ne + k] = el[k] + (int)nn;
+        half = nn;
+        memset(&fd, 0, sizeof fd);
+        fd.dim = 2, fd.n_nodes = 2 * nn, fd.n_elements = 2 * ne, fd.rest_m = X, fd.elements = el, fd.groups = &grp, fd.n_groups = 1;
+        if (pn_fem_create(&fd, &m, why, sizeof why) != PN_OK) {
+            fprintf(stderr, "  fem_self_contact: %s\n", why);
+            PN_CHECK(0);
+            continue;
+        }
+        for (k = 0; k < half; ++k) m->v[2 * k] = 1; /* the first block at 1 m/s toward the second, 1 cm away */
+        for (k = 0; k < 2 * nn; ++k) p0 += m->mass[k] * m->v[2 * k];
+        for (step = 0; t < T - 1e-12 && step < 2000000; ++step) {
+            pn_fem_stats st;
+            pn_real sdt = 0;
+            double dt = 1e-3, r0 = -1e9, l1 = 1e9;
+            if (!implicit) {
+                pn_fem_stable_dt(m, &sdt);
+                dt = fmin(0.5 * sdt, T - t);
+            }
+            if ((implicit ? pn_fem_step_implicit(m, (pn_real)dt, NULL, &st) : pn_fem_step_explicit(m, (pn_real)dt, &st)) != PN_OK) {
+                fprintf(stderr, "  fem_self_contact: %s\n", pn_fem_error(m));
+                PN_CHECK(0);
+                break;
+            }
+            t += dt;
+            dmin = fmin(dmin, pn__fem_min_distance(m, m->time_s));
+            (void)r0, (void)l1;
+            for (k = 0; k < 2 * nn; ++k) { /* no node inside a triangle of the other block */
+                size_t e0 = k < half ? ne : 0, e;
+                for (e = e0; e < e0 + ne; ++e) {
+                    const pn_real *a = m->x + 2 * (size_t)m->elem[3 * e], *b = m->x + 2 * (size_t)m->elem[3 * e + 1];
+                    const pn_real *c = m->x + 2 * (size_t)m->elem[3 * e + 2], *q = m->x + 2 * k;
+                    double w0 = (b[0] - q[0]) * (c[1] - q[1]) - (c[0] - q[0]) * (b[1] - q[1]);
+                    double w1 = (c[0] - q[0]) * (a[1] - q[1]) - (a[0] - q[0]) * (c[1] - q[1]);
+                    double w2 = (a[0] - q[0]) * (b[1] - q[1]) - (b[0] - q[0]) * (a[1] - q[1]);
+                    if (w0 > 0 && w1 > 0 && w2 > 0) overlap += 1;
+                }
+            }
+        }
+        for (k = 0; k < 2 * nn; ++k) p1 += m->mass[k] * m->v[2 * k];
+        {
+            double v0 = 0, v1 = 0, m0 = 0, m1 = 0;
+            for (k = 0; k < 2 * nn; ++k) {
+                if (k < half) v0 += m->mass[k] * m->v[2 * k], m0 += m->mass[k];
+                else v1 += m->mass[k] * m->v[2 * k], m1 += m->mass[k];
+            }
+            printf("    [fem_self_contact] %s: smallest node-edge distance %.3g m, momentum %.6f -> %.6f, after: %.3f and %.3f m/s\n",
+                   implicit ? "implicit dt 1e-3" : "explicit", dmin, p0, p1, v0 / m0, v1 / m1);
+            PN_CHECK(v1 / m1 > v0 / m0 && v1 / m1 > 0.3); /* they hit and parted */
+        }
+        PN_CHECK(dmin > 0);
+        PN_CHECK(overlap == 0);
+        PN_CHECK_NEAR(p1, p0, 1e-6 * p0);
+        pn_fem_destroy(m);
+        free(X);
+        free(el);
+    }
+}
+
 /* bad meshes are refused, naming the culprit, and create nothing */
 PN_TEST(fem_bad_mesh) {
     static const pn_real X[] = {0, 0, 1, 0, 0, 1, 1, 1, 2, 2};
@@ -682,5 +796,7 @@ static const pn_test_case pn_tests_fem[] = {
     {"fem_cantilever", fem_cantilever},
     {"fem_explicit_implicit", fem_explicit_implicit},
     {"fem_friction_slide", fem_friction_slide},
+    {"fem_point_edge_fd", fem_point_edge_fd},
+    {"fem_self_contact", fem_self_contact},
     {"fem_bad_mesh", fem_bad_mesh},
 };
