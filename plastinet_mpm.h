@@ -5463,6 +5463,9 @@ typedef struct pn__fem {
     pn_real *off;                /* side list: 6 x 6 blocks of node-edge pairs beyond the profile */
     int *off_node;               /* their nodes (p, a, b)                                    */
     size_t n_off, cap_off;
+    size_t *gstart, *gitem, gcap; /* the edges' grid: CSR of edge indices by cell (gcap cells)  */
+    pn_real glo[2], gcs;         /* its origin and cell size                                 */
+    long gn[2];                  /* cells per axis                                           */
     pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
     pn_real *eP, *eH;            /* per element: P (dd) and the projected dP/dF (dd^2)       */
     pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
@@ -5680,6 +5683,7 @@ PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
         pn_free(al, s->ebox);
         pn_free(al, s->off);
         pn_free(al, s->off_node);
+        pn_free(al, s->gstart);
         pn_free(al, s);
     }
     pn_free(al, m->x);
@@ -5796,7 +5800,10 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
         s->off = (pn_real *)pn_alloc(al, sizeof(pn_real) * 36 * s->cap_off);
         s->off_node = (int *)pn_alloc(al, sizeof(int) * 3 * s->cap_off);
         s->A = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
-        if (!s->bedge || !s->bnode || !s->ebox || !s->off || !s->off_node || !s->A) {
+        s->gcap = 4 * s->nbe + 16;
+        s->gstart = (size_t *)pn_alloc(al, sizeof(size_t) * (s->gcap + 1 + 4 * s->nbe + 4));
+        s->gitem = s->gstart ? s->gstart + s->gcap + 1 : NULL;
+        if (!s->bedge || !s->bnode || !s->ebox || !s->off || !s->off_node || !s->A || !s->gstart) {
             pn_free(al, key);
             return PN_ERROR_OUT_OF_MEMORY;
         }
@@ -6237,7 +6244,57 @@ static int pn__fem_in_profile(const pn_fem_mesh *m, size_t i, size_t j) {
     return lo * (size_t)m->dim >= s->fc[hi * (size_t)m->dim];
 }
 
-/* The boundary edges' boxes (grown by grow) for the pair search: lo, hi per edge */
+/* the cell range [c0, c1] per axis a box covers in the edges' grid (clamped) */
+static void pn__fem_cells(const pn__fem *s, const pn_real *lo, const pn_real *hi, long *c0, long *c1) {
+    int i;
+    for (i = 0; i < 2; ++i) {
+        pn_real a = (lo[i] - s->glo[i]) / s->gcs, b = (hi[i] - s->glo[i]) / s->gcs;
+        c0[i] = a < 0 ? 0 : a >= (pn_real)s->gn[i] ? s->gn[i] - 1 : (long)a;
+        c1[i] = b < 0 ? 0 : b >= (pn_real)s->gn[i] ? s->gn[i] - 1 : (long)b;
+    }
+}
+
+/* The broad phase: a uniform grid over the edges' boxes, cells as large as the largest box
+   (each box in at most 2 x 2 cells), no more than gcap cells; CSR of edge indices per cell */
+static void pn__fem_grid_build(pn__fem *s) {
+    pn_real hi[2] = {-1e300, -1e300}, ext = 0;
+    size_t k, total = 0;
+    long c;
+    int i;
+    s->glo[0] = s->glo[1] = 1e300;
+    for (k = 0; k < s->nbe; ++k)
+        for (i = 0; i < 2; ++i) {
+            s->glo[i] = PN__MIN(s->glo[i], s->ebox[4 * k + (size_t)i]);
+            hi[i] = PN__MAX(hi[i], s->ebox[4 * k + 2 + (size_t)i]);
+            ext = PN__MAX(ext, s->ebox[4 * k + 2 + (size_t)i] - s->ebox[4 * k + (size_t)i]);
+        }
+    s->gcs = ext > 0 ? ext : 1;
+    for (;;) {
+        s->gn[0] = (long)((hi[0] - s->glo[0]) / s->gcs) + 1, s->gn[1] = (long)((hi[1] - s->glo[1]) / s->gcs) + 1;
+        if ((size_t)s->gn[0] * (size_t)s->gn[1] <= s->gcap) break;
+        s->gcs *= 2;
+    }
+    for (c = 0; c <= s->gn[0] * s->gn[1]; ++c) s->gstart[c] = 0;
+    for (k = 0; k < s->nbe; ++k) { /* count, then place (counting sort by cell) */
+        long c0[2], c1[2], x, y;
+        pn__fem_cells(s, s->ebox + 4 * k, s->ebox + 4 * k + 2, c0, c1);
+        for (y = c0[1]; y <= c1[1]; ++y)
+            for (x = c0[0]; x <= c1[0]; ++x) s->gstart[y * s->gn[0] + x + 1]++;
+    }
+    for (c = 0; c < s->gn[0] * s->gn[1]; ++c) s->gstart[c + 1] += s->gstart[c];
+    for (k = 0; k < s->nbe; ++k) {
+        long c0[2], c1[2], x, y;
+        pn__fem_cells(s, s->ebox + 4 * k, s->ebox + 4 * k + 2, c0, c1);
+        for (y = c0[1]; y <= c1[1]; ++y)
+            for (x = c0[0]; x <= c1[0]; ++x) s->gitem[s->gstart[y * s->gn[0] + x]++] = k, total++;
+    }
+    for (c = s->gn[0] * s->gn[1]; c > 0; --c) s->gstart[c] = s->gstart[c - 1]; /* back to starts */
+    s->gstart[0] = 0;
+    (void)total;
+}
+
+/* The boundary edges' boxes (grown by grow; swept along alpha dir when dir is given) and
+   the grid over them, for the pair search */
 static void pn__fem_edge_boxes(const pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real alpha, pn_real grow) {
     pn__fem *s = (pn__fem *)m->impl;
     size_t k;
@@ -6253,6 +6310,7 @@ static void pn__fem_edge_boxes(const pn_fem_mesh *m, const pn_real *x, const pn_
             s->ebox[4 * k + (size_t)i] = lo - grow, s->ebox[4 * k + 2 + (size_t)i] = hi + grow;
         }
     }
+    pn__fem_grid_build(s);
 }
 
 /* node p's point and edge k's overlap in their boxes (p swept too when dir) */
@@ -6277,12 +6335,17 @@ static pn_result pn__fem_self(pn_fem_mesh *m, const pn_real *x, int mode, pn_rea
     if (!s->nbe) return PN_OK;
     pn__fem_edge_boxes(m, x, NULL, 0, m->dhat);
     for (q = 0; q < s->nbn; ++q) {
-        size_t p = s->bnode[q];
+        size_t p = s->bnode[q], it, cell;
+        long c0[2], c1[2];
         if (!PN__FEM_FREE(m, p)) continue;
-        for (k = 0; k < s->nbe; ++k) {
-            size_t na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1], nodes[3];
+        pn__fem_cells(s, x + 2 * p, x + 2 * p, c0, c1); /* the node's cell holds every edge within dhat, once */
+        cell = (size_t)(c0[1] * s->gn[0] + c0[0]);
+        for (it = s->gstart[cell]; it < s->gstart[cell + 1]; ++it) {
+            size_t na, nb, nodes[3];
             pn_real g6[6], H6[36], sq, dist, bb, b1, b2;
             int i, j;
+            k = s->gitem[it];
+            na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1];
             if (na == p || nb == p || !pn__fem_pair_near(s, k, x + 2 * p, NULL, 0)) continue;
             sq = pn__fem_pe(x + 2 * p, x + 2 * na, x + 2 * nb, g6, H6);
             dist = PN__SQRT(sq);
@@ -6343,12 +6406,34 @@ static pn_real pn__fem_self_ccd(const pn_fem_mesh *m, const pn_real *x, const pn
     if (!s->nbe) return amax;
     pn__fem_edge_boxes(m, x, dir, amax, 0);
     for (q = 0; q < s->nbn; ++q) {
-        size_t p = s->bnode[q];
+        size_t p = s->bnode[q], nall, at;
+        long c0[2], c1[2], cx, cy;
+        pn_real lo[2], hi[2];
+        int i;
         if (!PN__FEM_FREE(m, p)) continue;
-        for (k = 0; k < s->nbe; ++k) {
-            size_t na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1], n3[3];
+        for (i = 0; i < 2; ++i) /* the node's swept box: the cells it covers (all edges when many) */
+            lo[i] = PN__MIN(x[2 * p + (size_t)i], x[2 * p + (size_t)i] + amax * dir[2 * p + (size_t)i]),
+            hi[i] = PN__MAX(x[2 * p + (size_t)i], x[2 * p + (size_t)i] + amax * dir[2 * p + (size_t)i]);
+        pn__fem_cells(s, lo, hi, c0, c1);
+        nall = (size_t)((c1[0] - c0[0] + 1) * (c1[1] - c0[1] + 1)) > 16;
+        for (cy = c0[1], cx = c0[0], at = 0;; ++at) {
+            size_t na, nb, n3[3], cell = (size_t)(cy * s->gn[0] + cx);
             pn_real mean[2], lp = 0, la = 0, t = 0, d0, g6[6], H6[36];
-            int i, j, it;
+            int j, it;
+            if (nall) { /* every edge */
+                if (at >= s->nbe) break;
+                k = at;
+            } else { /* the cells' edges, cell by cell */
+                while (s->gstart[cell] + at >= s->gstart[cell + 1]) {
+                    at = 0;
+                    if (++cx > c1[0]) cx = c0[0], ++cy;
+                    if (cy > c1[1]) break;
+                    cell = (size_t)(cy * s->gn[0] + cx);
+                }
+                if (cy > c1[1]) break;
+                k = s->gitem[s->gstart[cell] + at];
+            }
+            na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1];
             if (na == p || nb == p || !pn__fem_pair_near(s, k, x + 2 * p, dir + 2 * p, amax)) continue;
             n3[0] = p, n3[1] = na, n3[2] = nb;
             for (i = 0; i < 2; ++i) mean[i] = (dir[2 * p + (size_t)i] + dir[2 * na + (size_t)i] + dir[2 * nb + (size_t)i]) / 3;
@@ -6714,11 +6799,11 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
 }
 
 /* The smallest node-obstacle distance with the obstacles at time t, and (2D) node-edge
-   distance of the boundary; with gap_speed and spring (optional, for pn_fem_stable_dt): the
+   distance of the boundary (of the pairs within 4 dhat); with gap_speed and spring (optional, for pn_fem_stable_dt): the
    least over the contacts of a quarter of the gap over the closing speeds' bound, and of
    sqrt(m / (kappa b''(d))) within dhat. */
 static pn_real pn__fem_contacts(const pn_fem_mesh *m, pn_real t, pn_real *gap_speed, pn_real *spring) {
-    const pn__fem *s = (const pn__fem *)m->impl;
+    pn__fem *s = (pn__fem *)m->impl; /* the grid is scratch */
     pn_real dmin = 1e300, nrm[3], bb, b1, b2;
     int o, d = m->dim, i;
     size_t k, q;
@@ -6740,13 +6825,19 @@ static pn_real pn__fem_contacts(const pn_fem_mesh *m, pn_real t, pn_real *gap_sp
             }
         }
     }
-    for (q = 0; q < s->nbn; ++q) { /* self-contact (2D) */
-        size_t p = s->bnode[q];
-        for (k = 0; k < s->nbe; ++k) {
-            size_t na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1], n3[3];
+    if (s->nbe) pn__fem_edge_boxes(m, m->x, NULL, 0, 4 * m->dhat); /* self-contact (2D): pairs within 4 dhat */
+    for (q = 0; q < s->nbn; ++q) {
+        size_t p = s->bnode[q], it, cell;
+        long c0[2], c1[2];
+        pn__fem_cells(s, m->x + 2 * p, m->x + 2 * p, c0, c1);
+        cell = (size_t)(c0[1] * s->gn[0] + c0[0]);
+        for (it = s->gstart[cell]; it < s->gstart[cell + 1]; ++it) {
+            size_t na, nb, n3[3];
             pn_real g6[6], H6[36], dist, sp = 0, mm;
             int j;
-            if (na == p || nb == p) continue;
+            k = s->gitem[it];
+            na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1];
+            if (na == p || nb == p || !pn__fem_pair_near(s, k, m->x + 2 * p, NULL, 0)) continue;
             dist = PN__SQRT(pn__fem_pe(m->x + 2 * p, m->x + 2 * na, m->x + 2 * nb, g6, H6));
             dmin = PN__MIN(dmin, dist);
             if (!gap_speed || !(dist > 0) || dist > 4 * m->dhat) continue;
