@@ -6258,7 +6258,7 @@ static void pn__fem_cells(const pn__fem *s, const pn_real *lo, const pn_real *hi
    (each box in at most 2 x 2 cells), no more than gcap cells; CSR of edge indices per cell */
 static void pn__fem_grid_build(pn__fem *s) {
     pn_real hi[2] = {-1e300, -1e300}, ext = 0;
-    size_t k, total = 0;
+    size_t k;
     long c;
     int i;
     s->glo[0] = s->glo[1] = 1e300;
@@ -6286,11 +6286,10 @@ static void pn__fem_grid_build(pn__fem *s) {
         long c0[2], c1[2], x, y;
         pn__fem_cells(s, s->ebox + 4 * k, s->ebox + 4 * k + 2, c0, c1);
         for (y = c0[1]; y <= c1[1]; ++y)
-            for (x = c0[0]; x <= c1[0]; ++x) s->gitem[s->gstart[y * s->gn[0] + x]++] = k, total++;
+            for (x = c0[0]; x <= c1[0]; ++x) s->gitem[s->gstart[y * s->gn[0] + x]++] = k;
     }
     for (c = s->gn[0] * s->gn[1]; c > 0; --c) s->gstart[c] = s->gstart[c - 1]; /* back to starts */
     s->gstart[0] = 0;
-    (void)total;
 }
 
 /* The boundary edges' boxes (grown by grow; swept along alpha dir when dir is given) and

@@ -1,7 +1,8 @@
 /* bench_fem: where implicit integration pays in FEM, on the metal frame of examples/pn_frame.h
    (a steel frame crushed by a plate; plastinet_mpm.h >>fem).
    Build: cc -std=c99 -O2 bench/bench_fem.c -lm -o bench_fem        (or: make bench-fem)
-   Usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--quick]
+   Usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR]
+                    [--no-check] [--quick]
    In one run, per dimension (2D unless --dim 3):
    1. accuracy at a softened stiffness (--soft-E, 2e9 Pa in 2D, 2e8 in 3D), where a converged
       explicit run is affordable: the explicit reference at half the step bound
@@ -18,7 +19,9 @@
       seconds (default 0.01 s), timed over that window and scaled to the whole run (stated
       in the table), against implicit at dt 1e-2 s over the whole run.
    Writes DIR/bench_fem.csv, DIR/bench_fem.md, DIR/bench_fem.svg (error against wall time);
-   progress on stderr. --quick: 2D, coarse (5 mm), short (0.04 s), for a smoke test. */
+   progress on stderr. --quick: 2D, coarse (5 mm), short (0.04 s), for a smoke test.
+   --ref-cache DIR: keep the references' frames in DIR and read them on a rerun; --no-check:
+   skip the reference's convergence check. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
 #include "../examples/pn_frame.h"
@@ -35,9 +38,9 @@ typedef struct run {
 } run;
 
 typedef struct cfg {
-    int dim, quick;
+    int dim, quick, no_check;
     double soft_E, window, T, speed, h;
-    const char *out;
+    const char *out, *ref_cache, *only;
 } cfg;
 
 static void scene(const cfg *c, int energy, double E, pn_frame_desc *d) {
@@ -106,6 +109,43 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
     pn_fem_destroy(m);
 }
 
+/* --ref-cache DIR: the reference's frames kept in a file per material family, dimension, E,
+   duration and element size (a rerun or another session reads them instead of 10 minutes of
+   explicit steps) */
+static void ref_path(const cfg *c, int fam, char *path, size_t cap) {
+    snprintf(path, cap, "%s/bench_fem_ref_%dd_%s_E%g_T%g_h%g.bin", c->ref_cache, c->dim, fam ? "nh" : "vm", c->soft_E, c->T,
+             c->h > 0 ? c->h : (c->dim == 3 ? 5e-3 : 2.5e-3));
+}
+static int ref_load(const cfg *c, int fam, double *ref, size_t nd, run *r) {
+    char path[1024];
+    FILE *f;
+    double head[6];
+    size_t nf = (size_t)floor(c->T / FRAME_DT + 0.5);
+    int ok;
+    if (!c->ref_cache) return 0;
+    ref_path(c, fam, path, sizeof path);
+    if (!(f = fopen(path, "rb"))) return 0;
+    ok = fread(head, sizeof head, 1, f) == 1 && head[0] == (double)nd && head[1] == (double)nf &&
+         fread(ref, sizeof(double), nd * nf, f) == nd * nf;
+    fclose(f);
+    if (ok) r->ok = 1, r->wall = head[2], r->sim = head[3], r->dmin = head[4], r->hmax = head[5];
+    if (ok) fprintf(stderr, "  (reference read from %s)\n", path);
+    return ok;
+}
+static void ref_save(const cfg *c, int fam, const double *ref, size_t nd, const run *r) {
+    char path[1024];
+    FILE *f;
+    double head[6];
+    size_t nf = (size_t)floor(c->T / FRAME_DT + 0.5);
+    if (!c->ref_cache || !r->ok) return;
+    ref_path(c, fam, path, sizeof path);
+    if (!(f = fopen(path, "wb"))) return;
+    head[0] = (double)nd, head[1] = (double)nf, head[2] = r->wall, head[3] = r->sim, head[4] = r->dmin, head[5] = r->hmax;
+    fwrite(head, sizeof head, 1, f);
+    fwrite(ref, sizeof(double), nd * nf, f);
+    fclose(f);
+}
+
 static void progress(const run *r) {
     fprintf(stderr, "  %-13s %-7s E %-7.3g dt %-8.3g courant %-4.3g: error mean %.4f max %.4f, wall %.3g s for %.3g s, Newton %.1f, "
                     "min distance %.3g m, max plastic strain %.3f%s\n",
@@ -167,15 +207,17 @@ int main(int argc, char **argv) {
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) c.quick = 1;
+        else if (!strcmp(a, "--no-check")) c.no_check = 1;
         else if (!v) {
-            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--quick]\n");
+            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n");
             return 2;
         } else if (!strcmp(a, "--dim")) dim_arg = atoi(v), ++k;
         else if (!strcmp(a, "--soft-E")) c.soft_E = atof(v), ++k;
         else if (!strcmp(a, "--window")) c.window = atof(v), ++k;
         else if (!strcmp(a, "--out")) c.out = v, ++k;
+        else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
         else {
-            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--quick]\n");
+            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n");
             return 2;
         }
     }
@@ -207,10 +249,14 @@ int main(int argc, char **argv) {
             if (!ref) return 1;
             memset(&runs[n], 0, 2 * sizeof runs[0]);
             runs[n].role = "reference", runs[n].energy = ref_energy, runs[n].E = c.soft_E, runs[n].courant = 0.5;
-            run_one(&c, &runs[n], ref, NULL, 0);
+            if (!ref_load(&c, fam, ref, nd, &runs[n])) {
+                run_one(&c, &runs[n], ref, NULL, 0);
+                ref_save(&c, fam, ref, nd, &runs[n]);
+            }
             progress(&runs[n++]);
             runs[n].role = "ref_check", runs[n].energy = ref_energy, runs[n].E = c.soft_E, runs[n].courant = 1;
-            run_one(&c, &runs[n], NULL, ref, 0);
+            if (!c.no_check) run_one(&c, &runs[n], NULL, ref, 0);
+            else runs[n].ok = 1;
             progress(&runs[n++]);
             for (e = 0; e < 3 && fam_energies[fam][e] >= 0; ++e)
                 for (i = 0; i < 3; ++i) {
