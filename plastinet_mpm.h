@@ -5445,6 +5445,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
    ====================================================================================== */
 
 #define PN__FEM_ALIGN(n) (((n) + 7) & ~(size_t)7)
+#define PN__FEM_FAR ((pn_real)1e30) /* farther than anything (and a float) */
 
 typedef struct pn__fem {
     size_t nu;                   /* unknowns: dim per node, then dim per moving obstacle     */
@@ -6059,7 +6060,7 @@ static pn_real pn__fem_obstacle_sd(const pn_mpm_collider *c, int d, pn_real t, c
         for (i = 0; i < d; ++i) n[i] = c->normal[i] * nn, dist += r[i] * n[i];
         return dist;
     } else { /* box */
-        pn_real q[3], out2 = 0, inmax = -1e300;
+        pn_real q[3], out2 = 0, inmax = -PN__FEM_FAR;
         int arg = 0;
         for (i = 0; i < d; ++i) {
             q[i] = PN__FABS(r[i]) - c->half_extent_m[i];
@@ -6257,11 +6258,11 @@ static void pn__fem_cells(const pn__fem *s, const pn_real *lo, const pn_real *hi
 /* The broad phase: a uniform grid over the edges' boxes, cells as large as the largest box
    (each box in at most 2 x 2 cells), no more than gcap cells; CSR of edge indices per cell */
 static void pn__fem_grid_build(pn__fem *s) {
-    pn_real hi[2] = {-1e300, -1e300}, ext = 0;
+    pn_real hi[2] = {-PN__FEM_FAR, -PN__FEM_FAR}, ext = 0;
     size_t k;
     long c;
     int i;
-    s->glo[0] = s->glo[1] = 1e300;
+    s->glo[0] = s->glo[1] = PN__FEM_FAR;
     for (k = 0; k < s->nbe; ++k)
         for (i = 0; i < 2; ++i) {
             s->glo[i] = PN__MIN(s->glo[i], s->ebox[4 * k + (size_t)i]);
@@ -6486,7 +6487,7 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
     pn__fem *s = (pn__fem *)m->impl;
     int d = m->dim, dd = d * d, dp = d + 1, a, b, i, j, o;
     size_t n = m->n_nodes, nd = n * (size_t)d, k, e, nu = s->nu;
-    pn_real dt2 = s->dt * s->dt, E = 0, dmin = 1e300;
+    pn_real dt2 = s->dt * s->dt, E = 0, dmin = PN__FEM_FAR;
     if (mode >= 1) memset(s->g, 0, sizeof(pn_real) * nu);
     if (mode >= 2) memset(s->L, 0, sizeof(pn_real) * s->rs[nu]);
     for (k = 0; k < n; ++k) { /* inertia */
@@ -6803,7 +6804,7 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
    sqrt(m / (kappa b''(d))) within dhat. */
 static pn_real pn__fem_contacts(const pn_fem_mesh *m, pn_real t, pn_real *gap_speed, pn_real *spring) {
     pn__fem *s = (pn__fem *)m->impl; /* the grid is scratch */
-    pn_real dmin = 1e300, nrm[3], bb, b1, b2;
+    pn_real dmin = PN__FEM_FAR, nrm[3], bb, b1, b2;
     int o, d = m->dim, i;
     size_t k, q;
     for (o = 0; o < m->n_obstacles; ++o) {
@@ -6862,7 +6863,7 @@ static pn_real pn__fem_min_distance(const pn_fem_mesh *m, pn_real t) { return pn
 PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
     int d, dp, a, b, c;
     size_t e;
-    pn_real best = 1e300;
+    pn_real best = PN__FEM_FAR;
     if (!m || !dt_s) return PN_ERROR_INVALID_ARGUMENT;
     d = m->dim, dp = d + 1;
     for (e = 0; e < m->n_elems; ++e) { /* the smallest altitude over the P-wave speed */
@@ -6893,7 +6894,7 @@ PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
         best = PN__MIN(best, (pn_real)0.5 * alt / cp);
     }
     { /* contacts: no node closes more than a quarter of its gap per step; the barrier's spring */
-        pn_real gs = 1e300, sp = 1e300;
+        pn_real gs = PN__FEM_FAR, sp = PN__FEM_FAR;
         pn__fem_contacts(m, m->time_s, &gs, &sp);
         best = PN__MIN(best, PN__MIN(gs, sp));
     }
@@ -6951,7 +6952,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
             for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] -= m->kappa * b1 * nrm[i];
         }
     if (s->nbe) { /* the self-contact barrier's forces: its gradient with dt = 1 */
-        pn_real Es = 0, dm = 1e300;
+        pn_real Es = 0, dm = PN__FEM_FAR;
         memset(s->g, 0, sizeof(pn_real) * m->n_nodes * (size_t)d);
         s->dt = 1;
         r = pn__fem_self(m, m->x, 1, &Es, &dm);
@@ -7675,6 +7676,7 @@ fail:
 #undef pn__fem_backup
 #undef pn__fem_restore
 #undef PN__FEM_ALIGN
+#undef PN__FEM_FAR
 #undef PN__OMP_FOR
 #undef PN__MPM_SPLINE
 #undef PN__MPM_ADD4

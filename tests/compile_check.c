@@ -222,6 +222,18 @@ static void smoke_fem(int d) {
     CHECK(pn_fem_fix_nodes(m, 1, &fix, NULL) == PN_OK);
     CHECK(pn_fem_energy(m, &el_j, &kin_j) == PN_OK && kin_j > 0);
     pn_fem_destroy(m);
+    { /* the loaders */
+        static const char msh[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
+                                  "$Elements\n1\n1 4 0 1 2 3 4\n$EndElements\n";
+        static const char node[] = "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n", ele[] = "1 4 0\n1 1 2 3 4\n";
+        pn_fem_mesh_data md2;
+        CHECK(pn_fem_parse_msh(msh, sizeof msh - 1, d, NULL, &md2, why, sizeof why) == (d == 3 ? PN_OK : PN_ERROR_FORMAT));
+        pn_fem_mesh_data_free(&md2, NULL);
+        if (d == 3) {
+            CHECK(pn_fem_parse_tetgen(node, sizeof node - 1, ele, sizeof ele - 1, NULL, &md2, why, sizeof why) == PN_OK);
+            pn_fem_mesh_data_free(&md2, NULL);
+        }
+    }
 }
 
 int main(void) {
