@@ -47,7 +47,7 @@
      >>matrix   small dense 2D/3D matrix helpers
      >>svd      SVD with rotation-valued U and V (det +1), the sign of an inverted F carried
                 by the smallest singular value; polar decomposition; Hencky strain
-     >>eigen    symmetric eigen-decomposition (Jacobi) and PSD projection, n <= 9
+     >>eigen    symmetric eigen-decomposition (Jacobi) and PSD projection, n <= 12
      >>material parameter validation, Lame constants
      >>elastic  fixed corotated, StVK-Hencky, Neo-Hookean, and the Neo-Hookean variant used by
                 Cam-Clay snow: energy, P, dP/dF, PSD-projected dP/dF
@@ -231,10 +231,11 @@ PN_API pn_result pn_polar(int dim, const pn_real *F, pn_real *R, pn_real *S);
 /* Spatial Hencky strain log V = U diag(log s) U^T. PN_ERROR_INVERTED when det F <= 0. */
 PN_API pn_result pn_hencky_strain(int dim, const pn_real *F, pn_real *eps);
 
-/* Symmetric eigen-decomposition A = Q diag(w) Q^T (cyclic Jacobi), n <= 9, Q row-major with
+/* Symmetric eigen-decomposition A = Q diag(w) Q^T (cyclic Jacobi), n <= 12, Q row-major with
    eigenvectors as columns, w ascending. A must be symmetric (only the upper part is read). */
 PN_API pn_result pn_sym_eigen(int n, const pn_real *A, pn_real *Q, pn_real *w);
-/* Replace symmetric A (n x n, n <= 9) with its nearest positive semi-definite matrix. */
+/* Replace symmetric A (n x n, n <= 12: a 3D contact pair's four nodes) with its nearest
+   positive semi-definite matrix. */
 PN_API pn_result pn_sym_project_psd(int n, pn_real *A);
 
 /* ---- materials -------------------------------------------------------------------------- */
@@ -974,6 +975,7 @@ PN__DEF pn_result pn_hencky_strain(int d, const pn_real *F, pn_real *eps) {
    ====================================================================================== */
 
 /* A (n x n, overwritten) = Q diag(w) Q^T, w ascending. */
+#define PN__SYM_MAX 12 /* pn_sym_eigen, pn_sym_project_psd: the largest n */
 static void pn__jacobi_eigen(int n, pn_real *A, pn_real *Q, pn_real *w) {
     pn_real norm = 0;
     int i, j, p, q, k, sweep;
@@ -1034,9 +1036,9 @@ static void pn__jacobi_eigen(int n, pn_real *A, pn_real *Q, pn_real *w) {
 }
 
 PN__DEF pn_result pn_sym_eigen(int n, const pn_real *A, pn_real *Q, pn_real *w) {
-    pn_real a[81], q[81], ww[9];
+    pn_real a[PN__SYM_MAX * PN__SYM_MAX], q[PN__SYM_MAX * PN__SYM_MAX], ww[PN__SYM_MAX];
     int i, j;
-    if (n < 1 || n > 9) return PN_ERROR_INVALID_ARGUMENT;
+    if (n < 1 || n > PN__SYM_MAX) return PN_ERROR_INVALID_ARGUMENT;
     for (i = 0; i < n; ++i)
         for (j = i; j < n; ++j) {
             if (!pn__finite(A[i * n + j])) return PN_ERROR_NONFINITE;
@@ -1050,7 +1052,7 @@ PN__DEF pn_result pn_sym_eigen(int n, const pn_real *A, pn_real *Q, pn_real *w) 
 
 /* A <- Q max(w, 0) Q^T (only the upper part of A is read) */
 static void pn__project_psd(int n, pn_real *A) {
-    pn_real a[81], q[81], w[9], top = 0;
+    pn_real a[PN__SYM_MAX * PN__SYM_MAX], q[PN__SYM_MAX * PN__SYM_MAX], w[PN__SYM_MAX], top = 0;
     int i, j, k, pd = 1;
     for (i = 0; i < n; ++i) {
         for (j = i; j < n; ++j) a[i * n + j] = a[j * n + i] = A[i * n + j];
@@ -1085,7 +1087,7 @@ static void pn__project_psd(int n, pn_real *A) {
 
 PN__DEF pn_result pn_sym_project_psd(int n, pn_real *A) {
     int i, j;
-    if (n < 1 || n > 9) return PN_ERROR_INVALID_ARGUMENT;
+    if (n < 1 || n > PN__SYM_MAX) return PN_ERROR_INVALID_ARGUMENT;
     for (i = 0; i < n; ++i)
         for (j = i; j < n; ++j)
             if (!pn__finite(A[i * n + j])) return PN_ERROR_NONFINITE;

@@ -5446,6 +5446,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
 
 #define PN__FEM_ALIGN(n) (((n) + 7) & ~(size_t)7)
 #define PN__FEM_FAR ((pn_real)1e30) /* farther than anything (and a float) */
+#define PN__FEM_PAIR_H(d) ((d) == 2 ? 36 : 144) /* >>fem self-contact: reals in a pair's Hessian */
 
 typedef struct pn__fem {
     size_t nu;                   /* unknowns: dim per node, then dim per moving obstacle     */
@@ -5458,15 +5459,19 @@ typedef struct pn__fem {
     pn_real *xlag;               /* where friction's normal force and directions are taken   */
     pn_real *A, *cgx, *cgz, *cgp, *cgq; /* self-contact beyond the profile: the unfactored matrix,
                                     CG's vectors                                           */
-    int *bedge;                  /* 2D: the boundary's edges (node pairs), nbe of them       */
-    size_t *bnode, nbe, nbn;     /* the nodes on the boundary                                */
-    pn_real *ebox;               /* per boundary edge: its box, lo and hi                    */
-    pn_real *off;                /* side list: 6 x 6 blocks of node-edge pairs beyond the profile */
-    int *off_node;               /* their nodes (p, a, b)                                    */
+    int *bedge, *bface;          /* the boundary's edges (node pairs, nbe) and 3D faces
+                                    (node triples, nbf): the self-contact primitives        */
+    size_t *bnode, nbe, nbf, nbn; /* the nodes on the boundary                               */
+    size_t ntgt, nitem;          /* grid items: the targets of the nodes (2D edges, 3D faces),
+                                    then (3D) the edges; nitem in all                       */
+    pn_real *ebox;               /* per item: its box (lo, then hi; 3 reals each)           */
+    pn_real *off;                /* side list: the Hessian blocks of pairs beyond the profile,
+                                    PN__FEM_PAIR_H reals each                               */
+    int *off_node;               /* their nodes (4 per pair, -1 past the pair's own)        */
     size_t n_off, cap_off;
-    size_t *gstart, *gitem, gcap; /* the edges' grid: CSR of edge indices by cell (gcap cells)  */
-    pn_real glo[2], gcs;         /* its origin and cell size                                 */
-    long gn[2];                  /* cells per axis                                           */
+    size_t *gstart, *gitem, gcap; /* the items' grid: CSR of item indices by cell (gcap cells) */
+    pn_real glo[3], gcs;         /* its origin and cell size                                 */
+    long gn[3];                  /* cells per axis                                           */
     pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
     pn_real *eP, *eH;            /* per element: P (dd) and the projected dP/dF (dd^2)       */
     pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
@@ -5680,6 +5685,7 @@ PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
         pn_free(al, s->bx);
         pn_free(al, s->A);
         pn_free(al, s->bedge);
+        pn_free(al, s->bface);
         pn_free(al, s->bnode);
         pn_free(al, s->ebox);
         pn_free(al, s->off);
@@ -5696,7 +5702,17 @@ PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
 PN__DEF const char *pn_fem_error(const pn_fem_mesh *m) { return m ? m->error : ""; }
 
 /* the arrays of the solver: one block per type (freed in pn_fem_destroy) */
-static void pn__fem_sort_pairs(long *a, size_t n); /* >>fem loaders */
+static void pn__fem_sort_longs(long *a, size_t n, int w, int keys); /* >>fem loaders */
+static int pn__fem_cmp_longs(const long *a, const long *b, int keys);
+
+static void pn__fem_sort3(int *v, int n) { /* n <= 3 ints, ascending */
+    int i, j;
+    for (i = 1; i < n; ++i)
+        for (j = i; j > 0 && v[j - 1] > v[j]; --j) {
+            int t = v[j];
+            v[j] = v[j - 1], v[j - 1] = t;
+        }
+}
 
 static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     const pn_allocator *al = &m->desc.allocator;
@@ -5780,49 +5796,75 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     pn_free(al, xadj), pn_free(al, adj), pn_free(al, deg), pn_free(al, seen), pn_free(al, cnt);
     s->L = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
     if (!s->L) return PN_ERROR_OUT_OF_MEMORY;
-    if (d == 2) { /* the boundary: the edges of one triangle only (sorted node pairs, counted) */
-        long *key = (long *)pn_alloc(al, sizeof(long) * 2 * 3 * ne);
-        size_t nk = 3 * ne, q, j;
-        if (!key) return PN_ERROR_OUT_OF_MEMORY;
-        for (e = 0; e < ne; ++e)
-            for (i = 0; i < 3; ++i) {
-                long u = m->elem[3 * e + i], v = m->elem[3 * e + (i + 1) % 3];
-                key[2 * (3 * e + i)] = PN__MIN(u, v) * (long)n + PN__MAX(u, v), key[2 * (3 * e + i) + 1] = 0;
-            }
-        pn__fem_sort_pairs(key, nk);
-        for (q = 0; q < nk; q = j) {
-            for (j = q + 1; j < nk && key[2 * j] == key[2 * q]; ++j) {}
-            s->nbe += j - q == 1;
-        }
-        s->bedge = (int *)pn_alloc(al, sizeof(int) * (2 * s->nbe + 1));
-        s->bnode = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
-        s->ebox = (pn_real *)pn_alloc(al, sizeof(pn_real) * (4 * s->nbe + 1));
-        s->cap_off = 8 * n + 64;
-        s->off = (pn_real *)pn_alloc(al, sizeof(pn_real) * 36 * s->cap_off);
-        s->off_node = (int *)pn_alloc(al, sizeof(int) * 3 * s->cap_off);
-        s->A = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
-        s->gcap = 4 * s->nbe + 16;
-        s->gstart = (size_t *)pn_alloc(al, sizeof(size_t) * (s->gcap + 1 + 4 * s->nbe + 4));
-        s->gitem = s->gstart ? s->gstart + s->gcap + 1 : NULL;
-        if (!s->bedge || !s->bnode || !s->ebox || !s->off || !s->off_node || !s->A || !s->gstart) {
-            pn_free(al, key);
+    { /* the boundary: the sides (2D edges, 3D faces) of one element only, then (3D) their
+         edges; sorted node tuples, counted */
+        int w = d, nsd = d + 1, sv[3], c0;
+        size_t ns = (size_t)nsd * ne, q, j, nb = 0;
+        long *key = (long *)pn_alloc(al, sizeof(long) * 3 * 3 * (ns + 1));
+        unsigned char *on = (unsigned char *)pn_alloc(al, n);
+        if (!key || !on) {
+            pn_free(al, key), pn_free(al, on);
             return PN_ERROR_OUT_OF_MEMORY;
         }
-        s->nbe = 0;
-        for (q = 0; q < nk; q = j) {
-            for (j = q + 1; j < nk && key[2 * j] == key[2 * q]; ++j) {}
-            if (j - q == 1) s->bedge[2 * s->nbe] = (int)(key[2 * q] / (long)n), s->bedge[2 * s->nbe + 1] = (int)(key[2 * q] % (long)n), s->nbe++;
+        for (e = 0; e < ne; ++e)
+            for (i = 0; i < (size_t)nsd; ++i) { /* side i: all nodes but node i */
+                int c = 0, a0;
+                for (a0 = 0; a0 < nsd; ++a0)
+                    if ((size_t)a0 != i) sv[c++] = m->elem[e * (size_t)nsd + (size_t)a0];
+                pn__fem_sort3(sv, w);
+                for (c = 0; c < w; ++c) key[(size_t)w * (e * (size_t)nsd + i) + (size_t)c] = sv[c];
+            }
+        pn__fem_sort_longs(key, ns, w, w);
+        for (q = 0; q < ns; q = j) {
+            for (j = q + 1; j < ns && !pn__fem_cmp_longs(key + (size_t)w * j, key + (size_t)w * q, w); ++j) {}
+            if (j - q == 1) { /* a boundary side: compacted to the front */
+                for (c0 = 0; c0 < w; ++c0) key[(size_t)w * nb + (size_t)c0] = key[(size_t)w * q + (size_t)c0];
+                nb++;
+            }
         }
-        pn_free(al, key);
-        {
-            unsigned char *on = (unsigned char *)pn_alloc(al, n);
-            if (!on) return PN_ERROR_OUT_OF_MEMORY;
-            memset(on, 0, n);
-            for (q = 0; q < 2 * s->nbe; ++q) on[s->bedge[q]] = 1;
-            for (q = 0; q < n; ++q)
-                if (on[q]) s->bnode[s->nbn++] = q;
-            pn_free(al, on);
+        if (d == 2) s->nbe = nb;
+        else { /* 3D: the faces' edges after them, sorted, once each */
+            long *ek = key + 3 * nb;
+            s->nbf = nb;
+            for (q = 0; q < nb; ++q)
+                for (c0 = 0; c0 < 3; ++c0) {
+                    long u = key[3 * q + (size_t)c0], v = key[3 * q + (size_t)(c0 + 1) % 3];
+                    ek[2 * (3 * q + (size_t)c0)] = PN__MIN(u, v), ek[2 * (3 * q + (size_t)c0) + 1] = PN__MAX(u, v);
+                }
+            pn__fem_sort_longs(ek, 3 * nb, 2, 2);
+            for (q = 0; q < 3 * nb; q = j) {
+                for (j = q + 1; j < 3 * nb && !pn__fem_cmp_longs(ek + 2 * j, ek + 2 * q, 2); ++j) {}
+                ek[2 * s->nbe] = ek[2 * q], ek[2 * s->nbe + 1] = ek[2 * q + 1], s->nbe++;
+            }
         }
+        s->ntgt = d == 2 ? s->nbe : s->nbf;
+        s->nitem = s->ntgt + (d == 3 ? s->nbe : 0);
+        s->bedge = (int *)pn_alloc(al, sizeof(int) * (2 * s->nbe + 1));
+        s->bface = (int *)pn_alloc(al, sizeof(int) * (3 * s->nbf + 1));
+        s->bnode = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
+        s->ebox = (pn_real *)pn_alloc(al, sizeof(pn_real) * (6 * s->nitem + 1));
+        s->cap_off = d == 2 ? 8 * n + 64 : 2 * n + 64; /* pairs: the side list grows as (2d + 2)^2 */
+        s->off = (pn_real *)pn_alloc(al, sizeof(pn_real) * PN__FEM_PAIR_H(d) * s->cap_off);
+        s->off_node = (int *)pn_alloc(al, sizeof(int) * 4 * s->cap_off);
+        s->A = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
+        s->gcap = 4 * s->nitem + 16;
+        s->gstart = (size_t *)pn_alloc(al, sizeof(size_t) * (s->gcap + 1 + (size_t)(1 << d) * s->nitem + 4));
+        s->gitem = s->gstart ? s->gstart + s->gcap + 1 : NULL;
+        if (!s->bedge || !s->bface || !s->bnode || !s->ebox || !s->off || !s->off_node || !s->A || !s->gstart) {
+            pn_free(al, key), pn_free(al, on);
+            return PN_ERROR_OUT_OF_MEMORY;
+        }
+        memset(on, 0, n);
+        for (q = 0; q < nb * (size_t)w; ++q) on[key[q]] = 1;
+        if (d == 2)
+            for (q = 0; q < 2 * s->nbe; ++q) s->bedge[q] = (int)key[q];
+        else {
+            for (q = 0; q < 3 * s->nbf; ++q) s->bface[q] = (int)key[q];
+            for (q = 0; q < 2 * s->nbe; ++q) s->bedge[q] = (int)key[3 * nb + q];
+        }
+        for (q = 0; q < n; ++q)
+            if (on[q]) s->bnode[s->nbn++] = q;
+        pn_free(al, key), pn_free(al, on);
     }
     return PN_OK;
 }
@@ -6189,55 +6231,6 @@ static void pn__fem_hadd(pn__fem *s, size_t r, size_t c, pn_real v) {
 /* is node k's unknown free (not driven)? */
 #define PN__FEM_FREE(m, node) (!(m)->fixed[node])
 
-/* ---- >>fem self-contact (2D): IPC's point-edge barrier between the boundary's nodes and
-   edges. d the point-segment distance of node p to edge (a, b), p not on the edge; the same
-   b(d) as against obstacles. Pairs whose Hessian couples nodes outside the skyline's profile
-   (two walls of the mesh far apart in the RCM order) go to a side list: the solve is then
-   preconditioned CG on the full Hessian with the skyline factor (holding those pairs'
-   diagonal blocks) as the preconditioner. -------------------------------------------------- */
-
-/* squared distance s of point p to segment (a, b) in 2D with its gradient g and Hessian H
-   (6 x 6) over (p, a, b) */
-static pn_real pn__fem_pe(const pn_real *p, const pn_real *a, const pn_real *b, pn_real *g, pn_real *H) {
-    pn_real e[2], w[2], L, t;
-    int i, j;
-    e[0] = b[0] - a[0], e[1] = b[1] - a[1], w[0] = p[0] - a[0], w[1] = p[1] - a[1];
-    L = e[0] * e[0] + e[1] * e[1];
-    t = L > 0 ? (w[0] * e[0] + w[1] * e[1]) / L : 0;
-    for (i = 0; i < 36; ++i) H[i] = 0;
-    if (t <= 0 || t >= 1) { /* nearest to an end: |p - q|^2, q = a or b */
-        int q = t <= 0 ? 1 : 2;
-        pn_real dq[2];
-        dq[0] = p[0] - (q == 1 ? a : b)[0], dq[1] = p[1] - (q == 1 ? a : b)[1];
-        for (i = 0; i < 6; ++i) g[i] = 0;
-        for (i = 0; i < 2; ++i) {
-            g[i] = 2 * dq[i], g[2 * q + i] = -2 * dq[i];
-            H[i * 6 + i] = 2, H[(2 * q + i) * 6 + 2 * q + i] = 2;
-            H[i * 6 + 2 * q + i] = H[(2 * q + i) * 6 + i] = -2;
-        }
-        return dq[0] * dq[0] + dq[1] * dq[1];
-    } else { /* the interior: s = c^2 / L, c = e x w */
-        /* e = E x, w = W x over x = (p, a, b): E = [0, -I, I], W = [I, -I, 0] */
-        static const pn_real E0[6] = {0, 0, -1, 0, 1, 0}, E1[6] = {0, 0, 0, -1, 0, 1};
-        static const pn_real W0[6] = {1, 0, -1, 0, 0, 0}, W1[6] = {0, 1, 0, -1, 0, 0};
-        pn_real c = e[0] * w[1] - e[1] * w[0], gc[6], gL[6], s;
-        for (i = 0; i < 6; ++i) {
-            gc[i] = E0[i] * w[1] + e[0] * W1[i] - E1[i] * w[0] - e[1] * W0[i];
-            gL[i] = 2 * (e[0] * E0[i] + e[1] * E1[i]);
-        }
-        s = c * c / L;
-        for (i = 0; i < 6; ++i) g[i] = 2 * c * gc[i] / L - c * c * gL[i] / (L * L);
-        for (i = 0; i < 6; ++i)
-            for (j = 0; j < 6; ++j) {
-                pn_real hc = E0[i] * W1[j] + W1[i] * E0[j] - E1[i] * W0[j] - W0[i] * E1[j];
-                pn_real hL = 2 * (E0[i] * E0[j] + E1[i] * E1[j]);
-                H[i * 6 + j] = 2 * gc[i] * gc[j] / L + 2 * c * hc / L - 2 * c / (L * L) * (gc[i] * gL[j] + gL[i] * gc[j]) +
-                               2 * c * c / (L * L * L) * gL[i] * gL[j] - c * c / (L * L) * hL;
-            }
-        return s;
-    }
-}
-
 /* Is the block of nodes i and j inside the skyline's profile? */
 static int pn__fem_in_profile(const pn_fem_mesh *m, size_t i, size_t j) {
     const pn__fem *s = (const pn__fem *)m->impl;
@@ -6245,237 +6238,453 @@ static int pn__fem_in_profile(const pn_fem_mesh *m, size_t i, size_t j) {
     return lo * (size_t)m->dim >= s->fc[hi * (size_t)m->dim];
 }
 
-/* the cell range [c0, c1] per axis a box covers in the edges' grid (clamped) */
-static void pn__fem_cells(const pn__fem *s, const pn_real *lo, const pn_real *hi, long *c0, long *c1) {
+/* ---- >>fem self-contact: IPC's barrier between boundary primitives of the mesh: in 2D
+   each boundary node against each boundary edge (point-edge), in 3D each boundary node
+   against each boundary face (point-triangle) and each boundary edge against each other
+   (edge-edge); pairs sharing a node are skipped. The same b(d) as against obstacles, d the
+   distance between the primitives' closest points. Pairs whose Hessian couples nodes
+   outside the skyline's profile (two walls of the mesh far apart in the RCM order) go to a
+   side list: the solve is then preconditioned CG on the full Hessian with the skyline
+   factor (holding those pairs' diagonal blocks) as the preconditioner. -------------------- */
+
+enum { PN__FEM_PE, PN__FEM_PT, PN__FEM_EE }; /* pair kinds: nodes (p, a, b), (p, a, b, c), (a, b, c, d) */
+
+/* the squared distance |r|^2 of r = sum_i c_i y_i over nv nodes y (d reals each), with c
+   affine in nf free parameters t (dC[j] = dc/dt_j) at the t that minimizes it: the gradient
+   is 2 c_i r (t optimal: the envelope theorem) and the Hessian is the Schur complement on t
+   of the Hessian of f(y, t) = |r|^2 in (y, t). gn: the Gauss-Newton part only (2 c_i c_k I),
+   for nearly parallel edges, whose exact Hessian grows as 1 / sin^2 of their angle. */
+static pn_real pn__fem_pair_eval(int d, int nv, const pn_real *y, const pn_real *c, int nf, const pn_real *dC, int gn,
+                                 pn_real *g, pn_real *H) {
+    pn_real r[3] = {0, 0, 0}, R[2][3] = {{0, 0, 0}, {0, 0, 0}}, X[12][2], Tt[2][2], det, Ti[2][2];
+    int n = nv * d, i, k, a, b, j, l;
+    for (i = 0; i < nv; ++i)
+        for (a = 0; a < d; ++a) {
+            r[a] += c[i] * y[i * d + a];
+            for (j = 0; j < nf; ++j) R[j][a] += dC[4 * j + i] * y[i * d + a];
+        }
+    if (g)
+        for (i = 0; i < nv; ++i)
+            for (a = 0; a < d; ++a) g[i * d + a] = 2 * c[i] * r[a];
+    if (H) {
+        for (i = 0; i < n; ++i)
+            for (k = 0; k < n; ++k) H[i * n + k] = i % d == k % d ? 2 * c[i / d] * c[k / d] : 0;
+        if (nf && !gn) {
+            for (i = 0; i < nv; ++i) /* f's mixed derivatives d2f / dy_ia dt_j */
+                for (a = 0; a < d; ++a)
+                    for (j = 0; j < nf; ++j) X[i * d + a][j] = 2 * (c[i] * R[j][a] + r[a] * dC[4 * j + i]);
+            for (j = 0; j < nf; ++j)
+                for (l = 0; l < nf; ++l) {
+                    Tt[j][l] = 0;
+                    for (a = 0; a < d; ++a) Tt[j][l] += 2 * R[j][a] * R[l][a];
+                }
+            if (nf == 1) Ti[0][0] = 1 / Tt[0][0];
+            else {
+                det = Tt[0][0] * Tt[1][1] - Tt[0][1] * Tt[1][0];
+                Ti[0][0] = Tt[1][1] / det, Ti[1][1] = Tt[0][0] / det, Ti[0][1] = Ti[1][0] = -Tt[0][1] / det;
+            }
+            for (i = 0; i < n; ++i)
+                for (k = 0; k < n; ++k)
+                    for (j = 0; j < nf; ++j)
+                        for (b = 0; b < nf; ++b) H[i * n + k] -= X[i][j] * Ti[j][b] * X[k][b];
+        }
+    }
+    return r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+}
+
+/* node slot ip against the segment of slots ia, ib: c and dC (zeroed first) for the closest
+   point, the number of free parameters; the squared distance */
+static pn_real pn__fem_pseg(int d, const pn_real *y, int ip, int ia, int ib, pn_real *c, pn_real *dC, int *nf) {
+    pn_real e2 = 0, we = 0, t, dist2 = 0;
+    int a;
+    for (a = 0; a < 8; ++a) c[a % 4] = 0, dC[a] = 0;
+    for (a = 0; a < d; ++a) {
+        pn_real e = y[ib * d + a] - y[ia * d + a];
+        e2 += e * e, we += (y[ip * d + a] - y[ia * d + a]) * e;
+    }
+    t = e2 > 0 ? we / e2 : 0;
+    c[ip] = 1, *nf = 0;
+    if (t <= 0) c[ia] = -1;
+    else if (t >= 1) c[ib] = -1;
+    else c[ia] = -(1 - t), c[ib] = -t, dC[ia] = 1, dC[ib] = -1, *nf = 1;
+    for (a = 0; a < d; ++a) {
+        pn_real r = c[ip] * y[ip * d + a] + c[ia] * y[ia * d + a] + c[ib] * y[ib * d + a];
+        dist2 += r * r;
+    }
+    return dist2;
+}
+
+/* the squared distance of a pair (kind PN__FEM_PE in d = 2, PT or EE in d = 3; y the nodes'
+   positions) with its gradient g and Hessian H (optional) over the nodes' coordinates. The
+   closest points' features (vertex, edge interior, face interior) are found first; on a
+   feature switch the distance is C1, its Hessian jumps. */
+static pn_real pn__fem_pair_d2(int kind, int d, const pn_real *y, pn_real *g, pn_real *H) {
+    pn_real c[4] = {0, 0, 0, 0}, dC[8] = {0, 0, 0, 0, 0, 0, 0, 0}, cb[4], dCb[8], best = PN__FEM_FAR, e[2][3], w[3];
+    pn_real A00 = 0, A01 = 0, A11 = 0, b0 = 0, b1 = 0, det, u, v;
+    int nf = 0, nfb, gn = 0, nv = kind == PN__FEM_PE ? 3 : 4, a, k, interior = 0;
+    static const int pt_edges[3][2] = {{1, 2}, {2, 3}, {3, 1}}, ee_ends[4][3] = {{0, 2, 3}, {1, 2, 3}, {2, 0, 1}, {3, 0, 1}};
+    if (kind == PN__FEM_PE) {
+        (void)pn__fem_pseg(d, y, 0, 1, 2, c, dC, &nf);
+        return pn__fem_pair_eval(d, 3, y, c, nf, dC, 0, g, H);
+    }
+    /* PT: the projection on the face's plane, p - a = u e0 + v e1 + r; EE: the lines' closest
+       points, r = (a - c) + u (b - a) - v (d - c) */
+    for (a = 0; a < 3; ++a) {
+        if (kind == PN__FEM_PT) e[0][a] = y[6 + a] - y[3 + a], e[1][a] = y[9 + a] - y[3 + a], w[a] = y[a] - y[3 + a];
+        else e[0][a] = y[3 + a] - y[a], e[1][a] = y[9 + a] - y[6 + a], w[a] = y[a] - y[6 + a];
+        A00 += e[0][a] * e[0][a], A01 += e[0][a] * e[1][a], A11 += e[1][a] * e[1][a];
+        b0 += w[a] * e[0][a], b1 += w[a] * e[1][a];
+    }
+    det = A00 * A11 - A01 * A01;
+    if (kind == PN__FEM_PT && det > (pn_real)1e-12 * A00 * A11) {
+        u = (A11 * b0 - A01 * b1) / det, v = (A00 * b1 - A01 * b0) / det;
+        if (u > 0 && v > 0 && u + v < 1) {
+            c[0] = 1, c[1] = -(1 - u - v), c[2] = -u, c[3] = -v;
+            dC[1] = 1, dC[2] = -1, dC[5] = 1, dC[7] = -1, nf = 2, interior = 1;
+        }
+    } else if (kind == PN__FEM_EE && det > (pn_real)1e-12 * A00 * A11) {
+        /* minimize |w + u e0 - v e1|^2: [A00 -A01; -A01 A11] (u, v) = (-b0, b1) */
+        u = (-A11 * b0 + A01 * b1) / det, v = (A00 * b1 - A01 * b0) / det;
+        if (u > 0 && u < 1 && v > 0 && v < 1) {
+            c[0] = 1 - u, c[1] = u, c[2] = -(1 - v), c[3] = -v;
+            dC[0] = -1, dC[1] = 1, dC[6] = 1, dC[7] = -1, nf = 2, interior = 1;
+            gn = det < (pn_real)1e-6 * A00 * A11; /* nearly parallel */
+        }
+    }
+    if (!interior) /* the closest points lie on the features' boundaries: the least of the
+                      point-segment distances there (a convex problem's minimum off its
+                      unconstrained one is on the boundary) */
+        for (k = 0; k < (kind == PN__FEM_PT ? 3 : 4); ++k) {
+            pn_real q = kind == PN__FEM_PT ? pn__fem_pseg(d, y, 0, pt_edges[k][0], pt_edges[k][1], cb, dCb, &nfb)
+                                           : pn__fem_pseg(d, y, ee_ends[k][0], ee_ends[k][1], ee_ends[k][2], cb, dCb, &nfb);
+            if (q < best) {
+                best = q, nf = nfb;
+                memcpy(c, cb, sizeof c), memcpy(dC, dCb, sizeof dC);
+            }
+        }
+    return pn__fem_pair_eval(d, nv, y, c, nf, dC, gn, g, H);
+}
+
+/* the box of grid item k (a target: 2D edge, 3D face; then a 3D edge) at x, swept along
+   alpha dir when dir is given, grown by grow */
+static void pn__fem_item_box(const pn_fem_mesh *m, size_t k, const pn_real *x, const pn_real *dir, pn_real alpha,
+                             pn_real grow, pn_real *lo, pn_real *hi) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    int d = m->dim, nv = d == 3 && k < s->ntgt ? 3 : 2, j, i;
+    const int *nd = d == 3 && k < s->ntgt ? s->bface + 3 * k : s->bedge + 2 * (k < s->ntgt ? k : k - s->ntgt);
+    for (i = 0; i < d; ++i) lo[i] = PN__FEM_FAR, hi[i] = -PN__FEM_FAR;
+    for (j = 0; j < nv; ++j)
+        for (i = 0; i < d; ++i) {
+            size_t c = (size_t)nd[j] * (size_t)d + (size_t)i;
+            pn_real a = x[c], b = dir ? x[c] + alpha * dir[c] : a;
+            lo[i] = PN__MIN(lo[i], PN__MIN(a, b)), hi[i] = PN__MAX(hi[i], PN__MAX(a, b));
+        }
+    for (i = 0; i < d; ++i) lo[i] -= grow, hi[i] += grow;
+}
+
+/* the cell range [c0, c1] per axis a box covers in the items' grid (clamped) */
+static void pn__fem_cells(const pn__fem *s, int d, const pn_real *lo, const pn_real *hi, long *c0, long *c1) {
     int i;
-    for (i = 0; i < 2; ++i) {
+    for (i = 0; i < d; ++i) {
         pn_real a = (lo[i] - s->glo[i]) / s->gcs, b = (hi[i] - s->glo[i]) / s->gcs;
         c0[i] = a < 0 ? 0 : a >= (pn_real)s->gn[i] ? s->gn[i] - 1 : (long)a;
         c1[i] = b < 0 ? 0 : b >= (pn_real)s->gn[i] ? s->gn[i] - 1 : (long)b;
     }
 }
 
-/* The broad phase: a uniform grid over the edges' boxes, cells as large as the largest box
-   (each box in at most 2 x 2 cells), no more than gcap cells; CSR of edge indices per cell */
-static void pn__fem_grid_build(pn__fem *s) {
-    pn_real hi[2] = {-PN__FEM_FAR, -PN__FEM_FAR}, ext = 0;
-    size_t k;
-    long c;
-    int i;
-    s->glo[0] = s->glo[1] = PN__FEM_FAR;
-    for (k = 0; k < s->nbe; ++k)
-        for (i = 0; i < 2; ++i) {
-            s->glo[i] = PN__MIN(s->glo[i], s->ebox[4 * k + (size_t)i]);
-            hi[i] = PN__MAX(hi[i], s->ebox[4 * k + 2 + (size_t)i]);
-            ext = PN__MAX(ext, s->ebox[4 * k + 2 + (size_t)i] - s->ebox[4 * k + (size_t)i]);
-        }
+static size_t pn__fem_cell_at(const pn__fem *s, const long *c) { return (size_t)((c[2] * s->gn[1] + c[1]) * s->gn[0] + c[0]); }
+
+/* the box of boundary node p (swept) */
+static void pn__fem_node_box(const pn_fem_mesh *m, size_t p, const pn_real *x, const pn_real *dir, pn_real alpha,
+                             pn_real *lo, pn_real *hi) {
+    int i, d = m->dim;
+    for (i = 0; i < d; ++i) {
+        pn_real a = x[p * (size_t)d + (size_t)i], b = dir ? a + alpha * dir[p * (size_t)d + (size_t)i] : a;
+        lo[i] = PN__MIN(a, b), hi[i] = PN__MAX(a, b);
+    }
+}
+
+/* The broad phase: the items' boxes and a uniform grid over them with cells as large as the
+   largest box (of the items and the boundary nodes: each box in at most 2 cells per axis),
+   no more than gcap cells; CSR of item indices per cell */
+static void pn__fem_grid_build(pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real alpha, pn_real grow) {
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = m->dim, i;
+    pn_real hi[3] = {-PN__FEM_FAR, -PN__FEM_FAR, -PN__FEM_FAR}, ext = 0, lo[3], up[3];
+    size_t k, q, cells;
+    long c, c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0}, cc[3];
+    int pass;
+    s->glo[0] = s->glo[1] = s->glo[2] = 0;
+    for (i = 0; i < d; ++i) s->glo[i] = PN__FEM_FAR;
+    for (k = 0; k < s->nitem; ++k) {
+        pn_real *b = s->ebox + 6 * k;
+        pn__fem_item_box(m, k, x, dir, alpha, grow, b, b + 3);
+        for (i = 0; i < d; ++i)
+            s->glo[i] = PN__MIN(s->glo[i], b[i]), hi[i] = PN__MAX(hi[i], b[3 + i]), ext = PN__MAX(ext, b[3 + i] - b[i]);
+    }
+    for (q = 0; q < s->nbn; ++q) {
+        pn__fem_node_box(m, s->bnode[q], x, dir, alpha, lo, up);
+        for (i = 0; i < d; ++i) ext = PN__MAX(ext, up[i] - lo[i]);
+    }
     s->gcs = ext > 0 ? ext : 1;
+    s->gn[2] = 1;
     for (;;) {
-        s->gn[0] = (long)((hi[0] - s->glo[0]) / s->gcs) + 1, s->gn[1] = (long)((hi[1] - s->glo[1]) / s->gcs) + 1;
-        if ((size_t)s->gn[0] * (size_t)s->gn[1] <= s->gcap) break;
+        for (cells = 1, i = 0; i < d; ++i) s->gn[i] = (long)((hi[i] - s->glo[i]) / s->gcs) + 1, cells *= (size_t)s->gn[i];
+        if (cells <= s->gcap) break;
         s->gcs *= 2;
     }
-    for (c = 0; c <= s->gn[0] * s->gn[1]; ++c) s->gstart[c] = 0;
-    for (k = 0; k < s->nbe; ++k) { /* count, then place (counting sort by cell) */
-        long c0[2], c1[2], x, y;
-        pn__fem_cells(s, s->ebox + 4 * k, s->ebox + 4 * k + 2, c0, c1);
-        for (y = c0[1]; y <= c1[1]; ++y)
-            for (x = c0[0]; x <= c1[0]; ++x) s->gstart[y * s->gn[0] + x + 1]++;
+    for (c = 0; c <= (long)cells; ++c) s->gstart[c] = 0;
+    for (pass = 0; pass < 2; ++pass) { /* count, then place (a counting sort by cell) */
+        for (k = 0; k < s->nitem; ++k) {
+            pn__fem_cells(s, d, s->ebox + 6 * k, s->ebox + 6 * k + 3, c0, c1);
+            for (cc[2] = c0[2]; cc[2] <= c1[2]; ++cc[2])
+                for (cc[1] = c0[1]; cc[1] <= c1[1]; ++cc[1])
+                    for (cc[0] = c0[0]; cc[0] <= c1[0]; ++cc[0]) {
+                        size_t cell = pn__fem_cell_at(s, cc);
+                        if (pass == 0) s->gstart[cell + 1]++;
+                        else s->gitem[s->gstart[cell]++] = k;
+                    }
+        }
+        if (pass == 0)
+            for (c = 0; c < (long)cells; ++c) s->gstart[c + 1] += s->gstart[c];
     }
-    for (c = 0; c < s->gn[0] * s->gn[1]; ++c) s->gstart[c + 1] += s->gstart[c];
-    for (k = 0; k < s->nbe; ++k) {
-        long c0[2], c1[2], x, y;
-        pn__fem_cells(s, s->ebox + 4 * k, s->ebox + 4 * k + 2, c0, c1);
-        for (y = c0[1]; y <= c1[1]; ++y)
-            for (x = c0[0]; x <= c1[0]; ++x) s->gitem[s->gstart[y * s->gn[0] + x]++] = k;
-    }
-    for (c = s->gn[0] * s->gn[1]; c > 0; --c) s->gstart[c] = s->gstart[c - 1]; /* back to starts */
+    for (c = (long)cells; c > 0; --c) s->gstart[c] = s->gstart[c - 1]; /* back to starts */
     s->gstart[0] = 0;
 }
 
-/* The boundary edges' boxes (grown by grow; swept along alpha dir when dir is given) and
-   the grid over them, for the pair search */
-static void pn__fem_edge_boxes(const pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real alpha, pn_real grow) {
-    pn__fem *s = (pn__fem *)m->impl;
-    size_t k;
-    int i;
-    for (k = 0; k < s->nbe; ++k) {
-        const pn_real *a = x + 2 * (size_t)s->bedge[2 * k], *b = x + 2 * (size_t)s->bedge[2 * k + 1];
-        for (i = 0; i < 2; ++i) {
-            pn_real lo = PN__MIN(a[i], b[i]), hi = PN__MAX(a[i], b[i]);
-            if (dir) { /* swept by alpha dir */
-                pn_real a1 = a[i] + alpha * dir[2 * (size_t)s->bedge[2 * k] + (size_t)i], b1 = b[i] + alpha * dir[2 * (size_t)s->bedge[2 * k + 1] + (size_t)i];
-                lo = PN__MIN(lo, PN__MIN(a1, b1)), hi = PN__MAX(hi, PN__MAX(a1, b1));
-            }
-            s->ebox[4 * k + (size_t)i] = lo - grow, s->ebox[4 * k + 2 + (size_t)i] = hi + grow;
-        }
-    }
-    pn__fem_grid_build(s);
-}
+typedef struct pn__fem_pair {
+    int kind, nv, na; /* kind, nodes, the nodes on the first side (1: a node, 2: an edge) */
+    size_t n[4];
+} pn__fem_pair;
 
-/* node p's point and edge k's overlap in their boxes (p swept too when dir) */
-static int pn__fem_pair_near(const pn__fem *s, size_t k, const pn_real *p, const pn_real *pd, pn_real alpha) {
+/* a pair's visitor: nonzero stops the search */
+typedef int (*pn__fem_visit)(pn_fem_mesh *m, const pn__fem_pair *pr, void *ctx);
+
+/* do boxes a and b (lo[3], hi[3]) overlap, and is cell cc the one of their overlap's low
+   corner (so that a pair found in several cells is visited once)? */
+static int pn__fem_pair_here(const pn__fem *s, int d, const pn_real *alo, const pn_real *ahi, const pn_real *blo,
+                             const pn_real *bhi, const long *cc) {
+    pn_real lo[3] = {0, 0, 0};
+    long c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0};
     int i;
-    for (i = 0; i < 2; ++i) {
-        pn_real lo = p[i], hi = p[i];
-        if (pd) lo = PN__MIN(lo, p[i] + alpha * pd[i]), hi = PN__MAX(hi, p[i] + alpha * pd[i]);
-        if (hi < s->ebox[4 * k + (size_t)i] || lo > s->ebox[4 * k + 2 + (size_t)i]) return 0;
+    for (i = 0; i < d; ++i) {
+        if (ahi[i] < blo[i] || alo[i] > bhi[i]) return 0;
+        lo[i] = PN__MAX(alo[i], blo[i]);
     }
+    pn__fem_cells(s, d, lo, lo, c0, c1);
+    for (i = 0; i < d; ++i)
+        if (c0[i] != cc[i]) return 0;
     return 1;
 }
 
-/* The barrier of every near node-edge pair into E (and g, the skyline or the side list by
-   mode); the smallest distance into *dmin; PN_ERROR_STEP_TOO_LARGE with error_node set when
-   a node touches an edge. */
-static pn_result pn__fem_self(pn_fem_mesh *m, const pn_real *x, int mode, pn_real *E, pn_real *dmin) {
-    pn__fem *s = (pn__fem *)m->impl;
-    size_t q, k;
-    pn_real w = s->dt * s->dt * m->kappa;
-    if (mode >= 2) s->n_off = 0;
-    if (!s->nbe) return PN_OK;
-    pn__fem_edge_boxes(m, x, NULL, 0, m->dhat);
-    for (q = 0; q < s->nbn; ++q) {
-        size_t p = s->bnode[q], it, cell;
-        long c0[2], c1[2];
-        if (!PN__FEM_FREE(m, p)) continue;
-        pn__fem_cells(s, x + 2 * p, x + 2 * p, c0, c1); /* the node's cell holds every edge within dhat, once */
-        cell = (size_t)(c0[1] * s->gn[0] + c0[0]);
-        for (it = s->gstart[cell]; it < s->gstart[cell + 1]; ++it) {
-            size_t na, nb, nodes[3];
-            pn_real g6[6], H6[36], sq, dist, bb, b1, b2;
-            int i, j;
-            k = s->gitem[it];
-            na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1];
-            if (na == p || nb == p || !pn__fem_pair_near(s, k, x + 2 * p, NULL, 0)) continue;
-            sq = pn__fem_pe(x + 2 * p, x + 2 * na, x + 2 * nb, g6, H6);
-            dist = PN__SQRT(sq);
-            *dmin = PN__MIN(*dmin, dist);
-            if (!(dist > 0)) {
-                m->error_node = (long)p;
-                return PN_ERROR_STEP_TOO_LARGE;
-            }
-            if (dist >= m->dhat) continue;
-            pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
-            *E += w * bb;
-            nodes[0] = p, nodes[1] = na, nodes[2] = nb;
-            if (mode >= 1) /* grad b(d) = b' grad s / (2 d) */
-                for (i = 0; i < 6; ++i)
-                    if (PN__FEM_FREE(m, nodes[i / 2])) s->g[nodes[i / 2] * 2 + (size_t)(i % 2)] += w * b1 * g6[i] / (2 * dist);
-            if (mode >= 2) { /* b'' grad d grad d^T + b' hess d, projected: PSD */
-                int full = pn__fem_in_profile(m, p, na) && pn__fem_in_profile(m, p, nb);
-                for (i = 0; i < 6; ++i)
-                    for (j = 0; j < 6; ++j) {
-                        pn_real gi = g6[i] / (2 * dist), gj = g6[j] / (2 * dist);
-                        H6[i * 6 + j] = w * (b2 * gi * gj + b1 * (H6[i * 6 + j] / (2 * dist) - g6[i] * g6[j] / (4 * dist * dist * dist)));
-                    }
-                pn_sym_project_psd(6, H6);
-                if (!full && s->n_off >= s->cap_off)
-                    return pn__fem_fail(m, PN_ERROR_CAPACITY, "self-contact: more than %lu node-edge pairs outside the "
-                                        "Hessian's profile", (unsigned long)s->cap_off);
-                for (i = 0; i < 6; ++i)
-                    for (j = 0; j <= i; ++j) {
-                        size_t ni = nodes[i / 2], nj = nodes[j / 2];
-                        if (!PN__FEM_FREE(m, ni) || !PN__FEM_FREE(m, nj)) continue;
-                        if (full || ni == nj) pn__fem_hadd(s, pn__fem_row(m, ni * 2 + (size_t)(i % 2)), pn__fem_row(m, nj * 2 + (size_t)(j % 2)),
-                                                           H6[i * 6 + j]);
-                    }
-                if (!full) { /* the off-diagonal node blocks go to the side list */
-                    pn_real *o = s->off + 36 * s->n_off;
-                    for (i = 0; i < 6; ++i)
-                        for (j = 0; j < 6; ++j) {
-                            int free2 = PN__FEM_FREE(m, nodes[i / 2]) && PN__FEM_FREE(m, nodes[j / 2]);
-                            o[i * 6 + j] = i / 2 != j / 2 && free2 ? H6[i * 6 + j] : 0;
-                        }
-                    for (i = 0; i < 3; ++i) s->off_node[3 * s->n_off + (size_t)i] = (int)nodes[i];
-                    s->n_off++;
-                }
-            }
-        }
+/* the pair of boundary node p (or 3D edge p when edge) and item k: 0 when they share a node
+   or all its nodes are held */
+static int pn__fem_pair_make(const pn_fem_mesh *m, int edge, size_t p, size_t k, pn__fem_pair *pr) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    int d = m->dim, j, i, fixed = 1;
+    const int *tn = edge ? s->bedge + 2 * (k - s->ntgt) : d == 2 ? s->bedge + 2 * k : s->bface + 3 * k;
+    pr->kind = edge ? PN__FEM_EE : d == 2 ? PN__FEM_PE : PN__FEM_PT;
+    pr->nv = edge ? 4 : d + 1, pr->na = edge ? 2 : 1;
+    if (edge) pr->n[0] = (size_t)s->bedge[2 * p], pr->n[1] = (size_t)s->bedge[2 * p + 1];
+    else pr->n[0] = p;
+    for (j = pr->na; j < pr->nv; ++j) pr->n[j] = (size_t)tn[j - pr->na];
+    for (j = 0; j < pr->nv; ++j) {
+        fixed &= m->fixed[pr->n[j]] != 0;
+        for (i = pr->na; j < pr->na && i < pr->nv; ++i)
+            if (pr->n[i] == pr->n[j]) return 0;
     }
-    return PN_OK;
+    return !fixed;
 }
 
-/* the largest step along dir no boundary node takes through a boundary edge: additive CCD
-   (Li, Kaufman and Jiang 2021): advance while the distance cannot have closed, by 0.9 of
-   distance over the bound of the pair's relative motion, and stop at a tenth of the
-   starting distance */
-static pn_real pn__fem_self_ccd(const pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real amax) {
+/* Every boundary pair whose boxes overlap (at x, swept along alpha dir when dir is given,
+   the items' grown by grow), once each, in a fixed order, except pairs of held nodes only:
+   the boundary nodes against the targets, then (3D) each edge against the later edges; fn
+   visits them. Returns nonzero when fn stopped. */
+static int pn__fem_pairs(pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real alpha, pn_real grow,
+                         pn__fem_visit fn, void *ctx) {
     pn__fem *s = (pn__fem *)m->impl;
-    size_t q, k;
-    pn_real best = amax;
-    if (!s->nbe) return amax;
-    pn__fem_edge_boxes(m, x, dir, amax, 0);
-    for (q = 0; q < s->nbn; ++q) {
-        size_t p = s->bnode[q], nall, at;
-        long c0[2], c1[2], cx, cy;
-        pn_real lo[2], hi[2];
-        int i;
-        if (!PN__FEM_FREE(m, p)) continue;
-        for (i = 0; i < 2; ++i) /* the node's swept box: the cells it covers (all edges when many) */
-            lo[i] = PN__MIN(x[2 * p + (size_t)i], x[2 * p + (size_t)i] + amax * dir[2 * p + (size_t)i]),
-            hi[i] = PN__MAX(x[2 * p + (size_t)i], x[2 * p + (size_t)i] + amax * dir[2 * p + (size_t)i]);
-        pn__fem_cells(s, lo, hi, c0, c1);
-        nall = (size_t)((c1[0] - c0[0] + 1) * (c1[1] - c0[1] + 1)) > 16;
-        for (cy = c0[1], cx = c0[0], at = 0;; ++at) {
-            size_t na, nb, n3[3], cell = (size_t)(cy * s->gn[0] + cx);
-            pn_real mean[2], lp = 0, la = 0, t = 0, d0, g6[6], H6[36];
-            int j, it;
-            if (nall) { /* every edge */
-                if (at >= s->nbe) break;
-                k = at;
-            } else { /* the cells' edges, cell by cell */
-                while (s->gstart[cell] + at >= s->gstart[cell + 1]) {
-                    at = 0;
-                    if (++cx > c1[0]) cx = c0[0], ++cy;
-                    if (cy > c1[1]) break;
-                    cell = (size_t)(cy * s->gn[0] + cx);
+    int d = m->dim, i;
+    size_t q, it, nq = s->nbn + (d == 3 ? s->nbe : 0);
+    long c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0}, cc[3];
+    pn_real lo[3], hi[3];
+    pn__fem_pair pr;
+    if (!s->nitem) return 0;
+    pn__fem_grid_build(m, x, dir, alpha, grow);
+    for (q = 0; q < nq; ++q) {
+        int edge = q >= s->nbn;
+        size_t qe = q - (edge ? s->nbn : 0);
+        if (edge)
+            for (i = 0; i < d; ++i) lo[i] = s->ebox[6 * (s->ntgt + qe) + (size_t)i], hi[i] = s->ebox[6 * (s->ntgt + qe) + 3 + (size_t)i];
+        else pn__fem_node_box(m, s->bnode[q], x, dir, alpha, lo, hi);
+        pn__fem_cells(s, d, lo, hi, c0, c1);
+        for (cc[2] = c0[2]; cc[2] <= c1[2]; ++cc[2])
+            for (cc[1] = c0[1]; cc[1] <= c1[1]; ++cc[1])
+                for (cc[0] = c0[0]; cc[0] <= c1[0]; ++cc[0]) {
+                    size_t cell = pn__fem_cell_at(s, cc);
+                    for (it = s->gstart[cell]; it < s->gstart[cell + 1]; ++it) {
+                        size_t k = s->gitem[it];
+                        if (edge ? k <= s->ntgt + qe : k >= s->ntgt) continue;
+                        if (!pn__fem_pair_here(s, d, lo, hi, s->ebox + 6 * k, s->ebox + 6 * k + 3, cc)) continue;
+                        if (pn__fem_pair_make(m, edge, edge ? qe : s->bnode[q], k, &pr) && fn(m, &pr, ctx)) return 1;
+                    }
                 }
-                if (cy > c1[1]) break;
-                k = s->gitem[s->gstart[cell] + at];
-            }
-            na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1];
-            if (na == p || nb == p || !pn__fem_pair_near(s, k, x + 2 * p, dir + 2 * p, amax)) continue;
-            n3[0] = p, n3[1] = na, n3[2] = nb;
-            for (i = 0; i < 2; ++i) mean[i] = (dir[2 * p + (size_t)i] + dir[2 * na + (size_t)i] + dir[2 * nb + (size_t)i]) / 3;
-            for (j = 0; j < 3; ++j) { /* the motion bound after the common translation */
-                pn_real v2 = 0;
-                for (i = 0; i < 2; ++i) v2 += (dir[2 * n3[j] + (size_t)i] - mean[i]) * (dir[2 * n3[j] + (size_t)i] - mean[i]);
-                if (j == 0) lp = PN__SQRT(v2);
-                else la = PN__MAX(la, PN__SQRT(v2));
-            }
-            lp += la;
-            if (!(lp > 0)) continue;
-            d0 = PN__SQRT(pn__fem_pe(x + 2 * p, x + 2 * na, x + 2 * nb, g6, H6));
-            for (it = 0; it < 1000; ++it) {
-                pn_real y[6], d, step;
-                for (j = 0; j < 3; ++j)
-                    for (i = 0; i < 2; ++i) y[2 * j + i] = x[2 * n3[j] + (size_t)i] + t * dir[2 * n3[j] + (size_t)i];
-                d = PN__SQRT(pn__fem_pe(y, y + 2, y + 4, g6, H6));
-                if (it > 0 && d < (pn_real)0.1 * d0) break;
-                step = (pn_real)0.9 * d / lp;
-                if (t + step >= best) {
-                    t = best;
-                    break;
-                }
-                t += step;
-            }
-            best = PN__MIN(best, t);
-        }
     }
-    return best;
+    return 0;
+}
+
+/* the pair's nodes' positions at x + t dir (dir optional) */
+static void pn__fem_pair_y(const pn_fem_mesh *m, const pn__fem_pair *pr, const pn_real *x, const pn_real *dir, pn_real t,
+                           pn_real *y) {
+    int j, i, d = m->dim;
+    for (j = 0; j < pr->nv; ++j)
+        for (i = 0; i < d; ++i) {
+            size_t c = pr->n[j] * (size_t)d + (size_t)i;
+            y[j * d + i] = x[c] + (dir ? t * dir[c] : 0);
+        }
+}
+
+typedef struct pn__fem_self_ctx {
+    const pn_real *x;
+    int mode;
+    pn_real E, dmin;
+    pn_result r;
+} pn__fem_self_ctx;
+
+/* one pair's barrier into E (and g, the skyline or the side list by mode) */
+static int pn__fem_self_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx) {
+    pn__fem_self_ctx *cx = (pn__fem_self_ctx *)vctx;
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = m->dim, n = pr->nv * d, i, j, full = 1;
+    pn_real y[12], g[12], H[144], sq, dist, bb, b1, b2, w = s->dt * s->dt * m->kappa;
+    pn__fem_pair_y(m, pr, cx->x, NULL, 0, y);
+    sq = pn__fem_pair_d2(pr->kind, d, y, g, cx->mode >= 2 ? H : NULL);
+    dist = PN__SQRT(sq);
+    cx->dmin = PN__MIN(cx->dmin, dist);
+    if (!(dist > 0)) {
+        m->error_node = (long)pr->n[0];
+        cx->r = PN_ERROR_STEP_TOO_LARGE;
+        return 1;
+    }
+    if (dist >= m->dhat) return 0;
+    pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+    cx->E += w * bb;
+    if (cx->mode >= 1) /* grad b(d) = b' grad s / (2 d) */
+        for (i = 0; i < n; ++i)
+            if (PN__FEM_FREE(m, pr->n[i / d])) s->g[pr->n[i / d] * (size_t)d + (size_t)(i % d)] += w * b1 * g[i] / (2 * dist);
+    if (cx->mode < 2) return 0;
+    for (i = 0; i < n; ++i) /* b'' grad d grad d^T + b' hess d, projected: PSD */
+        for (j = 0; j < n; ++j) {
+            pn_real gi = g[i] / (2 * dist), gj = g[j] / (2 * dist);
+            H[i * n + j] = w * (b2 * gi * gj + b1 * (H[i * n + j] / (2 * dist) - g[i] * g[j] / (4 * dist * dist * dist)));
+        }
+    pn_sym_project_psd(n, H);
+    for (i = 0; i < pr->nv; ++i)
+        for (j = 0; j < i; ++j) full &= pn__fem_in_profile(m, pr->n[i], pr->n[j]);
+    if (!full && s->n_off >= s->cap_off) {
+        cx->r = pn__fem_fail(m, PN_ERROR_CAPACITY, "self-contact: more than %lu pairs outside the Hessian's profile",
+                             (unsigned long)s->cap_off);
+        return 1;
+    }
+    for (i = 0; i < n; ++i)
+        for (j = 0; j <= i; ++j) {
+            size_t ni = pr->n[i / d], nj = pr->n[j / d];
+            if (!PN__FEM_FREE(m, ni) || !PN__FEM_FREE(m, nj)) continue;
+            if (full || ni == nj)
+                pn__fem_hadd(s, pn__fem_row(m, ni * (size_t)d + (size_t)(i % d)), pn__fem_row(m, nj * (size_t)d + (size_t)(j % d)),
+                             H[i * n + j]);
+        }
+    if (!full) { /* the off-diagonal node blocks go to the side list */
+        pn_real *o = s->off + PN__FEM_PAIR_H(d) * s->n_off;
+        for (i = 0; i < n; ++i)
+            for (j = 0; j < n; ++j) {
+                int free2 = PN__FEM_FREE(m, pr->n[i / d]) && PN__FEM_FREE(m, pr->n[j / d]);
+                o[i * n + j] = i / d != j / d && free2 ? H[i * n + j] : 0;
+            }
+        for (i = 0; i < 4; ++i) s->off_node[4 * s->n_off + (size_t)i] = i < pr->nv ? (int)pr->n[i] : -1;
+        s->n_off++;
+    }
+    return 0;
+}
+
+/* The barrier of every pair within dhat into E (and g, the skyline or the side list by mode);
+   the smallest distance into *dmin; PN_ERROR_STEP_TOO_LARGE with error_node set when two
+   primitives touch. */
+static pn_result pn__fem_self(pn_fem_mesh *m, const pn_real *x, int mode, pn_real *E, pn_real *dmin) {
+    pn__fem *s = (pn__fem *)m->impl;
+    pn__fem_self_ctx cx;
+    if (mode >= 2) s->n_off = 0;
+    cx.x = x, cx.mode = mode, cx.E = 0, cx.dmin = *dmin, cx.r = PN_OK;
+    pn__fem_pairs(m, x, NULL, 0, m->dhat, pn__fem_self_visit, &cx);
+    *E += cx.E, *dmin = cx.dmin;
+    return cx.r;
+}
+
+typedef struct pn__fem_ccd_ctx {
+    const pn_real *x, *dir;
+    pn_real best;
+} pn__fem_ccd_ctx;
+
+/* additive CCD (Li, Kaufman and Jiang 2021) of one pair: advance while the distance cannot
+   have closed, by 0.9 of the distance over the bound of the pair's relative motion (each
+   side's largest motion after the pair's mean translation), and stop at a tenth of the
+   starting distance */
+static int pn__fem_ccd_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx) {
+    pn__fem_ccd_ctx *cx = (pn__fem_ccd_ctx *)vctx;
+    int d = m->dim, i, j, it;
+    pn_real mean[3] = {0, 0, 0}, la = 0, lb = 0, lp, t = 0, d0, y[12];
+    for (j = 0; j < pr->nv; ++j)
+        for (i = 0; i < d; ++i) mean[i] += cx->dir[pr->n[j] * (size_t)d + (size_t)i] / (pn_real)pr->nv;
+    for (j = 0; j < pr->nv; ++j) {
+        pn_real v2 = 0;
+        for (i = 0; i < d; ++i) {
+            pn_real u = cx->dir[pr->n[j] * (size_t)d + (size_t)i] - mean[i];
+            v2 += u * u;
+        }
+        if (j < pr->na) la = PN__MAX(la, PN__SQRT(v2));
+        else lb = PN__MAX(lb, PN__SQRT(v2));
+    }
+    lp = la + lb;
+    if (!(lp > 0)) return 0;
+    pn__fem_pair_y(m, pr, cx->x, NULL, 0, y);
+    d0 = PN__SQRT(pn__fem_pair_d2(pr->kind, d, y, NULL, NULL));
+    for (it = 0; it < 1000; ++it) {
+        pn_real dist, step;
+        pn__fem_pair_y(m, pr, cx->x, cx->dir, t, y);
+        dist = PN__SQRT(pn__fem_pair_d2(pr->kind, d, y, NULL, NULL));
+        if (it > 0 && dist < (pn_real)0.1 * d0) break;
+        step = (pn_real)0.9 * dist / lp;
+        if (t + step >= cx->best) {
+            t = cx->best;
+            break;
+        }
+        t += step;
+    }
+    cx->best = PN__MIN(cx->best, t);
+    return 0;
+}
+
+/* the largest step (at most amax) along dir that no boundary pair takes through contact */
+static pn_real pn__fem_self_ccd(pn_fem_mesh *m, const pn_real *x, const pn_real *dir, pn_real amax) {
+    pn__fem_ccd_ctx cx;
+    cx.x = x, cx.dir = dir, cx.best = amax;
+    pn__fem_pairs(m, x, dir, amax, 0, pn__fem_ccd_visit, &cx);
+    return cx.best;
 }
 
 /* y += the side list's blocks times x (unknowns in skyline row order) */
 static void pn__fem_off_apply(const pn_fem_mesh *m, const pn_real *x, pn_real *y) {
     const pn__fem *s = (const pn__fem *)m->impl;
+    int d = m->dim;
     size_t q;
     int i, j;
     for (q = 0; q < s->n_off; ++q) {
-        const pn_real *o = s->off + 36 * q;
-        size_t row[6];
-        for (i = 0; i < 6; ++i) row[i] = pn__fem_row(m, (size_t)s->off_node[3 * q + (size_t)(i / 2)] * 2 + (size_t)(i % 2));
-        for (i = 0; i < 6; ++i)
-            for (j = 0; j < 6; ++j) y[row[i]] += o[i * 6 + j] * x[row[j]];
+        const pn_real *o = s->off + PN__FEM_PAIR_H(d) * q;
+        const int *nd = s->off_node + 4 * q;
+        int n = (nd[3] < 0 ? 3 : 4) * d;
+        size_t row[12];
+        for (i = 0; i < n; ++i) row[i] = pn__fem_row(m, (size_t)nd[i / d] * (size_t)d + (size_t)(i % d));
+        for (i = 0; i < n; ++i)
+            for (j = 0; j < n; ++j) y[row[i]] += o[i * n + j] * x[row[j]];
     }
 }
 
@@ -6586,7 +6795,7 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
                     }
         }
     }
-    if (s->nbe) { /* self-contact */
+    if (s->nitem) { /* self-contact */
         pn_result r = pn__fem_self(m, x, mode, &E, &dmin);
         if (r != PN_OK) {
             s->dmin = dmin;
@@ -6798,6 +7007,34 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
     return PN_OK;
 }
 
+typedef struct pn__fem_contact_ctx {
+    pn_real dmin, *gap_speed, *spring;
+} pn__fem_contact_ctx;
+
+/* one self-contact pair's distance, and its terms of the stable step (pn__fem_contacts) */
+static int pn__fem_contact_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx) {
+    pn__fem_contact_ctx *cx = (pn__fem_contact_ctx *)vctx;
+    int d = m->dim, i, j;
+    pn_real y[12], dist, sa = 0, sb = 0, mm = PN__FEM_FAR, bb, b1, b2;
+    pn__fem_pair_y(m, pr, m->x, NULL, 0, y);
+    dist = PN__SQRT(pn__fem_pair_d2(pr->kind, d, y, NULL, NULL));
+    cx->dmin = PN__MIN(cx->dmin, dist);
+    if (!cx->gap_speed || !(dist > 0) || dist > 4 * m->dhat) return 0;
+    for (j = 0; j < pr->nv; ++j) { /* each side's fastest node: their sum bounds the closing speed */
+        pn_real v2 = 0;
+        for (i = 0; i < d; ++i) v2 += m->v[pr->n[j] * (size_t)d + (size_t)i] * m->v[pr->n[j] * (size_t)d + (size_t)i];
+        if (j < pr->na) sa = PN__MAX(sa, PN__SQRT(v2));
+        else sb = PN__MAX(sb, PN__SQRT(v2));
+        mm = PN__MIN(mm, m->mass[pr->n[j]]);
+    }
+    if (sa + sb > 0) *cx->gap_speed = PN__MIN(*cx->gap_speed, (pn_real)0.25 * dist / (sa + sb));
+    if (dist < m->dhat) {
+        pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
+        *cx->spring = PN__MIN(*cx->spring, PN__SQRT(mm / (m->kappa * b2)));
+    }
+    return 0;
+}
+
 /* The smallest node-obstacle distance with the obstacles at time t, and (2D) node-edge
    distance of the boundary (of the pairs within 4 dhat); with gap_speed and spring (optional, for pn_fem_stable_dt): the
    least over the contacts of a quarter of the gap over the closing speeds' bound, and of
@@ -6806,7 +7043,7 @@ static pn_real pn__fem_contacts(const pn_fem_mesh *m, pn_real t, pn_real *gap_sp
     pn__fem *s = (pn__fem *)m->impl; /* the grid is scratch */
     pn_real dmin = PN__FEM_FAR, nrm[3], bb, b1, b2;
     int o, d = m->dim, i;
-    size_t k, q;
+    size_t k;
     for (o = 0; o < m->n_obstacles; ++o) {
         const pn_real *vo = m->obstacles[o].velocity_m_s;
         pn_real so = PN__SQRT(vo[0] * vo[0] + vo[1] * vo[1] + vo[2] * vo[2]);
@@ -6825,35 +7062,11 @@ static pn_real pn__fem_contacts(const pn_fem_mesh *m, pn_real t, pn_real *gap_sp
             }
         }
     }
-    if (s->nbe) pn__fem_edge_boxes(m, m->x, NULL, 0, 4 * m->dhat); /* self-contact (2D): pairs within 4 dhat */
-    for (q = 0; q < s->nbn; ++q) {
-        size_t p = s->bnode[q], it, cell;
-        long c0[2], c1[2];
-        pn__fem_cells(s, m->x + 2 * p, m->x + 2 * p, c0, c1);
-        cell = (size_t)(c0[1] * s->gn[0] + c0[0]);
-        for (it = s->gstart[cell]; it < s->gstart[cell + 1]; ++it) {
-            size_t na, nb, n3[3];
-            pn_real g6[6], H6[36], dist, sp = 0, mm;
-            int j;
-            k = s->gitem[it];
-            na = (size_t)s->bedge[2 * k], nb = (size_t)s->bedge[2 * k + 1];
-            if (na == p || nb == p || !pn__fem_pair_near(s, k, m->x + 2 * p, NULL, 0)) continue;
-            dist = PN__SQRT(pn__fem_pe(m->x + 2 * p, m->x + 2 * na, m->x + 2 * nb, g6, H6));
-            dmin = PN__MIN(dmin, dist);
-            if (!gap_speed || !(dist > 0) || dist > 4 * m->dhat) continue;
-            n3[0] = p, n3[1] = na, n3[2] = nb;
-            for (j = 0; j < 3; ++j) { /* |v_p| + max(|v_a|, |v_b|) bounds the closing speed */
-                pn_real sj = PN__SQRT(m->v[2 * n3[j]] * m->v[2 * n3[j]] + m->v[2 * n3[j] + 1] * m->v[2 * n3[j] + 1]);
-                sp = j == 0 ? sj : j == 1 ? sj : PN__MAX(sp, sj);
-            }
-            sp += PN__SQRT(m->v[2 * p] * m->v[2 * p] + m->v[2 * p + 1] * m->v[2 * p + 1]);
-            if (sp > 0) *gap_speed = PN__MIN(*gap_speed, (pn_real)0.25 * dist / sp);
-            if (dist < m->dhat) {
-                pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
-                mm = PN__MIN(m->mass[p], PN__MIN(m->mass[na], m->mass[nb]));
-                *spring = PN__MIN(*spring, PN__SQRT(mm / (m->kappa * b2)));
-            }
-        }
+    if (s->nitem) { /* self-contact: the pairs within 4 dhat */
+        pn__fem_contact_ctx cx;
+        cx.dmin = dmin, cx.gap_speed = gap_speed, cx.spring = spring;
+        pn__fem_pairs((pn_fem_mesh *)m, m->x, NULL, 0, 4 * m->dhat, pn__fem_contact_visit, &cx);
+        dmin = cx.dmin;
     }
     return dmin;
 }
@@ -6951,7 +7164,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
             pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
             for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] -= m->kappa * b1 * nrm[i];
         }
-    if (s->nbe) { /* the self-contact barrier's forces: its gradient with dt = 1 */
+    if (s->nitem) { /* the self-contact barrier's forces: its gradient with dt = 1 */
         pn_real Es = 0, dm = PN__FEM_FAR;
         memset(s->g, 0, sizeof(pn_real) * m->n_nodes * (size_t)d);
         s->dt = 1;
@@ -6974,7 +7187,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
                                     "smaller step (pn_fem_stable_dt)", (unsigned long)k);
             }
         }
-    if (s->nbe) { /* self-contact must not be crossed within the step either */
+    if (s->nitem) { /* self-contact must not be crossed within the step either */
         for (k = 0; k < m->n_nodes * (size_t)d; ++k) s->dir[k] = m->x[k] - s->bx[k];
         if (pn__fem_self_ccd(m, s->bx, s->dir, 1) < 1) {
             pn__fem_restore(m);
@@ -7388,27 +7601,38 @@ static long pn__fem_find(const long *pairs, size_t n, long id) {
     return lo < n && pairs[2 * lo] == id ? pairs[2 * lo + 1] : -1;
 }
 
-static void pn__fem_sort_pairs(long *a, size_t n) { /* heap sort by the first of each pair */
-    size_t i, start, end;
-    for (start = n / 2; start-- > 0;)
-        for (i = start;;) {
-            size_t c = 2 * i + 1;
-            long t0, t1;
-            if (c >= n) break;
-            if (c + 1 < n && a[2 * c + 2] > a[2 * c]) c++;
-            if (a[2 * i] >= a[2 * c]) break;
-            t0 = a[2 * i], t1 = a[2 * i + 1], a[2 * i] = a[2 * c], a[2 * i + 1] = a[2 * c + 1], a[2 * c] = t0, a[2 * c + 1] = t1;
-            i = c;
+/* records of w longs compared by their first `keys` (lexicographic) */
+static int pn__fem_cmp_longs(const long *a, const long *b, int keys) {
+    int i;
+    for (i = 0; i < keys; ++i)
+        if (a[i] != b[i]) return a[i] < b[i] ? -1 : 1;
+    return 0;
+}
+
+static void pn__fem_swap_longs(long *a, long *b, int w) {
+    int i;
+    for (i = 0; i < w; ++i) {
+        long t = a[i];
+        a[i] = b[i], b[i] = t;
+    }
+}
+
+/* heap sort of n records of w longs by their first `keys` (the loaders' (id, index) pairs,
+   the boundary's node tuples): no allocation, n log n at worst */
+static void pn__fem_sort_longs(long *a, size_t n, int w, int keys) {
+    size_t i, start, end, W = (size_t)w;
+    for (start = n / 2, end = n;;) {
+        if (start > 0) --start; /* heapify, then pop */
+        else {
+            if (end-- <= 1) break;
+            pn__fem_swap_longs(a, a + W * end, w);
         }
-    for (end = n; end-- > 1;) {
-        long t0 = a[0], t1 = a[1];
-        a[0] = a[2 * end], a[1] = a[2 * end + 1], a[2 * end] = t0, a[2 * end + 1] = t1;
-        for (i = 0;;) {
+        for (i = start;;) { /* sift down */
             size_t c = 2 * i + 1;
             if (c >= end) break;
-            if (c + 1 < end && a[2 * c + 2] > a[2 * c]) c++;
-            if (a[2 * i] >= a[2 * c]) break;
-            t0 = a[2 * i], t1 = a[2 * i + 1], a[2 * i] = a[2 * c], a[2 * i + 1] = a[2 * c + 1], a[2 * c] = t0, a[2 * c + 1] = t1;
+            if (c + 1 < end && pn__fem_cmp_longs(a + W * (c + 1), a + W * c, keys) > 0) c++;
+            if (pn__fem_cmp_longs(a + W * i, a + W * c, keys) >= 0) break;
+            pn__fem_swap_longs(a + W * i, a + W * c, w);
             i = c;
         }
     }
@@ -7418,7 +7642,7 @@ static void pn__fem_sort_pairs(long *a, size_t n) { /* heap sort by the first of
 static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, char *why, size_t cap) {
     size_t k, e;
     int dp = d->dim + 1, a;
-    pn__fem_sort_pairs(ids, d->n_nodes);
+    pn__fem_sort_longs(ids, d->n_nodes, 2, 1);
     for (k = 1; k < d->n_nodes; ++k)
         if (ids[2 * k] == ids[2 * k - 2]) {
             pn__fem_why(why, cap, "node id %ld appears twice", ids[2 * k]);

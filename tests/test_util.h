@@ -5,7 +5,7 @@
    #included once by test_main.c after pn_test.h; the test files (one translation unit) use
    these t_ helpers and keep only those specific to them, under their own prefixes. Everything
    here is double precision and written independently of plastinet.h: it is what the tests
-   judge the library against, so it must not call it. Matrices are n x n row-major, n <= 9. */
+   judge the library against, so it must not call it. Matrices are n x n row-major, n <= 12. */
 #ifndef PN_TEST_UTIL_H
 #define PN_TEST_UTIL_H
 
@@ -26,7 +26,7 @@ static double t_norm(int count, const double *a) {
 }
 /* |a - b| (Frobenius), count <= 81 */
 static double t_dist(int count, const double *a, const double *b) {
-    double d[81];
+    double d[144];
     int i;
     for (i = 0; i < count; ++i) d[i] = a[i] - b[i];
     return t_norm(count, d);
@@ -138,10 +138,10 @@ static void t_rand_rot(pn_test_rng *r, int dim, double *R) {
 
 /* ---- reference symmetric eigen-solver and PSD rebuild (not pn_sym_eigen) -------------------- */
 
-/* Cyclic Jacobi: A (n x n, n <= 9, symmetrised on entry) = Q diag(w) Q^T, Q columns
+/* Cyclic Jacobi: A (n x n, n <= 12, symmetrised on entry) = Q diag(w) Q^T, Q columns
    eigenvectors, w unsorted. */
 static void t_jacobi(int n, const double *A_in, double *Q, double *w) {
-    double A[81];
+    double A[144];
     int i, j, p, q, sweep;
     for (i = 0; i < n; ++i)
         for (j = 0; j < n; ++j) A[i * n + j] = 0.5 * (A_in[i * n + j] + A_in[j * n + i]);
