@@ -88,10 +88,11 @@ bench-mpm: build/bench_mpm
 	@cat build/bench_mpm.md
 
 # FEM: the metal frame, accuracy at a softened stiffness and speed at 200 GPa (bench/bench_fem.c;
-# BENCH_FEM_FLAGS=--dim 3 for 3D, --quick for a smoke test).
+# 2D then 3D; BENCH_FEM_FLAGS=--quick for a smoke test).
 bench-fem: build/bench_fem
-	build/bench_fem --out build $(BENCH_FEM_FLAGS)
-	@cat build/bench_fem.md
+	build/bench_fem --dim 2 --out build $(BENCH_FEM_FLAGS)
+	build/bench_fem --dim 3 --out build $(BENCH_FEM_FLAGS)
+	@cat build/bench_fem_2d.md build/bench_fem_3d.md
 
 build/bench_fem: bench/bench_fem.c examples/pn_frame.h $(EXAMPLE_DEPS)
 	@mkdir -p build

@@ -620,6 +620,7 @@ PN_API pn_result pn_learned_return_map(const pn_model *model, const pn_material 
 #define PN__EXP(x) ((pn_real)exp((double)(x)))
 #define PN__POW(x, y) ((pn_real)pow((double)(x), (double)(y)))
 #define PN__SIN(x) ((pn_real)sin((double)(x)))
+#define PN__COS(x) ((pn_real)cos((double)(x)))
 #define PN__SINH(x) ((pn_real)sinh((double)(x)))
 #define PN__FABS(x) ((pn_real)fabs((double)(x)))
 #define PN__EPS ((pn_real)(sizeof(pn_real) < sizeof(double) ? FLT_EPSILON : DBL_EPSILON))

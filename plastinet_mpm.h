@@ -709,8 +709,9 @@ typedef struct pn_fem_mesh {
     pn_real *Fp_inv, *h;         /* per element: inverse plastic deformation, plastic state */
     pn_fem_group groups[PN_FEM_MAX_GROUPS];
     int n_groups;
-    unsigned char *fixed;        /* per node: 0 free, 1 driven (held: velocity 0)           */
+    unsigned char *fixed;        /* per node: 0 free, 1 driven (held: velocity 0), 2 spun    */
     pn_real *drive;              /* per node: the driven velocity (dim reals)                */
+    pn_real *spin;               /* per node: the spin's centre (3 reals), angular velocity (3) */
     pn_mpm_collider obstacles[PN_FEM_MAX_OBSTACLES];
     int n_obstacles;
     pn_real time_s, dhat, kappa, edge_mean;
@@ -733,6 +734,16 @@ PN_API pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_mpm_energy en
 
 /* Nodes held (velocity NULL) or driven at a constant velocity (dim reals); n nodes by index. */
 PN_API pn_result pn_fem_fix_nodes(pn_fem_mesh *m, size_t n, const int *nodes, const pn_real *velocity_m_s);
+
+/* Nodes driven in a rigid rotation about the axis through center_m (dim reals) at
+   angular_velocity_rad_s (3 reals: the axis times the rate, right-handed; 2D uses [2], the
+   rate about z): each step moves them along the exact arc. */
+PN_API pn_result pn_fem_spin_nodes(pn_fem_mesh *m, size_t n, const int *nodes, const pn_real *center_m,
+                                   const pn_real *angular_velocity_rad_s);
+
+/* Let held, driven or spun nodes go: they move freely from the next step, at the velocity
+   they had. */
+PN_API pn_result pn_fem_release_nodes(pn_fem_mesh *m, size_t n, const int *nodes);
 
 /* Add an obstacle (a half-space or a box; copied). Every node must be outside it, further
    than nothing: PN_ERROR_INVALID_ARGUMENT names a node inside. */
@@ -5992,7 +6003,7 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     m->error_element = m->error_node = -1;
     m->n_groups = desc->n_groups;
     for (g = 0; g < desc->n_groups; ++g) m->groups[g] = desc->groups[g];
-    m->x = (pn_real *)pn_alloc(al, sizeof(pn_real) * (n * (size_t)(4 * d + 1) + ne * (size_t)(2 * dd + 2)));
+    m->x = (pn_real *)pn_alloc(al, sizeof(pn_real) * (n * (size_t)(4 * d + 1 + 6) + ne * (size_t)(2 * dd + 2)));
     m->elem = (int *)pn_alloc(al, sizeof(int) * ne * (size_t)(dp + 1));
     m->fixed = (unsigned char *)pn_alloc(al, n);
     if (!m->x || !m->elem || !m->fixed) {
@@ -6007,11 +6018,13 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     m->Fp_inv = m->Dm_inv + ne * (size_t)dd;
     m->vol0 = m->Fp_inv + ne * (size_t)dd;
     m->h = m->vol0 + ne;
+    m->spin = m->h + ne;
     m->egroup = m->elem + ne * (size_t)dp;
     memcpy(m->x, desc->rest_m, sizeof(pn_real) * n * (size_t)d);
     memcpy(m->X, desc->rest_m, sizeof(pn_real) * n * (size_t)d);
     memset(m->v, 0, sizeof(pn_real) * n * (size_t)d);
     memset(m->drive, 0, sizeof(pn_real) * n * (size_t)d);
+    memset(m->spin, 0, sizeof(pn_real) * n * 6);
     memset(m->mass, 0, sizeof(pn_real) * n);
     memset(m->fixed, 0, n);
     memcpy(m->elem, desc->elements, sizeof(int) * ne * (size_t)dp);
@@ -6067,16 +6080,28 @@ PN__DEF pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_mpm_energy e
     return PN_OK;
 }
 
+static void pn__fem_cross(const pn_real *a, const pn_real *b, pn_real *c) {
+    c[0] = a[1] * b[2] - a[2] * b[1], c[1] = a[2] * b[0] - a[0] * b[2], c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* the node list of a pn_fem_*_nodes call checked; PN_OK or the failure, named */
+static pn_result pn__fem_node_list(pn_fem_mesh *m, size_t n, const int *nodes, const char *who) {
+    size_t k;
+    if (n && !nodes) return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "%s: nodes is NULL", who);
+    for (k = 0; k < n; ++k)
+        if (nodes[k] < 0 || (size_t)nodes[k] >= m->n_nodes)
+            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "%s: node index %d (entry %lu) is out of range", who, nodes[k],
+                                (unsigned long)k);
+    return PN_OK;
+}
+
 PN__DEF pn_result pn_fem_fix_nodes(pn_fem_mesh *m, size_t n, const int *nodes, const pn_real *velocity_m_s) {
     size_t k;
     int i;
+    pn_result r;
     if (!m) return PN_ERROR_INVALID_ARGUMENT;
     m->error[0] = 0;
-    if (n && !nodes) return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_fix_nodes: nodes is NULL");
-    for (k = 0; k < n; ++k)
-        if (nodes[k] < 0 || (size_t)nodes[k] >= m->n_nodes)
-            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_fix_nodes: node index %d (entry %lu) is out of range",
-                                nodes[k], (unsigned long)k);
+    if ((r = pn__fem_node_list(m, n, nodes, "pn_fem_fix_nodes")) != PN_OK) return r;
     if (velocity_m_s)
         for (i = 0; i < m->dim; ++i)
             if (!pn__finite(velocity_m_s[i]))
@@ -6088,6 +6113,65 @@ PN__DEF pn_result pn_fem_fix_nodes(pn_fem_mesh *m, size_t n, const int *nodes, c
         for (i = 0; i < m->dim; ++i) m->v[p * (size_t)m->dim + (size_t)i] = velocity_m_s ? velocity_m_s[i] : 0;
     }
     return PN_OK;
+}
+
+PN__DEF pn_result pn_fem_spin_nodes(pn_fem_mesh *m, size_t n, const int *nodes, const pn_real *center_m,
+                                    const pn_real *angular_velocity_rad_s) {
+    size_t k;
+    int i;
+    pn_result r;
+    if (!m) return PN_ERROR_INVALID_ARGUMENT;
+    m->error[0] = 0;
+    if ((r = pn__fem_node_list(m, n, nodes, "pn_fem_spin_nodes")) != PN_OK) return r;
+    if (!center_m || !angular_velocity_rad_s)
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_spin_nodes: center_m or angular_velocity_rad_s is NULL");
+    for (i = 0; i < 3; ++i)
+        if ((i < m->dim && !pn__finite(center_m[i])) || !pn__finite(angular_velocity_rad_s[i]))
+            return pn__fem_fail(m, PN_ERROR_NONFINITE, "pn_fem_spin_nodes: center_m[%d] or angular_velocity_rad_s[%d] is not "
+                                "finite", i, i);
+    for (k = 0; k < n; ++k) {
+        size_t p = (size_t)nodes[k];
+        pn_real *sp = m->spin + 6 * p, w[3], rr[3] = {0, 0, 0};
+        m->fixed[p] = 2;
+        for (i = 0; i < 3; ++i) sp[i] = i < m->dim ? center_m[i] : 0, sp[3 + i] = angular_velocity_rad_s[i];
+        if (m->dim == 2) sp[3] = sp[4] = 0;
+        for (i = 0; i < m->dim; ++i) rr[i] = m->x[p * (size_t)m->dim + (size_t)i] - sp[i];
+        pn__fem_cross(sp + 3, rr, w); /* v = omega x r */
+        for (i = 0; i < m->dim; ++i) m->v[p * (size_t)m->dim + (size_t)i] = w[i];
+    }
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_fem_release_nodes(pn_fem_mesh *m, size_t n, const int *nodes) {
+    size_t k;
+    pn_result r;
+    if (!m) return PN_ERROR_INVALID_ARGUMENT;
+    m->error[0] = 0;
+    if ((r = pn__fem_node_list(m, n, nodes, "pn_fem_release_nodes")) != PN_OK) return r;
+    for (k = 0; k < n; ++k) m->fixed[nodes[k]] = 0;
+    return PN_OK;
+}
+
+/* where driven node k is after a step of dt: translated, or turned along the exact arc
+   (Rodrigues' formula about the spin's axis) */
+static void pn__fem_driven(const pn_fem_mesh *m, size_t k, pn_real dt, pn_real *xn) {
+    int d = m->dim, i;
+    const pn_real *x = m->x + k * (size_t)d;
+    if (m->fixed[k] == 2) {
+        const pn_real *sp = m->spin + 6 * k;
+        pn_real rate = PN__SQRT(sp[3] * sp[3] + sp[4] * sp[4] + sp[5] * sp[5]), a[3], r[3] = {0, 0, 0}, axr[3], ad, c, s;
+        for (i = 0; i < d; ++i) r[i] = x[i] - sp[i];
+        if (!(rate > 0)) {
+            for (i = 0; i < d; ++i) xn[i] = x[i];
+            return;
+        }
+        for (i = 0; i < 3; ++i) a[i] = sp[3 + i] / rate;
+        c = PN__COS(rate * dt), s = PN__SIN(rate * dt);
+        pn__fem_cross(a, r, axr);
+        ad = a[0] * r[0] + a[1] * r[1] + a[2] * r[2];
+        for (i = 0; i < d; ++i) xn[i] = sp[i] + r[i] * c + axr[i] * s + a[i] * ad * (1 - c);
+    } else
+        for (i = 0; i < d; ++i) xn[i] = x[i] + dt * m->drive[k * (size_t)d + (size_t)i];
 }
 
 /* signed distance from x to obstacle c at time t (> 0 outside), and its gradient n */
@@ -7175,11 +7259,13 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
         }
         for (k = 0; k < m->n_nodes * (size_t)d; ++k) f[k] -= s->g[k];
     }
-    for (k = 0; k < m->n_nodes; ++k)
+    for (k = 0; k < m->n_nodes; ++k) {
+        pn_real xn[3];
+        if (m->fixed[k]) pn__fem_driven(m, k, dt, xn);
         for (i = 0; i < d; ++i) {
             size_t c = k * (size_t)d + (size_t)i;
-            m->v[c] = m->fixed[k] ? m->drive[c] : m->v[c] + dt * f[c] / m->mass[k];
-            m->x[c] += dt * m->v[c];
+            m->v[c] = m->fixed[k] ? (xn[i] - m->x[c]) / dt : m->v[c] + dt * f[c] / m->mass[k];
+            m->x[c] = m->fixed[k] ? xn[i] : m->x[c] + dt * m->v[c];
             if (!pn__finite(m->x[c])) {
                 pn__fem_restore(m);
                 m->error_node = (long)k;
@@ -7187,6 +7273,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
                                     "smaller step (pn_fem_stable_dt)", (unsigned long)k);
             }
         }
+    }
     if (s->nitem) { /* self-contact must not be crossed within the step either */
         for (k = 0; k < m->n_nodes * (size_t)d; ++k) s->dir[k] = m->x[k] - s->bx[k];
         if (pn__fem_self_ccd(m, s->bx, s->dir, 1) < 1) {
@@ -7388,12 +7475,15 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
         }
     }
     s->nu = nd + (size_t)(s->n_mov * d);
-    for (k = 0; k < n; ++k)
+    for (k = 0; k < n; ++k) {
+        pn_real xn[3];
+        if (m->fixed[k]) pn__fem_driven(m, k, dt, xn);
         for (i = 0; i < d; ++i) {
             size_t c = k * (size_t)d + (size_t)i;
-            if (m->fixed[k]) s->xt[c] = s->xs[c] = m->x[c] + dt * m->drive[c];
+            if (m->fixed[k]) s->xt[c] = s->xs[c] = xn[i];
             else s->xt[c] = m->x[c] + dt * m->v[c] + dt * dt * m->desc.gravity[i], s->xs[c] = m->x[c];
         }
+    }
     for (k = nd; k < s->nu; ++k) s->xs[k] = 0;
     { /* start at the inertial prediction x~ where it is near (no node moves half an edge),
          no node passes an obstacle to it and no element is inverted there; else at x^n */

@@ -18,7 +18,7 @@
       fraction of the step bound (4, 2, 1, 0.5) that stays finite over the first --window
       seconds (default 0.01 s), timed over that window and scaled to the whole run (stated
       in the table), against implicit at dt 1e-2 s over the whole run.
-   Writes DIR/bench_fem.csv, DIR/bench_fem.md, DIR/bench_fem.svg (error against wall time);
+   Writes DIR/bench_fem_Nd.csv, .md and .svg (error against wall time; N the dimension);
    progress on stderr. --quick: 2D, coarse (5 mm), short (0.04 s), for a smoke test.
    --ref-cache DIR: keep the references' frames in DIR and read them on a rerun; --no-check:
    skip the reference's convergence check. */
@@ -291,9 +291,9 @@ int main(int argc, char **argv) {
             run_one(&c, r, NULL, NULL, 0);
             progress(r);
         }
-        snprintf(path, sizeof path, "%s/bench_fem.csv", c.out);
+        snprintf(path, sizeof path, "%s/bench_fem_%dd.csv", c.out, c.dim);
         csv = fopen(path, "w");
-        snprintf(path, sizeof path, "%s/bench_fem.md", c.out);
+        snprintf(path, sizeof path, "%s/bench_fem_%dd.md", c.out, c.dim);
         md = fopen(path, "w");
         if (!csv || !md) return 1;
         fprintf(csv, "dim,role,integrator,energy,E,dt,courant,error_mean,error_max,wall_s,sim_s,wall_per_sim_s,x_fair,newton_per_step,"
@@ -333,7 +333,7 @@ int main(int argc, char **argv) {
         fclose(csv);
         fclose(md);
     }
-    snprintf(path, sizeof path, "%s/bench_fem.svg", c.out);
+    snprintf(path, sizeof path, "%s/bench_fem_%dd.svg", c.out, c.dim);
     svg(path, runs, n);
     fprintf(stderr, "wrote %s/bench_fem.{csv,md,svg}\n", c.out);
     return 0;

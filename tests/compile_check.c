@@ -220,6 +220,10 @@ static void smoke_fem(int d) {
     CHECK(pn_fem_step_explicit(m, dt / 2, &st) == PN_OK);
     CHECK(pn_fem_step_implicit(m, (pn_real)1e-3, NULL, &st) == PN_OK && pn_fem_error(m)[0] == 0);
     CHECK(pn_fem_fix_nodes(m, 1, &fix, NULL) == PN_OK);
+    {
+        static const pn_real centre[3] = {0, 0, 0}, spin[3] = {0, 0, 1};
+        CHECK(pn_fem_spin_nodes(m, 1, &fix, centre, spin) == PN_OK && pn_fem_release_nodes(m, 1, &fix) == PN_OK);
+    }
     CHECK(pn_fem_energy(m, &el_j, &kin_j) == PN_OK && kin_j > 0);
     pn_fem_destroy(m);
     { /* the loaders */

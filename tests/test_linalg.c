@@ -888,7 +888,7 @@ PN_TEST(linalg_nonfinite_rejected) {
                 if (pos % n != pos / n) A[(pos % n) * n + pos / n] = bad[b]; /* keep it symmetric */
                 memcpy(K, A, sizeof A);
                 for (i = 0; i < 144; ++i) kQ[i] = Q[i] = 0.5 * i;
-                for (i = 0; i < 9; ++i) kw[i] = w[i] = -0.5 * i;
+                for (i = 0; i < 12; ++i) kw[i] = w[i] = -0.5 * i;
                 tried++;
                 if (pn_sym_eigen(n, A, Q, w) != PN_ERROR_NONFINITE || memcmp(Q, kQ, sizeof Q) ||
                     memcmp(w, kw, sizeof w)) {
