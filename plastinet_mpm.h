@@ -77,8 +77,10 @@
    Results are bitwise identical for any thread count: particle-to-grid is a gather over
    particles sorted by node (implicit) or a scatter in particle order where each thread adds
    only to its own slab of rows (explicit): no atomics, a fixed summation order; every
-   reduction sums fixed-size chunks in a fixed order. One world must not be stepped from two threads at
-   once; different worlds may.
+   reduction sums fixed-size chunks in a fixed order. FEM meshes of at least 512 elements
+   evaluate each element's energy, stress, Hessian, F0 preparation and return mapping on
+   threads into per-element slots, then sum and assemble in element order. One world or
+   mesh must not be stepped from two threads at once; different ones may.
    DETERMINISM: as for plastinet.h: with -ffp-contract=off (and without -ffast-math) gcc,
    g++ and clang give the same bits at any -O level for every integrator and energy
    (tests/cross_compiler.sh).
@@ -834,8 +836,10 @@ PN_API pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_real
 #ifdef _OPENMP
 #include <omp.h>
 #define PN__OMP_FOR _Pragma("omp parallel for schedule(dynamic, 64) if(w->n >= w->desc.parallel_min_particles)")
+#define PN__FEM_OMP_FOR _Pragma("omp parallel for schedule(dynamic, 64) if(m->n_elems >= 512)") /* >>fem, mesh m */
 #else
 #define PN__OMP_FOR
+#define PN__FEM_OMP_FOR
 #endif
 #if defined(__GNUC__)
 #define PN__MPM_INLINE static inline __attribute__((always_inline))
@@ -5490,6 +5494,8 @@ typedef struct pn__fem {
     pn_real *bx, *bv, *bFp, *bh; /* the state before the step (restored on failure)         */
     pn_real bt;
     unsigned char *elast;        /* per element: needs det Fe > 0 (all but fixed corotated)  */
+    pn_real *epsi;               /* per element: Psi (the threaded loop's output)            */
+    int *estat;                  /* per element: what the threaded loop found (0: fine)      */
     pn_real al_k;                /* augmented Lagrangian stiffness of the obstacle unknowns  */
     pn_real al_lam[PN_FEM_MAX_OBSTACLES * 3], target[PN_FEM_MAX_OBSTACLES * 3];
     pn_real dt, t_end;           /* this step's dt and end time                              */
@@ -5693,6 +5699,7 @@ PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
         pn_free(al, s->B);
         pn_free(al, s->ppt);
         pn_free(al, s->elast);
+        pn_free(al, s->estat);
         pn_free(al, s->bx);
         pn_free(al, s->A);
         pn_free(al, s->bedge);
@@ -5738,11 +5745,12 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->perm = (size_t *)pn_alloc(al, sizeof(size_t) * 2 * n);
     s->fc = (size_t *)pn_alloc(al, sizeof(size_t) * (2 * nu + 1));
     s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (11 * PN__FEM_ALIGN(nu)));
-    s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * ne * (size_t)(dd + d * dp + dd + dd * dd + dd + 1 + 1 + dd));
+    s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * ne * (size_t)(dd + d * dp + dd + dd * dd + dd + 1 + 1 + dd + 1));
+    s->estat = (int *)pn_alloc(al, sizeof(int) * (ne + 1));
     s->ppt = (pn_pnet_point *)pn_alloc(al, sizeof(pn_pnet_point) * ne);
     s->elast = (unsigned char *)pn_alloc(al, ne);
     s->bx = (pn_real *)pn_alloc(al, sizeof(pn_real) * (2 * n * (size_t)d + ne * (size_t)(dd + 1)));
-    if (!s->perm || !s->fc || !s->xt || !s->B || !s->ppt || !s->elast || !s->bx) return PN_ERROR_OUT_OF_MEMORY;
+    if (!s->perm || !s->fc || !s->xt || !s->B || !s->ppt || !s->elast || !s->bx || !s->estat) return PN_ERROR_OUT_OF_MEMORY;
     s->bv = s->bx + n * (size_t)d;
     s->bFp = s->bv + n * (size_t)d;
     s->bh = s->bFp + ne * (size_t)dd;
@@ -5764,6 +5772,7 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->phG = s->pG + ne * (size_t)dd;
     s->pty = s->phG + ne;
     s->F0 = s->pty + ne;
+    s->epsi = s->F0 + ne * (size_t)dd;
     /* node graph (CSR) for the ordering: temporary */
     xadj = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
     cnt = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
@@ -6793,23 +6802,29 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
             if (mode >= 2) pn__fem_hadd(s, pn__fem_row(m, c), pn__fem_row(m, c), m->mass[k]);
         }
     }
+    PN__FEM_OMP_FOR /* each element's Psi, P and H on threads; summed below in element order */
     for (e = 0; e < m->n_elems; ++e) {
-        pn_real Fe[9], psi, *P = s->eP + e * (size_t)dd, *H = s->eH + e * (size_t)(dd * dd);
-        const int *el = m->elem + e * (size_t)dp;
-        const pn_real *q = s->q + e * (size_t)(d * dp);
-        pn_real V = m->vol0[e] * dt2;
+        pn_real Fe[9];
         pn_result r;
         pn__fem_fe(m, e, x, Fe);
         if (s->elast[e] && !(pn_mat_det(d, Fe) > 0)) {
-            m->error_element = (long)e;
-            return PN_ERROR_INVERTED;
+            s->estat[e] = PN_ERROR_INVERTED;
+            continue;
         }
-        r = pn__fem_psi(m, e, Fe, &psi, mode >= 1 ? P : NULL, mode >= 2 ? H : NULL);
-        if (r != PN_OK || !pn__finite(psi)) {
+        r = pn__fem_psi(m, e, Fe, &s->epsi[e], mode >= 1 ? s->eP + e * (size_t)dd : NULL,
+                        mode >= 2 ? s->eH + e * (size_t)(dd * dd) : NULL);
+        s->estat[e] = r != PN_OK ? (int)r : !pn__finite(s->epsi[e]) ? (int)PN_ERROR_OVERFLOW : 0;
+    }
+    for (e = 0; e < m->n_elems; ++e) {
+        const pn_real *P = s->eP + e * (size_t)dd, *H = s->eH + e * (size_t)(dd * dd);
+        const int *el = m->elem + e * (size_t)dp;
+        const pn_real *q = s->q + e * (size_t)(d * dp);
+        pn_real V = m->vol0[e] * dt2;
+        if (s->estat[e]) {
             m->error_element = (long)e;
-            return r != PN_OK ? r : PN_ERROR_OVERFLOW;
+            return (pn_result)s->estat[e];
         }
-        E += V * psi;
+        E += V * s->epsi[e];
         if (mode >= 1)
             for (a = 0; a < dp; ++a) {
                 size_t na = (size_t)el[a];
@@ -7055,38 +7070,55 @@ static void pn__fem_keep(pn_fem_mesh *m, int restore) {
    the count of projected elements in *plastic. */
 static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
     pn__fem *s = (pn__fem *)m->impl;
-    int d = m->dim, dd = d * d, i;
+    int d = m->dim, dd = d * d;
     size_t e;
+    enum { KEPT = 0, PROJECTED, INVERTED, SINGULAR, FAILED }; /* estat: FAILED + the pn_result */
     *plastic = 0;
+    PN__FEM_OMP_FOR /* each element's own state on threads; counted and judged below in order */
     for (e = 0; e < m->n_elems; ++e) {
         const pn_fem_group *g = &m->groups[m->egroup[e]];
         pn_real Fe[9], Z[9], Fi[9], T[9], hn, moved = 0;
         pn_result r;
+        int i;
+        s->estat[e] = KEPT;
         pn__fem_fe(m, e, m->x, Fe);
         if (s->elast[e] && !(pn_mat_det(d, Fe) > 0)) {
-            m->error_element = (long)e;
-            return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu turned inside out (det Fe = %g)", (unsigned long)e,
-                                (double)pn_mat_det(d, Fe));
+            s->estat[e] = INVERTED;
+            continue;
         }
         if (g->material.plastic == PN_PLASTIC_NONE) continue;
         r = pn__mpm_energy_of(g) == PN_MPM_ENERGY_PNET && g->pnet.return_map
                 ? pn_learned_return_map(g->pnet.return_map, &g->material, d, Fe, m->h[e], Z, &hn, NULL)
                 : pn_return_map(&g->material, d, Fe, m->h[e], Z, &hn, NULL);
         if (r != PN_OK || !pn__finite(hn)) {
-            m->error_element = (long)e;
-            return pn__fem_fail(m, r != PN_OK ? r : PN_ERROR_OVERFLOW, "element %lu: the return mapping failed (%s)",
-                                (unsigned long)e, pn_result_string(r != PN_OK ? r : PN_ERROR_OVERFLOW));
+            s->estat[e] = FAILED + (int)(r != PN_OK ? r : PN_ERROR_OVERFLOW);
+            continue;
         }
         for (i = 0; i < dd; ++i) moved = PN__MAX(moved, PN__FABS(Z[i] - Fe[i]));
         if (moved == 0 && hn == m->h[e]) continue;
-        (*plastic)++;
         if (pn_mat_inverse(d, Fe, Fi) != PN_OK) {
-            m->error_element = (long)e;
-            return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu: Fe is singular", (unsigned long)e);
+            s->estat[e] = SINGULAR;
+            continue;
         }
+        s->estat[e] = PROJECTED;
         pn_mat_mul(d, m->Fp_inv + e * (size_t)dd, Fi, T);
         pn_mat_mul(d, T, Z, m->Fp_inv + e * (size_t)dd);
         m->h[e] = hn;
+    }
+    for (e = 0; e < m->n_elems; ++e) {
+        int st = s->estat[e];
+        if (st == PROJECTED) (*plastic)++;
+        if (st <= PROJECTED) continue;
+        m->error_element = (long)e;
+        if (st == INVERTED) {
+            pn_real Fe[9];
+            pn__fem_fe(m, e, m->x, Fe);
+            return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu turned inside out (det Fe = %g)", (unsigned long)e,
+                                (double)pn_mat_det(d, Fe));
+        }
+        if (st == SINGULAR) return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu: Fe is singular", (unsigned long)e);
+        return pn__fem_fail(m, (pn_result)(st - FAILED), "element %lu: the return mapping failed (%s)", (unsigned long)e,
+                            pn_result_string((pn_result)(st - FAILED)));
     }
     return PN_OK;
 }
@@ -7223,16 +7255,20 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     f = s->xtry; /* forces */
     for (k = 0; k < m->n_nodes; ++k)
         for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] = m->mass[k] * m->desc.gravity[i];
+    PN__FEM_OMP_FOR /* each element's P on threads; the forces gathered below in element order */
     for (e = 0; e < m->n_elems; ++e) {
-        const pn_fem_group *g = &m->groups[m->egroup[e]];
-        const int *el = m->elem + e * (size_t)dp;
-        const pn_real *q = s->q + e * (size_t)(d * dp);
-        pn_real Fe[9], P[9];
+        pn_real Fe[9];
         pn__fem_fe(m, e, m->x, Fe);
-        r = pn_elastic_energy(&g->material, d, Fe, m->h[e], NULL, P, NULL, 0);
-        if (r != PN_OK) {
+        s->estat[e] = (int)pn_elastic_energy(&m->groups[m->egroup[e]].material, d, Fe, m->h[e], NULL, s->eP + e * (size_t)(d * d),
+                                             NULL, 0);
+    }
+    for (e = 0; e < m->n_elems; ++e) {
+        const int *el = m->elem + e * (size_t)dp;
+        const pn_real *q = s->q + e * (size_t)(d * dp), *P = s->eP + e * (size_t)(d * d);
+        if (s->estat[e]) {
             m->error_element = (long)e;
-            return pn__fem_fail(m, r, "pn_fem_step_explicit: element %lu: %s", (unsigned long)e, pn_result_string(r));
+            return pn__fem_fail(m, (pn_result)s->estat[e], "pn_fem_step_explicit: element %lu: %s", (unsigned long)e,
+                                pn_result_string((pn_result)s->estat[e]));
         }
         for (a = 0; a < dp; ++a)
             for (i = 0; i < d; ++i) {
@@ -7438,22 +7474,27 @@ static pn_result pn__fem_prepare(pn_fem_mesh *m, const pn_real *x) {
     pn__fem *s = (pn__fem *)m->impl;
     int d = m->dim, dd = d * d;
     size_t e;
+    PN__FEM_OMP_FOR
     for (e = 0; e < m->n_elems; ++e) {
         const pn_fem_group *g = &m->groups[m->egroup[e]];
         pn_real F0[9];
         pn_result r = PN_OK;
         pn_mpm_energy en = pn__mpm_energy_of(g);
+        s->estat[e] = 0;
         if (en != PN_MPM_ENERGY_LAGGED && en != PN_MPM_ENERGY_PNET && en != PN_MPM_ENERGY_DP) continue;
         pn__fem_fe(m, e, x, F0);
         if (!(pn_mat_det(d, F0) > 0)) pn__fem_fe(m, e, m->x, F0);
         if (en == PN_MPM_ENERGY_LAGGED) r = pn_lagged_prepare(&g->material, d, F0, m->h[e], s->pG + e * (size_t)dd, &s->phG[e]);
         else if (en == PN_MPM_ENERGY_PNET) r = pn_pnet_prepare(&g->pnet, F0, m->h[e], &s->ppt[e], NULL, NULL);
         else r = pn_dp_prepare(&g->material, d, F0, m->h[e], &s->pty[e]);
-        if (r != PN_OK) {
-            m->error_element = (long)e;
-            return pn__fem_fail(m, r, "element %lu: preparing its energy at F0 failed (%s)", (unsigned long)e, pn_result_string(r));
-        }
+        s->estat[e] = (int)r;
     }
+    for (e = 0; e < m->n_elems; ++e)
+        if (s->estat[e]) {
+            m->error_element = (long)e;
+            return pn__fem_fail(m, (pn_result)s->estat[e], "element %lu: preparing its energy at F0 failed (%s)", (unsigned long)e,
+                                pn_result_string((pn_result)s->estat[e]));
+        }
     return PN_OK;
 }
 

@@ -761,6 +761,57 @@ PN_TEST(fem_spin_release) {
         }
 }
 
+/* 1 and 2 threads give the same bits: a von Mises block pressed by a plate (2D and 3D, over
+   512 elements so the element loops run threaded), implicit steps with the exact energy and
+   with the lagged one (its fixed point), then explicit steps */
+PN_TEST(fem_threads_same_bits) {
+    int dim, en;
+    for (dim = 2; dim <= 3; ++dim)
+        for (en = 0; en < 2; ++en) {
+            pn_real *xs[2] = {NULL, NULL};
+            size_t nn = 0, k;
+            int t, same = 1;
+            for (t = 1; t <= 2; ++t) {
+                pn_fem_grid g = dim == 2 ? t_fem_grid(2, 24, 12, 1, 0.06, 0.03, 0) : t_fem_grid(3, 8, 6, 4, 0.04, 0.03, 0.02);
+                pn_fem_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
+                pn_mpm_collider c;
+                t_fem tf;
+                int step;
+                g.lo_m[1] = (pn_real)1e-3, g.crossed = 1;
+                omp_set_num_threads(t);
+                if (!t_fem_make(&tf, &g, &grp, -9.81)) {
+                    PN_CHECK(0);
+                    break;
+                }
+                PN_CHECK(pn_fem_group_set_energy(tf.m, 0, en ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+                memset(&c, 0, sizeof c);
+                c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+                PN_CHECK(pn_fem_add_obstacle(tf.m, &c, NULL) == PN_OK);
+                c.normal[1] = -1, c.center_m[1] = (pn_real)0.0315, c.velocity_m_s[1] = (pn_real)-0.5;
+                PN_CHECK(pn_fem_add_obstacle(tf.m, &c, NULL) == PN_OK);
+                for (step = 0; step < 4; ++step) {
+                    pn_fem_stats st;
+                    PN_CHECK(pn_fem_step_implicit(tf.m, (pn_real)2e-3, NULL, &st) == PN_OK);
+                }
+                for (step = 0; step < 20; ++step) {
+                    pn_fem_stats st;
+                    pn_real sdt;
+                    pn_fem_stable_dt(tf.m, &sdt);
+                    PN_CHECK(pn_fem_step_explicit(tf.m, sdt / 2, &st) == PN_OK);
+                }
+                nn = tf.m->n_nodes * (size_t)dim;
+                xs[t - 1] = (pn_real *)malloc(sizeof(pn_real) * nn);
+                memcpy(xs[t - 1], tf.m->x, sizeof(pn_real) * nn);
+                t_fem_free(&tf);
+            }
+            omp_set_num_threads(2);
+            for (k = 0; xs[0] && xs[1] && k < nn; ++k) same &= memcmp(&xs[0][k], &xs[1][k], sizeof(pn_real)) == 0;
+            printf("    [fem_threads_same_bits] %dD %s: 1 and 2 threads %s\n", dim, en ? "lagged" : "exact", same ? "identical" : "DIFFER");
+            PN_CHECK(xs[0] && xs[1] && same);
+            free(xs[0]), free(xs[1]);
+        }
+}
+
 /* the curvature 2c of the least-squares parabola a + b x + c x^2 through the nodes at rest
    height 0 with rest x in [x0, x1] (small slopes: the arc's curvature to (k x1)^2) */
 static double t_fem_curvature(const pn_fem_mesh *m, double x0, double x1) {
@@ -1127,6 +1178,7 @@ static const pn_test_case pn_tests_fem[] = {
     {"fem_self_contact_3d", fem_self_contact_3d},
     {"fem_permanent_set", fem_permanent_set},
     {"fem_spin_release", fem_spin_release},
+    {"fem_threads_same_bits", fem_threads_same_bits},
     {"fem_self_contact", fem_self_contact},
     {"fem_bad_mesh", fem_bad_mesh},
 };
