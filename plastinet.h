@@ -54,7 +54,8 @@
      >>return-mapping  Drucker-Prager (sand), von Mises (metal, closed form for StVK-Hencky,
                 safeguarded root find otherwise), non-associative Cam-Clay (snow), and the
                 singular-value clamp snow of Stomakhin et al. 2013
-     >>energy-vm      exact StVK-Hencky + von Mises elastoplastic energy (frozen yield stress)
+     >>energy-vm      exact StVK-Hencky + von Mises elastoplastic energy (the return mapping's
+                      incremental potential, hardening included)
      >>energy-lagged  lagged-plasticity energy Psi_el(F G), G = F0^-1 Z(F0)
      >>mlp      inference of small MLPs stored as float arrays: value, input gradient and the
                 exact input Hessian (forward-mode second order)
@@ -375,10 +376,11 @@ PN_API pn_result pn_yield_function(const pn_material *m, int dim, const pn_real 
 
 /* ---- elastoplastic energies -------------------------------------------------------------- */
 
-/* Exact StVK-Hencky + von Mises energy with the yield stress frozen at sigma_Y0 + K h
-   (perfect plasticity within one minimization): its gradient is tau(Z(F)) F^-T of the
-   return mapping with that yield stress. C1 across the yield surface. Needs a von Mises
-   material with StVK-Hencky elasticity (PN_ERROR_UNSUPPORTED otherwise). */
+/* Exact StVK-Hencky + von Mises energy: the incremental potential of the return mapping
+   from plastic state h (the accumulated plastic strain at the step's start), linear hardening
+   included: its gradient is tau(Z(F)) F^-T of pn_return_map at (F, h) exactly, so a
+   minimization with it and the return mapping after it agree. C1 across the yield surface.
+   Needs a von Mises material with StVK-Hencky elasticity (PN_ERROR_UNSUPPORTED otherwise). */
 PN_API pn_result pn_von_mises_energy(const pn_material *m, int dim, const pn_real *F, pn_real h,
                                      pn_real *psi, pn_real *P, pn_real *dPdF, unsigned flags);
 
@@ -2011,11 +2013,17 @@ PN__DEF pn_result pn_yield_function(const pn_material *m, int d, const pn_real *
 }
 
 /* ======================================================================================
-   >>energy-vm: exact StVK-Hencky + von Mises energy (frozen tau_Y, r = tau_Y / (2 mu))
-       psi = kappa/2 (tr e)^2 + mu |e_hat|^2               |e_hat| <= r
-       psi = kappa/2 (tr e)^2 + tau_Y |e_hat| - tau_Y^2/(4 mu)   otherwise
-   Its e-gradient is the Kirchhoff stress of the projected strain, so its F-gradient is
-   tau(Z(F)) F^-T. C1: the Hessian jumps across |e_hat| = r.
+   >>energy-vm: the incremental potential of StVK-Hencky + von Mises with linear hardening.
+   With tau_Y = sqrt(2/3) (sigma_Y0 + K h) at the step's start, beta = 2K/3, r = |e_hat| and
+   the return's plastic multiplier g (Simo and Hughes 1998, radial return):
+       W(r) = min_{g >= 0} mu (r - g)^2 + tau_Y g + beta/2 g^2
+            = mu r^2                                        2 mu r <= tau_Y
+            = mu (r - g)^2 + tau_Y g + beta/2 g^2,  g = (2 mu r - tau_Y) / (2 mu + beta)
+       psi = kappa/2 (tr e)^2 + W(|e_hat|)
+   W'(r) = 2 mu (r - g) = tau_Y + beta g is the returned |dev tau| (envelope theorem), so the
+   e-gradient is the Kirchhoff stress of pn_return_map's projected strain, hardening included,
+   and the F-gradient is tau(Z(F)) F^-T; W'' = 2 mu beta / (2 mu + beta) along the flow. C1:
+   the Hessian jumps across 2 mu r = tau_Y. K = 0: the perfectly plastic tau_Y r - tau_Y^2/(4 mu).
    ====================================================================================== */
 
 PN__DEF pn_result pn_von_mises_energy(const pn_material *m, int d, const pn_real *F, pn_real h,
@@ -2042,14 +2050,16 @@ PN__DEF pn_result pn_von_mises_energy(const pn_material *m, int d, const pn_real
         for (i = 0; i < d; ++i) ge[i] = kappa * tr + c * n[i];
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j) Ae[i * 3 + j] = kappa + c * ((i == j ? 1 : 0) - 1 / dd);
-    } else {
-        pr.psi = kappa / 2 * tr * tr + tauy * rr - tauy * tauy / (4 * m->mu);
-        c = tauy / rr;
+    } else { /* past yield: the radial return's multiplier g, |dev tau| = w1, W'' = w2 */
+        pn_real beta = 2 * m->hardening_modulus / 3, g = (2 * m->mu * rr - tauy) / (2 * m->mu + beta);
+        pn_real w1 = tauy + beta * g, w2 = 2 * m->mu * beta / (2 * m->mu + beta);
+        pr.psi = kappa / 2 * tr * tr + m->mu * (rr - g) * (rr - g) + tauy * g + beta / 2 * g * g;
+        c = w1 / rr;
         for (i = 0; i < d; ++i) n[i] /= rr;
-        for (i = 0; i < d; ++i) ge[i] = kappa * tr + tauy * n[i];
+        for (i = 0; i < d; ++i) ge[i] = kappa * tr + w1 * n[i];
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j)
-                Ae[i * 3 + j] = kappa + c * ((i == j ? 1 : 0) - 1 / dd - n[i] * n[j]);
+                Ae[i * 3 + j] = kappa + c * ((i == j ? 1 : 0) - 1 / dd - n[i] * n[j]) + w2 * n[i] * n[j];
     }
     pn__hencky_to_s(d, s, ge, Ae, c, &pr);
     return pn__energy_out(d, U, V, &pr, psi, P, dPdF, flags);

@@ -6589,6 +6589,29 @@ static int pn__fem_pair_make(const pn_fem_mesh *m, int edge, size_t p, size_t k,
     return !fixed;
 }
 
+/* a lower bound on the distance between the pair's two sides at x: the distance of their
+   bounding spheres (centre the side's mean node, radius its farthest node); rules out at a
+   few flops the pairs a box test lets through, coplanar neighbours on a flat surface above all */
+static pn_real pn__fem_pair_bound(const pn_fem_mesh *m, const pn__fem_pair *pr, const pn_real *x) {
+    int d = m->dim, side, j, i;
+    pn_real c[2][3] = {{0, 0, 0}, {0, 0, 0}}, rad[2] = {0, 0}, cc = 0;
+    for (side = 0; side < 2; ++side) {
+        int j0 = side ? pr->na : 0, j1 = side ? pr->nv : pr->na;
+        for (j = j0; j < j1; ++j)
+            for (i = 0; i < d; ++i) c[side][i] += x[pr->n[j] * (size_t)d + (size_t)i] / (pn_real)(j1 - j0);
+        for (j = j0; j < j1; ++j) {
+            pn_real r2 = 0;
+            for (i = 0; i < d; ++i) {
+                pn_real u = x[pr->n[j] * (size_t)d + (size_t)i] - c[side][i];
+                r2 += u * u;
+            }
+            rad[side] = PN__MAX(rad[side], r2);
+        }
+    }
+    for (i = 0; i < d; ++i) cc += (c[0][i] - c[1][i]) * (c[0][i] - c[1][i]);
+    return PN__SQRT(cc) - PN__SQRT(rad[0]) - PN__SQRT(rad[1]);
+}
+
 /* Every boundary pair whose boxes overlap (at x, swept along alpha dir when dir is given,
    the items' grown by grow), once each, in a fixed order, except pairs of held nodes only:
    the boundary nodes against the targets, then (3D) each edge against the later edges; fn
@@ -6618,7 +6641,9 @@ static int pn__fem_pairs(pn_fem_mesh *m, const pn_real *x, const pn_real *dir, p
                         size_t k = s->gitem[it];
                         if (edge ? k <= s->ntgt + qe : k >= s->ntgt) continue;
                         if (!pn__fem_pair_here(s, d, lo, hi, s->ebox + 6 * k, s->ebox + 6 * k + 3, cc)) continue;
-                        if (pn__fem_pair_make(m, edge, edge ? qe : s->bnode[q], k, &pr) && fn(m, &pr, ctx)) return 1;
+                        if (!pn__fem_pair_make(m, edge, edge ? qe : s->bnode[q], k, &pr)) continue;
+                        if (!dir && pn__fem_pair_bound(m, &pr, x) >= grow) continue; /* not within grow */
+                        if (fn(m, &pr, ctx)) return 1;
                     }
                 }
     }
@@ -6738,6 +6763,7 @@ static int pn__fem_ccd_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx)
     }
     lp = la + lb;
     if (!(lp > 0)) return 0;
+    if ((pn_real)0.9 * pn__fem_pair_bound(m, pr, cx->x) / lp >= cx->best) return 0; /* its first advance reaches best */
     pn__fem_pair_y(m, pr, cx->x, NULL, 0, y);
     d0 = PN__SQRT(pn__fem_pair_d2(pr->kind, d, y, NULL, NULL));
     for (it = 0; it < 1000; ++it) {

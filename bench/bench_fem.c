@@ -21,7 +21,8 @@
    Writes DIR/bench_fem_Nd.csv, .md and .svg (error against wall time; N the dimension);
    progress on stderr. --quick: 2D, coarse (5 mm), short (0.04 s), for a smoke test.
    --ref-cache DIR: keep the references' frames in DIR and read them on a rerun; --no-check:
-   skip the reference's convergence check. */
+   skip the reference's convergence check; --energies, --dts: only these implicit runs (comma
+   lists); --no-speed: the accuracy part only. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
 #include "../examples/pn_frame.h"
@@ -38,7 +39,8 @@ typedef struct run {
 } run;
 
 typedef struct cfg {
-    int dim, quick, no_check;
+    int dim, quick, no_check, no_speed;
+    unsigned energies, dts;      /* the implicit energies (bit PN_FRAME_*) and steps (bit of dts[]) run */
     double soft_E, window, T, speed, h;
     const char *out, *ref_cache, *only;
 } cfg;
@@ -208,16 +210,36 @@ int main(int argc, char **argv) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) c.quick = 1;
         else if (!strcmp(a, "--no-check")) c.no_check = 1;
+        else if (!strcmp(a, "--no-speed")) c.no_speed = 1;
         else if (!v) {
-            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n");
+            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
+                            "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n");
             return 2;
         } else if (!strcmp(a, "--dim")) dim_arg = atoi(v), ++k;
         else if (!strcmp(a, "--soft-E")) c.soft_E = atof(v), ++k;
         else if (!strcmp(a, "--window")) c.window = atof(v), ++k;
         else if (!strcmp(a, "--out")) c.out = v, ++k;
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
-        else {
-            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n");
+        else if (!strcmp(a, "--energies") || !strcmp(a, "--dts")) { /* comma lists */
+            int is_e = a[2] == 'e', count = is_e ? PN_FRAME_ENERGIES : 3, j;
+            unsigned mask = 0;
+            char buf[256], *tok;
+            snprintf(buf, sizeof buf, "%s", v);
+            for (tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
+                for (j = 0; j < count; ++j)
+                    if (is_e ? !strcmp(tok, pn_frame_energy_names[j]) : fabs(atof(tok) - dts[j]) < 1e-12) break;
+                if (j == count) {
+                    fprintf(stderr, "bench_fem: %s: unknown entry '%s'\n", a, tok);
+                    return 2;
+                }
+                mask |= 1u << j;
+            }
+            if (is_e) c.energies = mask;
+            else c.dts = mask;
+            ++k;
+        } else {
+            fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
+                            "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n");
             return 2;
         }
     }
@@ -227,6 +249,8 @@ int main(int argc, char **argv) {
         return 2;
     }
     if (!c.soft_E) c.soft_E = c.dim == 2 ? 2e9 : 2e8;
+    if (!c.energies) c.energies = (1u << PN_FRAME_ENERGIES) - 1;
+    if (!c.dts) c.dts = 7;
     if (c.quick) c.T = 0.04, c.h = 5e-3, c.window = 1e-3;
     if (!pn_ex_mkdirs(c.out)) return 1;
     fprintf(stderr, "bench_fem %dD: the metal frame, plate %g m/s for %g s\n", c.dim, c.speed, c.T);
@@ -234,13 +258,15 @@ int main(int argc, char **argv) {
         int fam;
         for (fam = 0; fam < 2; ++fam) {
             static const int fam_energies[2][3] = {{PN_FRAME_EXACT, PN_FRAME_PNET, PN_FRAME_LAGGED}, {PN_FRAME_PNET_NH, PN_FRAME_NH, -1}};
-            int ref_energy = fam == 0 ? PN_FRAME_EXACT : PN_FRAME_NH;
+            int ref_energy = fam == 0 ? PN_FRAME_EXACT : PN_FRAME_NH, any = 0;
             pn_frame_desc d;
             pn_fem_mesh *m;
             pn_pnet net;
             char why[256];
             size_t nd;
             double *ref;
+            for (e = 0; e < 3 && fam_energies[fam][e] >= 0; ++e) any |= c.energies >> fam_energies[fam][e] & 1;
+            if (!any) continue;
             scene(&c, ref_energy, c.soft_E, &d);
             if (!pn_frame_create(&d, &m, &net, why, sizeof why)) return 1;
             nd = m->n_nodes * (size_t)c.dim;
@@ -263,7 +289,7 @@ int main(int argc, char **argv) {
                     run *r = &runs[n++];
                     memset(r, 0, sizeof *r);
                     r->role = "implicit", r->energy = fam_energies[fam][e], r->E = c.soft_E, r->implicit = 1, r->dt = dts[i];
-                    if (c.quick && dts[i] > 1e-2) {
+                    if ((c.quick && dts[i] > 1e-2) || !(c.energies >> r->energy & 1) || !(c.dts >> i & 1)) {
                         n--;
                         continue;
                     }
@@ -275,7 +301,7 @@ int main(int argc, char **argv) {
     }
     { /* 2. speed at 200 GPa: the fair explicit baseline over the window, implicit at 1e-2 s */
         run *best = NULL;
-        for (i = 0; i < 4 && !best; ++i) {
+        for (i = 0; i < 4 && !best && !c.no_speed; ++i) {
             run *r = &runs[n];
             memset(r, 0, sizeof *r);
             r->role = "fair", r->energy = PN_FRAME_EXACT, r->E = 2e11, r->courant = courants[i];
@@ -285,7 +311,9 @@ int main(int argc, char **argv) {
             if (r->ok) best = r;
         }
         for (e = 0; e < PN_FRAME_ENERGIES; ++e) {
-            run *r = &runs[n++];
+            run *r;
+            if (c.no_speed || !(c.energies >> e & 1)) continue;
+            r = &runs[n++];
             memset(r, 0, sizeof *r);
             r->role = "implicit_real", r->energy = e, r->E = 2e11, r->implicit = 1, r->dt = 1e-2;
             run_one(&c, r, NULL, NULL, 0);

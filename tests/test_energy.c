@@ -340,11 +340,13 @@ static void t_en_ref_elastic(pn_elastic_model model, double mu, double lam, int 
     }
 }
 
-/* Exact StVK-Hencky + von Mises energy (docs/method.md) from the log stretches e. Returns the
-   signed distance |dev e| - r to the yield surface in strain. */
-static double t_en_ref_vm(double mu, double lam, double tauY, int dim, const double *s, double *psi,
+/* Exact StVK-Hencky + von Mises energy (docs/method.md) from the log stretches e: kappa/2
+   (tr e)^2 + min over g >= 0 of mu (|dev e| - g)^2 + tauY g + beta/2 g^2 (beta = 2K/3), the
+   minimizing g found by bisection on the derivative (not the library's closed form). Returns
+   the signed distance |dev e| - r to the yield surface in strain. */
+static double t_en_ref_vm(double mu, double lam, double tauY, double beta, int dim, const double *s, double *psi,
                           double *dpsi) {
-    double e[3], tr = 0, nd = 0, kappa = lam + 2 * mu / dim, r = tauY / (2 * mu);
+    double e[3], tr = 0, nd = 0, kappa = lam + 2 * mu / dim, r = tauY / (2 * mu), g = 0, w1;
     int i;
     for (i = 0; i < dim; ++i) {
         e[i] = log(s[i]);
@@ -352,12 +354,18 @@ static double t_en_ref_vm(double mu, double lam, double tauY, int dim, const dou
     }
     for (i = 0; i < dim; ++i) nd += (e[i] - tr / dim) * (e[i] - tr / dim);
     nd = sqrt(nd);
-    *psi = kappa / 2 * tr * tr + (nd <= r ? mu * nd * nd : tauY * nd - tauY * tauY / (4 * mu));
-    for (i = 0; i < dim; ++i) {
-        double dev = e[i] - tr / dim;
-        double dd = nd <= r ? 2 * mu * dev : tauY * dev / nd;
-        dpsi[i] = (kappa * tr + dd) / s[i];
+    if (nd > r) { /* d/dg: -2 mu (nd - g) + tauY + beta g, increasing, < 0 at 0, > 0 at nd */
+        double lo = 0, hi = nd;
+        for (i = 0; i < 200 && hi > lo; ++i) {
+            double mid = (lo + hi) / 2;
+            if (-2 * mu * (nd - mid) + tauY + beta * mid > 0) hi = mid;
+            else lo = mid;
+        }
+        g = (lo + hi) / 2;
     }
+    *psi = kappa / 2 * tr * tr + mu * (nd - g) * (nd - g) + tauY * g + beta / 2 * g * g;
+    w1 = nd > 0 ? 2 * mu * (nd - g) / nd : 0; /* dev tau = 2 mu (nd - g) n: the envelope theorem */
+    for (i = 0; i < dim; ++i) dpsi[i] = (kappa * tr + w1 * (e[i] - tr / dim)) / s[i];
     return nd - r;
 }
 
@@ -663,7 +671,7 @@ PN_TEST(energy_fd_von_mises) {
                 f.m = &m;
                 f.h = h;
                 f.G = NULL;
-                dist = t_en_ref_vm(mu, lam, tauY, dim, s, &psi_ref, dpsi);
+                dist = t_en_ref_vm(mu, lam, tauY, 2 * K / 3, dim, s, &psi_ref, dpsi);
                 if (dist <= 0) ++n_el; else ++n_pl;
                 /* only C1 at the yield surface: no FD stencil may cross it. A step h in one entry
                    moves the log strains, hence |dev e|, by at most ~h / s_min: keep 20x away.
@@ -684,7 +692,7 @@ PN_TEST(energy_fd_von_mises) {
     t_en_finish(pn__t, &st, 1);
     for (kind = 0; kind < 5; ++kind)
         PN_REPORT("  %-13s worst FD grad %.2e, hess %.2e", vm_kind[kind], wk_grad[kind], wk_hess[kind]);
-    PN_REPORT("  %ld elastic and %ld plastic samples (sigma_Y0 = 1e-3 E, K = 0 or 0.05 E, frozen at h)", n_el, n_pl);
+    PN_REPORT("  %ld elastic and %ld plastic samples (sigma_Y0 = 1e-3 E, K = 0 or 0.05 E, from state h)", n_el, n_pl);
     PN_CHECK(n_el > 100 && n_pl > 100);
 }
 
@@ -793,7 +801,8 @@ PN_TEST(energy_dp_frozen_yield) {
     }
 }
 
-/* At K = 0 the energy's gradient is the return-mapped force density T of pn_return_map. */
+/* The energy's gradient is the return-mapped force density T of pn_return_map, with and
+   without hardening (K = 0 or 0.05 E): the energy is the return mapping's potential. */
 PN_TEST(energy_von_mises_matches_return_map) {
     pn_test_rng rng;
     double worst = 0;
@@ -804,14 +813,14 @@ PN_TEST(energy_von_mises_matches_return_map) {
         pn_material_desc d;
         pn_material m;
         int dim = 2 + (k & 1), n2 = dim * dim;
-        double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_mu(E, nu), tauY = sqrt(2.0 / 3.0) * 1e-3 * E;
+        double E = t_en_E[k % 3], nu = t_en_nu[(k / 3) % 3], mu = t_mu(E, nu), K = (k / 2) & 1 ? 0.05 * E : 0;
         double s[3], R1[9], R2[9], F[9], P[9], T[9], Z[9], h = pn_test_rng_range(&rng, 0, 0.3), hn, nT;
-        double psi_ref, dpsi[3];
+        double tauY = sqrt(2.0 / 3.0) * (1e-3 * E + K * h), psi_ref, dpsi[3];
         t_en_desc(&d, PN_ELASTIC_DEFAULT, PN_PLASTIC_VON_MISES, E, nu);
-        d.yield_stress_pa = 1e-3 * E;
+        d.yield_stress_pa = 1e-3 * E, d.hardening_modulus_pa = K;
         if (!t_en_init(pn__t, &m, &d)) return;
-        t_en_vm_sample(&rng, dim, (k / 2) % 5, tauY / (2 * mu), s, R1, R2, F);
-        if (t_en_ref_vm(mu, t_lambda(E, nu), tauY, dim, s, &psi_ref, dpsi) <= 0) ++n_el; else ++n_pl;
+        t_en_vm_sample(&rng, dim, (k / 4) % 5, tauY / (2 * mu), s, R1, R2, F);
+        if (t_en_ref_vm(mu, t_lambda(E, nu), tauY, 2 * K / 3, dim, s, &psi_ref, dpsi) <= 0) ++n_el; else ++n_pl;
         if (pn_von_mises_energy(&m, dim, F, h, NULL, P, NULL, 0) != PN_OK ||
             pn_return_map(&m, dim, F, h, Z, &hn, T) != PN_OK) {
             ++fails;
@@ -820,7 +829,7 @@ PN_TEST(energy_von_mises_matches_return_map) {
         nT = t_norm(n2, T);
         t_en_maxto(&worst, t_dist(n2, P, T) / (nT > 1e-6 * E ? nT : 1e-6 * E));
     }
-    PN_REPORT("%ld elastic, %ld plastic F: |P - T| / max(|T|, 1e-6 E) worst %.2e", n_el, n_pl, worst);
+    PN_REPORT("%ld elastic, %ld plastic F (K = 0 and 0.05 E): |P - T| / max(|T|, 1e-6 E) worst %.2e", n_el, n_pl, worst);
     PN_CHECK(fails == 0);
     PN_CHECK(n_el > 100 && n_pl > 100);
     PN_CHECK_LE(worst, 1e-8);

@@ -814,10 +814,11 @@ PN_TEST(return_snow_stomakhin) {
     pn_tr_run_case(pn__t, &c, 501);
 }
 
-/* The exact StVK-Hencky + von Mises energy (yield stress frozen at sigma_Y0 + K h): its
-   gradient is T of the return mapping with that yield stress and no hardening within the
-   step, i.e. of a K = 0 material with sigma_Y0' = sigma_Y0 + K h. Also its value against
-   docs/method.md and a central difference of it. */
+/* The exact StVK-Hencky + von Mises energy (the return mapping's incremental potential from
+   state h): its gradient is T of pn_return_map at (F, h), hardening included (half the
+   samples), and for a K = 0 material with sigma_Y0' = sigma_Y0 + K h (the other half) that of
+   the perfectly plastic return. Also its value against docs/method.md and a central
+   difference of it. */
 PN_TEST(return_von_mises_energy_gradient) {
     pn_material_desc dk, d0;
     pn_material mk, m0;
@@ -854,7 +855,7 @@ PN_TEST(return_von_mises_energy_gradient) {
             d0.yield_stress_pa = dk.yield_stress_pa + dk.hardening_modulus_pa * h;
             if (pn_material_init(&m0, &d0, NULL) != PN_OK) { errors++; continue; }
             if (pn_von_mises_energy(use_k ? &mk : &m0, d, Fr, use_k ? h : 0, &psi, P, NULL, 0) != PN_OK ||
-                pn_return_map(&m0, d, Fr, 0, NULL, NULL, T) != PN_OK) {
+                pn_return_map(use_k ? &mk : &m0, d, Fr, use_k ? h : 0, NULL, NULL, T) != PN_OK) {
                 errors++;
                 continue;
             }
@@ -864,7 +865,8 @@ PN_TEST(return_von_mises_energy_gradient) {
                 Td[i] = T[i];
             }
             pn_tr_max_into(&worst_grad, pn_tr_reldiff(n, Pd, Td, PN_TR_STRAIN_FLOOR * dk.youngs_modulus_pa));
-            /* docs/method.md: kappa/2 tr^2 + mu |e^|^2 inside, kappa/2 tr^2 + tau_Y |e^| - tau_Y^2/(4 mu) outside */
+            /* docs/method.md: kappa/2 tr^2 + mu |e^|^2 inside, kappa/2 tr^2 + mu (|e^| - g)^2 + tau_Y g +
+               beta/2 g^2 outside, g = (2 mu |e^| - tau_Y) / (2 mu + beta), beta = 2K/3 */
             mu = dk.youngs_modulus_pa / (2 * (1 + dk.poisson_ratio));
             la = dk.youngs_modulus_pa * dk.poisson_ratio / ((1 + dk.poisson_ratio) * (1 - 2 * dk.poisson_ratio));
             kappa = la + 2 * mu / d;
@@ -872,7 +874,8 @@ PN_TEST(return_von_mises_energy_gradient) {
             rn = pn_tr_dev(d, e, eh);
             if (2 * mu * rn <= tauy) psi_ref = kappa / 2 * tr * tr + mu * rn * rn;
             else {
-                psi_ref = kappa / 2 * tr * tr + tauy * rn - tauy * tauy / (4 * mu);
+                double beta = use_k ? 2 * dk.hardening_modulus_pa / 3 : 0, g = (2 * mu * rn - tauy) / (2 * mu + beta);
+                psi_ref = kappa / 2 * tr * tr + mu * (rn - g) * (rn - g) + tauy * g + beta / 2 * g * g;
                 plastic++;
             }
             /* floor: the energy at the floor strain (psi carries e to ~1e-16 absolute) */
@@ -888,8 +891,8 @@ PN_TEST(return_von_mises_energy_gradient) {
                 Fmr[i] = Fm[i];
                 dir += Td[i] * dF[i];
             }
-            if (pn_von_mises_energy(&m0, d, Fpr, 0, &pp, NULL, NULL, 0) != PN_OK ||
-                pn_von_mises_energy(&m0, d, Fmr, 0, &pm, NULL, NULL, 0) != PN_OK) {
+            if (pn_von_mises_energy(use_k ? &mk : &m0, d, Fpr, use_k ? h : 0, &pp, NULL, NULL, 0) != PN_OK ||
+                pn_von_mises_energy(use_k ? &mk : &m0, d, Fmr, use_k ? h : 0, &pm, NULL, NULL, 0) != PN_OK) {
                 errors++;
                 continue;
             }
