@@ -689,6 +689,8 @@ typedef struct pn_fem_implicit_desc {
 typedef struct pn_fem_stats {
     int substeps, newton_iters, factorizations, fixed_point_iters, line_search_failures;
     int al_iters;                /* augmented-Lagrangian rounds moving the obstacles        */
+    int friction_relags;         /* re-solves with friction lagged at the solution, for nodes
+                                    that came into contact with a rough obstacle in the step */
     int solves;                  /* minimizations (passes x rounds x substeps)              */
     int cg_iters;                /* conjugate-gradient iterations (self-contact pairs beyond
                                     the factor's profile make the solve iterative)         */
@@ -7524,6 +7526,52 @@ static pn_result pn__fem_prepare(pn_fem_mesh *m, const pn_real *x) {
     return PN_OK;
 }
 
+/* minimize, and (with moving obstacles) the augmented-Lagrangian rounds that pull their
+   offsets to the targets */
+static pn_result pn__fem_rounds(pn_fem_mesh *m, const pn_fem_implicit_desc *o, pn_fem_stats *st, pn_real tol) {
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t nd = m->n_nodes * (size_t)m->dim, k;
+    int round;
+    for (round = 0;; ++round) {
+        pn_real off = 0;
+        pn_result r;
+        st->solves++;
+        r = pn__fem_minimize(m, o, st);
+        if (r != PN_OK) return r;
+        if (!s->n_mov) return PN_OK;
+        st->al_iters++;
+        for (k = nd; k < s->nu; ++k) off = PN__MAX(off, PN__FABS(s->xs[k] - s->target[k - nd]));
+        if (off <= tol) return PN_OK;
+        if (round >= 30)
+            return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: a moving obstacle is still %g m short of "
+                                "its position after %d rounds: a smaller step", (double)s->dt, (double)off, round + 1);
+        for (k = nd; k < s->nu; ++k) s->al_lam[k - nd] -= s->al_k * (s->xs[k] - s->target[k - nd]);
+    }
+}
+
+/* does a node lie within dhat of an obstacle with friction at the solution s->xs but not
+   where friction was lagged (s->xlag)? */
+static int pn__fem_new_friction(const pn_fem_mesh *m) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    int o, j, d = m->dim;
+    size_t k, nd = m->n_nodes * (size_t)d;
+    for (o = 0; o < m->n_obstacles; ++o) {
+        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_real *u = NULL, *ul = NULL;
+        if (!(c->friction > 0)) continue;
+        for (j = 0; j < s->n_mov; ++j)
+            if (s->mov[j] == o) u = s->xs + nd + (size_t)(j * d), ul = s->xlag + nd + (size_t)(j * d);
+        for (k = 0; k < m->n_nodes; ++k) {
+            pn_real nrm[3];
+            if (!PN__FEM_FREE(m, k)) continue;
+            if (pn__fem_obstacle_sd(c, d, u ? m->time_s : s->t_end, u, s->xs + k * (size_t)d, nrm) < m->dhat &&
+                !(pn__fem_obstacle_sd(c, d, u ? m->time_s : s->t_end, ul, s->xlag + k * (size_t)d, nrm) < m->dhat))
+                return 1;
+        }
+    }
+    return 0;
+}
+
 static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_implicit_desc *o, pn_fem_stats *st) {
     pn__fem *s = (pn__fem *)m->impl;
     int d = m->dim, dp = d + 1, i, j, pass, round, a;
@@ -7584,20 +7632,14 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
             for (k = nd; k < s->nu; ++k) s->xlag[k] = 0;
         } else memcpy(s->xlag, s->xs, sizeof(pn_real) * s->nu);
         st->fixed_point_iters++;
-        for (round = 0;; ++round) {
-            pn_real off = 0;
-            st->solves++;
-            r = pn__fem_minimize(m, o, st);
-            if (r != PN_OK) return r;
-            if (!s->n_mov) break;
-            st->al_iters++;
-            for (k = nd; k < s->nu; ++k) off = PN__MAX(off, PN__FABS(s->xs[k] - s->target[k - nd]));
-            if (off <= tol) break;
-            if (round >= 30)
-                return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: a moving obstacle is still %g m short "
-                                    "of its position after %d rounds: a smaller step", (double)dt, (double)off, round + 1);
-            for (k = nd; k < s->nu; ++k) s->al_lam[k - nd] -= s->al_k * (s->xs[k] - s->target[k - nd]);
-        }
+        if ((r = pn__fem_rounds(m, o, st, tol)) != PN_OK) return r;
+    }
+    for (round = 0; round < 2 && pn__fem_new_friction(m); ++round) { /* friction lagged again (IPC's lagged
+        iterations) where a node came within dhat of a rough obstacle during the step: lagged at x^n it
+        had no normal force and slid freely for the whole step */
+        memcpy(s->xlag, s->xs, sizeof(pn_real) * s->nu);
+        st->friction_relags++;
+        if ((r = pn__fem_rounds(m, o, st, tol)) != PN_OK) return r;
     }
     for (k = 0; k < nd; ++k) m->v[k] = (s->xs[k] - m->x[k]) / dt, m->x[k] = s->xs[k];
     r = pn__fem_return(m, &plastic);
