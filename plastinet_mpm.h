@@ -765,12 +765,15 @@ PN_API pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s);
 PN_API pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt_s, pn_fem_stats *stats);
 
 /* One implicit step: the nodal positions minimize
-       1/2 |x - x~|_M^2 + dt^2 (sum_e V_e Psi_e(Fe(x)) + kappa sum b(d(x)))
-   by Newton (PSD-projected element Hessians, a sparse Cholesky factorization in a
-   reverse Cuthill-McKee order) with a backtracking line search whose first step no node
-   can take into an obstacle (continuous collision detection); moving obstacles follow
-   their velocity by an augmented Lagrangian. Then the return mapping of each element. A
-   step that fails is retried as substeps; the mesh is unchanged when it fails. */
+       1/2 |x - x~|_M^2 + dt^2 (sum_e V_e Psi_e(Fe(x)) + kappa sum b(d(x)) + D(x))
+   (b over node-obstacle distances and the mesh's own boundary pairs: 2D point-edge, 3D
+   point-triangle and edge-edge; D lagged smoothed friction against rough obstacles) by
+   Newton (PSD-projected element Hessians, a sparse Cholesky factorization in a reverse
+   Cuthill-McKee order) with a backtracking line search whose first step no node can take
+   into an obstacle or through the mesh (continuous collision detection); moving obstacles
+   follow their velocity by an augmented Lagrangian; friction is lagged again where a node
+   came into contact during the step. Then the return mapping of each element. A step that
+   fails is retried as substeps; the mesh is unchanged when it fails. */
 PN_API pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt_s, const pn_fem_implicit_desc *desc,
                                       pn_fem_stats *stats);
 
