@@ -507,15 +507,28 @@ PN_API pn_result pn_model_check(const pn_model *model, int dim, const char **why
 PN_API pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m, const char **why);
 
 /* PlasticityNet (Li et al. 2022): the energy
-     Psi(F; F0, h) = N(F, F0, h) - (grad_F N(F0, F0, h) - T(F0)) : F + w mu/2 |F - F0|^2
+     Psi(F; F0, h) = N(F, F0, h) - (grad_F N(F0, F0, h) - T(F0)) : F + R(F, F0)
    (Eqs. 8 and 11) whose gradient at F = F0 is exactly T(F0) = tau(Z(F0)) F0^-T and approximates
    T(F) nearby. N is a function of rotation invariants of F and F0 (exactly objective and
-   isotropic), scaled by E / E_train. */
+   isotropic), scaled by E / E_train. R is the regularizer, zero with zero gradient at F0:
+     PN_PNET_REG_DISPLACEMENT  w mu/2 |F - F0|^2 (Eq. 11): it also resists rotating F, a
+                               viscosity on spin that suits MPM's small rotations per step;
+     PN_PNET_REG_STRAIN        w mu/8 |F^T F - F0^T F0|^2: the same stiffness on stretches at
+                               small strain, none on rotations (objective). For FEM bodies that
+                               bend and buckle: the displacement form makes turning an element
+                               cost as much as straining it, and a crushed frame then squashes
+                               instead of folding (docs/results.md, "FEM: the metal frame"). */
+typedef enum pn_pnet_regularizer {
+    PN_PNET_REG_DISPLACEMENT = 0,
+    PN_PNET_REG_STRAIN = 1
+} pn_pnet_regularizer;
+
 typedef struct pn_pnet_desc {
     const pn_model *energy;          /* required, kind PN_MODEL_ENERGY                      */
     const pn_model *return_map;      /* the learned return mapping energy->return_map names;
                                         NULL when that is NULL                             */
-    pn_real regularizer;             /* w in Eq. 11: 0 means 1; negative means 0 (off)     */
+    pn_real regularizer;             /* w: 0 means 1; negative means 0 (off)               */
+    pn_pnet_regularizer regularizer_form; /* R's form [PN_PNET_REG_DISPLACEMENT]            */
 } pn_pnet_desc;
 
 typedef struct pn_pnet {
@@ -523,6 +536,7 @@ typedef struct pn_pnet {
     pn_material material;            /* the simulated material (any E)                     */
     pn_real scale;                   /* E / E_train                                        */
     pn_real reg;                     /* w mu (Pa)                                          */
+    pn_pnet_regularizer reg_form;
 } pn_pnet;
 
 /* Per-point data, computed once per F0 by pn_pnet_prepare. */
@@ -2763,7 +2777,8 @@ static void pn__features_eval(int d, const pn_real *F, int level, pn__features *
    >>pnet: model checks, material matching, PlasticityNet energy (Li et al. 2022, Eqs. 8, 11)
      N(F, F0, h) = (E / E_train) out_scale mlp(u),
      u = ([x(F) - x(F0), x(F0), clamp(h)] - in_shift) * in_scale
-     Psi = N(F, F0, h) - C : F + reg/2 |F - F0|^2,  C = grad_F N(F0, F0, h) - T(F0)
+     Psi = N(F, F0, h) - C : F + R(F, F0),  C = grad_F N(F0, F0, h) - T(F0)
+     R = reg/2 |F - F0|^2 (Eq. 11) or reg/8 |F^T F - F0^T F0|^2 (pn_pnet_regularizer)
    ====================================================================================== */
 
 static int pn__model_nf(const pn_model *mo) { return mo->dim == 2 ? 2 : 3; }
@@ -2915,11 +2930,16 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
         if (why) *why = "pn_pnet_desc.regularizer is not finite";
         return PN_ERROR_NONFINITE;
     }
+    if (desc->regularizer_form != PN_PNET_REG_DISPLACEMENT && desc->regularizer_form != PN_PNET_REG_STRAIN) {
+        if (why) *why = "pn_pnet_desc.regularizer_form is neither PN_PNET_REG_DISPLACEMENT nor PN_PNET_REG_STRAIN";
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
     net->energy = e;
     net->return_map = rm;
     net->material = *m;
     net->scale = (pn_real)((double)m->E / e->youngs_modulus_train_pa);
     net->reg = desc->regularizer < 0 ? 0 : (desc->regularizer == 0 ? 1 : desc->regularizer) * m->mu;
+    net->reg_form = desc->regularizer_form;
     return PN_OK;
 }
 
@@ -3158,19 +3178,50 @@ PN__DEF pn_result pn_pnet_energy(const pn_pnet *net, const pn_pnet_point *pt, co
     return pn__pnet_finish(net, pt, F, level, N, gN, HN, flags, psi, P, dPdF);
 }
 
-/* pn_pnet_energy after the network: the regularizer of Eq. 11, the PSD projection, checks */
+/* The strain regularizer R = w mu/8 |D|^2, D = F^T F - F0^T F0: with k = w mu / 2,
+   P_R = k F D and dP_R_ij / dF_lm = k (delta_il D_mj + F_im F_lj + delta_jm (F F^T)_il). */
+static void pn__pnet_strain_reg(int d, pn_real k, const pn_real *F, const pn_real *F0, int level, pn_real *e,
+                                pn_real *g, pn_real *H) {
+    int n = d * d, i, j, l, m;
+    pn_real D[9], FF[9];
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j) {
+            pn_real c = 0, ff = 0;
+            for (l = 0; l < d; ++l) c += F[l * d + i] * F[l * d + j] - F0[l * d + i] * F0[l * d + j], ff += F[i * d + l] * F[j * d + l];
+            D[i * d + j] = c, FF[i * d + j] = ff;
+        }
+    for (i = 0; i < n; ++i) *e += k / 4 * D[i] * D[i];
+    if (level > 0)
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j)
+                for (l = 0; l < d; ++l) g[i * d + j] += k * F[i * d + l] * D[l * d + j];
+    if (level > 1)
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j)
+                for (l = 0; l < d; ++l)
+                    for (m = 0; m < d; ++m)
+                        H[(i * d + j) * n + l * d + m] +=
+                            k * ((i == l ? D[m * d + j] : 0) + F[i * d + m] * F[l * d + j] + (j == m ? FF[i * d + l] : 0));
+}
+
+/* pn_pnet_energy after the network: the linear correction, the regularizer (Eq. 11 or the
+   strain form), the PSD projection, checks */
 static pn_result pn__pnet_finish(const pn_pnet *net, const pn_pnet_point *pt, const pn_real *F, int level, pn_real N,
                                  pn_real *gN, pn_real *HN, unsigned flags, pn_real *psi, pn_real *P, pn_real *dPdF) {
-    int n = net->energy->dim * net->energy->dim, a;
+    int n = net->energy->dim * net->energy->dim, a, strain = net->reg_form == PN_PNET_REG_STRAIN;
     pn_real e;
     pn_result r;
     e = N;
     for (a = 0; a < n; ++a) {
         pn_real df = F[a] - pt->F0[a];
-        e += -pt->C[a] * F[a] + net->reg / 2 * df * df;
-        if (level > 0) gN[a] += -pt->C[a] + net->reg * df;
+        e += -pt->C[a] * F[a];
+        if (level > 0) gN[a] += -pt->C[a];
+        if (strain) continue;
+        e += net->reg / 2 * df * df;
+        if (level > 0) gN[a] += net->reg * df;
         if (level > 1) HN[a * n + a] += net->reg;
     }
+    if (strain && net->reg > 0) pn__pnet_strain_reg(net->energy->dim, net->reg / 2, F, pt->F0, level, &e, gN, HN);
     if (level > 1 && (flags & PN_EVAL_PROJECT_PSD)) {
         if (!pn__all_finite(n * n, HN)) return PN_ERROR_OVERFLOW;
         r = pn_sym_project_psd(n, HN);

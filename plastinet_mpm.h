@@ -677,7 +677,7 @@ typedef struct pn_fem_implicit_desc {
     int newton_max;              /* Newton iterations per minimization [100]                */
     pn_real newton_tol;          /* stop when max |dx| < newton_tol l dt-free: l the mean
                                     rest edge length [1e-6]                                 */
-    int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [3]       */
+    int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [5]       */
     /* optional trace: called at every Newton iteration with the incremental potential E at
        the iterate and max |dx| / l of the step it takes next; `solve` counts the
        minimizations of the step (each fixed-point pass, augmented-Lagrangian round and
@@ -2542,22 +2542,22 @@ static pn_mpm_energy pn__mpm_energy_of(const pn_mpm_group *g) {
     return g->material.plastic == PN_PLASTIC_NONE ? PN_MPM_ENERGY_ELASTIC : PN_MPM_ENERGY_LAGGED;
 }
 
-/* A group's implicit energy density at F (a particle's or an element's), with P and the PSD
-   dP/dF when asked: h the plastic state, G and hG the lagged energy's, pt PlasticityNet's
+/* A group's implicit energy density at F (a particle's or an element's), with P and dP/dF
+   when asked (PSD-projected under PN_EVAL_PROJECT_PSD in flags): h the plastic state, G and hG the lagged energy's, pt PlasticityNet's
    point, ty the frozen DP yield stress (each prepared at F0). */
 static pn_result pn__group_psi(const pn_mpm_group *g, int d, const pn_real *F, pn_real h, const pn_real *G, pn_real hG,
-                               const pn_pnet_point *pt, pn_real ty, pn_real *psi, pn_real *P, pn_real *H) {
+                               const pn_pnet_point *pt, pn_real ty, pn_real *psi, pn_real *P, pn_real *H, unsigned flags) {
     switch (pn__mpm_energy_of(g)) {
     case PN_MPM_ENERGY_LAGGED:
-        return pn_lagged_energy(&g->material, d, F, G, hG, psi, P, H, PN_EVAL_PROJECT_PSD);
+        return pn_lagged_energy(&g->material, d, F, G, hG, psi, P, H, flags);
     case PN_MPM_ENERGY_EXACT_VM:
-        return pn_von_mises_energy(&g->material, d, F, h, psi, P, H, PN_EVAL_PROJECT_PSD);
+        return pn_von_mises_energy(&g->material, d, F, h, psi, P, H, flags);
     case PN_MPM_ENERGY_PNET:
-        return pn_pnet_energy(&g->pnet, pt, F, psi, P, H, PN_EVAL_PROJECT_PSD);
+        return pn_pnet_energy(&g->pnet, pt, F, psi, P, H, flags);
     case PN_MPM_ENERGY_DP:
-        return pn_dp_energy(&g->material, d, F, h, ty, psi, P, H, PN_EVAL_PROJECT_PSD);
+        return pn_dp_energy(&g->material, d, F, h, ty, psi, P, H, flags);
     default:
-        return pn_elastic_energy(&g->material, d, F, h, psi, P, H, PN_EVAL_PROJECT_PSD);
+        return pn_elastic_energy(&g->material, d, F, h, psi, P, H, flags);
     }
 }
 
@@ -2566,7 +2566,7 @@ static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, 
                              pn_real *P, pn_real *H) {
     int dd = w->dim * w->dim;
     return pn__group_psi(&w->groups[w->group[p]], w->dim, F, w->h[p], w->pG + p * (size_t)dd, w->phG[p], &w->ppt[p],
-                         w->pty[p], psi, P, H);
+                         w->pty[p], psi, P, H, PN_EVAL_PROJECT_PSD);
 }
 
 /* Per implicit step, after >>bin, by sorted index j (particle p = order[j]): q_js =
@@ -5493,7 +5493,7 @@ typedef struct pn__fem {
     pn_real glo[3], gcs;         /* its origin and cell size                                 */
     long gn[3];                  /* cells per axis                                           */
     pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
-    pn_real *eP, *eH;            /* per element: P (dd) and the projected dP/dF (dd^2)       */
+    pn_real *eP, *eH;            /* per element: P (dd) and dP/dF (dd^2)                     */
     pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
     pn_pnet_point *ppt;
     pn_real *bx, *bv, *bFp, *bh; /* the state before the step (restored on failure)         */
@@ -5505,6 +5505,8 @@ typedef struct pn__fem {
     pn_real al_lam[PN_FEM_MAX_OBSTACLES * 3], target[PN_FEM_MAX_OBSTACLES * 3];
     pn_real dt, t_end;           /* this step's dt and end time                              */
     pn_real dmin;                /* the smallest distance the last objective saw             */
+    unsigned hflags;             /* the element Hessians' flags: PN_EVAL_PROJECT_PSD, or 0
+                                    near a minimum (pn__fem_minimize)                       */
 } pn__fem;
 
 static pn_result pn__fem_fail(pn_fem_mesh *m, pn_result r, const char *fmt, ...) {
@@ -6270,12 +6272,13 @@ static void pn__fem_barrier(pn_real dist, pn_real dhat, pn_real *b, pn_real *b1,
 
 /* ---- >>fem energies per element ------------------------------------------------------- */
 
-/* Psi of element e at Fe with the group's energy (P and the PSD Hessian when asked) */
+/* Psi of element e at Fe with the group's energy (P and the Hessian when asked, PSD-projected
+   unless the Newton iteration asked for the full one: s->hflags) */
 static pn_result pn__fem_psi(const pn_fem_mesh *m, size_t e, const pn_real *Fe, pn_real *psi, pn_real *P, pn_real *H) {
     const pn__fem *s = (const pn__fem *)m->impl;
     int dd = m->dim * m->dim;
     return pn__group_psi(&m->groups[m->egroup[e]], m->dim, Fe, m->h[e], s->pG + e * (size_t)dd, s->phG[e], &s->ppt[e],
-                         s->pty[e], psi, P, H);
+                         s->pty[e], psi, P, H, s->hflags);
 }
 
 /* Fe = sum_a x_a q_a^T of element e */
@@ -7431,24 +7434,45 @@ static pn_result pn__fem_objective_value(void *ctx, const pn_real *x, pn_real *E
     return pn__fem_objective((pn_fem_mesh *)ctx, x, 0, E);
 }
 
-/* Newton on the incremental potential from s->xs (feasible) to its minimum. */
+/* Newton's step, under which the element Hessians are used as they are (PN__FEM_FULL_H) */
+#define PN__FEM_FULL_H ((pn_real)1e-2) /* of the mean edge */
+
+/* Newton on the incremental potential from s->xs (feasible) to its minimum.
+   Element Hessians are PSD-projected (projected Newton: every direction descends) until the
+   steps are short; then they are used whole. Clamping the negative curvature of compressed
+   elements (their geometric stiffness) leaves a model that is wrong near the minimum, and
+   Newton converges linearly there (a ratio of 0.9 per iteration on a crushed frame); at a
+   strict minimum the whole Hessian is positive definite and convergence is quadratic again.
+   Where it is not (the factorization fails: a saddle the iterate passes) or its step finds no
+   decrease, the iteration projects again until its steps are 10 times shorter, or long again
+   (it left for another minimum): the idea of Chen et al. 2024, trust-region eigenvalue
+   filtering, to project only where the quadratic model is poor. */
 static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o, pn_fem_stats *st) {
     pn__fem *s = (pn__fem *)m->impl;
     size_t nu = s->nu, nd = m->n_nodes * (size_t)m->dim, k;
     int it;
-    pn_real tol = o->newton_tol * m->edge_mean, res = 0, gres = 0, gfloor = 0;
+    pn_real tol = o->newton_tol * m->edge_mean, res = 0, gres = 0, gfloor = 0, full_below = PN__FEM_FULL_H * m->edge_mean;
     for (it = 0; it < o->newton_max; ++it) {
         pn_real E0, E1, gd = 0, a0, alpha;
-        pn_result r = pn__fem_objective(m, s->xs, 2, &E0);
-        if (r != PN_OK)
-            return pn__fem_fail(m, r, "implicit step: the energy at an accepted iterate failed (%s, element %ld, node %ld)",
-                                pn_result_string(r), m->error_element, m->error_node);
-        for (k = 0; k < nu; ++k) s->xtry[pn__fem_row(m, k)] = -s->g[k];
-        if (s->n_off) memcpy(s->A, s->L, sizeof(pn_real) * s->rs[nu]); /* kept for CG's products */
-        if (!pn__fem_cholesky(s, nu))
-            return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the Hessian is not positive definite (a "
-                                "material's energy is not convex where it was projected)");
-        st->factorizations++;
+        pn_result r;
+        int full = it > 0 && res <= full_below;
+        for (;;) {
+            s->hflags = full ? 0 : PN_EVAL_PROJECT_PSD;
+            r = pn__fem_objective(m, s->xs, 2, &E0);
+            s->hflags = PN_EVAL_PROJECT_PSD; /* what every other evaluation uses */
+            if (r != PN_OK)
+                return pn__fem_fail(m, r, "implicit step: the energy at an accepted iterate failed (%s, element %ld, node %ld)",
+                                    pn_result_string(r), m->error_element, m->error_node);
+            for (k = 0; k < nu; ++k) s->xtry[pn__fem_row(m, k)] = -s->g[k];
+            if (s->n_off) memcpy(s->A, s->L, sizeof(pn_real) * s->rs[nu]); /* kept for CG's products */
+            st->factorizations++;
+            if (pn__fem_cholesky(s, nu)) break;
+            if (!full)
+                return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the Hessian is not positive definite (a "
+                                    "material's energy is not convex where it was projected)");
+            full = 0, full_below = res / 10; /* indefinite here (a saddle on the way): project until
+                                                 the steps are 10x shorter */
+        }
         if (s->n_off) { /* self-contact beyond the profile: CG on the whole Hessian, the factor preconditions */
             pn__cg_ops op;
             int capped;
@@ -7465,6 +7489,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
         }
         st->newton_iters++;
         st->newton_residual = res / m->edge_mean;
+        if (res > PN__FEM_FULL_H * m->edge_mean) full_below = PN__FEM_FULL_H * m->edge_mean; /* moved on */
         if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / m->edge_mean);
         if (!pn__finite(res))
             return pn__fem_fail(m, PN_ERROR_OVERFLOW, "implicit step: the Newton direction is not finite");
@@ -7488,11 +7513,20 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
         }
         if (alpha == 0) {
             st->line_search_failures++;
-            if (res <= 100 * tol && gres <= 100 * gfloor) return PN_OK;
+            /* a step below tol that the energy cannot tell from no step: converged as far as
+               its rounding resolves (stiff material at a large step) */
+            if (res <= tol || (res <= 100 * tol && gres <= 100 * gfloor)) return PN_OK;
+            if (full) { /* the whole Hessian's step found no decrease: project again */
+                full_below = res / 10;
+                continue;
+            }
             return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the line search found no decrease at max |dx| = "
                                 "%.3g of the mean edge (newton_tol %g)", (double)(res / m->edge_mean), (double)o->newton_tol);
         }
         memcpy(s->xs, s->xtry, sizeof(pn_real) * nu);
+        if (res <= tol && !(E1 < E0)) return PN_OK; /* the step below tol no longer lowers the energy
+            at all: what force is left, the energy's rounding cannot resolve (a stiff contact pressed
+            hard, where b'' is large: a force of weights for a move of 1e-12 m) */
     }
     if (res <= 100 * tol && gres <= 100 * gfloor) return PN_OK; /* within 100 newton_tol, as MPM's */
     return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped after %d iterations at max |dx| = %.3g "
@@ -7642,6 +7676,11 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
         had no normal force and slid freely for the whole step */
         memcpy(s->xlag, s->xs, sizeof(pn_real) * s->nu);
         st->friction_relags++;
+        /* and solved again from x^n: the first solve, frictionless where the contact began,
+           may have gone far down another branch (the frame swaying sideways under the plate) */
+        for (k = 0; k < n; ++k)
+            if (PN__FEM_FREE(m, k)) memcpy(s->xs + k * (size_t)d, m->x + k * (size_t)d, sizeof(pn_real) * (size_t)d);
+        for (k = nd; k < s->nu; ++k) s->xs[k] = 0;
         if ((r = pn__fem_rounds(m, o, st, tol)) != PN_OK) return r;
     }
     for (k = 0; k < nd; ++k) m->v[k] = (s->xs[k] - m->x[k]) / dt, m->x[k] = s->xs[k];
@@ -7666,7 +7705,7 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
     if (!o.fixed_point_iters) o.fixed_point_iters = 1;
     if (!o.newton_max) o.newton_max = 100;
     if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
-    if (!o.max_halvings) o.max_halvings = 3;
+    if (!o.max_halvings) o.max_halvings = 5;
     if (o.fixed_point_iters < 0 || o.newton_max < 0 || !pn__finite(o.newton_tol))
         return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: fixed_point_iters, newton_max and newton_tol "
                             "must be positive");

@@ -22,7 +22,8 @@
    progress on stderr. --quick: 2D, coarse (5 mm), short (0.04 s), for a smoke test.
    --ref-cache DIR: keep the references' frames in DIR and read them on a rerun; --no-check:
    skip the reference's convergence check; --energies, --dts: only these implicit runs (comma
-   lists); --no-speed: the accuracy part only. */
+   lists); --no-speed: the accuracy part only; --passes N: F0 fixed-point passes of the implicit
+   steps (pn_fem_implicit_desc.fixed_point_iters; lagged and PlasticityNet) [1]. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
 #include "../examples/pn_frame.h"
@@ -39,7 +40,7 @@ typedef struct run {
 } run;
 
 typedef struct cfg {
-    int dim, quick, no_check, no_speed;
+    int dim, quick, no_check, no_speed, passes;
     unsigned energies, dts;      /* the implicit energies (bit PN_FRAME_*) and steps (bit of dts[]) run */
     double soft_E, window, T, speed, h;
     const char *out, *ref_cache, *only;
@@ -56,12 +57,15 @@ static void scene(const cfg *c, int energy, double E, pn_frame_desc *d) {
 static void run_one(const cfg *c, run *r, double *traj, const double *ref, double max_sim) {
     pn_frame_desc d;
     pn_fem_mesh *m = NULL;
+    pn_fem_implicit_desc id;
     pn_pnet net;
     char why[256];
     int f, nf = (int)floor(c->T / FRAME_DT + 0.5), compared = 0;
     double sum = 0, diag = 0, t0;
     size_t nd, k;
     r->ok = 1, r->err_mean = r->err_max = r->wall = r->sim = r->newton = r->hmax = 0, r->steps = 0, r->dmin = 1e300;
+    memset(&id, 0, sizeof id);
+    id.fixed_point_iters = c->passes;
     scene(c, r->energy, r->E, &d);
     if (!pn_frame_create(&d, &m, &net, why, sizeof why)) {
         fprintf(stderr, "bench_fem: %s\n", why);
@@ -75,7 +79,8 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
         if (r->implicit && fmod(t + 1e-9, r->dt) > 1e-6) continue; /* not a frame this run's steps land on */
         if (max_sim > 0 && t > max_sim + 1e-9) t = max_sim;
         t0 = pn_ex_seconds();
-        if (!pn_frame_advance(m, t, r->implicit, r->implicit ? r->dt : 1.0, r->courant, NULL, &r->steps, &newton, &r->dmin)) {
+        if (!pn_frame_advance(m, t, r->implicit, r->implicit ? r->dt : 1.0, r->courant, c->passes ? &id : NULL, &r->steps, &newton,
+                              &r->dmin)) {
             r->wall += pn_ex_seconds() - t0;
             fprintf(stderr, "  %s %s dt %g: failed at t = %g s: %s\n", r->role, pn_frame_energy_names[r->energy], r->dt,
                     (double)m->time_s, pn_fem_error(m));
@@ -213,13 +218,15 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--no-speed")) c.no_speed = 1;
         else if (!v) {
             fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
-                            "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n");
+                            "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n"
+                            "                 [--passes N]\n");
             return 2;
         } else if (!strcmp(a, "--dim")) dim_arg = atoi(v), ++k;
         else if (!strcmp(a, "--soft-E")) c.soft_E = atof(v), ++k;
         else if (!strcmp(a, "--window")) c.window = atof(v), ++k;
         else if (!strcmp(a, "--out")) c.out = v, ++k;
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
+        else if (!strcmp(a, "--passes")) c.passes = atoi(v), ++k;
         else if (!strcmp(a, "--energies") || !strcmp(a, "--dts")) { /* comma lists */
             int is_e = a[2] == 'e', count = is_e ? PN_FRAME_ENERGIES : 3, j;
             unsigned mask = 0;
@@ -239,7 +246,8 @@ int main(int argc, char **argv) {
             ++k;
         } else {
             fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
-                            "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n");
+                            "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n"
+                            "                 [--passes N]\n");
             return 2;
         }
     }

@@ -53,7 +53,7 @@ static void usage(FILE *f) {
                "  --friction MU             Coulomb coefficient of ground and plate [0.3]\n"
                "  --passes N                F0 fixed-point passes [1]\n"
                "  --newton-tol X            pn_fem_implicit_desc.newton_tol [1e-5]\n"
-               "  --regularizer W           PlasticityNet's w (Eq. 11; -1: off) [1]\n"
+               "  --regularizer W           PlasticityNet's w, strain form (-1: off) [1]\n"
                "  --fps N                   frames per simulated second [25]\n"
                "  --alternating             2D: two triangles per square, not four (crossed)\n"
                "  --png --vtu --obj         outputs (DIR/frame_NNNN.*)\n"

@@ -26,7 +26,9 @@ typedef struct pn_frame_desc {
                                     metal models' (0.003 E, 0.01 E)                        */
     double speed, friction;      /* plate speed (m/s) [0.5]; Coulomb coefficient of ground and
                                     plate [0.3]                                            */
-    double regularizer;          /* PlasticityNet's w (pn_pnet_desc.regularizer) [0: 1]      */
+    double regularizer;          /* PlasticityNet's w, in the strain form (pn_pnet_desc:
+                                    PN_PNET_REG_STRAIN; bending elements turn, and Eq. 11's
+                                    form would resist that) [0: 1]                         */
     int alternating;             /* 2D: two triangles per square (the diagonal alternating)
                                     instead of four around a centre node, which lock less
                                     under von Mises flow [0]                               */
@@ -105,6 +107,7 @@ static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **out, pn_pnet *n
         const char *w2 = NULL;
         memset(&pd, 0, sizeof pd);
         pd.energy = model, pd.return_map = ret, pd.regularizer = (pn_real)d->regularizer;
+        pd.regularizer_form = PN_PNET_REG_STRAIN;
         if (pn_pnet_init(net, &pd, &grp.material, dim, &w2) != PN_OK) {
             snprintf(why, cap, "%s", w2 ? w2 : "pn_pnet_init failed");
             goto done;
