@@ -3187,7 +3187,10 @@ static void pn__pnet_strain_reg(int d, pn_real k, const pn_real *F, const pn_rea
     for (i = 0; i < d; ++i)
         for (j = 0; j < d; ++j) {
             pn_real c = 0, ff = 0;
-            for (l = 0; l < d; ++l) c += F[l * d + i] * F[l * d + j] - F0[l * d + i] * F0[l * d + j], ff += F[i * d + l] * F[j * d + l];
+            for (l = 0; l < d; ++l) {
+                c += F[l * d + i] * F[l * d + j] - F0[l * d + i] * F0[l * d + j];
+                ff += F[i * d + l] * F[j * d + l];
+            }
             D[i * d + j] = c, FF[i * d + j] = ff;
         }
     for (i = 0; i < n; ++i) *e += k / 4 * D[i] * D[i];

@@ -676,7 +676,7 @@ typedef struct pn_fem_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (lagged, PlasticityNet) [1] */
     int newton_max;              /* Newton iterations per minimization [100]                */
     pn_real newton_tol;          /* stop when max |dx| < newton_tol l dt-free: l the mean
-                                    rest edge length [1e-6]                                 */
+                                    rest edge length [1e-5]                                 */
     int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [5]       */
     /* optional trace: called at every Newton iteration with the incremental potential E at
        the iterate and max |dx| / l of the step it takes next; `solve` counts the
@@ -2543,8 +2543,9 @@ static pn_mpm_energy pn__mpm_energy_of(const pn_mpm_group *g) {
 }
 
 /* A group's implicit energy density at F (a particle's or an element's), with P and dP/dF
-   when asked (PSD-projected under PN_EVAL_PROJECT_PSD in flags): h the plastic state, G and hG the lagged energy's, pt PlasticityNet's
-   point, ty the frozen DP yield stress (each prepared at F0). */
+   when asked (PSD-projected under PN_EVAL_PROJECT_PSD in flags): h the plastic state, G and
+   hG the lagged energy's, pt PlasticityNet's point, ty the frozen DP yield stress (each
+   prepared at F0). */
 static pn_result pn__group_psi(const pn_mpm_group *g, int d, const pn_real *F, pn_real h, const pn_real *G, pn_real hG,
                                const pn_pnet_point *pt, pn_real ty, pn_real *psi, pn_real *P, pn_real *H, unsigned flags) {
     switch (pn__mpm_energy_of(g)) {
