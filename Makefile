@@ -89,14 +89,20 @@ bench-mpm: build/bench_mpm
 
 # FEM: the metal frame, accuracy at a softened stiffness and speed at 200 GPa (bench/bench_fem.c;
 # 2D then 3D; BENCH_FEM_FLAGS=--quick for a smoke test).
-bench-fem: build/bench_fem
+# Then the linear solvers against the mesh size (bench/bench_fem_linear.c; about an hour).
+bench-fem: build/bench_fem build/bench_fem_linear
 	build/bench_fem --dim 2 --out build $(BENCH_FEM_FLAGS)
 	build/bench_fem --dim 3 --out build $(BENCH_FEM_FLAGS)
-	@cat build/bench_fem_2d.md build/bench_fem_3d.md
+	build/bench_fem_linear --out build $(BENCH_FEM_LINEAR_FLAGS)
+	@cat build/bench_fem_2d.md build/bench_fem_3d.md build/bench_fem_linear.md
 
 build/bench_fem: bench/bench_fem.c examples/pn_frame.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_fem.c $(LDLIBS) -o $@
+
+build/bench_fem_linear: bench/bench_fem_linear.c examples/pn_frame.h $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/bench_fem_linear.c $(LDLIBS) -o $@
 
 build/bench_mpm: bench/bench_mpm.c $(EXAMPLE_DEPS)
 	@mkdir -p build

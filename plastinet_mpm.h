@@ -35,7 +35,8 @@
                  the checks of a group's implicit energy
      >>fem       finite elements (linear triangles and tetrahedra): meshes and a structured
                  builder, held and driven nodes, IPC barrier contact with analytic obstacles,
-                 explicit and implicit (Newton, skyline Cholesky in RCM order, CCD-filtered
+                 explicit and implicit (Newton; skyline Cholesky in RCM order, or PCG with a
+                 block incomplete Cholesky on large meshes; CCD-filtered
                  line search, moving obstacles by augmented Lagrangian) steps
 
    QUICK START (README.md has it as a complete program)
@@ -672,12 +673,35 @@ typedef struct pn_fem_desc {
    half_extent_m, velocity_m_s: translating at a constant velocity; friction: the Coulomb
    coefficient; boundary is not used: contact is the barrier's). */
 
+/* How an implicit FEM step solves each Newton system. */
+typedef enum pn_fem_linear_solver {
+    PN_FEM_LINEAR_DEFAULT = 0,   /* Cholesky while its factor is small (PN_FEM_CHOLESKY_MAX_MB of
+                                    storage and PN_FEM_CHOLESKY_MAX_GFLOP per factorization;
+                                    2D meshes and 3D ones up to a few 1e4 unknowns), PCG beyond */
+    PN_FEM_LINEAR_CHOLESKY,      /* skyline Cholesky in a reverse Cuthill-McKee order: exact, its
+                                    storage grows as unknowns x profile (3D: about n^5/3)   */
+    PN_FEM_LINEAR_PCG            /* conjugate gradients preconditioned by a block incomplete
+                                    Cholesky, IC(0) on the node blocks: storage linear in the
+                                    mesh, iterations grow with its resolution               */
+} pn_fem_linear_solver;
+#ifndef PN_FEM_CHOLESKY_MAX_MB
+#define PN_FEM_CHOLESKY_MAX_MB 1024
+#endif
+#ifndef PN_FEM_CHOLESKY_MAX_GFLOP
+#define PN_FEM_CHOLESKY_MAX_GFLOP 8
+#endif
+
 typedef struct pn_fem_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (lagged, PlasticityNet) [1] */
     int newton_max;              /* Newton iterations per minimization [100]                */
     pn_real newton_tol;          /* stop when max |dx| < newton_tol l dt-free: l the mean
                                     rest edge length [1e-5]                                 */
     int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [5]       */
+    pn_fem_linear_solver linear_solver; /* [PN_FEM_LINEAR_DEFAULT]                          */
+    pn_real cg_rel_tol;          /* PCG: the relative residual of the last Newton solves; the
+                                    first ones stop at max(this, min(1e-2, |g| / |g_0|)),
+                                    g the gradient (Eisenstat-Walker forcing) [1e-6]        */
+    int cg_max;                  /* PCG: iterations per Newton solve [5000]                 */
     /* optional trace: called at every Newton iteration with the incremental potential E at
        the iterate and max |dx| / l of the step it takes next; `solve` counts the
        minimizations of the step (each fixed-point pass, augmented-Lagrangian round and
@@ -692,8 +716,10 @@ typedef struct pn_fem_stats {
     int friction_relags;         /* re-solves with friction lagged at the solution, for nodes
                                     that came into contact with a rough obstacle in the step */
     int solves;                  /* minimizations (passes x rounds x substeps)              */
-    int cg_iters;                /* conjugate-gradient iterations (self-contact pairs beyond
-                                    the factor's profile make the solve iterative)         */
+    int cg_iters;                /* conjugate-gradient iterations (PCG; with Cholesky,
+                                    self-contact pairs beyond the factor's profile make the
+                                    solve iterative)                                       */
+    pn_fem_linear_solver linear_solver; /* what the step used: CHOLESKY or PCG           */
     pn_real newton_residual;     /* max |dx| / l at the last Newton iteration               */
     pn_real min_distance_m;      /* the smallest node-obstacle distance at the step's end
                                     (and over its line searches: never <= 0)                */
@@ -768,12 +794,15 @@ PN_API pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt_s, pn_fem_stats
        1/2 |x - x~|_M^2 + dt^2 (sum_e V_e Psi_e(Fe(x)) + kappa sum b(d(x)) + D(x))
    (b over node-obstacle distances and the mesh's own boundary pairs: 2D point-edge, 3D
    point-triangle and edge-edge; D lagged smoothed friction against rough obstacles) by
-   Newton (PSD-projected element Hessians, a sparse Cholesky factorization in a reverse
-   Cuthill-McKee order) with a backtracking line search whose first step no node can take
+   Newton (PSD-projected element Hessians; the linear solver of desc->linear_solver: a
+   skyline Cholesky factorization in a reverse Cuthill-McKee order, or conjugate gradients
+   preconditioned by its block incomplete Cholesky on large meshes) with a backtracking line search whose first step no node can take
    into an obstacle or through the mesh (continuous collision detection); moving obstacles
    follow their velocity by an augmented Lagrangian; friction is lagged again where a node
    came into contact during the step. Then the return mapping of each element. A step that
-   fails is retried as substeps; the mesh is unchanged when it fails. */
+   fails is retried as substeps; the mesh is unchanged when it fails. The first step with a
+   solver (or with more moving obstacles than before) allocates its storage: with Cholesky
+   on a mesh too large for it PN_ERROR_OUT_OF_MEMORY, the message says so. */
 PN_API pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt_s, const pn_fem_implicit_desc *desc,
                                       pn_fem_stats *stats);
 
@@ -916,6 +945,8 @@ typedef struct pn__cg_ops {
     void (*apply)(void *ctx, const pn_real *x, pn_real *y);
     void (*precond)(void *ctx, const pn_real *r, pn_real *z);
     pn_real (*dot)(void *ctx, size_t n, const pn_real *a, const pn_real *b);
+    int *curv;                   /* optional: set to 1 where a direction of curvature <= 0
+                                    stopped the iteration (A is not positive definite)      */
 } pn__cg_ops;
 
 /* Solve A x = b by preconditioned conjugate gradients to |r| <= rel_tol |b|, b given in r
@@ -943,7 +974,10 @@ static int pn__pcg(const pn__cg_ops *op, size_t n, pn_real *x, pn_real *r, pn_re
         pn_real pq, alpha, rz_new, beta;
         op->apply(op->ctx, p, q);
         pq = op->dot(op->ctx, n, p, q);
-        if (!(pq > 0)) break; /* A is positive definite: only rounding gets here */
+        if (!(pq > 0)) { /* A positive definite: only rounding gets here */
+            if (op->curv) *op->curv = 1;
+            break;
+        }
         alpha = rz / pq;
         for (k = 0; k < n; ++k) {
             x[k] += alpha * p[k];
@@ -3397,7 +3431,7 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol,
         pn__mpm_filter(w, k, w->cg_r + k * (size_t)d);
     }
     c.w = w, c.dt = dt;
-    op.ctx = &c, op.apply = pn__mpm_cg_apply, op.precond = pn__mpm_cg_precond, op.dot = pn__mpm_cg_dot;
+    op.ctx = &c, op.apply = pn__mpm_cg_apply, op.precond = pn__mpm_cg_precond, op.dot = pn__mpm_cg_dot, op.curv = NULL;
     return pn__pcg(&op, w->n_act * (size_t)d, w->dir, w->cg_r, w->cg_z, w->cg_p, w->cg_q, max_it, rel_tol, warm, capped);
 }
 
@@ -5480,6 +5514,34 @@ typedef struct pn__fem {
     pn_real *xlag;               /* where friction's normal force and directions are taken   */
     pn_real *A, *cgx, *cgz, *cgp, *cgq; /* self-contact beyond the profile: the unfactored matrix,
                                     CG's vectors                                           */
+    double sky_mb, sky_gflop;    /* the skyline's storage and one factorization's cost      */
+    /* >>fem sparse: the Hessian's lower triangle in d x d blocks by block row (a node in RCM
+       position order, then the moving obstacles' rows, dense), columns ascending, the
+       diagonal block last (its lower half used); its block incomplete Cholesky
+       L D L^T on the same pattern */
+    int sparse;                  /* this step's Hessian is in the blocks (PCG), not the skyline */
+    int d;
+    size_t *brs;                 /* start of each block row (n + PN_FEM_MAX_OBSTACLES + 1)   */
+    int *bcol;                   /* block columns                                            */
+    size_t nblk, bcap;           /* blocks of the node rows; room in bcol, bA, bL            */
+    int brows;                   /* block rows the obstacle rows are laid out for (n + n_mov) */
+    pn_real *bA, *bL, *bDi;      /* the Hessian's blocks, the factor's L, D^-1 per row       */
+    pn_real *bT;                 /* the factorization's row of L D (one block per column)    */
+    int *bmark;                  /* per block column: its position in the row being factored */
+    long bmiss;                  /* Hessian entries outside the pattern (never: a bug)       */
+    pn_real bshift;              /* the diagonal shift the last factorization needed        */
+    /* >>fem sparse, the coarse level: aggregates of nodes (by block row), and per aggregate
+       its rigid motions at the iterate (d translations, d(d-1)/2 rotations), orthonormal:
+       the prolongation P; the coarse matrix P^T A P in a skyline (aggregates in RCM order) */
+    int nm;                      /* modes per aggregate                                      */
+    size_t nagg, cnc;            /* aggregates; coarse unknowns (nagg nm)                   */
+    int *agg;                    /* per node row: its aggregate                              */
+    size_t *abeg, *arow;         /* the rows of aggregate a: arow[abeg[a] .. abeg[a + 1])    */
+    size_t *apos, *cfc, *crs;    /* per aggregate its coarse position; the coarse skyline    */
+    pn_real *cL, *cv, *P;        /* coarse matrix (factored), coarse vector; d x nm per row  */
+    pn_real *pt, *pz;            /* the V-cycle's fine vectors                               */
+    int coarse;                  /* the coarse level is set up and factored for this matrix */
+    int one_level;               /* benchmarks: PCG on the block IC(0) alone                */
     int *bedge, *bface;          /* the boundary's edges (node pairs, nbe) and 3D faces
                                     (node triples, nbf): the self-contact primitives        */
     size_t *bnode, nbe, nbf, nbn; /* the nodes on the boundary                               */
@@ -5710,6 +5772,16 @@ PN__DEF void pn_fem_destroy(pn_fem_mesh *m) {
         pn_free(al, s->estat);
         pn_free(al, s->bx);
         pn_free(al, s->A);
+        pn_free(al, s->brs);
+        pn_free(al, s->bcol);
+        pn_free(al, s->bA);
+        pn_free(al, s->bL);
+        pn_free(al, s->bDi);
+        pn_free(al, s->bmark);
+        pn_free(al, s->agg);
+        pn_free(al, s->abeg);
+        pn_free(al, s->cL);
+        pn_free(al, s->P);
         pn_free(al, s->bedge);
         pn_free(al, s->bface);
         pn_free(al, s->bnode);
@@ -5821,9 +5893,42 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->nnz = 0;
     for (k = 0; k < nu; ++k) s->rs[k] = s->nnz, s->nnz += k - s->fc[k] + 1;
     s->rs[nu] = s->nnz;
+    { /* what the skyline (allocated at its first use) would take: L and the copy CG needs, and
+         a factorization's multiply-adds, sum over rows of the row's length squared / 2 */
+        double fl = 0;
+        for (k = 0; k < n * (size_t)d; ++k) fl += 0.5 * (double)(k - s->fc[k] + 1) * (double)(k - s->fc[k] + 1);
+        s->sky_mb = 2.0 * (double)s->nnz * sizeof(pn_real) / 1e6, s->sky_gflop = 2 * fl / 1e9;
+    }
+    /* the block pattern of the node rows (>>fem sparse): row at position p holds the
+       neighbours before it, then p */
+    s->d = d;
+    s->brs = (size_t *)pn_alloc(al, sizeof(size_t) * (n + PN_FEM_MAX_OBSTACLES + 1));
+    s->nblk = n;
+    for (i = 0; i < n; ++i)
+        for (k = xadj[i]; k < cnt[i]; ++k) s->nblk += s->iperm[adj[k]] < s->iperm[i];
+    s->bcap = s->nblk;
+    s->bcol = (int *)pn_alloc(al, sizeof(int) * s->bcap);
+    if (!s->brs || !s->bcol) {
+        pn_free(al, xadj), pn_free(al, adj), pn_free(al, deg), pn_free(al, seen), pn_free(al, cnt);
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
+    s->brs[0] = 0;
+    for (k = 0; k < n; ++k) {
+        size_t i0 = s->perm[k], w = 0, r, c;
+        int *row;
+        for (r = xadj[i0]; r < cnt[i0]; ++r) w += s->iperm[adj[r]] < k;
+        s->brs[k + 1] = s->brs[k] + w + 1;
+        row = s->bcol + s->brs[k];
+        for (w = 0, r = xadj[i0]; r < cnt[i0]; ++r)
+            if (s->iperm[adj[r]] < k) {
+                int v = (int)s->iperm[adj[r]];
+                for (c = w++; c > 0 && row[c - 1] > v; --c) row[c] = row[c - 1]; /* insertion: rows are short */
+                row[c] = v;
+            }
+        row[w] = (int)k;
+    }
+    s->brows = (int)n;
     pn_free(al, xadj), pn_free(al, adj), pn_free(al, deg), pn_free(al, seen), pn_free(al, cnt);
-    s->L = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
-    if (!s->L) return PN_ERROR_OUT_OF_MEMORY;
     { /* the boundary: the sides (2D edges, 3D faces) of one element only, then (3D) their
          edges; sorted node tuples, counted */
         int w = d, nsd = d + 1, sv[3], c0;
@@ -5871,14 +5976,13 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
         s->bface = (int *)pn_alloc(al, sizeof(int) * (3 * s->nbf + 1));
         s->bnode = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
         s->ebox = (pn_real *)pn_alloc(al, sizeof(pn_real) * (6 * s->nitem + 1));
-        s->cap_off = d == 2 ? 8 * n + 64 : 2 * n + 64; /* pairs: the side list grows as (2d + 2)^2 */
+        s->cap_off = (d == 2 ? 8 : 2) * nb + 64; /* pairs, by boundary sides; grown when a step needs more */
         s->off = (pn_real *)pn_alloc(al, sizeof(pn_real) * PN__FEM_PAIR_H(d) * s->cap_off);
         s->off_node = (int *)pn_alloc(al, sizeof(int) * 4 * s->cap_off);
-        s->A = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
         s->gcap = 4 * s->nitem + 16;
         s->gstart = (size_t *)pn_alloc(al, sizeof(size_t) * (s->gcap + 1 + (size_t)(1 << d) * s->nitem + 4));
         s->gitem = s->gstart ? s->gstart + s->gcap + 1 : NULL;
-        if (!s->bedge || !s->bface || !s->bnode || !s->ebox || !s->off || !s->off_node || !s->A || !s->gstart) {
+        if (!s->bedge || !s->bface || !s->bnode || !s->ebox || !s->off || !s->off_node || !s->gstart) {
             pn_free(al, key), pn_free(al, on);
             return PN_ERROR_OUT_OF_MEMORY;
         }
@@ -6322,10 +6426,20 @@ static size_t pn__fem_row(const pn_fem_mesh *m, size_t k) {
     return s->iperm[k / (size_t)m->dim] * (size_t)m->dim + k % (size_t)m->dim;
 }
 
+static pn_real *pn__fem_blk(const pn__fem *s, size_t br, size_t bc); /* >>fem sparse */
+
+/* add v at (r, c) of the Hessian (the skyline, or the blocks with s->sparse) */
 static void pn__fem_hadd(pn__fem *s, size_t r, size_t c, pn_real v) {
     if (r < c) {
         size_t t = r;
         r = c, c = t;
+    }
+    if (s->sparse) {
+        size_t d = (size_t)s->d;
+        pn_real *b = pn__fem_blk(s, r / d, c / d);
+        if (b) b[(r % d) * d + c % d] += v;
+        else s->bmiss++;
+        return;
     }
     s->L[s->rs[r] + c - s->fc[r]] += v;
 }
@@ -6333,10 +6447,11 @@ static void pn__fem_hadd(pn__fem *s, size_t r, size_t c, pn_real v) {
 /* is node k's unknown free (not driven)? */
 #define PN__FEM_FREE(m, node) (!(m)->fixed[node])
 
-/* Is the block of nodes i and j inside the skyline's profile? */
+/* Is the block of nodes i and j inside the skyline's profile (the blocks' pattern)? */
 static int pn__fem_in_profile(const pn_fem_mesh *m, size_t i, size_t j) {
     const pn__fem *s = (const pn__fem *)m->impl;
     size_t pi = s->iperm[i], pj = s->iperm[j], lo = PN__MIN(pi, pj), hi = PN__MAX(pi, pj);
+    if (s->sparse) return pn__fem_blk(s, hi, lo) != NULL;
     return lo * (size_t)m->dim >= s->fc[hi * (size_t)m->dim];
 }
 
@@ -6707,10 +6822,21 @@ static int pn__fem_self_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx
     pn_sym_project_psd(n, H);
     for (i = 0; i < pr->nv; ++i)
         for (j = 0; j < i; ++j) full &= pn__fem_in_profile(m, pr->n[i], pr->n[j]);
-    if (!full && s->n_off >= s->cap_off) {
-        cx->r = pn__fem_fail(m, PN_ERROR_CAPACITY, "self-contact: more than %lu pairs outside the Hessian's profile",
-                             (unsigned long)s->cap_off);
-        return 1;
+    if (!full && s->n_off >= s->cap_off) { /* more pairs than ever before: twice the room */
+        const pn_allocator *al = &m->desc.allocator;
+        size_t cap = 2 * s->cap_off;
+        pn_real *o2 = (pn_real *)pn_alloc(al, sizeof(pn_real) * PN__FEM_PAIR_H(d) * cap);
+        int *n2 = (int *)pn_alloc(al, sizeof(int) * 4 * cap);
+        if (!o2 || !n2) {
+            pn_free(al, o2), pn_free(al, n2);
+            cx->r = pn__fem_fail(m, PN_ERROR_OUT_OF_MEMORY, "self-contact: out of memory for %lu pairs outside the "
+                                 "Hessian's pattern", (unsigned long)cap);
+            return 1;
+        }
+        memcpy(o2, s->off, sizeof(pn_real) * PN__FEM_PAIR_H(d) * s->n_off);
+        memcpy(n2, s->off_node, sizeof(int) * 4 * s->n_off);
+        pn_free(al, s->off), pn_free(al, s->off_node);
+        s->off = o2, s->off_node = n2, s->cap_off = cap;
     }
     for (i = 0; i < n; ++i)
         for (j = 0; j <= i; ++j) {
@@ -6826,7 +6952,8 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
     size_t n = m->n_nodes, nd = n * (size_t)d, k, e, nu = s->nu;
     pn_real dt2 = s->dt * s->dt, E = 0, dmin = PN__FEM_FAR;
     if (mode >= 1) memset(s->g, 0, sizeof(pn_real) * nu);
-    if (mode >= 2) memset(s->L, 0, sizeof(pn_real) * s->rs[nu]);
+    if (mode >= 2 && s->sparse) memset(s->bA, 0, sizeof(pn_real) * s->brs[s->brows] * (size_t)(d * d)), s->bmiss = 0;
+    else if (mode >= 2) memset(s->L, 0, sizeof(pn_real) * s->rs[nu]);
     for (k = 0; k < n; ++k) { /* inertia */
         if (!PN__FEM_FREE(m, k)) continue;
         for (i = 0; i < d; ++i) {
@@ -6996,15 +7123,16 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
     return pn__finite(E) ? PN_OK : PN_ERROR_OVERFLOW;
 }
 
-/* In-place Cholesky of the skyline matrix's first nu rows; 0 if not positive definite. */
-static int pn__fem_cholesky(pn__fem *s, size_t nu) {
+/* In-place Cholesky of the first nu rows of the skyline matrix L (row r: columns fc[r] .. r
+   from L + rs[r]); 0 if not positive definite. */
+static int pn__sky_cholesky(const size_t *fc, const size_t *rs, pn_real *L, size_t nu) {
     size_t r, c, k;
     for (r = 0; r < nu; ++r) {
-        pn_real *Lr = s->L + s->rs[r], diag;
-        size_t fr = s->fc[r];
+        pn_real *Lr = L + rs[r], diag;
+        size_t fr = fc[r];
         for (c = fr; c < r; ++c) {
-            const pn_real *Lc = s->L + s->rs[c];
-            size_t fcc = s->fc[c], k0 = PN__MAX(fr, fcc);
+            const pn_real *Lc = L + rs[c];
+            size_t fcc = fc[c], k0 = PN__MAX(fr, fcc);
             pn_real acc = Lr[c - fr];
             for (k = k0; k < c; ++k) acc -= Lr[k - fr] * Lc[k - fcc];
             Lr[c - fr] = acc / Lc[c - fcc];
@@ -7018,18 +7146,429 @@ static int pn__fem_cholesky(pn__fem *s, size_t nu) {
 }
 
 /* solve L L^T y = b in place (skyline rows) */
-static void pn__fem_solve(const pn__fem *s, size_t nu, pn_real *y) {
+static void pn__sky_solve(const size_t *fc, const size_t *rs, const pn_real *L, size_t nu, pn_real *y) {
     size_t r, k;
     for (r = 0; r < nu; ++r) {
-        const pn_real *Lr = s->L + s->rs[r];
+        const pn_real *Lr = L + rs[r];
         pn_real acc = y[r];
-        for (k = s->fc[r]; k < r; ++k) acc -= Lr[k - s->fc[r]] * y[k];
-        y[r] = acc / Lr[r - s->fc[r]];
+        for (k = fc[r]; k < r; ++k) acc -= Lr[k - fc[r]] * y[k];
+        y[r] = acc / Lr[r - fc[r]];
     }
     for (r = nu; r-- > 0;) {
-        const pn_real *Lr = s->L + s->rs[r];
-        y[r] /= Lr[r - s->fc[r]];
-        for (k = s->fc[r]; k < r; ++k) y[k] -= Lr[k - s->fc[r]] * y[r];
+        const pn_real *Lr = L + rs[r];
+        y[r] /= Lr[r - fc[r]];
+        for (k = fc[r]; k < r; ++k) y[k] -= Lr[k - fc[r]] * y[r];
+    }
+}
+
+/* ---- >>fem sparse: the Hessian in d x d node blocks (the lower triangle by block rows:
+   nodes in RCM position order, then the moving obstacles' dense rows), its block incomplete
+   Cholesky L D L^T on the same pattern (block IC(0)), and the products PCG needs. Storage
+   grows with the mesh, not with its profile: the solver for meshes the skyline cannot hold.
+   One thread: the factorization and the triangular solves are sequential, the product is
+   memory-bound on these sizes, and the bits do not depend on the thread count. ---------- */
+
+static pn_result pn__fem_coarse_setup(pn_fem_mesh *m);
+
+/* room for this step's obstacle rows (dense: every column before them); the first step with
+   more moving obstacles than before allocates */
+static pn_result pn__fem_sparse_reserve(pn_fem_mesh *m) {
+    const pn_allocator *al = &m->desc.allocator;
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t n = m->n_nodes, rows = n + (size_t)s->n_mov, total = s->nblk, j, c, dd = (size_t)(s->d * s->d);
+    for (j = 0; j < (size_t)s->n_mov; ++j) total += n + j + 1;
+    if (!s->bDi) {
+        s->bDi = (pn_real *)pn_alloc(al, sizeof(pn_real) * 2 * (n + PN_FEM_MAX_OBSTACLES) * dd);
+        s->bmark = (int *)pn_alloc(al, sizeof(int) * (n + PN_FEM_MAX_OBSTACLES));
+        if (!s->bDi || !s->bmark) return PN_ERROR_OUT_OF_MEMORY;
+        s->bT = s->bDi + (n + PN_FEM_MAX_OBSTACLES) * dd;
+        for (c = 0; c < n + PN_FEM_MAX_OBSTACLES; ++c) s->bmark[c] = -1;
+    }
+    if (!s->agg && pn__fem_coarse_setup(m) != PN_OK) return PN_ERROR_OUT_OF_MEMORY;
+    if (!s->bA || total > s->bcap) {
+        int *nc = (int *)pn_alloc(al, sizeof(int) * total);
+        pn_real *na = (pn_real *)pn_alloc(al, sizeof(pn_real) * total * dd), *nl = (pn_real *)pn_alloc(al, sizeof(pn_real) * total * dd);
+        if (!nc || !na || !nl) {
+            pn_free(al, nc), pn_free(al, na), pn_free(al, nl);
+            return PN_ERROR_OUT_OF_MEMORY;
+        }
+        memcpy(nc, s->bcol, sizeof(int) * s->nblk);
+        pn_free(al, s->bcol), pn_free(al, s->bA), pn_free(al, s->bL);
+        s->bcol = nc, s->bA = na, s->bL = nl, s->bcap = total;
+        s->brows = -1; /* lay the obstacle rows out again */
+    }
+    if ((size_t)s->brows != rows) {
+        for (j = n; j < rows; ++j) {
+            s->brs[j + 1] = s->brs[j] + j + 1;
+            for (c = 0; c <= j; ++c) s->bcol[s->brs[j] + c] = (int)c;
+        }
+        s->brows = (int)rows;
+    }
+    return PN_OK;
+}
+
+/* block (br, bc), br >= bc, of the Hessian; NULL outside the pattern */
+static pn_real *pn__fem_blk(const pn__fem *s, size_t br, size_t bc) {
+    size_t lo = s->brs[br], hi = s->brs[br + 1];
+    while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if ((size_t)s->bcol[mid] < bc) lo = mid + 1;
+        else hi = mid;
+    }
+    return lo < s->brs[br + 1] && (size_t)s->bcol[lo] == bc ? s->bA + lo * (size_t)(s->d * s->d) : NULL;
+}
+
+/* y = A x (the blocks; the diagonal block's lower half mirrored); d a constant where inlined */
+PN__MPM_INLINE void pn__fem_bmul_d(const pn__fem *s, const pn_real *x, pn_real *y, const int d) {
+    int dd = d * d, i, j;
+    size_t r, q;
+    memset(y, 0, sizeof(pn_real) * (size_t)s->brows * (size_t)d);
+    for (r = 0; r < (size_t)s->brows; ++r) {
+        const pn_real *xr = x + r * (size_t)d, *B;
+        pn_real *yr = y + r * (size_t)d;
+        for (q = s->brs[r]; q + 1 < s->brs[r + 1]; ++q) {
+            const pn_real *xc = x + (size_t)s->bcol[q] * (size_t)d;
+            pn_real *yc = y + (size_t)s->bcol[q] * (size_t)d;
+            B = s->bA + q * (size_t)dd;
+            for (i = 0; i < d; ++i)
+                for (j = 0; j < d; ++j) yr[i] += B[i * d + j] * xc[j], yc[j] += B[i * d + j] * xr[i];
+        }
+        B = s->bA + q * (size_t)dd;
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) yr[i] += B[i >= j ? i * d + j : j * d + i] * xr[j];
+    }
+}
+
+static void pn__fem_bmul(const pn__fem *s, const pn_real *x, pn_real *y) {
+    if (s->d == 3) pn__fem_bmul_d(s, x, y, 3);
+    else pn__fem_bmul_d(s, x, y, 2);
+}
+
+/* Ai = A^-1 of a symmetric d x d block (lower half read) by Cholesky; 0 if A is not positive
+   definite */
+static int pn__fem_spd_inv(int d, const pn_real *A, pn_real *Ai) {
+    pn_real L[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, y[3];
+    int i, j, k, c;
+    for (i = 0; i < d; ++i)
+        for (j = 0; j <= i; ++j) {
+            pn_real acc = A[i * d + j];
+            for (k = 0; k < j; ++k) acc -= L[i * d + k] * L[j * d + k];
+            if (i == j) {
+                if (!(acc > 0)) return 0;
+                L[i * d + i] = PN__SQRT(acc);
+            } else L[i * d + j] = acc / L[j * d + j];
+        }
+    for (c = 0; c < d; ++c) { /* column c of A^-1: L y = e_c, L^T x = y */
+        for (i = 0; i < d; ++i) {
+            pn_real acc = i == c;
+            for (k = 0; k < i; ++k) acc -= L[i * d + k] * y[k];
+            y[i] = acc / L[i * d + i];
+        }
+        for (i = d - 1; i >= 0; --i) {
+            pn_real acc = y[i];
+            for (k = i + 1; k < d; ++k) acc -= L[k * d + i] * Ai[k * d + c];
+            Ai[i * d + c] = acc / L[i * d + i];
+        }
+    }
+    return 1;
+}
+
+/* Block IC(0) of A + shift diag(A): A = L D L^T with L unit lower, kept on A's pattern. Row i,
+   columns k < i in order: T_ik = A_ik - sum_j T_ij L_kj^T (j < k in both rows' patterns),
+   L_ik = T_ik D_k^-1; then D_i = A_ii - sum_k T_ik L_ik^T. 0 if a D_i is not positive
+   definite (the factorization of a positive definite matrix can break down too: a shift
+   then helps). */
+static int pn__fem_bic(pn__fem *s, pn_real shift) {
+    int d = s->d, dd = d * d, a, b, c;
+    size_t i, q, p;
+    for (i = 0; i < (size_t)s->brows; ++i) {
+        size_t b0 = s->brs[i], b1 = s->brs[i + 1] - 1; /* b1: the diagonal block */
+        pn_real Dm[9];
+        int ok;
+        for (q = b0; q < b1; ++q) s->bmark[s->bcol[q]] = (int)(q - b0);
+        for (q = b0; q < b1; ++q) {
+            size_t k = (size_t)s->bcol[q];
+            pn_real *T = s->bT + (q - b0) * (size_t)dd, *Lq = s->bL + q * (size_t)dd;
+            const pn_real *Dk = s->bDi + k * (size_t)dd;
+            memcpy(T, s->bA + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+            for (p = s->brs[k]; p + 1 < s->brs[k + 1]; ++p) {
+                int jj = s->bmark[s->bcol[p]];
+                const pn_real *Tij, *Lkj;
+                if (jj < 0) continue;
+                Tij = s->bT + (size_t)jj * (size_t)dd, Lkj = s->bL + p * (size_t)dd;
+                for (a = 0; a < d; ++a)
+                    for (b = 0; b < d; ++b)
+                        for (c = 0; c < d; ++c) T[a * d + b] -= Tij[a * d + c] * Lkj[b * d + c];
+            }
+            for (a = 0; a < d; ++a)
+                for (b = 0; b < d; ++b) {
+                    pn_real acc = 0;
+                    for (c = 0; c < d; ++c) acc += T[a * d + c] * Dk[c * d + b];
+                    Lq[a * d + b] = acc;
+                }
+        }
+        for (a = 0; a < d; ++a)
+            for (b = 0; b <= a; ++b) {
+                pn_real acc = s->bA[b1 * (size_t)dd + (size_t)(a * d + b)] * (a == b ? 1 + shift : 1);
+                for (q = b0; q < b1; ++q)
+                    for (c = 0; c < d; ++c) acc -= s->bT[(q - b0) * (size_t)dd + (size_t)(a * d + c)] * s->bL[q * (size_t)dd + (size_t)(b * d + c)];
+                Dm[a * d + b] = Dm[b * d + a] = acc;
+            }
+        for (q = b0; q < b1; ++q) s->bmark[s->bcol[q]] = -1;
+        ok = pn__fem_spd_inv(d, Dm, s->bDi + i * (size_t)dd);
+        if (!ok) return 0;
+    }
+    return 1;
+}
+
+/* the factor, shifted as far as it needs (Manteuffel 1980): 0 if even a shift of 16 diag(A)
+   breaks down (a diagonal block not positive definite: the Hessian is not) */
+static int pn__fem_bfactor(pn__fem *s) {
+    pn_real shift = 0;
+    int t;
+    for (t = 0; t < 8; ++t) {
+        if (pn__fem_bic(s, shift)) {
+            s->bshift = shift;
+            return 1;
+        }
+        shift = shift > 0 ? 4 * shift : (pn_real)1e-3;
+    }
+    return 0;
+}
+
+/* z = (L D L^T)^-1 r; d a constant where inlined */
+PN__MPM_INLINE void pn__fem_bic_solve_d(const pn__fem *s, const pn_real *r, pn_real *z, const int d) {
+    int dd = d * d, a, b;
+    size_t i, q, rows = (size_t)s->brows;
+    memcpy(z, r, sizeof(pn_real) * rows * (size_t)d);
+    for (i = 0; i < rows; ++i) /* L y = r */
+        for (q = s->brs[i]; q + 1 < s->brs[i + 1]; ++q) {
+            const pn_real *Lq = s->bL + q * (size_t)dd, *zk = z + (size_t)s->bcol[q] * (size_t)d;
+            for (a = 0; a < d; ++a)
+                for (b = 0; b < d; ++b) z[i * (size_t)d + (size_t)a] -= Lq[a * d + b] * zk[b];
+        }
+    for (i = 0; i < rows; ++i) { /* D^-1 */
+        pn_real t[3];
+        const pn_real *Di = s->bDi + i * (size_t)dd;
+        for (a = 0; a < d; ++a) {
+            t[a] = 0;
+            for (b = 0; b < d; ++b) t[a] += Di[a * d + b] * z[i * (size_t)d + (size_t)b];
+        }
+        for (a = 0; a < d; ++a) z[i * (size_t)d + (size_t)a] = t[a];
+    }
+    for (i = rows; i-- > 0;) /* L^T x = y: row i final, pushed into the columns before it */
+        for (q = s->brs[i]; q + 1 < s->brs[i + 1]; ++q) {
+            const pn_real *Lq = s->bL + q * (size_t)dd, *zi = z + i * (size_t)d;
+            pn_real *zk = z + (size_t)s->bcol[q] * (size_t)d;
+            for (a = 0; a < d; ++a)
+                for (b = 0; b < d; ++b) zk[b] -= Lq[a * d + b] * zi[a];
+        }
+}
+static void pn__fem_bic_solve(const pn__fem *s, const pn_real *r, pn_real *z) {
+    if (s->d == 3) pn__fem_bic_solve_d(s, r, z, 3);
+    else pn__fem_bic_solve_d(s, r, z, 2);
+}
+
+/* The coarse level's structure, once (at the first PCG step): aggregates grown greedily in
+   row order on the node graph (a row whose neighbours are all free takes them; rows left over
+   join a neighbouring aggregate, or start their own), the aggregates' graph in RCM order and
+   its skyline. Vanek, Mandel and Brezina 1996 (aggregation, rigid-body modes). */
+static pn_result pn__fem_coarse_setup(pn_fem_mesh *m) {
+    const pn_allocator *al = &m->desc.allocator;
+    pn__fem *s = (pn__fem *)m->impl;
+    size_t n = m->n_nodes, p, q, a, b, na = 0, nnz = 0, *beg, *adj, *cnt, *deg, *ab, *aadj, *acnt, *pos;
+    int d = s->d, nm = d == 2 ? 3 : 6, *mark;
+    unsigned char *seen;
+    pn_result r = PN_ERROR_OUT_OF_MEMORY;
+    beg = (size_t *)pn_alloc(al, sizeof(size_t) * (3 * (n + 1) + 2 * s->nblk + 2 * (n + 1) + 4 * s->nblk + 4));
+    mark = (int *)pn_alloc(al, sizeof(int) * (n + 1));
+    seen = (unsigned char *)pn_alloc(al, n + 1);
+    s->agg = (int *)pn_alloc(al, sizeof(int) * (n + 1));
+    if (!beg || !mark || !seen || !s->agg) goto done;
+    cnt = beg + n + 1, adj = cnt + n + 1, deg = adj + 2 * s->nblk, ab = deg + n + 1, aadj = ab + n + 1, acnt = aadj + 2 * s->nblk;
+    /* the node graph, both ways, from the lower block rows */
+    memset(cnt, 0, sizeof(size_t) * (n + 1));
+    for (p = 0; p < n; ++p)
+        for (q = s->brs[p]; q + 1 < s->brs[p + 1]; ++q) cnt[p]++, cnt[s->bcol[q]]++;
+    for (beg[0] = 0, p = 0; p < n; ++p) beg[p + 1] = beg[p] + cnt[p], cnt[p] = beg[p];
+    for (p = 0; p < n; ++p)
+        for (q = s->brs[p]; q + 1 < s->brs[p + 1]; ++q) adj[cnt[p]++] = (size_t)s->bcol[q], adj[cnt[s->bcol[q]]++] = p;
+    for (p = 0; p < n; ++p) s->agg[p] = -1;
+    for (p = 0; p < n; ++p) { /* 1: a row and all its neighbours, where none is taken */
+        int free_all = s->agg[p] < 0;
+        for (q = beg[p]; q < cnt[p] && free_all; ++q) free_all = s->agg[adj[q]] < 0;
+        if (!free_all) continue;
+        s->agg[p] = (int)na;
+        for (q = beg[p]; q < cnt[p]; ++q) s->agg[adj[q]] = (int)na;
+        na++;
+    }
+    for (p = 0; p < n; ++p) mark[p] = s->agg[p]; /* 2: the rest join a neighbour's (of step 1) */
+    for (p = 0; p < n; ++p)
+        if (s->agg[p] < 0)
+            for (q = beg[p]; q < cnt[p]; ++q)
+                if (mark[adj[q]] >= 0) {
+                    s->agg[p] = mark[adj[q]];
+                    break;
+                }
+    for (p = 0; p < n; ++p) /* 3: isolated rows (a node of no element) alone */
+        if (s->agg[p] < 0) s->agg[p] = (int)na++;
+    s->nagg = na, s->nm = nm, s->cnc = na * (size_t)nm;
+    /* the aggregates' rows (counting sort) and graph */
+    s->abeg = (size_t *)pn_alloc(al, sizeof(size_t) * ((na + 1) + n + na + 2 * s->cnc + 1));
+    if (!s->abeg) goto done;
+    s->arow = s->abeg + na + 1, s->apos = s->arow + n, s->cfc = s->apos + na, s->crs = s->cfc + s->cnc;
+    memset(s->abeg, 0, sizeof(size_t) * (na + 1));
+    for (p = 0; p < n; ++p) s->abeg[s->agg[p] + 1]++;
+    for (a = 0; a < na; ++a) s->abeg[a + 1] += s->abeg[a];
+    for (a = 0; a < na; ++a) ab[a] = s->abeg[a];
+    for (p = 0; p < n; ++p) s->arow[ab[s->agg[p]]++] = p;
+    for (a = 0; a < na; ++a) mark[a] = -1;
+    for (ab[0] = 0, a = 0; a < na; ++a) { /* neighbours of aggregate a: at most the fine edges out of it */
+        acnt[a] = ab[a];
+        for (b = s->abeg[a]; b < s->abeg[a + 1]; ++b)
+            for (p = s->arow[b], q = beg[p]; q < cnt[p]; ++q) {
+                int o = s->agg[adj[q]];
+                if (o != (int)a && mark[o] != (int)a) mark[o] = (int)a, aadj[acnt[a]++] = (size_t)o;
+            }
+        ab[a + 1] = acnt[a];
+    }
+    pos = beg; /* reused: the RCM order of the aggregates */
+    pn__fem_rcm(na, ab, acnt, aadj, pos, seen, deg);
+    for (a = 0; a < na; ++a) s->apos[pos[a]] = a;
+    for (a = 0; a < na; ++a) { /* the skyline: row (position, mode) from the first neighbour's position */
+        size_t lo = s->apos[a], c;
+        int k;
+        for (q = ab[a]; q < acnt[a]; ++q) lo = PN__MIN(lo, s->apos[aadj[q]]);
+        for (k = 0; k < nm; ++k) s->cfc[s->apos[a] * (size_t)nm + (size_t)k] = lo * (size_t)nm;
+        (void)c;
+    }
+    for (q = 0; q < s->cnc; ++q) s->crs[q] = nnz, nnz += q - s->cfc[q] + 1;
+    s->crs[s->cnc] = nnz;
+    s->cL = (pn_real *)pn_alloc(al, sizeof(pn_real) * (nnz + s->cnc));
+    s->P = (pn_real *)pn_alloc(al, sizeof(pn_real) * (n * (size_t)(d * nm) + 2 * (n + PN_FEM_MAX_OBSTACLES) * (size_t)d));
+    if (!s->cL || !s->P) goto done;
+    s->cv = s->cL + nnz;
+    s->pt = s->P + n * (size_t)(d * nm), s->pz = s->pt + (n + PN_FEM_MAX_OBSTACLES) * (size_t)d;
+    r = PN_OK;
+done:
+    pn_free(al, beg), pn_free(al, mark), pn_free(al, seen);
+    return r;
+}
+
+/* the coarse add of v at coarse unknowns (r, c), either triangle */
+#define PN__FEM_CADD(s, r, c, v)                                                                  \
+    do {                                                                                          \
+        size_t r_ = (r), c_ = (c);                                                                \
+        if (r_ < c_) r_ = (c), c_ = (r);                                                          \
+        (s)->cL[(s)->crs[r_] + c_ - (s)->cfc[r_]] += (v);                                         \
+    } while (0)
+
+/* P at the iterate x (rigid motions of each aggregate about its centre, rotations over its
+   size, orthonormalized by Gram-Schmidt; a mode an aggregate cannot have, a rotation of one
+   node, stays 0; driven nodes have none), then P^T A P, factored. 0 if that is not positive
+   definite. */
+static int pn__fem_coarse_build(pn_fem_mesh *m, const pn_real *x) {
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = s->d, nm = s->nm, dd = d * d, i, j, k, l;
+    size_t a, b, p, q;
+    memset(s->P, 0, sizeof(pn_real) * m->n_nodes * (size_t)(d * nm));
+    for (a = 0; a < s->nagg; ++a) {
+        pn_real c[3] = {0, 0, 0}, size = 0, cnt = 0;
+        for (b = s->abeg[a]; b < s->abeg[a + 1]; ++b) {
+            size_t node = s->perm[s->arow[b]];
+            if (!PN__FEM_FREE(m, node)) continue;
+            for (i = 0; i < d; ++i) c[i] += x[node * (size_t)d + (size_t)i];
+            cnt += 1;
+        }
+        if (!(cnt > 0)) continue;
+        for (i = 0; i < d; ++i) c[i] /= cnt;
+        for (b = s->abeg[a]; b < s->abeg[a + 1]; ++b) {
+            size_t node = s->perm[s->arow[b]];
+            pn_real *Pp = s->P + s->arow[b] * (size_t)(d * nm), rr[3] = {0, 0, 0};
+            if (!PN__FEM_FREE(m, node)) continue;
+            for (i = 0; i < d; ++i) rr[i] = x[node * (size_t)d + (size_t)i] - c[i], size = PN__MAX(size, PN__FABS(rr[i]));
+            for (i = 0; i < d; ++i) Pp[i * nm + i] = 1; /* translations */
+            if (d == 2) Pp[0 * nm + 2] = -rr[1], Pp[1 * nm + 2] = rr[0];
+            else { /* omega x r for omega = e_0, e_1, e_2 */
+                Pp[1 * nm + 3] = -rr[2], Pp[2 * nm + 3] = rr[1];
+                Pp[0 * nm + 4] = rr[2], Pp[2 * nm + 4] = -rr[0];
+                Pp[0 * nm + 5] = -rr[1], Pp[1 * nm + 5] = rr[0];
+            }
+        }
+        for (k = 0; k < nm; ++k) { /* modified Gram-Schmidt over the aggregate's rows */
+            pn_real nrm = 0, ref = k < d ? 1 : size * size; /* a rotation's scale */
+            for (l = 0; l < k; ++l) {
+                pn_real dot = 0;
+                for (b = s->abeg[a]; b < s->abeg[a + 1]; ++b)
+                    for (i = 0; i < d; ++i) {
+                        const pn_real *Pp = s->P + s->arow[b] * (size_t)(d * nm);
+                        dot += Pp[i * nm + k] * Pp[i * nm + l];
+                    }
+                for (b = s->abeg[a]; b < s->abeg[a + 1]; ++b)
+                    for (i = 0; i < d; ++i) {
+                        pn_real *Pp = s->P + s->arow[b] * (size_t)(d * nm);
+                        Pp[i * nm + k] -= dot * Pp[i * nm + l];
+                    }
+            }
+            for (b = s->abeg[a]; b < s->abeg[a + 1]; ++b)
+                for (i = 0; i < d; ++i) nrm += s->P[s->arow[b] * (size_t)(d * nm) + (size_t)(i * nm + k)] * s->P[s->arow[b] * (size_t)(d * nm) + (size_t)(i * nm + k)];
+            nrm = PN__SQRT(nrm);
+            for (b = s->abeg[a]; b < s->abeg[a + 1]; ++b)
+                for (i = 0; i < d; ++i) {
+                    pn_real *Pp = s->P + s->arow[b] * (size_t)(d * nm);
+                    Pp[i * nm + k] = nrm > (pn_real)1e-6 * PN__SQRT(ref) ? Pp[i * nm + k] / nrm : 0;
+                }
+        }
+    }
+    memset(s->cL, 0, sizeof(pn_real) * s->crs[s->cnc]);
+    for (p = 0; p < m->n_nodes; ++p) /* P^T A P over the node blocks (both triangles of A) */
+        for (q = s->brs[p]; q < s->brs[p + 1]; ++q) {
+            size_t kr = (size_t)s->bcol[q], I = s->apos[s->agg[p]], J = s->apos[s->agg[kr]];
+            const pn_real *A = s->bA + q * (size_t)dd, *Pp = s->P + p * (size_t)(d * nm), *Pk = s->P + kr * (size_t)(d * nm);
+            pn_real AP[18], W[36];
+            int diag = kr == p;
+            for (i = 0; i < d; ++i) /* A_pk P_k */
+                for (l = 0; l < nm; ++l) {
+                    pn_real acc = 0;
+                    for (j = 0; j < d; ++j) acc += (diag ? A[i >= j ? i * d + j : j * d + i] : A[i * d + j]) * Pk[j * nm + l];
+                    AP[i * nm + l] = acc;
+                }
+            for (k = 0; k < nm; ++k)
+                for (l = 0; l < nm; ++l) {
+                    pn_real acc = 0;
+                    for (i = 0; i < d; ++i) acc += Pp[i * nm + k] * AP[i * nm + l];
+                    W[k * nm + l] = acc;
+                }
+            for (k = 0; k < nm; ++k)
+                for (l = 0; l < nm; ++l) {
+                    size_t rr = I * (size_t)nm + (size_t)k, cc = J * (size_t)nm + (size_t)l;
+                    if (diag) { /* P_p^T A_pp P_p: symmetric, its lower half once */
+                        if (l <= k) PN__FEM_CADD(s, rr, cc, W[k * nm + l]);
+                    } else if (I != J || k != l) PN__FEM_CADD(s, rr, cc, W[k * nm + l]); /* and its mirror block */
+                    else PN__FEM_CADD(s, rr, cc, 2 * W[k * nm + l]);
+                }
+        }
+    for (q = 0; q < s->cnc; ++q) /* modes an aggregate lacks: decoupled */
+        if (s->cL[s->crs[q] + q - s->cfc[q]] == 0) s->cL[s->crs[q] + q - s->cfc[q]] = 1;
+    return pn__sky_cholesky(s->cfc, s->crs, s->cL, s->cnc);
+}
+
+/* z += P Ac^-1 P^T t */
+static void pn__fem_coarse_correct(const pn__fem *s, size_t n, const pn_real *t, pn_real *z) {
+    int d = s->d, nm = s->nm, i, k;
+    size_t p;
+    memset(s->cv, 0, sizeof(pn_real) * s->cnc);
+    for (p = 0; p < n; ++p) {
+        const pn_real *Pp = s->P + p * (size_t)(d * nm);
+        pn_real *cv = s->cv + s->apos[s->agg[p]] * (size_t)nm;
+        for (k = 0; k < nm; ++k)
+            for (i = 0; i < d; ++i) cv[k] += Pp[i * nm + k] * t[p * (size_t)d + (size_t)i];
+    }
+    pn__sky_solve(s->cfc, s->crs, s->cL, s->cnc, s->cv);
+    for (p = 0; p < n; ++p) {
+        const pn_real *Pp = s->P + p * (size_t)(d * nm), *cv = s->cv + s->apos[s->agg[p]] * (size_t)nm;
+        for (i = 0; i < d; ++i)
+            for (k = 0; k < nm; ++k) z[p * (size_t)d + (size_t)i] += Pp[i * nm + k] * cv[k];
     }
 }
 
@@ -7400,11 +7939,17 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     return PN_OK;
 }
 
-/* the shared CG (>>newton) on the skyline matrix plus the side list, in row order */
+/* the shared CG (>>newton) on the skyline matrix (or the blocks) plus the side list, in row
+   order; the skyline's Cholesky factor (or the blocks' incomplete one) preconditions */
 static void pn__fem_cg_apply(void *ctx, const pn_real *x, pn_real *y) {
     const pn_fem_mesh *m = (const pn_fem_mesh *)ctx;
     const pn__fem *s = (const pn__fem *)m->impl;
     size_t r, c, nu = s->nu;
+    if (s->sparse) {
+        pn__fem_bmul(s, x, y);
+        pn__fem_off_apply(m, x, y);
+        return;
+    }
     for (r = 0; r < nu; ++r) y[r] = 0;
     for (r = 0; r < nu; ++r) {
         const pn_real *Ar = s->A + s->rs[r];
@@ -7420,8 +7965,21 @@ static void pn__fem_cg_apply(void *ctx, const pn_real *x, pn_real *y) {
 static void pn__fem_cg_precond(void *ctx, const pn_real *r, pn_real *z) {
     const pn_fem_mesh *m = (const pn_fem_mesh *)ctx;
     const pn__fem *s = (const pn__fem *)m->impl;
+    if (s->sparse) { /* a two-grid V(1,1) cycle: IC(0) smoothing, the rigid motions' correction */
+        size_t k, nu = s->nu;
+        pn__fem_bic_solve(s, r, z);
+        if (!s->coarse) return;
+        pn__fem_cg_apply(ctx, z, s->pt);
+        for (k = 0; k < nu; ++k) s->pt[k] = r[k] - s->pt[k];
+        pn__fem_coarse_correct(s, m->n_nodes, s->pt, z);
+        pn__fem_cg_apply(ctx, z, s->pt);
+        for (k = 0; k < nu; ++k) s->pt[k] = r[k] - s->pt[k];
+        pn__fem_bic_solve(s, s->pt, s->pz);
+        for (k = 0; k < nu; ++k) z[k] += s->pz[k];
+        return;
+    }
     memcpy(z, r, sizeof(pn_real) * s->nu);
-    pn__fem_solve(s, s->nu, z);
+    pn__sky_solve(s->fc, s->rs, s->L, s->nu, z);
 }
 static pn_real pn__fem_cg_dot(void *ctx, size_t n, const pn_real *a, const pn_real *b) {
     pn_real acc = 0;
@@ -7453,35 +8011,56 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
     size_t nu = s->nu, nd = m->n_nodes * (size_t)m->dim, k;
     int it;
     pn_real tol = o->newton_tol * m->edge_mean, res = 0, gres = 0, gfloor = 0, full_below = PN__FEM_FULL_H * m->edge_mean;
+    pn_real gnorm0 = 0;
     for (it = 0; it < o->newton_max; ++it) {
         pn_real E0, E1, gd = 0, a0, alpha;
         pn_result r;
-        int full = it > 0 && res <= full_below;
+        int full = it > 0 && res <= full_below, capped = 0, loose = 0;
         for (;;) {
+            pn__cg_ops op;
+            int curv = 0;
             s->hflags = full ? 0 : PN_EVAL_PROJECT_PSD;
             r = pn__fem_objective(m, s->xs, 2, &E0);
             s->hflags = PN_EVAL_PROJECT_PSD; /* what every other evaluation uses */
             if (r != PN_OK)
                 return pn__fem_fail(m, r, "implicit step: the energy at an accepted iterate failed (%s, element %ld, node %ld)",
                                     pn_result_string(r), m->error_element, m->error_node);
+            if (s->sparse && s->bmiss)
+                return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "implicit step: %ld Hessian entries fell outside the "
+                                    "block pattern (a bug: please report)", s->bmiss);
             for (k = 0; k < nu; ++k) s->xtry[pn__fem_row(m, k)] = -s->g[k];
-            if (s->n_off) memcpy(s->A, s->L, sizeof(pn_real) * s->rs[nu]); /* kept for CG's products */
+            op.ctx = m, op.apply = pn__fem_cg_apply, op.precond = pn__fem_cg_precond, op.dot = pn__fem_cg_dot, op.curv = &curv;
             st->factorizations++;
-            if (pn__fem_cholesky(s, nu)) break;
+            if (s->sparse) { /* PCG: far from the minimum as tight as the gradient's decrease so far asks
+                                (Eisenstat-Walker), near it (the last step under PN__FEM_FULL_H) to cg_rel_tol */
+                pn_real gn = PN__SQRT(pn__fem_cg_dot(NULL, nu, s->xtry, s->xtry)), eta = o->cg_rel_tol;
+                if (it == 0) gnorm0 = gn;
+                if (it == 0 || res > PN__FEM_FULL_H * m->edge_mean)
+                    eta = PN__MAX(eta, PN__MIN((pn_real)1e-2, gnorm0 > 0 ? gn / gnorm0 : 0)), loose = eta > o->cg_rel_tol;
+                if (pn__fem_bfactor(s)) {
+                    s->coarse = !s->one_level && pn__fem_coarse_build(m, s->xs);
+                    st->cg_iters += pn__pcg(&op, nu, s->cgx, s->xtry, s->cgz, s->cgp, s->cgq, o->cg_max, eta, 0, &capped);
+                    memcpy(s->xtry, s->cgx, sizeof(pn_real) * nu); /* capped or curved: CG from 0 still descends */
+                    if (!(curv && full)) break;
+                }
+            } else {
+                if (s->n_off) memcpy(s->A, s->L, sizeof(pn_real) * s->rs[nu]); /* kept for CG's products */
+                if (pn__sky_cholesky(s->fc, s->rs, s->L, nu)) {
+                    if (s->n_off) { /* self-contact beyond the profile: CG on the whole Hessian, the factor preconditions */
+                        st->cg_iters += pn__pcg(&op, nu, s->cgx, s->xtry, s->cgz, s->cgp, s->cgq, 200, (pn_real)1e-10, 0, &capped);
+                        memcpy(s->xtry, s->cgx, sizeof(pn_real) * nu); /* capped: still a descent direction (CG from 0) */
+                        capped = 0; /* preconditioned by the exact factor of most of it: as good as converged */
+                    } else
+                        pn__sky_solve(s->fc, s->rs, s->L, nu, s->xtry);
+                    break;
+                }
+            }
             if (!full)
                 return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the Hessian is not positive definite (a "
                                     "material's energy is not convex where it was projected)");
             full = 0, full_below = res / 10; /* indefinite here (a saddle on the way): project until
                                                  the steps are 10x shorter */
         }
-        if (s->n_off) { /* self-contact beyond the profile: CG on the whole Hessian, the factor preconditions */
-            pn__cg_ops op;
-            int capped;
-            op.ctx = m, op.apply = pn__fem_cg_apply, op.precond = pn__fem_cg_precond, op.dot = pn__fem_cg_dot;
-            st->cg_iters += pn__pcg(&op, nu, s->cgx, s->xtry, s->cgz, s->cgp, s->cgq, 200, (pn_real)1e-10, 0, &capped);
-            memcpy(s->xtry, s->cgx, sizeof(pn_real) * nu); /* capped: still a descent direction (CG from 0) */
-        } else
-            pn__fem_solve(s, nu, s->xtry);
         for (res = 0, gres = 0, k = 0; k < nu; ++k) {
             s->dir[k] = s->xtry[pn__fem_row(m, k)];
             res = PN__MAX(res, PN__FABS(s->dir[k]));
@@ -7502,7 +8081,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
            rounding): there 1e-6 of the minimization's first residual is enough. The first
            step is always taken: x^n is no answer. */
         if (it == 0) gfloor = PN__MAX(tol, (pn_real)1e-6 * gres); /* or 1e-6 of the first residual */
-        if (res <= tol && gres <= gfloor && it > 0) return PN_OK;
+        if (res <= tol && gres <= gfloor && it > 0 && !capped && !loose) return PN_OK; /* (nor does a loose solve or one cut short) */
         a0 = pn__fem_self_ccd(m, s->xs, s->dir, pn__fem_ccd(m, s->xs, s->dir));
         alpha = pn__armijo(pn__fem_objective_value, m, nu, s->xs, s->dir, E0, gd, a0, s->xtry, &E1);
         if (alpha == 0 && -gd <= (pn_real)1e3 * PN__EPS * PN__FABS(E0) && a0 == 1) {
@@ -7692,6 +8271,39 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
     return PN_OK;
 }
 
+/* choose the step's linear solver and give it its storage (the first step that uses it) */
+static pn_result pn__fem_linear_setup(pn_fem_mesh *m, pn_fem_linear_solver ls) {
+    pn__fem *s = (pn__fem *)m->impl;
+    const pn_allocator *al = &m->desc.allocator;
+    int i;
+    if (ls < PN_FEM_LINEAR_DEFAULT || ls > PN_FEM_LINEAR_PCG)
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: linear_solver %d is not a pn_fem_linear_solver",
+                            (int)ls);
+    s->sparse = ls == PN_FEM_LINEAR_PCG ||
+                (ls == PN_FEM_LINEAR_DEFAULT && (s->sky_mb > PN_FEM_CHOLESKY_MAX_MB || s->sky_gflop > PN_FEM_CHOLESKY_MAX_GFLOP));
+    if (s->sparse) {
+        for (s->n_mov = 0, i = 0; i < m->n_obstacles; ++i) {
+            const pn_real *v = m->obstacles[i].velocity_m_s;
+            s->n_mov += v[0] != 0 || v[1] != 0 || v[2] != 0;
+        }
+        if (pn__fem_sparse_reserve(m) != PN_OK)
+            return pn__fem_fail(m, PN_ERROR_OUT_OF_MEMORY, "pn_fem_step_implicit: out of memory for the sparse Hessian of %lu "
+                                "nodes", (unsigned long)m->n_nodes);
+        return PN_OK;
+    }
+    if (!s->L) {
+        s->L = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
+        s->A = (pn_real *)pn_alloc(al, sizeof(pn_real) * s->nnz);
+        if (!s->L || !s->A) {
+            pn_free(al, s->L), pn_free(al, s->A);
+            s->L = s->A = NULL;
+            return pn__fem_fail(m, PN_ERROR_OUT_OF_MEMORY, "pn_fem_step_implicit: out of memory for the Cholesky factor "
+                                "(%.0f MB; PN_FEM_LINEAR_PCG needs far less)", s->sky_mb);
+        }
+    }
+    return PN_OK;
+}
+
 PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_implicit_desc *desc, pn_fem_stats *stats) {
     pn_fem_implicit_desc o;
     pn_fem_stats st;
@@ -7707,9 +8319,12 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
     if (!o.newton_max) o.newton_max = 100;
     if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
     if (!o.max_halvings) o.max_halvings = 5;
-    if (o.fixed_point_iters < 0 || o.newton_max < 0 || !pn__finite(o.newton_tol))
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: fixed_point_iters, newton_max and newton_tol "
-                            "must be positive");
+    if (!(o.cg_rel_tol > 0)) o.cg_rel_tol = (pn_real)1e-6;
+    if (!o.cg_max) o.cg_max = 5000;
+    if (o.fixed_point_iters < 0 || o.newton_max < 0 || !pn__finite(o.newton_tol) || o.cg_max < 0 || !pn__finite(o.cg_rel_tol))
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: fixed_point_iters, newton_max, newton_tol, "
+                            "cg_max and cg_rel_tol must be positive");
+    if ((r = pn__fem_linear_setup(m, o.linear_solver)) != PN_OK) return r;
     pn__fem_backup(m);
     for (level = 0; level <= (o.max_halvings < 0 ? 0 : o.max_halvings); ++level) {
         int sub, nsub = 1 << level;
@@ -7718,6 +8333,7 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
         for (sub = 0, r = PN_OK; sub < nsub && r == PN_OK; ++sub) r = pn__fem_implicit_once(m, dt / nsub, &o, &st);
         if (r == PN_OK) {
             m->steps++;
+            st.linear_solver = ((pn__fem *)m->impl)->sparse ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY;
             st.min_distance_m = m->n_obstacles ? pn__fem_min_distance(m, m->time_s) : -1;
             st.kappa = m->kappa;
             {

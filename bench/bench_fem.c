@@ -79,7 +79,7 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
         if (r->implicit && fmod(t + 1e-9, r->dt) > 1e-6) continue; /* not a frame this run's steps land on */
         if (max_sim > 0 && t > max_sim + 1e-9) t = max_sim;
         t0 = pn_ex_seconds();
-        if (!pn_frame_advance(m, t, r->implicit, r->implicit ? r->dt : 1.0, r->courant, c->passes ? &id : NULL, &r->steps, &newton,
+        if (!pn_frame_advance(m, t, r->implicit, r->implicit ? r->dt : 1.0, r->courant, c->passes ? &id : NULL, &r->steps, &newton, NULL,
                               &r->dmin)) {
             r->wall += pn_ex_seconds() - t0;
             fprintf(stderr, "  %s %s dt %g: failed at t = %g s: %s\n", r->role, pn_frame_energy_names[r->energy], r->dt,

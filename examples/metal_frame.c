@@ -30,7 +30,7 @@ static int cmp3(const void *pa, const void *pb) {
 
 typedef struct frame_cli {
     int dim, implicit, frames_per_s, png, vtu, obj, pass, alternating;
-    const char *energy, *out;
+    const char *energy, *out, *solver;
     double dt, E, speed, wall, h, depth, crush, friction, newton_tol, regularizer;
 } frame_cli;
 
@@ -52,6 +52,8 @@ static void usage(FILE *f) {
                "  --depth M                 3D: extrusion depth [0.03]\n"
                "  --friction MU             Coulomb coefficient of ground and plate [0.3]\n"
                "  --passes N                F0 fixed-point passes [1]\n"
+               "  --solver default|cholesky|pcg   implicit: the Newton systems' solver; default:\n"
+               "                            Cholesky unless its factor is too large [default]\n"
                "  --newton-tol X            pn_fem_implicit_desc.newton_tol [1e-5]\n"
                "  --regularizer W           PlasticityNet's w, strain form (-1: off) [1]\n"
                "  --fps N                   frames per simulated second [25]\n"
@@ -202,12 +204,14 @@ int main(int argc, char **argv) {
     pn_pnet net;
     pn_fem_implicit_desc id;
     int k, energy, frames, f, fails = 0;
-    long steps = 0, newton = 0;
+    long steps = 0, newton = 0, cg = 0;
+    static const char *const solvers[3] = {"default", "cholesky", "pcg"};
+    int solver;
     size_t e, i;
     char why[256], path[1024];
     double t_end, wall_s = 0, dmin = 1e300, hmax = 0, top = 0;
     memset(&o, 0, sizeof o);
-    o.dim = 2, o.implicit = 1, o.energy = "exact", o.out = "build/metal_frame_frames", o.dt = 1e-2, o.E = 2e11;
+    o.dim = 2, o.implicit = 1, o.energy = "exact", o.solver = "default", o.out = "build/metal_frame_frames", o.dt = 1e-2, o.E = 2e11;
     o.speed = 0.5, o.wall = 0.01, o.h = 0, o.depth = 0.03, o.crush = 0.4, o.friction = 0.3, o.frames_per_s = 25, o.pass = 1;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
@@ -231,6 +235,7 @@ int main(int argc, char **argv) {
             o.implicit = !strcmp(v, "implicit"), ++k;
         } else if (!strcmp(a, "--energy")) o.energy = v, ++k;
         else if (!strcmp(a, "--out")) o.out = v, ++k;
+        else if (!strcmp(a, "--solver")) o.solver = v, ++k;
         else {
             if (!pn_ex_number("metal_frame", a, v, &x)) return 2;
             ++k;
@@ -254,6 +259,7 @@ int main(int argc, char **argv) {
         }
     }
     if ((energy = pn_ex_choice("metal_frame", "--energy", o.energy, pn_frame_energy_names, PN_FRAME_ENERGIES)) < 0) return 2;
+    if ((solver = pn_ex_choice("metal_frame", "--solver", o.solver, solvers, 3)) < 0) return 2;
     pn_frame_default(&fd, o.dim);
     if (!o.h) o.h = fd.h;
     if ((o.dim != 2 && o.dim != 3) || !(o.dt > 0) || !(o.E > 0) || !(o.speed > 0) || !(o.crush > 0 && o.crush < 0.9) ||
@@ -278,11 +284,11 @@ int main(int argc, char **argv) {
             (unsigned long)m->n_nodes, (unsigned long)m->n_elems, o.implicit ? "implicit" : "explicit",
             o.implicit ? o.energy : "(return mapping)", o.dt, o.E, o.speed, frames);
     memset(&id, 0, sizeof id);
-    id.fixed_point_iters = o.pass, id.newton_tol = (pn_real)o.newton_tol;
+    id.fixed_point_iters = o.pass, id.newton_tol = (pn_real)o.newton_tol, id.linear_solver = (pn_fem_linear_solver)solver;
     for (f = 0; f <= frames; ++f) {
         double t0 = pn_ex_seconds();
         int ok = pn_frame_advance(m, f == 0 ? 0 : fmin(t_end, (double)f / o.frames_per_s), o.implicit, o.dt, 0.5, &id, &steps,
-                                  &newton, &dmin);
+                                  &newton, &cg, &dmin);
         wall_s += pn_ex_seconds() - t0;
         if (!ok) {
             fprintf(stderr, "\nmetal_frame: a step at t = %g s failed: %s\n", (double)m->time_s, pn_fem_error(m));
@@ -309,10 +315,10 @@ int main(int argc, char **argv) {
     for (i = 0; i < m->n_nodes; ++i) top = fmax(top, m->x[i * (size_t)o.dim + 1]);
     printf("{\"dim\": %d, \"nodes\": %lu, \"elements\": %lu, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
            "\"E\": %g, \"steps\": %ld, \"sim_s\": %.6g, \"wall_s\": %.4g, \"wall_per_sim_s\": %.4g, \"newton_per_step\": %.2f, "
-           "\"min_distance_m\": %.4g, \"max_plastic_strain\": %.4g, \"top_drop_m\": %.5g, \"ok\": %s}\n",
+           "\"cg_per_newton\": %.1f, \"min_distance_m\": %.4g, \"max_plastic_strain\": %.4g, \"top_drop_m\": %.5g, \"ok\": %s}\n",
            o.dim, (unsigned long)m->n_nodes, (unsigned long)m->n_elems, o.implicit ? "implicit" : "explicit",
            o.implicit ? o.energy : "return_mapping", o.dt, o.E, steps, (double)m->time_s, wall_s,
-           m->time_s > 0 ? wall_s / m->time_s : 0, steps ? (double)newton / steps : 0, dmin, hmax,
+           m->time_s > 0 ? wall_s / m->time_s : 0, steps ? (double)newton / steps : 0, newton ? (double)cg / newton : 0, dmin, hmax,
            PN_FRAME_GAP + fd.height - top, fails ? "false" : "true");
     pn_fem_destroy(m);
     return fails;

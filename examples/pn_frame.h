@@ -133,10 +133,11 @@ done:
 }
 
 /* Advance to time t: implicit steps of at most dt (id: NULL for the defaults), or explicit
-   ones of min(dt, courant pn_fem_stable_dt). Totals into *steps and *newton, the smallest
-   contact distance into *dmin. 0 on a failed step (the message in pn_fem_error). */
+   ones of min(dt, courant pn_fem_stable_dt). Totals into *steps, *newton and *cg (optional:
+   conjugate-gradient iterations), the smallest contact distance into *dmin. 0 on a failed
+   step (the message in pn_fem_error). */
 static int pn_frame_advance(pn_fem_mesh *m, double t, int implicit, double dt, double courant, const pn_fem_implicit_desc *id,
-                            long *steps, long *newton, double *dmin) {
+                            long *steps, long *newton, long *cg, double *dmin) {
     while (m->time_s < t - 1e-12) {
         pn_fem_stats st;
         pn_result r;
@@ -150,6 +151,7 @@ static int pn_frame_advance(pn_fem_mesh *m, double t, int implicit, double dt, d
         if (r != PN_OK) return 0;
         ++*steps;
         *newton += st.newton_iters;
+        if (cg) *cg += st.cg_iters;
         if (st.min_distance_m < *dmin) *dmin = st.min_distance_m;
     }
     return 1;

@@ -174,16 +174,30 @@ static pn_real t_fem_E(pn_fem_mesh *m, const pn_real *x) {
     return E;
 }
 
+/* entry (r, c) (rows of unknowns in the solver's order) of the assembled Hessian, from the
+   skyline or from the blocks */
+static double t_fem_hget(const pn__fem *s, size_t r, size_t c) {
+    size_t a = r > c ? r : c, b = r > c ? c : r, d = (size_t)s->d;
+    if (s->sparse) {
+        size_t q;
+        for (q = s->brs[a / d]; q < s->brs[a / d + 1]; ++q)
+            if ((size_t)s->bcol[q] == b / d) return s->bA[q * d * d + (a % d) * d + b % d];
+        return 0;
+    }
+    return b >= s->fc[a] ? s->L[s->rs[a] + b - s->fc[a]] : 0;
+}
+
 /* The incremental potential's gradient and Hessian against central differences, with an
    obstacle within dhat of some nodes and a moving one (its offset an unknown), both with
    friction (sliding and in the smoothed stick range), in 2D and 3D,
-   for Neo-Hookean (convex here: the projection changes nothing) and exact von Mises. */
+   for Neo-Hookean (convex here: the projection changes nothing) and exact von Mises; the
+   Hessian as the skyline holds it and as PCG's blocks do. */
 PN_TEST(fem_objective_fd) {
     int dim, mat;
     for (dim = 2; dim <= 3; ++dim)
-        for (mat = 0; mat < 2; ++mat) {
+        for (mat = 0; mat < 4; ++mat) {
             pn_fem_grid g = t_fem_grid(dim, 2, 2, 1, 0.02, 0.02, 0.01);
-            pn_fem_group grp = mat ? t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e6, 1000)
+            pn_fem_group grp = mat & 1 ? t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e6, 1000)
                                    : t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
             pn_mpm_collider c;
             t_fem t;
@@ -197,7 +211,7 @@ PN_TEST(fem_objective_fd) {
                 PN_CHECK(0);
                 continue;
             }
-            if (mat) PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+            if (mat & 1) PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
             memset(&c, 0, sizeof c);
             c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)0.5; /* the floor, 2e-5 below */
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
@@ -208,6 +222,7 @@ PN_TEST(fem_objective_fd) {
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
             s = (pn__fem *)t.m->impl;
             /* the step's setup as pn__fem_implicit_once does it, then a random state */
+            PN_CHECK(pn__fem_linear_setup(t.m, mat & 2 ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY) == PN_OK);
             s->dt = (pn_real)1e-3, s->t_end = (pn_real)1e-3;
             pn__fem_setup(t.m);
             s->n_mov = 1, s->mov[0] = 1;
@@ -253,8 +268,7 @@ PN_TEST(fem_objective_fd) {
                     for (l = 0; l < nu; ++l) g0[l] = (gp[l] - s->g[l]) / (2 * h); /* column k by FD */
                     pn__fem_objective(t.m, x, 2, &E);
                     for (l = 0; l < nu; ++l) {
-                        size_t r = pn__fem_row(t.m, k), cc = pn__fem_row(t.m, l), a = r > cc ? r : cc, b = r > cc ? cc : r;
-                        double an = b >= s->fc[a] ? s->L[s->rs[a] + b - s->fc[a]] : 0;
+                        double an = t_fem_hget(s, pn__fem_row(t.m, k), pn__fem_row(t.m, l));
                         herr = fmax(herr, fabs(g0[l] - an));
                         hmax = fmax(hmax, fabs(an));
                     }
@@ -541,6 +555,79 @@ PN_TEST(fem_explicit_implicit) {
         PN_CHECK_LE(err, 0.03 * 0.03 * sqrt((double)dim)); /* 3% of the block's diagonal */
         t_fem_free(&a);
         t_fem_free(&b);
+    }
+}
+
+/* PN_FEM_LINEAR_PCG against PN_FEM_LINEAR_CHOLESKY: a von Mises block in 2D and 3D dropped on
+   a rough floor and pressed by a rough plate moving down (the plate's offset an unknown whose
+   row couples to every node), 12 steps of 5 ms: 6 mm, a fifth of its height, past yield. Both minimize the same
+   potential to newton_tol: the final nodes agree to a small fraction of an edge. A bad
+   linear_solver is refused with the mesh unchanged; stats say which solver ran, and the
+   default switches to PCG where the factor would cost more than PN_FEM_CHOLESKY_MAX_GFLOP. */
+PN_TEST(fem_pcg) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_fem_grid g = t_fem_grid(dim, 5, 5, 3, 0.03, 0.03, 0.018);
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
+        t_fem a[2];
+        pn_mpm_collider c;
+        pn_fem_implicit_desc id;
+        pn_fem_stats st;
+        double apart = 0, plastic = 0;
+        int s, step, ok = 1;
+        size_t k;
+        g.lo_m[1] = (pn_real)1e-4;
+        for (s = 0; s < 2; ++s) {
+            if (!t_fem_make(&a[s], &g, &grp, -9.81)) {
+                PN_CHECK(0);
+                return;
+            }
+            PN_CHECK(pn_fem_group_set_energy(a[s].m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+            memset(&c, 0, sizeof c);
+            c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)0.3;
+            PN_CHECK(pn_fem_add_obstacle(a[s].m, &c, NULL) == PN_OK);
+            c.normal[1] = -1, c.center_m[1] = (pn_real)(0.03 + 3e-4), c.velocity_m_s[1] = (pn_real)-0.1;
+            PN_CHECK(pn_fem_add_obstacle(a[s].m, &c, NULL) == PN_OK);
+        }
+        memset(&id, 0, sizeof id);
+        id.linear_solver = (pn_fem_linear_solver)7; /* refused, nothing moves */
+        PN_CHECK(pn_fem_step_implicit(a[1].m, (pn_real)5e-3, &id, &st) == PN_ERROR_INVALID_ARGUMENT);
+        PN_CHECK(strstr(pn_fem_error(a[1].m), "linear_solver") != NULL);
+        PN_CHECK(a[1].m->time_s == 0 && !memcmp(a[1].m->x, a[1].X, sizeof(pn_real) * a[1].nn * (size_t)dim));
+        for (step = 0; step < 12 && ok; ++step)
+            for (s = 0; s < 2; ++s) {
+                id.linear_solver = s ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_DEFAULT;
+                if (pn_fem_step_implicit(a[s].m, (pn_real)5e-3, &id, &st) != PN_OK) {
+                    fprintf(stderr, "  fem_pcg %dD %s, step %d: %s\n", dim, s ? "PCG" : "Cholesky", step, pn_fem_error(a[s].m));
+                    ok = 0;
+                    break;
+                }
+                PN_CHECK(st.linear_solver == (s ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY)); /* small: the default factors */
+                PN_CHECK(s ? st.cg_iters > 0 : 1);
+            }
+        PN_CHECK(ok);
+        for (k = 0; k < a[0].nn; ++k) {
+            double d2 = 0;
+            int i;
+            for (i = 0; i < dim; ++i) d2 += pow(a[0].m->x[k * (size_t)dim + (size_t)i] - a[1].m->x[k * (size_t)dim + (size_t)i], 2);
+            apart = fmax(apart, sqrt(d2) / a[0].m->edge_mean);
+        }
+        for (k = 0; k < a[0].ne; ++k) plastic = fmax(plastic, a[0].m->h[k]);
+        printf("    [fem_pcg] %dD: after 12 steps PCG and Cholesky %.2g of an edge apart; plate %.1f mm down, max plastic "
+               "state %.3f\n", dim, apart, 12 * 5e-3 * 0.1 * 1e3, plastic);
+        PN_CHECK(plastic > 0.01);          /* crushed past yield */
+        PN_CHECK_LE(apart, 1e-2);          /* newton_tol 1e-5 of an edge per step, a 100x margin */
+        { /* the default: Cholesky unless its factor would be too costly (here: made to look so) */
+            pn__fem *sv = (pn__fem *)a[0].m->impl;
+            double keep = sv->sky_gflop;
+            id.linear_solver = PN_FEM_LINEAR_DEFAULT;
+            sv->sky_gflop = 2.0 * PN_FEM_CHOLESKY_MAX_GFLOP;
+            PN_CHECK(pn_fem_step_implicit(a[0].m, (pn_real)5e-3, &id, &st) == PN_OK && st.linear_solver == PN_FEM_LINEAR_PCG);
+            sv->sky_gflop = keep;
+            PN_CHECK(pn_fem_step_implicit(a[0].m, (pn_real)5e-3, &id, &st) == PN_OK && st.linear_solver == PN_FEM_LINEAR_CHOLESKY);
+        }
+        t_fem_free(&a[0]);
+        t_fem_free(&a[1]);
     }
 }
 
@@ -1007,7 +1094,7 @@ static int t_seg_tri(const pn_real *p, const pn_real *q, const pn_real *a, const
    1e-3 s and explicit. */
 PN_TEST(fem_self_contact_3d) {
     int implicit;
-    for (implicit = 0; implicit < 2; ++implicit) {
+    for (implicit = 0; implicit < 3; ++implicit) { /* 2: implicit with PCG (the pairs all off its block pattern) */
         pn_fem_grid g = t_fem_grid(3, 8, 2, 2, 0.08, 0.02, 0.02);
         pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
         pn_fem_desc fd;
@@ -1018,6 +1105,9 @@ PN_TEST(fem_self_contact_3d) {
         char why[256];
         double p0 = 0, p1 = 0, dmin = 1, t = 0, T = 0.04, r = 0.7071067811865476, vz[2] = {0, 0}, mz[2] = {0, 0};
         long crossings = 0;
+        pn_fem_implicit_desc id;
+        memset(&id, 0, sizeof id);
+        id.linear_solver = implicit == 2 ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_DEFAULT;
         pn_fem_grid_mesh(&g, NULL, NULL, &nn, &ne);
         X = (pn_real *)malloc(sizeof(pn_real) * 6 * nn);
         el = (int *)malloc(sizeof(int) * 8 * ne);
@@ -1051,7 +1141,7 @@ PN_TEST(fem_self_contact_3d) {
                 pn_fem_stable_dt(m, &sdt);
                 dt = fmin(0.5 * sdt, T - t);
             }
-            if ((implicit ? pn_fem_step_implicit(m, (pn_real)dt, NULL, &st) : pn_fem_step_explicit(m, (pn_real)dt, &st)) != PN_OK) {
+            if ((implicit ? pn_fem_step_implicit(m, (pn_real)dt, &id, &st) : pn_fem_step_explicit(m, (pn_real)dt, &st)) != PN_OK) {
                 fprintf(stderr, "  fem_self_contact_3d: %s\n", pn_fem_error(m));
                 PN_CHECK(0);
                 break;
@@ -1077,7 +1167,7 @@ PN_TEST(fem_self_contact_3d) {
             vz[k >= nn] += m->mass[k] * m->v[3 * k + 2], mz[k >= nn] += m->mass[k];
         }
         printf("    [fem_self_contact_3d] %s: smallest distance %.3g m, %ld crossings, z momentum %.6f -> %.6f, after: lower %.3f, "
-               "upper %.3f m/s\n", implicit ? "implicit dt 1e-3" : "explicit", dmin, crossings, p0, p1, vz[0] / mz[0], vz[1] / mz[1]);
+               "upper %.3f m/s\n", implicit == 2 ? "implicit dt 1e-3, PCG" : implicit ? "implicit dt 1e-3" : "explicit", dmin, crossings, p0, p1, vz[0] / mz[0], vz[1] / mz[1]);
         PN_CHECK(dmin > 0);
         PN_CHECK(crossings == 0);
         PN_CHECK(vz[0] / mz[0] < -0.3 && vz[1] / mz[1] > vz[0] / mz[0]); /* they hit and parted */
@@ -1249,6 +1339,7 @@ static const pn_test_case pn_tests_fem[] = {
     {"fem_newton_tail", fem_newton_tail},
     {"fem_cantilever", fem_cantilever},
     {"fem_explicit_implicit", fem_explicit_implicit},
+    {"fem_pcg", fem_pcg},
     {"fem_friction_slide", fem_friction_slide},
     {"fem_pair_distance_fd", fem_pair_distance_fd},
     {"fem_self_contact_3d", fem_self_contact_3d},
