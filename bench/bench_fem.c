@@ -23,7 +23,8 @@
    --ref-cache DIR: keep the references' frames in DIR and read them on a rerun; --no-check:
    skip the reference's convergence check; --energies, --dts: only these implicit runs (comma
    lists); --no-speed: the accuracy part only; --passes N: F0 fixed-point passes of the implicit
-   steps (pn_fem_implicit_desc.fixed_point_iters; lagged and PlasticityNet) [1]. */
+   steps (pn_fem_implicit_desc.fixed_point_iters; lagged and PlasticityNet) [1]; --solver: the
+   implicit steps' linear solver (pn_fem_implicit_desc.linear_solver) [the default]. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
 #include "../examples/pn_frame.h"
@@ -41,6 +42,7 @@ typedef struct run {
 
 typedef struct cfg {
     int dim, quick, no_check, no_speed, passes;
+    pn_fem_linear_solver solver; /* --solver: the implicit steps' (0: the default)          */
     unsigned energies, dts;      /* the implicit energies (bit PN_FRAME_*) and steps (bit of dts[]) run */
     double soft_E, window, T, speed, h;
     const char *out, *ref_cache, *only;
@@ -65,7 +67,7 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
     size_t nd, k;
     r->ok = 1, r->err_mean = r->err_max = r->wall = r->sim = r->newton = r->hmax = 0, r->steps = 0, r->dmin = 1e300;
     memset(&id, 0, sizeof id);
-    id.fixed_point_iters = c->passes;
+    id.fixed_point_iters = c->passes, id.linear_solver = c->solver;
     scene(c, r->energy, r->E, &d);
     if (!pn_frame_create(&d, &m, &net, why, sizeof why)) {
         fprintf(stderr, "bench_fem: %s\n", why);
@@ -79,7 +81,7 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
         if (r->implicit && fmod(t + 1e-9, r->dt) > 1e-6) continue; /* not a frame this run's steps land on */
         if (max_sim > 0 && t > max_sim + 1e-9) t = max_sim;
         t0 = pn_ex_seconds();
-        if (!pn_frame_advance(m, t, r->implicit, r->implicit ? r->dt : 1.0, r->courant, c->passes ? &id : NULL, &r->steps, &newton, NULL,
+        if (!pn_frame_advance(m, t, r->implicit, r->implicit ? r->dt : 1.0, r->courant, &id, &r->steps, &newton, NULL,
                               &r->dmin)) {
             r->wall += pn_ex_seconds() - t0;
             fprintf(stderr, "  %s %s dt %g: failed at t = %g s: %s\n", r->role, pn_frame_energy_names[r->energy], r->dt,
@@ -219,7 +221,7 @@ int main(int argc, char **argv) {
         else if (!v) {
             fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
                             "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n"
-                            "                 [--passes N]\n");
+                            "                 [--passes N] [--solver cholesky|pcg]\n");
             return 2;
         } else if (!strcmp(a, "--dim")) dim_arg = atoi(v), ++k;
         else if (!strcmp(a, "--soft-E")) c.soft_E = atof(v), ++k;
@@ -227,6 +229,8 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--out")) c.out = v, ++k;
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
         else if (!strcmp(a, "--passes")) c.passes = atoi(v), ++k;
+        else if (!strcmp(a, "--solver") && (!strcmp(v, "cholesky") || !strcmp(v, "pcg")))
+            c.solver = !strcmp(v, "pcg") ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY, ++k;
         else if (!strcmp(a, "--energies") || !strcmp(a, "--dts")) { /* comma lists */
             int is_e = a[2] == 'e', count = is_e ? PN_FRAME_ENERGIES : 3, j;
             unsigned mask = 0;
@@ -247,7 +251,7 @@ int main(int argc, char **argv) {
         } else {
             fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
                             "                 [--energies exact,pnet,lagged,pnet_nh,nh] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n"
-                            "                 [--passes N]\n");
+                            "                 [--passes N] [--solver cholesky|pcg]\n");
             return 2;
         }
     }

@@ -10,8 +10,7 @@
    level); Cholesky is skipped where one factorization would cost more than --max-gflop
    (default 30) GFLOP. Reported: wall seconds per step, Newton iterations per step,
    CG iterations per Newton iteration, each solver's storage, the largest distance between the
-   two solvers' final node positions over the mesh's edge (both solve to newton_tol), and
-   which solver PN_FEM_LINEAR_DEFAULT picks. Writes DIR/bench_fem_linear.md and .csv;
+   two solvers' final node positions over the mesh's edge (both solve to newton_tol). Writes DIR/bench_fem_linear.md and .csv;
    progress on stderr. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
@@ -27,7 +26,7 @@ typedef struct lrun {
 } lrun;
 
 static void run_solver(double h, double window, pn_fem_linear_solver ls, int one_level, lrun *r, double *sky_mb, double *sky_gflop,
-                       double *blk_mb, size_t *nodes, double *edge, int *deflt) {
+                       double *blk_mb, size_t *nodes, double *edge) {
     pn_frame_desc fd;
     pn_fem_mesh *m;
     pn_pnet net;
@@ -46,7 +45,6 @@ static void run_solver(double h, double window, pn_fem_linear_solver ls, int one
     s->one_level = one_level;
     *sky_mb = s->sky_mb, *sky_gflop = s->sky_gflop, *nodes = m->n_nodes, *edge = m->edge_mean;
     *blk_mb = 2.0 * (double)(s->nblk + 2 * m->n_nodes) * 9 * sizeof(pn_real) / 1e6; /* A, L (and the moving plate's row) */
-    *deflt = s->sky_mb > PN_FEM_CHOLESKY_MAX_MB || s->sky_gflop > PN_FEM_CHOLESKY_MAX_GFLOP;
     memset(&id, 0, sizeof id);
     id.linear_solver = ls;
     r->steps = 0;
@@ -114,25 +112,24 @@ int main(int argc, char **argv) {
                 "matrices. *Apart*: the largest distance between the two solvers' final nodes over the mean edge. Cholesky is "
                 "not run where a factorization would cost more than %g GFLOP.\n\n"
                 "| h (mm) | nodes | unknowns | Cholesky storage (MB) | GFLOP per factorization | PCG storage (MB) | "
-                "Cholesky s / step | Newton / step | PCG s / step | Newton / step | CG / Newton | PCG / Cholesky time | apart | "
-                "default |%s\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|%s\n",
+                "Cholesky s / step | Newton / step | PCG s / step | Newton / step | CG / Newton | PCG / Cholesky time | apart |"
+                "%s\n|---|---|---|---|---|---|---|---|---|---|---|---|---|%s\n",
             window, max_gflop, one ? " one level: s / step | Newton / step | CG / Newton |" : "", one ? "---|---|---|" : "");
     fprintf(csv, "h_m,nodes,unknowns,chol_mb,chol_gflop,pcg_mb,chol_s_per_step,chol_newton,pcg_s_per_step,pcg_newton,"
-                 "pcg_cg_per_newton,apart_over_edge,default\n");
+                 "pcg_cg_per_newton,apart_over_edge\n");
     for (i = 0; i < ns; ++i) {
         lrun ch, pc, o1;
         double mb, gf, bmb, edge, apart = -1;
         size_t nodes, q;
-        int deflt;
         memset(&ch, 0, sizeof ch);
         memset(&pc, 0, sizeof pc);
         memset(&o1, 0, sizeof o1);
         fprintf(stderr, "h %g: PCG ...\n", sizes[i]);
-        run_solver(sizes[i], window, PN_FEM_LINEAR_PCG, 0, &pc, &mb, &gf, &bmb, &nodes, &edge, &deflt);
+        run_solver(sizes[i], window, PN_FEM_LINEAR_PCG, 0, &pc, &mb, &gf, &bmb, &nodes, &edge);
         fprintf(stderr, "  %.1f s per step, Newton %.1f, CG %.1f\n", pc.wall / (double)(pc.steps ? pc.steps : 1), pc.newton, pc.cg);
         if (gf <= max_gflop) {
             fprintf(stderr, "h %g: Cholesky ...\n", sizes[i]);
-            run_solver(sizes[i], window, PN_FEM_LINEAR_CHOLESKY, 0, &ch, &mb, &gf, &bmb, &nodes, &edge, &deflt);
+            run_solver(sizes[i], window, PN_FEM_LINEAR_CHOLESKY, 0, &ch, &mb, &gf, &bmb, &nodes, &edge);
             fprintf(stderr, "  %.1f s per step, Newton %.1f\n", ch.wall / (double)(ch.steps ? ch.steps : 1), ch.newton);
             if (ch.x && pc.x)
                 for (apart = 0, q = 0; q < nodes * 3; q += 3) {
@@ -145,18 +142,17 @@ int main(int argc, char **argv) {
         if (ch.ran) fprintf(md, "%s%.3g | %.1f | ", ch.ok ? "" : "failed: ", ch.wall / (double)(ch.steps ? ch.steps : 1), ch.newton);
         else fprintf(md, "not run | - | ");
         fprintf(md, "%s%.3g | %.1f | %.0f | ", pc.ok ? "" : "failed: ", pc.wall / (double)(pc.steps ? pc.steps : 1), pc.newton, pc.cg);
-        if (ch.ran) fprintf(md, "%.2f | %.1e | ", pc.wall / ch.wall, apart);
-        else fprintf(md, "- | - | ");
-        fprintf(md, "%s |", deflt ? "PCG" : "Cholesky");
+        if (ch.ran) fprintf(md, "%.2f | %.1e |", pc.wall / ch.wall, apart);
+        else fprintf(md, "- | - |");
         if (one) {
             fprintf(stderr, "h %g: PCG, one level ...\n", sizes[i]);
-            run_solver(sizes[i], window, PN_FEM_LINEAR_PCG, 1, &o1, &mb, &gf, &bmb, &nodes, &edge, &deflt);
+            run_solver(sizes[i], window, PN_FEM_LINEAR_PCG, 1, &o1, &mb, &gf, &bmb, &nodes, &edge);
             fprintf(md, " %s%.3g | %.1f | %.0f |", o1.ok ? "" : "failed: ", o1.wall / (double)(o1.steps ? o1.steps : 1), o1.newton, o1.cg);
         }
         fprintf(md, "\n");
-        fprintf(csv, "%g,%lu,%lu,%.1f,%.3f,%.2f,%g,%g,%g,%g,%g,%g,%s\n", sizes[i], (unsigned long)nodes, (unsigned long)nodes * 3, mb, gf,
+        fprintf(csv, "%g,%lu,%lu,%.1f,%.3f,%.2f,%g,%g,%g,%g,%g,%g\n", sizes[i], (unsigned long)nodes, (unsigned long)nodes * 3, mb, gf,
                 bmb, ch.ran ? ch.wall / (double)(ch.steps ? ch.steps : 1) : -1, ch.newton,
-                pc.wall / (double)(pc.steps ? pc.steps : 1), pc.newton, pc.cg, apart, deflt ? "pcg" : "cholesky");
+                pc.wall / (double)(pc.steps ? pc.steps : 1), pc.newton, pc.cg, apart);
         fflush(md), fflush(csv);
         free(ch.x), free(pc.x), free(o1.x);
     }

@@ -563,7 +563,7 @@ PN_TEST(fem_explicit_implicit) {
    row couples to every node), 12 steps of 5 ms: 6 mm, a fifth of its height, past yield. Both minimize the same
    potential to newton_tol: the final nodes agree to a small fraction of an edge. A bad
    linear_solver is refused with the mesh unchanged; stats say which solver ran, and the
-   default switches to PCG where the factor would cost more than PN_FEM_CHOLESKY_MAX_GFLOP. */
+   default switches to PCG where the factor would cost more than PN_FEM_CHOLESKY_MAX_GFLOP_*. */
 PN_TEST(fem_pcg) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
@@ -621,7 +621,7 @@ PN_TEST(fem_pcg) {
             pn__fem *sv = (pn__fem *)a[0].m->impl;
             double keep = sv->sky_gflop;
             id.linear_solver = PN_FEM_LINEAR_DEFAULT;
-            sv->sky_gflop = 2.0 * PN_FEM_CHOLESKY_MAX_GFLOP;
+            sv->sky_gflop = 2.0 * (dim == 2 ? PN_FEM_CHOLESKY_MAX_GFLOP_2D : PN_FEM_CHOLESKY_MAX_GFLOP_3D);
             PN_CHECK(pn_fem_step_implicit(a[0].m, (pn_real)5e-3, &id, &st) == PN_OK && st.linear_solver == PN_FEM_LINEAR_PCG);
             sv->sky_gflop = keep;
             PN_CHECK(pn_fem_step_implicit(a[0].m, (pn_real)5e-3, &id, &st) == PN_OK && st.linear_solver == PN_FEM_LINEAR_CHOLESKY);
