@@ -3,7 +3,8 @@
    from 5 mm to finer elements.
    Build: cc -std=c99 -O2 bench/bench_fem_linear.c -lm -o bench_fem_linear   (or: make bench-fem)
    Usage: bench_fem_linear [--sizes 5e-3,3.333e-3,...] [--window S] [--max-gflop G] [--one-level]
-                           [--out DIR]
+                           [--out DIR] [--storage]
+   --storage: only each solver's storage per size, as a table on stdout (no steps run).
    Per element size h: the first --window seconds (default 0.01: one step of dt 1e-2 s, the
    plate's first contact, the hardest step of the run) with PN_FEM_LINEAR_CHOLESKY and with
    PN_FEM_LINEAR_PCG (and, with --one-level, PCG on the block IC(0) alone, without the coarse
@@ -62,7 +63,7 @@ static void run_solver(double h, double window, pn_fem_linear_solver ls, int one
 
 int main(int argc, char **argv) {
     double sizes[MAX_SIZES] = {5e-3, 3.333e-3, 2.5e-3, 2e-3, 1.667e-3}, window = 0.01, max_gflop = 30;
-    int ns = 5, k, i, one = 0;
+    int ns = 5, k, i, one = 0, storage = 0;
     const char *out = "build";
     char path[1024];
     FILE *md, *csv;
@@ -70,6 +71,10 @@ int main(int argc, char **argv) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--one-level")) {
             one = 1;
+            continue;
+        }
+        if (!strcmp(a, "--storage")) {
+            storage = 1;
             continue;
         }
         if (!v) {
@@ -94,6 +99,29 @@ int main(int argc, char **argv) {
             fprintf(stderr, "bench_fem_linear: unknown flag '%s'\n", a);
             return 2;
         }
+    }
+    if (storage) { /* the skyline's estimate, and PCG's arrays as its first step allocates them */
+        printf("| h (mm) | nodes | unknowns | Cholesky storage (MB) | GFLOP per factorization | PCG: blocks of A and L (MB) | "
+               "coarse level (MB) |\n|---|---|---|---|---|---|---|\n");
+        for (i = 0; i < ns; ++i) {
+            pn_frame_desc fd;
+            pn_fem_mesh *m;
+            pn_pnet net;
+            char why[256];
+            pn__fem *s;
+            pn_frame_default(&fd, 3);
+            fd.h = sizes[i];
+            if (!pn_frame_create(&fd, &m, &net, why, sizeof why) || pn__fem_linear_setup(m, PN_FEM_LINEAR_PCG) != PN_OK) {
+                fprintf(stderr, "bench_fem_linear: h %g: %s\n", sizes[i], why);
+                return 1;
+            }
+            s = (pn__fem *)m->impl;
+            printf("| %.3g | %lu | %lu | %.0f | %.2f | %.1f | %.1f |\n", sizes[i] * 1e3, (unsigned long)m->n_nodes,
+                   (unsigned long)m->n_nodes * 3, s->sky_mb, s->sky_gflop, 2.0 * (double)s->bcap * 9 * sizeof(pn_real) / 1e6,
+                   (double)(s->crs[s->cnc] + s->cnc + m->n_nodes * 18) * sizeof(pn_real) / 1e6);
+            pn_fem_destroy(m);
+        }
+        return 0;
     }
     if (!pn_ex_mkdirs(out)) return 1;
     snprintf(path, sizeof path, "%s/bench_fem_linear.md", out);
