@@ -10,6 +10,8 @@
    WHAT IS HERE (greppable banners in the implementation: // >>name)
    ======================================================================================
      >>world     creation, particle groups, particles (structure of arrays), colliders
+     >>drive     particles driven rigidly (held, translated, spun) and loads on particles,
+                 applied by explicit steps; selection by box; overwriting a state
      >>fill      particles in boxes, spheres, cylinders and closed meshes (pn_mpm_fill)
      >>stable-dt the explicit step bound from the wave speed (pn_mpm_stable_dt)
      >>bin       per implicit step: each particle's quadratic B-spline stencil, particles
@@ -98,6 +100,8 @@ extern "C" {
 
 #define PN_MPM_MAX_GROUPS 16
 #define PN_MPM_MAX_COLLIDERS 16
+#define PN_MPM_MAX_DRIVES 16 /* pn_mpm_drive_particles */
+#define PN_MPM_MAX_LOADS 16  /* pn_mpm_add_load */
 
 typedef enum pn_mpm_boundary {
     PN_MPM_BOUNDARY_STICKY = 0,  /* velocity equals the obstacle's                           */
@@ -357,6 +361,18 @@ typedef struct pn_mpm_stats {
                                     substeps); else 0                                       */
 } pn_mpm_stats;
 
+/* >>drive: a rigidly driven set of particles, and a load (internal) */
+typedef struct pn__mpm_drive {
+    size_t n, *idx;              /* the particles, and their positions at t0 (dim each)      */
+    pn_real *x0, t0, center[3], vel[3], omega[3];
+    int on;                      /* 0: released                                               */
+} pn__mpm_drive;
+typedef struct pn__mpm_load {
+    size_t n, *idx;
+    pn_real acc[3], t_end;       /* the acceleration force / mass, until t_end (inf: always)  */
+    int on;
+} pn__mpm_load;
+
 /* >>multigrid: one grid level of the implicit Hessian (internal) */
 #define PN__MPM_MG_MAX 8     /* most grid levels                                               */
 #define PN__MPM_MG_DENSE 192 /* the coarsest level is factored (Cholesky) up to these unknowns */
@@ -395,6 +411,9 @@ typedef struct pn_mpm_world {
     int n_groups;
     pn_mpm_collider colliders[PN_MPM_MAX_COLLIDERS];
     int n_colliders;
+    pn__mpm_drive drives[PN_MPM_MAX_DRIVES]; /* >>drive: pn_mpm_drive_particles, pn_mpm_add_load */
+    pn__mpm_load loads[PN_MPM_MAX_LOADS];
+    int n_drives, n_loads;
     pn_real time_s;
     long steps;
     long newton_left;            /* implicit: Newton iterations the current call may still take */
@@ -597,6 +616,51 @@ PN_API pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c, 
    through it. PN_ERROR_INVALID_ARGUMENT for a bad index, PN_ERROR_NONFINITE for NaN or inf. */
 PN_API pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real *center_m,
                                       const pn_real *velocity_m_s);
+
+/* ---- driven particles and loads (explicit steps) ------------------------------------------ */
+
+/* Drive particles rigidly (a wall a body is attached to, the clamped ends of a bar under
+   tension and torsion, a moving lid): from now (w->time_s = t0) particle p follows
+   x_p(t) = c(t) + R(t) (x_p(t0) - c(t0)), c(t) = center_m + (t - t0) velocity_m_s, R(t) the
+   rotation by angular_velocity_rad_s (dim = 3: the axis times the rate, right-handed; 2D: [2]
+   is the rate about z) times (t - t0). NULL velocity or angular velocity: zero (held in
+   place); center_m may be NULL without rotation. Each explicit step sets the grid nodes
+   the driven particles touch to the rigid motion's velocity (their reaction holds the rest
+   of the body), then puts the driven particles at their exact x_p(t) with the rigid
+   velocity and velocity gradient. n particles by index, each active and in no other drive;
+   *index (optional) names the drive for pn_mpm_release_drive. PN_ERROR_CAPACITY beyond
+   PN_MPM_MAX_DRIVES, PN_ERROR_NONFINITE / PN_ERROR_INVALID_ARGUMENT naming the culprit, with
+   nothing changed; PN_ERROR_OUT_OF_MEMORY. Implicit steps refuse a world with a drive
+   (PN_ERROR_UNSUPPORTED). */
+PN_API pn_result pn_mpm_drive_particles(pn_mpm_world *w, size_t n, const size_t *particles,
+                                        const pn_real *velocity_m_s, const pn_real *center_m,
+                                        const pn_real *angular_velocity_rad_s, int *index);
+
+/* Let drive `index` go: its particles move freely from the next step, at the velocity they
+   have. Releasing a released drive is a no-op. */
+PN_API pn_result pn_mpm_release_drive(pn_mpm_world *w, int index);
+
+/* Apply force_N (dim reals, in total) to n particles for duration_s from now (0: until
+   pn_mpm_remove_load), shared in proportion to their masses: a poke, a hand, a thruster.
+   Each explicit step adds m_p a dt to the momentum the particle scatters, a = force / (the
+   particles' mass). Errors as pn_mpm_drive_particles (PN_MPM_MAX_LOADS). */
+PN_API pn_result pn_mpm_add_load(pn_mpm_world *w, size_t n, const size_t *particles, const pn_real *force_N,
+                                 pn_real duration_s, int *index);
+PN_API pn_result pn_mpm_remove_load(pn_mpm_world *w, int index);
+
+/* The active particles inside the box lo .. hi (dim reals each, m): their indices, ascending,
+   into out (room for cap), *count how many there are (may exceed cap: then out holds the
+   first cap). For pn_mpm_drive_particles and pn_mpm_add_load. */
+PN_API pn_result pn_mpm_select_box(const pn_mpm_world *w, const pn_real *lo, const pn_real *hi, size_t *out,
+                                   size_t cap, size_t *count);
+
+/* Overwrite the kinematic state of particles first .. first + n - 1 (to restore a checkpoint,
+   or set an initial motion): x, v (dim reals each), C (the affine velocity, dim^2), F (dim^2);
+   a NULL array keeps those values. time_s >= 0 sets w->time_s (negative: unchanged). All or
+   nothing: PN_ERROR_NONFINITE, PN_ERROR_INVALID_ARGUMENT (outside the walls, a particle that
+   does not exist), naming the particle. */
+PN_API pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, const pn_real *x, const pn_real *v,
+                                      const pn_real *C, const pn_real *F, pn_real time_s);
 
 /* One explicit step of dt_s seconds (symplectic Euler, APIC or AFLIP, return mapping after the F
    update). On failure the world is unchanged and w->error_particle names the culprit. */
@@ -1085,6 +1149,8 @@ PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
 #undef PN__MPM_FREE
     {
         int l;
+        for (l = 0; l < w->n_drives; ++l) pn_free(&a, w->drives[l].idx), pn_free(&a, w->drives[l].x0);
+        for (l = 0; l < w->n_loads; ++l) pn_free(&a, w->loads[l].idx);
         for (l = 0; l < PN__MPM_MG_MAX; ++l) {
             pn__mpm_level *L = &w->mg[l];
             void *m[] = {L->node, L->dof, L->mark, L->nbr, L->A, L->Dinv, L->x, L->b, L->r, L->crow};
@@ -1437,6 +1503,229 @@ PN__DEF pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real
         c->center_m[i] = center_m[i] - w->time_s * c->velocity_m_s[i];
     }
     return PN_OK;
+}
+
+/* ======================================================================================
+   >>drive: particles driven rigidly and loads on particles. A drive is a Dirichlet condition
+   carried by material: the grid nodes its particles touch take the rigid motion's velocity
+   (pn__mpm_xdrive_grid), and its particles are then put at their exact positions
+   (pn__mpm_xdrive_state). A load adds m_p a dt to the momentum a particle scatters.
+   ====================================================================================== */
+
+/* checks a particle list: each exists, is active, and (drives) is in no other live drive */
+static pn_result pn__mpm_list_check(pn_mpm_world *w, size_t n, const size_t *idx, int drive, const char *fn) {
+    size_t k, j;
+    int a;
+    if (n == 0 || !idx) return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: no particles (n = 0 or NULL)", fn);
+    for (k = 0; k < n; ++k) {
+        if (idx[k] >= w->n || !w->active[idx[k]]) {
+            w->error_particle = idx[k] < w->n ? idx[k] : (size_t)-1;
+            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu (entry %lu) %s", fn, (unsigned long)idx[k],
+                                (unsigned long)k, idx[k] >= w->n ? "does not exist" : "is not active");
+        }
+    }
+    if (!drive) return PN_OK;
+    for (a = 0; a < w->n_drives; ++a) {
+        const pn__mpm_drive *D = &w->drives[a];
+        if (!D->on) continue;
+        for (k = 0; k < n; ++k)
+            for (j = 0; j < D->n; ++j)
+                if (D->idx[j] == idx[k]) {
+                    w->error_particle = idx[k];
+                    return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu is already driven by drive %d "
+                                        "(pn_mpm_release_drive it first)", fn, (unsigned long)idx[k], a);
+                }
+    }
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_drive_particles(pn_mpm_world *w, size_t n, const size_t *particles, const pn_real *velocity_m_s,
+                                         const pn_real *center_m, const pn_real *angular_velocity_rad_s, int *index) {
+    static const char *fn = "pn_mpm_drive_particles";
+    pn__mpm_drive D;
+    pn_result r;
+    int d, i, a, spin = 0, fail = 0;
+    size_t k;
+    PN_ASSERT(w);
+    d = w->dim;
+    w->error[0] = 0;
+    if ((velocity_m_s && !pn__all_finite(d, velocity_m_s)) || (center_m && !pn__all_finite(d, center_m)) ||
+        (angular_velocity_rad_s && !pn__all_finite(3, angular_velocity_rad_s)))
+        return pn__mpm_fail(w, PN_ERROR_NONFINITE, "%s: velocity_m_s, center_m or angular_velocity_rad_s is NaN or infinite", fn);
+    memset(&D, 0, sizeof D);
+    for (i = 0; i < 3; ++i) {
+        D.vel[i] = velocity_m_s && i < d ? velocity_m_s[i] : 0;
+        D.center[i] = center_m && i < d ? center_m[i] : 0;
+        D.omega[i] = angular_velocity_rad_s && (d == 3 || i == 2) ? angular_velocity_rad_s[i] : 0;
+        spin |= D.omega[i] != 0;
+    }
+    if (spin && !center_m) return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: a rotation needs center_m", fn);
+    if ((r = pn__mpm_list_check(w, n, particles, 1, fn)) != PN_OK) return r;
+    for (a = 0; a < w->n_drives && w->drives[a].on; ++a) {} /* a released slot is reused */
+    if (a == PN_MPM_MAX_DRIVES) a = -1;
+    if (a < 0) return pn__mpm_fail(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_DRIVES = %d are in use", fn, PN_MPM_MAX_DRIVES);
+    D.idx = (size_t *)pn__mpm_alloc(&w->desc, n, sizeof(size_t), &fail);
+    D.x0 = (pn_real *)pn__mpm_alloc(&w->desc, n * (size_t)d, sizeof(pn_real), &fail);
+    if (fail) {
+        pn_free(&w->desc.allocator, D.idx);
+        pn_free(&w->desc.allocator, D.x0);
+        return pn__mpm_fail(w, PN_ERROR_OUT_OF_MEMORY, "%s: out of memory for %lu particles", fn, (unsigned long)n);
+    }
+    D.n = n;
+    D.t0 = w->time_s;
+    D.on = 1;
+    memcpy(D.idx, particles, sizeof(size_t) * n);
+    for (k = 0; k < n; ++k) memcpy(D.x0 + k * (size_t)d, w->x + particles[k] * (size_t)d, sizeof(pn_real) * (size_t)d);
+    pn_free(&w->desc.allocator, w->drives[a].idx); /* a released drive's */
+    pn_free(&w->desc.allocator, w->drives[a].x0);
+    w->drives[a] = D;
+    if (a == w->n_drives) w->n_drives++;
+    if (index) *index = a;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_release_drive(pn_mpm_world *w, int index) {
+    PN_ASSERT(w);
+    w->error[0] = 0;
+    if (index < 0 || index >= w->n_drives || index >= PN_MPM_MAX_DRIVES)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_release_drive: drive %d does not exist (%d drives)", index,
+                            w->n_drives);
+    w->drives[index].on = 0;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_add_load(pn_mpm_world *w, size_t n, const size_t *particles, const pn_real *force_N,
+                                  pn_real duration_s, int *index) {
+    static const char *fn = "pn_mpm_add_load";
+    pn__mpm_load L;
+    pn_result r;
+    pn_real mass = 0;
+    int d, i, a, fail = 0;
+    size_t k;
+    PN_ASSERT(w);
+    d = w->dim;
+    w->error[0] = 0;
+    if (!force_N || !pn__all_finite(d, force_N))
+        return pn__mpm_fail(w, PN_ERROR_NONFINITE, "%s: force_N is NULL, NaN or infinite", fn);
+    if (!pn__finite(duration_s) || !(duration_s >= 0))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: duration_s = %g must be finite and >= 0 (0: until removed)", fn,
+                            (double)duration_s);
+    if ((r = pn__mpm_list_check(w, n, particles, 0, fn)) != PN_OK) return r;
+    for (a = 0; a < w->n_loads && w->loads[a].on; ++a) {}
+    if (a == PN_MPM_MAX_LOADS) a = -1;
+    if (a < 0) return pn__mpm_fail(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_LOADS = %d are in use", fn, PN_MPM_MAX_LOADS);
+    memset(&L, 0, sizeof L);
+    L.idx = (size_t *)pn__mpm_alloc(&w->desc, n, sizeof(size_t), &fail);
+    if (fail) return pn__mpm_fail(w, PN_ERROR_OUT_OF_MEMORY, "%s: out of memory for %lu particles", fn, (unsigned long)n);
+    memcpy(L.idx, particles, sizeof(size_t) * n);
+    for (k = 0; k < n; ++k) mass += w->mass[particles[k]];
+    for (i = 0; i < d; ++i) L.acc[i] = force_N[i] / mass;
+    L.n = n;
+    L.t_end = duration_s > 0 ? w->time_s + duration_s : (pn_real)HUGE_VAL;
+    L.on = 1;
+    pn_free(&w->desc.allocator, w->loads[a].idx);
+    w->loads[a] = L;
+    if (a == w->n_loads) w->n_loads++;
+    if (index) *index = a;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_remove_load(pn_mpm_world *w, int index) {
+    PN_ASSERT(w);
+    w->error[0] = 0;
+    if (index < 0 || index >= w->n_loads || index >= PN_MPM_MAX_LOADS)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_remove_load: load %d does not exist (%d loads)", index,
+                            w->n_loads);
+    w->loads[index].on = 0;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_select_box(const pn_mpm_world *w, const pn_real *lo, const pn_real *hi, size_t *out, size_t cap,
+                                    size_t *count) {
+    size_t p, c = 0;
+    int d, i;
+    PN_ASSERT(w && lo && hi && count && (out || cap == 0));
+    d = w->dim;
+    *count = 0;
+    if (!pn__all_finite(d, lo) || !pn__all_finite(d, hi)) return PN_ERROR_NONFINITE;
+    for (p = 0; p < w->n; ++p) {
+        int in = w->active[p];
+        for (i = 0; i < d; ++i) in &= w->x[p * (size_t)d + (size_t)i] >= lo[i] && w->x[p * (size_t)d + (size_t)i] <= hi[i];
+        if (!in) continue;
+        if (c < cap) out[c] = p;
+        c++;
+    }
+    *count = c;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, const pn_real *x, const pn_real *v,
+                                       const pn_real *C, const pn_real *F, pn_real time_s) {
+    size_t p;
+    int d, dd;
+    PN_ASSERT(w);
+    d = w->dim, dd = d * d;
+    w->error[0] = 0;
+    if (first > w->n || n > w->n - first)
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_particles: particles %lu .. %lu + %lu do not exist "
+                            "(%lu particles)", (unsigned long)first, (unsigned long)first, (unsigned long)n, (unsigned long)w->n);
+    if (!pn__finite(time_s)) return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_set_particles: time_s is NaN or infinite");
+    for (p = 0; p < n; ++p) {
+        const char *bad = NULL;
+        if (x && !pn__all_finite(d, x + p * (size_t)d)) bad = "x";
+        else if (v && !pn__all_finite(d, v + p * (size_t)d)) bad = "v";
+        else if (C && !pn__all_finite(dd, C + p * (size_t)dd)) bad = "C";
+        else if (F && !pn__all_finite(dd, F + p * (size_t)dd)) bad = "F";
+        if (bad) {
+            w->error_particle = first + p;
+            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_set_particles: %s of particle %lu is NaN or infinite", bad,
+                                (unsigned long)(first + p));
+        }
+        if (x && !pn__mpm_inside(w, x + p * (size_t)d)) {
+            w->error_particle = first + p;
+            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_particles: x of particle %lu is outside the walls",
+                                (unsigned long)(first + p));
+        }
+    }
+    if (x) memcpy(w->x + first * (size_t)d, x, sizeof(pn_real) * n * (size_t)d);
+    if (v) memcpy(w->v + first * (size_t)d, v, sizeof(pn_real) * n * (size_t)d);
+    if (C) memcpy(w->C + first * (size_t)dd, C, sizeof(pn_real) * n * (size_t)dd);
+    if (F) memcpy(w->F + first * (size_t)dd, F, sizeof(pn_real) * n * (size_t)dd);
+    if (time_s >= 0) w->time_s = time_s;
+    w->rec_ok = 0;
+    w->n_lag = 0;
+    return PN_OK;
+}
+
+/* the rigid motion of drive D at time t: its centre c(t), and x(t) of a point that was at x0
+   at t0 (Rodrigues: rotation by |omega| (t - t0) about omega) */
+static void pn__mpm_drive_at(const pn__mpm_drive *D, int d, pn_real t, const pn_real *x0, pn_real *c, pn_real *x) {
+    pn_real s = t - D->t0, r[3] = {0, 0, 0}, wn = 0, k[3] = {0, 0, 0}, th, cs, sn, kr, kx[3];
+    int i;
+    for (i = 0; i < 3; ++i) c[i] = D->center[i] + s * D->vel[i];
+    if (!x) return;
+    for (i = 0; i < d; ++i) r[i] = x0[i] - D->center[i];
+    for (i = 0; i < 3; ++i) wn += D->omega[i] * D->omega[i];
+    wn = PN__SQRT(wn);
+    if (!(wn > 0)) {
+        for (i = 0; i < d; ++i) x[i] = c[i] + r[i];
+        return;
+    }
+    for (i = 0; i < 3; ++i) k[i] = D->omega[i] / wn;
+    th = wn * s, cs = PN__COS(th), sn = PN__SIN(th);
+    kr = k[0] * r[0] + k[1] * r[1] + k[2] * r[2];
+    kx[0] = k[1] * r[2] - k[2] * r[1], kx[1] = k[2] * r[0] - k[0] * r[2], kx[2] = k[0] * r[1] - k[1] * r[0];
+    for (i = 0; i < d; ++i) x[i] = c[i] + r[i] * cs + kx[i] * sn + k[i] * kr * (1 - cs);
+}
+
+/* the rigid velocity at a point x when the centre is at c: vel + omega x (x - c) */
+static void pn__mpm_drive_vel(const pn__mpm_drive *D, int d, const pn_real *c, const pn_real *x, pn_real *v) {
+    pn_real r[3] = {0, 0, 0};
+    int i;
+    for (i = 0; i < d; ++i) r[i] = x[i] - c[i];
+    v[0] = D->vel[0] + D->omega[1] * r[2] - D->omega[2] * r[1];
+    v[1] = D->vel[1] + D->omega[2] * r[0] - D->omega[0] * r[2];
+    if (d == 3) v[2] = D->vel[2] + D->omega[0] * r[1] - D->omega[1] * r[0];
 }
 
 PN__DEF void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentum) {
@@ -4338,6 +4627,17 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     w->error[0] = 0;
     if (!pn__finite(dt) || !(dt > 0))
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_implicit: dt_s = %g must be finite and > 0", (double)dt);
+    {
+        int a;
+        for (a = 0; a < w->n_drives; ++a)
+            if (w->drives[a].on)
+                return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_step_implicit: drive %d is on: drives and loads work "
+                                    "with explicit steps (pn_mpm_step_explicit)", a);
+        for (a = 0; a < w->n_loads; ++a)
+            if (w->loads[a].on && w->loads[a].t_end > w->time_s)
+                return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_step_implicit: load %d is on: drives and loads work "
+                                    "with explicit steps (pn_mpm_step_explicit)", a);
+    }
     memset(&o, 0, sizeof o);
     if (desc) o = *desc;
     if (!pn__finite(o.newton_tol) || !pn__finite(o.cg_rel_tol) || !pn__finite(o.cg_forcing_max) ||
@@ -4948,6 +5248,98 @@ static size_t pn__mpm_xgrid(pn_mpm_world *w, pn_real dt) {
     return count;
 }
 
+/* >>drive in the explicit step: the 3^dim stencil of a point x on the dense grid, its nodes'
+   flat indices, weights and positions; returns the count */
+static int pn__mpm_xstencil(const pn_mpm_world *w, const pn_real *x, size_t *node, pn_real *wt, pn_real (*pos)[3]) {
+    int d = w->dim, base[3], o[3] = {0, 0, 0}, i, n = 0;
+    pn_real fx[3], W[3][3];
+    pn__mpm_base(w, x, base, fx);
+    for (i = 0; i < d; ++i) PN__MPM_SPLINE(W[i], fx[i]);
+    for (o[0] = 0; o[0] < 3; ++o[0])
+        for (o[1] = 0; o[1] < 3; ++o[1])
+            for (o[2] = 0; o[2] < (d == 3 ? 3 : 1); ++o[2], ++n) {
+                size_t f = 0;
+                wt[n] = 1;
+                for (i = 0; i < d; ++i) {
+                    f += (size_t)(base[i] + o[i]) * w->stride[i];
+                    wt[n] *= W[i][o[i]];
+                    pos[n][i] = w->desc.origin_m[i] + (pn_real)(base[i] + o[i]) * w->desc.dx_m;
+                }
+                node[n] = f;
+            }
+    return n;
+}
+
+/* loads: each loaded particle adds m_p a times the part of [t, t + dt] inside the load's window
+   to the momentum of its nodes (before the grid update divides by the mass) */
+static void pn__mpm_xloads(pn_mpm_world *w, pn_real dt) {
+    int d = w->dim, a, s, i, ns;
+    for (a = 0; a < w->n_loads; ++a) {
+        const pn__mpm_load *L = &w->loads[a];
+        pn_real span = L->on ? PN__MIN(dt, L->t_end - w->time_s) : 0;
+        size_t k, node[27];
+        pn_real wt[27], pos[27][3];
+        if (!(span > 0)) continue;
+        for (k = 0; k < L->n; ++k) {
+            size_t p = L->idx[k];
+            if (!w->active[p]) continue;
+            ns = pn__mpm_xstencil(w, w->x + p * (size_t)d, node, wt, pos);
+            for (s = 0; s < ns; ++s)
+                for (i = 0; i < d; ++i) w->gdense[node[s] * 4 + 1 + (size_t)i] += wt[s] * w->mass[p] * L->acc[i] * span;
+        }
+    }
+}
+
+/* drives: the nodes a driven particle touches take the rigid velocity at mid-step (the chord
+   of a rotation to second order; the particles themselves land exactly, pn__mpm_xdrive_state) */
+static void pn__mpm_xdrive_grid(pn_mpm_world *w, pn_real dt) {
+    int d = w->dim, a, s, ns;
+    for (a = 0; a < w->n_drives; ++a) {
+        const pn__mpm_drive *D = &w->drives[a];
+        pn_real c[3], wt[27], pos[27][3];
+        size_t k, node[27];
+        if (!D->on) continue;
+        pn__mpm_drive_at(D, d, w->time_s + dt / 2, NULL, c, NULL);
+        for (k = 0; k < D->n; ++k) {
+            size_t p = D->idx[k];
+            if (!w->active[p]) continue;
+            ns = pn__mpm_xstencil(w, w->x + p * (size_t)d, node, wt, pos);
+            for (s = 0; s < ns; ++s)
+                if (w->gdense[node[s] * 4] > 0) pn__mpm_drive_vel(D, d, c, pos[s], w->gdense + node[s] * 4 + 1);
+        }
+    }
+}
+
+/* drives after G2P: each driven particle at its exact position at t + dt, with the rigid
+   velocity and velocity gradient (a particle the step failed on, or one the motion would
+   carry through a wall, keeps what G2P made of it) */
+static void pn__mpm_xdrive_state(pn_mpm_world *w, pn_real dt) {
+    int d = w->dim, dd = d * d, a, i;
+    for (a = 0; a < w->n_drives; ++a) {
+        const pn__mpm_drive *D = &w->drives[a];
+        pn_real c[3], xn[3], Wm[9] = {0};
+        size_t k;
+        if (!D->on) continue;
+        if (d == 2) Wm[1] = -D->omega[2], Wm[2] = D->omega[2];
+        else {
+            Wm[1] = -D->omega[2], Wm[2] = D->omega[1], Wm[3] = D->omega[2];
+            Wm[5] = -D->omega[0], Wm[6] = -D->omega[1], Wm[7] = D->omega[0];
+        }
+        for (k = 0; k < D->n; ++k) {
+            size_t p = D->idx[k];
+            int in = 1;
+            if (!w->active[p] || !w->sactive[p] || (w->pstat[p] & 0xcff)) continue;
+            pn__mpm_drive_at(D, d, w->time_s + dt, D->x0 + k * (size_t)d, c, xn);
+            for (i = 0; i < d; ++i) in &= xn[i] >= w->wall_lo[i] && xn[i] <= w->wall_hi[i];
+            if (!in) continue;
+            memcpy(w->sx + p * (size_t)d, xn, sizeof(pn_real) * (size_t)d);
+            pn__mpm_drive_vel(D, d, c, xn, w->sv + p * (size_t)d);
+            memcpy(w->sC + p * (size_t)dd, Wm, sizeof(pn_real) * (size_t)dd);
+            w->srow[p] = pn__mpm_row_of(w, xn);
+        }
+    }
+}
+
 /* After G2P: the touched blocks back to zero, as the next P2G expects the grid */
 static void pn__mpm_xclear(pn_mpm_world *w) {
     int d = w->dim;
@@ -5351,7 +5743,9 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     if (!w->rec_ok && (r = pn__mpm_xrecords(w, dt)) != PN_OK) return r;
     w->rec_ok = 1;
     pn__mpm_xp2g(w, dt);
+    if (w->n_loads) pn__mpm_xloads(w, dt);
     st.active_nodes = pn__mpm_xgrid(w, dt);
+    if (w->n_drives) pn__mpm_xdrive_grid(w, dt);
     { /* G2P in index order (the particle arrays stream), retired particles copied, and the
          statistics: integer counts and a max, the same whatever the thread count */
         size_t n_plastic = 0, n_left = 0, n_alive = 0;
@@ -5407,6 +5801,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
                 v2max = PN__MAX(v2max, sp);
             }
         }
+        if (w->n_drives) pn__mpm_xdrive_state(w, dt);
         pn__mpm_xclear(w);
         if ((any & 0xcff) && (r = pn__mpm_first_error(w, dt)) != PN_OK) return r;
         st.plastic = n_plastic;
