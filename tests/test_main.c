@@ -5,6 +5,7 @@
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
+#include "../plastinet_rom.h"
 #include "pn_test.h"
 #ifdef _OPENMP
 #include <omp.h> /* test_mpm.c compares 1 and 2 threads */
@@ -19,6 +20,7 @@
 #include "test_mpm.c"     /* pn_tests_mpm: explicit MPM on small scenes                 */
 #include "test_scene.c"   /* pn_tests_scene: fill helpers, stable dt, large steps, errors */
 #include "test_fem.c"     /* pn_tests_fem: FEM meshes, energies, contact, Newton        */
+#include "test_rom.c"     /* pn_tests_rom: reduced-order MPM (maps, projections, the step) */
 
 #define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
@@ -33,6 +35,7 @@ int main(int argc, char **argv) {
     pn_test_run(pn_tests_mpm, PN_COUNT(pn_tests_mpm), filter, &passed, &failed);
     pn_test_run(pn_tests_scene, PN_COUNT(pn_tests_scene), filter, &passed, &failed);
     pn_test_run(pn_tests_fem, PN_COUNT(pn_tests_fem), filter, &passed, &failed);
+    pn_test_run(pn_tests_rom, PN_COUNT(pn_tests_rom), filter, &passed, &failed);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

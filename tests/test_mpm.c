@@ -1989,7 +1989,9 @@ static void mpm_drive_exact(pn_test_ctx *pn__t) {
         if (!w) return;
         g = t_mpm_group(w, PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE, 2e4);
         w->desc.parallel_min_particles = 1;
+#ifdef _OPENMP
         omp_set_num_threads(t);
+#endif
         n = t_mpm_block(w, g, lo, sz, NULL);
         PN_CHECK(pn_mpm_select_box(w, blo, bhi, sel, 4096, &cnt) == PN_OK);
         PN_CHECK(cnt > 0 && cnt < n);
@@ -2025,7 +2027,9 @@ static void mpm_drive_exact(pn_test_ctx *pn__t) {
         PN_CHECK(pn_mpm_step_explicit(w, dt, NULL) == PN_OK);
         pn_mpm_destroy(w);
     }
+#ifdef _OPENMP
     omp_set_num_threads(2);
+#endif
     free(keep);
 }
 

@@ -1,0 +1,1734 @@
+/* plastinet_rom.h - v0.1 - reduced-order MPM on a learned deformation map, on plastinet.h.
+   Public domain or MIT, your choice: see the end of plastinet.h.
+
+   Do this in exactly one C or C++ file, after plastinet.h:
+       #define PLASTINET_IMPLEMENTATION
+       #include "plastinet.h"
+       #include "plastinet_rom.h"
+       #include "models/rom_cylinder.h"          // a generated model (gen/rom_export.py)
+
+   WHAT IT DOES (Chen, Xiao, Chen, Carlberg, Grinspun 2023: model reduction for MPM on a
+   learned deformation map; docs/rom.md has the method and the measured errors)
+   A small MLP g(X, xhat) maps a reference point X and a latent vector xhat (a few numbers)
+   to the deformed position x. Its Jacobians give the deformation gradient F = dg/dX and the
+   velocity v = dg/dxhat vhat of every point of the body, at any resolution. A step moves a
+   few sampled points by one MPM step in the full space (the quadrature around them found
+   from the map), then projects their new velocities and positions back onto the latent by
+   least squares (Algorithm 2 of the paper):
+     quadrature  LAGRANGIAN: the body's own points near the samples (Algorithm 3);
+                 EULERIAN: l^dim points per grid cell around the samples, each mapped back
+                 to X by Newton on g(X, xhat) = x (Algorithm 4), so no point is tracked
+     projection  LINEAR: vhat from the velocities, xhat += dt vhat (Eq. 23);
+                 NONLINEAR: vhat as well, xhat by Gauss-Newton on the positions (Eqs. 21-22)
+     sampling    new random points every step, at least boundary_samples per drive (Sec. 3.3)
+   The reduced step costs the same whatever the body's point count; drawing the body costs
+   one evaluation of g per drawn point (pn_rom_map, pn_rom_positions), paid only when drawn.
+
+   QUICK START
+       pn_rom_desc d;  pn_rom_world *w;  char why[256];  pn_rom_region base;
+       memset(&d, 0, sizeof d);                         // zeroed fields mean defaults
+       d.model = pn_rom_model_cylinder();  d.gravity[1] = -9.81;
+       pn_rom_create(&d, &w, why, sizeof why);          // the model's own point lattice
+       memset(&base, 0, sizeof base);  base.hi[0] = 0.024;   // hold the points with X < 2.4 cm
+       pn_rom_drive(w, &base, NULL, NULL, NULL, NULL);
+       for (;;) { pn_rom_step(w, 1.0 / 144, NULL);  pn_rom_map(w, n, X, x, NULL); draw(x); }
+
+   MEMORY: pn_rom_create allocates the points, the float weights and the step's scratch for
+   the sample count it is given; the first steps grow the quadrature buffers to what the
+   scene needs (doubling), after which a step allocates nothing.
+   ERRORS: every call that fails returns its pn_result, leaves the world as it was, and
+   pn_rom_error(w) says why, naming the argument, point or model field at fault.
+   THREADS: with -fopenmp the map evaluations (the bulk of a step) run on threads, each
+   point into its own slot; sums over points run in point order on one thread, so the bits
+   do not depend on the thread count.
+*/
+#ifndef PLASTINET_ROM_H
+#define PLASTINET_ROM_H
+#ifndef PLASTINET_H
+#error "include plastinet.h first"
+#endif
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define PN_ROM_FORMAT_VERSION 1
+#define PN_ROM_MAX_LATENT 32   /* d_hat                                                      */
+#define PN_ROM_MAX_WIDTH 64    /* a hidden layer of g                                        */
+#define PN_ROM_MAX_LAYERS 8    /* linear layers of g                                         */
+#define PN_ROM_MAX_DRIVES 8
+#define PN_ROM_MAX_LOADS 16
+
+/* g's activation: the kind of map */
+enum {
+    PN_ROM_AFFINE = 0,         /* no network: x = X + b + A X, xhat = (b, A row-major), d + d^2
+                                  latents (pn_rom_affine_model): an affine body             */
+    PN_ROM_ELU = 1             /* an MLP with ELU (alpha 1) hidden layers                     */
+};
+
+/* A deformation map, as gen/rom_export.py writes it (models/rom_*.h). */
+typedef struct pn_rom_model {
+    int format_version;            /* PN_ROM_FORMAT_VERSION                                  */
+    const char *name;
+    int dim, latent;               /* d, d_hat                                               */
+    int n_layers;                  /* linear layers of g (hidden + 1)                        */
+    const int *width;              /* n_layers + 1: d + d_hat, hidden widths ..., d          */
+    const double *const *weight;   /* per layer: width[l+1] x width[l], row-major            */
+    const double *const *bias;     /* per layer: width[l+1]                                  */
+    int activation;                /* PN_ROM_ELU, PN_ROM_AFFINE                              */
+    double in_lo[3], in_hi[3];     /* Xn = 2 (X - in_lo) / (in_hi - in_lo) - 1               */
+    double out_mean[3], out_std[3];/* x = out_mean + out_std net(Xn, xhat)                   */
+    const double *latent_rest;     /* d_hat: the latent of the rest state (NULL: zeros)      */
+    const double *latent_std;      /* d_hat: spread of the training latents (NULL: ones)     */
+    double cell_m;                 /* the reference domain: occupancy cells of this size     */
+    double origin_m[3];            /* from this corner                                       */
+    int cells[3];                  /* per axis (0: no domain, every X is material)           */
+    const unsigned char *occupied; /* (i cells[1] + j) cells[2] + k: 1 = material            */
+    double youngs_pa, poisson, density_kg_m3; /* the training data's material                */
+    double dx_m;                   /* its MPM grid, particles per cell per axis,             */
+    int per_axis;                  /* and snapshot interval                                  */
+    double frame_dt_s;
+} pn_rom_model;
+
+/* Checks a model (format, sizes, finite weights); PN_ERROR_FORMAT / PN_ERROR_DIMENSION /
+   PN_ERROR_INVALID_ARGUMENT with why (optional) naming the field. */
+PN_API pn_result pn_rom_model_check(const pn_rom_model *m, char *why, size_t why_cap);
+
+/* The affine map of dimension dim (d + d^2 latents, latent 0 = the identity): a model with
+   no network, for affine bodies and for testing the reduced step against full MPM. */
+PN_API void pn_rom_affine_model(int dim, pn_rom_model *out);
+
+/* g, F = dg/dX (d x d per point, row = output) and G = dg/dxhat (d x d_hat per point) at n
+   reference points X for the latent xhat, in double, one point at a time: the reference the
+   fast path is tested against. x, F, G may each be NULL. */
+PN_API pn_result pn_rom_eval(const pn_rom_model *m, const double *xhat, size_t n, const double *X, double *x, double *F,
+                             double *G);
+
+/* Points of the reference domain: the occupied cells of the model, each sampled refine^dim
+   times on a cell-centred lattice (refine 1: the training resolution). Writes up to cap points
+   (dim doubles each; X may be NULL to count) and returns the count. */
+PN_API size_t pn_rom_lattice(const pn_rom_model *m, int refine, double *X, size_t cap);
+
+/* Is X (dim doubles) material, by the model's occupancy cells? */
+PN_API int pn_rom_inside(const pn_rom_model *m, const double *X);
+
+typedef enum pn_rom_quadrature { PN_ROM_EULERIAN = 0, PN_ROM_LAGRANGIAN } pn_rom_quadrature;
+typedef enum pn_rom_projection { PN_ROM_LINEAR = 0, PN_ROM_NONLINEAR } pn_rom_projection;
+typedef enum pn_rom_transfer {
+    PN_ROM_APIC = 0,               /* quadrature points carry C = dF/dt F^-1 (from the map)  */
+    PN_ROM_PIC                     /* momentum m v only (the paper's Algorithm 5)            */
+} pn_rom_transfer;
+
+typedef struct pn_rom_desc {
+    const pn_rom_model *model;
+    const double *points;          /* the body's reference points (dim each), copied        */
+    size_t n_points;               /* (NULL: the model's lattice at `refine`)                */
+    int refine;                    /* [1]                                                    */
+    double point_volume_m3;        /* with points: each point's volume [(cell_m/refine)^d]   */
+    double dx_m;                   /* the full-space grid [model dx_m]                       */
+    double youngs_pa, poisson, density_kg_m3; /* fixed corotated [the model's]               */
+    double gravity[3];             /* m/s^2                                                  */
+    int samples;                   /* projection points per step [50]; < 0 or >= n: all     */
+    int boundary_samples;          /* at least this many points of each drive per step [5]   */
+    pn_rom_quadrature quadrature;
+    pn_rom_projection projection;
+    pn_rom_transfer transfer;
+    int quad_per_axis;             /* EULERIAN: points per cell per axis [2]                 */
+    int reference;                 /* nonzero: the double path everywhere (slow; for tests)  */
+    unsigned long long seed;       /* of the sampling [1]                                    */
+    int gn_max;                    /* NONLINEAR: Gauss-Newton iterations [10]                */
+    int parallel_min;              /* -fopenmp: batches of fewer points stay on one thread [256] */
+    pn_allocator allocator;
+} pn_rom_desc;
+
+/* A region of the reference domain: the box lo .. hi (a zero box: all of space) and, if
+   radius > 0, the ball about center. */
+typedef struct pn_rom_region {
+    double lo[3], hi[3], center[3], radius;
+} pn_rom_region;
+
+typedef struct pn_rom_stats {
+    size_t samples;                /* projection points                                      */
+    size_t quad_points;            /* quadrature points used                                 */
+    size_t nodes;                  /* grid nodes of the full-space update                    */
+    size_t inverse_failed;         /* EULERIAN: lattice points whose X Newton did not find   */
+    int gn_iterations;             /* NONLINEAR                                              */
+    double residual_m;             /* RMS distance of the projected samples to their trial   */
+} pn_rom_stats;
+
+typedef struct pn_rom_world pn_rom_world; /* below; read the public part, do not write it */
+
+/* Create a world (*out set on success): the model checked, its weights copied to float, the
+   points (desc->points, or the model's lattice) with their masses, the latent at the
+   model's rest latent and at rest. PN_ERROR_* with why naming the field. */
+PN_API pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, char *why, size_t why_cap);
+PN_API void pn_rom_destroy(pn_rom_world *w);
+PN_API const char *pn_rom_error(const pn_rom_world *w);
+
+/* Drive the material of region r rigidly from now on (as pn_mpm_drive_particles: velocity
+   dim reals, center dim reals, angular velocity 3 reals (2D: [2]); NULLs: zero, held). */
+PN_API pn_result pn_rom_drive(pn_rom_world *w, const pn_rom_region *r, const double *velocity_m_s,
+                              const double *center_m, const double *angular_velocity_rad_s, int *index);
+PN_API pn_result pn_rom_release_drive(pn_rom_world *w, int index);
+
+/* Apply force_N (in total) to the material of region r for duration_s from now (0: until
+   removed), shared by mass (as pn_mpm_add_load). */
+PN_API pn_result pn_rom_add_load(pn_rom_world *w, const pn_rom_region *r, const double *force_N, double duration_s,
+                                 int *index);
+PN_API pn_result pn_rom_remove_load(pn_rom_world *w, int index);
+
+/* Set the latent and its velocity (d_hat each; vhat NULL: 0). */
+PN_API pn_result pn_rom_set_latent(pn_rom_world *w, const double *xhat, const double *vhat);
+
+/* The latent of a full state (Eq. 19): xhat minimizing sum_p |g(X_p, xhat) - x_p|^2 over the
+   world's points by Gauss-Newton from the current latent, and (v not NULL) vhat minimizing
+   sum_p |G_p vhat - v_p|^2. x, v: dim per point. *rms_m (optional): the RMS misfit. */
+PN_API pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, double *rms_m);
+
+/* One reduced step of dt seconds (Algorithm 2). PN_ERROR_NONFINITE when the state would not
+   be finite (the step too large for the scene), PN_ERROR_NOT_CONVERGED when the projection
+   fails; the world is unchanged then. */
+PN_API pn_result pn_rom_step(pn_rom_world *w, double dt_s, pn_rom_stats *stats);
+
+/* Reconstruction for drawing, from the current latent, in float: positions (and F, d x d,
+   optional) of the world's points first .. first + n - 1, or of any reference points X. */
+PN_API pn_result pn_rom_positions(const pn_rom_world *w, size_t first, size_t n, float *x, float *F);
+PN_API pn_result pn_rom_map(const pn_rom_world *w, size_t n, const float *X, float *x, float *F);
+
+/* ---- the world (read-only outside the library) ------------------------------------------ */
+typedef struct pn__rom_drive {
+    pn_rom_region r;
+    double vel[3], center[3], omega[3], t0, xhat0[PN_ROM_MAX_LATENT];
+    size_t *pts, n_pts;            /* the world's points in the region (boundary sampling)    */
+    int on;
+} pn__rom_drive;
+
+typedef struct pn__rom_load {
+    pn_rom_region r;
+    double acc[3], t_end;
+    int on;
+} pn__rom_load;
+
+typedef struct pn__rom_hash {      /* open addressing: packed integer triple -> slot         */
+    unsigned long long *key;       /* key + 1 (0: empty)                                      */
+    long *val;
+    size_t cap, *used, n_used;
+} pn__rom_hash;
+
+struct pn_rom_world {
+    pn_rom_desc desc;
+    pn_rom_model model;            /* a copy (its arrays are the caller's)                   */
+    int dim, latent;
+    size_t n;                      /* points                                                 */
+    double *X, *mass, *vol;        /* reference positions (dim each), masses, volumes        */
+    double xhat[PN_ROM_MAX_LATENT], vhat[PN_ROM_MAX_LATENT], xhat_prev[PN_ROM_MAX_LATENT];
+    double time_s;
+    long steps;
+    char error[256];
+    pn_material material;
+    pn__rom_drive drives[PN_ROM_MAX_DRIVES];
+    pn__rom_load loads[PN_ROM_MAX_LOADS];
+    int n_drives, n_loads;
+    /* internal: float weights (W row-major out x in, then b, per layer), the scales */
+    float *wf;
+    size_t wf_off[PN_ROM_MAX_LAYERS + 1];
+    double xs[3], xo[3];           /* Xn = xs X + xo                                         */
+    /* internal: step scratch, grown as needed */
+    unsigned long long rng;
+    size_t *perm;                  /* a permutation of the points (sampling without replacement) */
+    size_t cap_s, cap_q;
+    size_t *sidx;                  /* sample point indices                                   */
+    double *sx, *sF, *sG, *sv, *sxt; /* samples: x, F, G, trial v, trial x                    */
+    int *sdrv;                     /* sample's drive (-1)                                    */
+    double *sX;                    /* samples' reference positions                           */
+    double *qx, *qX, *qF, *qG, *qv, *qC, *qT, *qm, *qV0; /* quadrature points (qT: Kirchhoff stress) */
+    double *tX, *tx, *tF, *tG;     /* gathered batches (Newton, FD)                          */
+    long *tI;
+    int *qflag;                    /* bits 0..7 drive, bit 8 + load                           */
+    long *qsrc;                    /* EULERIAN: the sample a lattice point came from         */
+    unsigned char *qok;
+    pn__rom_hash nodes, lat;
+    size_t cap_n;
+    long long *nidx;               /* node integer triples (3 each)                           */
+    double *nm, *np, *nf;          /* node mass, momentum (dim), force (dim)                 */
+    int *ndrv;                     /* node's drive (-1)                                      */
+    double *px;                    /* LAGRANGIAN: every point's position                     */
+};
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* PLASTINET_ROM_H */
+
+/* ==========================================================================================
+   IMPLEMENTATION
+   ========================================================================================== */
+#if defined(PLASTINET_IMPLEMENTATION) && !defined(PLASTINET_ROM_IMPLEMENTATION_DONE)
+#define PLASTINET_ROM_IMPLEMENTATION_DONE
+#ifndef PLASTINET_IMPLEMENTATION_DONE
+#error "plastinet_rom.h: the plastinet.h implementation must come first"
+#endif
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+/* ======================================================================================
+   >>model: checks, the affine map, the reference domain
+   ====================================================================================== */
+
+static void pn__rom_msg(char *buf, size_t cap, const char *fmt, ...) {
+    va_list ap;
+    if (!buf || !cap) return;
+    va_start(ap, fmt);
+    vsnprintf(buf, cap, fmt, ap);
+    va_end(ap);
+}
+
+static int pn__rom_finite(double x) { return x == x && x - x == 0; }
+static int pn__rom_all_finite(size_t n, const double *a) {
+    size_t i;
+    double s = 0;
+    for (i = 0; i < n; ++i) s += a[i] - a[i];
+    return s == 0;
+}
+
+PN__DEF pn_result pn_rom_model_check(const pn_rom_model *m, char *why, size_t cap) {
+    int l, i, d;
+    if (!m) {
+        pn__rom_msg(why, cap, "model is NULL");
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if (m->format_version != PN_ROM_FORMAT_VERSION) {
+        pn__rom_msg(why, cap, "model %s: format_version %d, this plastinet_rom.h reads %d (regenerate it)",
+                    m->name ? m->name : "?", m->format_version, PN_ROM_FORMAT_VERSION);
+        return PN_ERROR_FORMAT;
+    }
+    d = m->dim;
+    if (d != 2 && d != 3) {
+        pn__rom_msg(why, cap, "model %s: dim %d is not 2 or 3", m->name ? m->name : "?", d);
+        return PN_ERROR_DIMENSION;
+    }
+    if (m->activation == PN_ROM_AFFINE) {
+        if (m->latent != d + d * d) {
+            pn__rom_msg(why, cap, "affine model: latent %d must be dim + dim^2 = %d", m->latent, d + d * d);
+            return PN_ERROR_DIMENSION;
+        }
+        return PN_OK;
+    }
+    if (m->activation != PN_ROM_ELU) {
+        pn__rom_msg(why, cap, "model %s: activation %d is not PN_ROM_ELU or PN_ROM_AFFINE", m->name ? m->name : "?",
+                    m->activation);
+        return PN_ERROR_FORMAT;
+    }
+    if (m->latent < 1 || m->latent > PN_ROM_MAX_LATENT || m->n_layers < 2 || m->n_layers > PN_ROM_MAX_LAYERS || !m->width ||
+        !m->weight || !m->bias) {
+        pn__rom_msg(why, cap, "model %s: latent %d (1 .. %d) or n_layers %d (2 .. %d) out of range, or no weights",
+                    m->name ? m->name : "?", m->latent, PN_ROM_MAX_LATENT, m->n_layers, PN_ROM_MAX_LAYERS);
+        return PN_ERROR_DIMENSION;
+    }
+    if (m->width[0] != d + m->latent || m->width[m->n_layers] != d) {
+        pn__rom_msg(why, cap, "model %s: width[0] = %d must be dim + latent = %d and width[%d] = %d must be dim",
+                    m->name ? m->name : "?", m->width[0], d + m->latent, m->n_layers, m->width[m->n_layers]);
+        return PN_ERROR_DIMENSION;
+    }
+    for (l = 1; l < m->n_layers; ++l)
+        if (m->width[l] < 1 || m->width[l] > PN_ROM_MAX_WIDTH) {
+            pn__rom_msg(why, cap, "model %s: width[%d] = %d outside 1 .. %d", m->name ? m->name : "?", l, m->width[l],
+                        PN_ROM_MAX_WIDTH);
+            return PN_ERROR_DIMENSION;
+        }
+    for (l = 0; l < m->n_layers; ++l)
+        if (!m->weight[l] || !m->bias[l] || !pn__rom_all_finite((size_t)m->width[l] * (size_t)m->width[l + 1], m->weight[l]) ||
+            !pn__rom_all_finite((size_t)m->width[l + 1], m->bias[l])) {
+            pn__rom_msg(why, cap, "model %s: layer %d has missing or non-finite weights", m->name ? m->name : "?", l);
+            return PN_ERROR_NONFINITE;
+        }
+    for (i = 0; i < d; ++i)
+        if (!pn__rom_finite(m->in_lo[i]) || !pn__rom_finite(m->in_hi[i]) || !(m->in_hi[i] > m->in_lo[i]) ||
+            !pn__rom_finite(m->out_mean[i]) || !pn__rom_finite(m->out_std[i]) || !(m->out_std[i] > 0)) {
+            pn__rom_msg(why, cap, "model %s: in_lo/in_hi or out_mean/out_std[%d] invalid (need in_hi > in_lo, out_std > 0)",
+                        m->name ? m->name : "?", i);
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+    if (m->cells[0] > 0 && (!m->occupied || !(m->cell_m > 0) || m->cells[1] < 1 || m->cells[2] < 1)) {
+        pn__rom_msg(why, cap, "model %s: an occupancy grid needs occupied, cell_m > 0 and cells >= 1", m->name ? m->name : "?");
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    return PN_OK;
+}
+
+PN__DEF void pn_rom_affine_model(int dim, pn_rom_model *out) {
+    int i;
+    memset(out, 0, sizeof *out);
+    out->format_version = PN_ROM_FORMAT_VERSION;
+    out->name = "affine";
+    out->dim = dim;
+    out->latent = dim + dim * dim;
+    out->activation = PN_ROM_AFFINE;
+    for (i = 0; i < 3; ++i) out->in_lo[i] = -1, out->in_hi[i] = 1, out->out_std[i] = 1;
+    out->youngs_pa = 1e5, out->poisson = 0.3, out->density_kg_m3 = 1000, out->dx_m = 0.01, out->per_axis = 2;
+    out->frame_dt_s = 1.0 / 60;
+}
+
+PN__DEF int pn_rom_inside(const pn_rom_model *m, const double *X) {
+    long c[3] = {0, 0, 0};
+    int i;
+    if (m->cells[0] <= 0) return 1;
+    for (i = 0; i < m->dim; ++i) {
+        double u = (X[i] - m->origin_m[i]) / m->cell_m;
+        if (!(u >= 0 && u < m->cells[i])) return 0;
+        c[i] = (long)u;
+    }
+    return m->occupied[((size_t)c[0] * (size_t)m->cells[1] + (size_t)c[1]) * (size_t)m->cells[2] + (size_t)c[2]] != 0;
+}
+
+PN__DEF size_t pn_rom_lattice(const pn_rom_model *m, int refine, double *X, size_t cap) {
+    size_t n = 0;
+    long c[3], k[3];
+    int d = m->dim, r = refine > 1 ? refine : 1, i;
+    double h = m->cell_m / r;
+    if (m->cells[0] <= 0) return 0;
+    for (c[0] = 0; c[0] < m->cells[0]; ++c[0])
+        for (c[1] = 0; c[1] < m->cells[1]; ++c[1])
+            for (c[2] = 0; c[2] < (d == 3 ? m->cells[2] : 1); ++c[2]) {
+                if (!m->occupied[((size_t)c[0] * (size_t)m->cells[1] + (size_t)c[1]) * (size_t)m->cells[2] + (size_t)c[2]])
+                    continue;
+                for (k[0] = 0; k[0] < r; ++k[0])
+                    for (k[1] = 0; k[1] < r; ++k[1])
+                        for (k[2] = 0; k[2] < (d == 3 ? r : 1); ++k[2], ++n)
+                            if (X && n < cap)
+                                for (i = 0; i < d; ++i)
+                                    X[n * (size_t)d + (size_t)i] = m->origin_m[i] + (double)c[i] * m->cell_m + ((double)k[i] + 0.5) * h;
+            }
+    return n;
+}
+
+/* ======================================================================================
+   >>mlp: g and its Jacobians. net(u), u = (Xn, xhat); forward through the hidden layers
+   a_l = elu(W_l a_(l-1) + b_l), then out = W_L a + b_L; x = mean + std out. The Jacobian by
+   reverse mode, the d output rows at once: lambda_L = W_L rows, lambda_(l-1) = W_l^T (elu'
+   (z_l) lambda_l), so J = lambda_0 (d x (d + d_hat)); F = std J_X 2/(hi - lo), G = std J_xhat.
+   ====================================================================================== */
+
+/* the affine map: x = X + b + A X, F = I + A, G = [I | X-blocks] */
+static void pn__rom_affine(int d, const double *xhat, const double *X, double *x, double *F, double *G) {
+    int i, j, K = d + d * d;
+    const double *A = xhat + d;
+    for (i = 0; i < d; ++i) {
+        double s = X[i] + xhat[i];
+        for (j = 0; j < d; ++j) s += A[i * d + j] * X[j];
+        if (x) x[i] = s;
+        if (F)
+            for (j = 0; j < d; ++j) F[i * d + j] = (i == j) + A[i * d + j];
+        if (G) {
+            for (j = 0; j < K; ++j) G[i * K + j] = 0;
+            G[i * K + i] = 1;
+            for (j = 0; j < d; ++j) G[i * K + d + i * d + j] = X[j];
+        }
+    }
+}
+
+static double pn__rom_elu(double z, double *slope) {
+    if (z > 0) {
+        *slope = 1;
+        return z;
+    }
+    *slope = exp(z);
+    return expm1(z);
+}
+
+PN__DEF pn_result pn_rom_eval(const pn_rom_model *m, const double *xhat, size_t n, const double *X, double *x, double *F,
+                              double *G) {
+    int d = m->dim, K = m->latent, L = m->n_layers;
+    size_t p;
+    if (m->activation == PN_ROM_AFFINE) {
+        for (p = 0; p < n; ++p)
+            pn__rom_affine(d, xhat, X + p * (size_t)d, x ? x + p * (size_t)d : NULL, F ? F + p * (size_t)(d * d) : NULL,
+                           G ? G + p * (size_t)(d * K) : NULL);
+        return PN_OK;
+    }
+    for (p = 0; p < n; ++p) {
+        double a[PN_ROM_MAX_WIDTH + PN_ROM_MAX_LATENT], z[PN_ROM_MAX_WIDTH], s[PN_ROM_MAX_LAYERS][PN_ROM_MAX_WIDTH];
+        double lam[3][PN_ROM_MAX_WIDTH + PN_ROM_MAX_LATENT], nl[PN_ROM_MAX_WIDTH + PN_ROM_MAX_LATENT];
+        const double *Xp = X + p * (size_t)d;
+        int l, o, i, k, win;
+        for (i = 0; i < d; ++i) a[i] = 2 * (Xp[i] - m->in_lo[i]) / (m->in_hi[i] - m->in_lo[i]) - 1;
+        for (i = 0; i < K; ++i) a[d + i] = xhat[i];
+        for (l = 0; l < L; ++l) {
+            const double *W = m->weight[l], *b = m->bias[l];
+            win = m->width[l];
+            for (o = 0; o < m->width[l + 1]; ++o) {
+                double t = b[o];
+                for (i = 0; i < win; ++i) t += W[o * win + i] * a[i];
+                z[o] = t;
+            }
+            for (o = 0; o < m->width[l + 1]; ++o) a[o] = l + 1 < L ? pn__rom_elu(z[o], &s[l][o]) : z[o];
+        }
+        if (x)
+            for (k = 0; k < d; ++k) x[p * (size_t)d + (size_t)k] = m->out_mean[k] + m->out_std[k] * a[k];
+        if (!F && !G) continue;
+        for (k = 0; k < d; ++k) { /* reverse mode, one adjoint per output row */
+            for (i = 0; i < m->width[L - 1]; ++i) lam[k][i] = m->weight[L - 1][k * m->width[L - 1] + i];
+            for (l = L - 2; l >= 0; --l) {
+                const double *W = m->weight[l];
+                win = m->width[l];
+                for (i = 0; i < win; ++i) nl[i] = 0;
+                for (o = 0; o < m->width[l + 1]; ++o) {
+                    double mu = s[l][o] * lam[k][o];
+                    for (i = 0; i < win; ++i) nl[i] += W[o * win + i] * mu;
+                }
+                for (i = 0; i < win; ++i) lam[k][i] = nl[i];
+            }
+            for (i = 0; i < d; ++i)
+                if (F) F[p * (size_t)(d * d) + (size_t)(k * d + i)] = m->out_std[k] * lam[k][i] * 2 / (m->in_hi[i] - m->in_lo[i]);
+            for (i = 0; i < K; ++i)
+                if (G) G[p * (size_t)(d * K) + (size_t)(k * K + i)] = m->out_std[k] * lam[k][d + i];
+        }
+    }
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>lanes: the float path. PN__ROM_B points at a time, each layer a (width x B) block whose
+   inner loops run over the B points (the compiler vectorizes them at -O2); exp for ELU is a
+   branch-free polynomial (pn__rom_expf) so it vectorizes too. Same formulas as >>mlp.
+   ====================================================================================== */
+#define PN__ROM_B 16
+
+/* e^z for z <= 0 in float: z = n ln2 + r, |r| <= ln2/2, e^r by a degree-6 polynomial
+   (relative error < 2e-7), 2^n by the exponent bits; z < -87 gives ~0 */
+static inline float pn__rom_expf(float z) {
+    float n, r, p;
+    int ni;
+    union {
+        float f;
+        int i;
+    } u;
+    z = z < -87.0f ? -87.0f : z;
+    n = (float)(int)(z * 1.44269504f - 0.5f); /* round to nearest for z <= 0 */
+    r = z - n * 0.693145752f - n * 1.42860677e-6f;
+    p = 1.0f + r * (1.0f + r * (0.5f + r * (0.166666672f + r * (0.0416666679f + r * (0.00833333377f + r * 0.00138888892f)))));
+    ni = (int)n;
+    u.i = (ni + 127) << 23;
+    return p * u.f;
+}
+
+/* the float net of world w at nb (<= B) points: Xn (d x B, normalized), the first layer's
+   latent part c1 (width[1]: W1 xhat + b1); out (d x B, the net's raw output) and, if J, the
+   raw Jacobian J[(k (d + K) + i) B + b] */
+static void pn__rom_lanes(const pn_rom_world *w, const float *c1, const float *Xn, float *out, float *J) {
+    const pn_rom_model *m = &w->model;
+    int d = w->dim, K = w->latent, L = m->n_layers, l, o, i, k, b;
+    float a[2][PN_ROM_MAX_WIDTH][PN__ROM_B], s[PN_ROM_MAX_LAYERS][PN_ROM_MAX_WIDTH][PN__ROM_B];
+    int cur = 0;
+    { /* layer 0: the X columns on top of c1 */
+        const float *W = w->wf + w->wf_off[0];
+        int win = m->width[0];
+        for (o = 0; o < m->width[1]; ++o) {
+            float z[PN__ROM_B];
+            for (b = 0; b < PN__ROM_B; ++b) z[b] = c1[o];
+            for (i = 0; i < d; ++i) {
+                float wv = W[o * win + i];
+                for (b = 0; b < PN__ROM_B; ++b) z[b] += wv * Xn[i * PN__ROM_B + b];
+            }
+            for (b = 0; b < PN__ROM_B; ++b) {
+                float e = pn__rom_expf(z[b] < 0 ? z[b] : 0.0f);
+                a[cur][o][b] = z[b] > 0 ? z[b] : e - 1.0f;
+                s[0][o][b] = z[b] > 0 ? 1.0f : e;
+            }
+        }
+    }
+    for (l = 1; l < L; ++l) {
+        const float *W = w->wf + w->wf_off[l], *bias = W + m->width[l + 1] * m->width[l];
+        int win = m->width[l], last = l + 1 == L;
+        for (o = 0; o < m->width[l + 1]; ++o) {
+            float z[PN__ROM_B];
+            for (b = 0; b < PN__ROM_B; ++b) z[b] = bias[o];
+            for (i = 0; i < win; ++i) {
+                float wv = W[o * win + i];
+                for (b = 0; b < PN__ROM_B; ++b) z[b] += wv * a[cur][i][b];
+            }
+            if (last) {
+                for (b = 0; b < PN__ROM_B; ++b) out[o * PN__ROM_B + b] = z[b];
+            } else {
+                for (b = 0; b < PN__ROM_B; ++b) {
+                    float e = pn__rom_expf(z[b] < 0 ? z[b] : 0.0f);
+                    a[1 - cur][o][b] = z[b] > 0 ? z[b] : e - 1.0f;
+                    s[l][o][b] = z[b] > 0 ? 1.0f : e;
+                }
+            }
+        }
+        cur = 1 - cur;
+    }
+    if (!J) return;
+    for (k = 0; k < d; ++k) {
+        float lam[2][PN_ROM_MAX_WIDTH + PN_ROM_MAX_LATENT][PN__ROM_B];
+        const float *WL = w->wf + w->wf_off[L - 1];
+        int c = 0;
+        for (i = 0; i < m->width[L - 1]; ++i)
+            for (b = 0; b < PN__ROM_B; ++b) lam[c][i][b] = WL[k * m->width[L - 1] + i];
+        for (l = L - 2; l >= 0; --l) {
+            const float *W = w->wf + w->wf_off[l];
+            int win = m->width[l];
+            for (i = 0; i < win; ++i)
+                for (b = 0; b < PN__ROM_B; ++b) lam[1 - c][i][b] = 0;
+            for (o = 0; o < m->width[l + 1]; ++o) {
+                float mu[PN__ROM_B];
+                for (b = 0; b < PN__ROM_B; ++b) mu[b] = s[l][o][b] * lam[c][o][b];
+                for (i = 0; i < win; ++i) {
+                    float wv = W[o * win + i];
+                    for (b = 0; b < PN__ROM_B; ++b) lam[1 - c][i][b] += wv * mu[b];
+                }
+            }
+            c = 1 - c;
+        }
+        for (i = 0; i < d + K; ++i)
+            for (b = 0; b < PN__ROM_B; ++b) J[((size_t)k * (size_t)(d + K) + (size_t)i) * PN__ROM_B + (size_t)b] = lam[c][i][b];
+    }
+}
+
+/* g (and F, G) of world w at n points X (dim doubles each) for latent xhat, into doubles:
+   the float lanes, or pn_rom_eval when the world is in reference mode or affine. Threads
+   take whole batches; each point writes only its own outputs. */
+static void pn__rom_map(const pn_rom_world *w, const double *xhat, size_t n, const double *X, double *x, double *F,
+                        double *G) {
+    const pn_rom_model *m = &w->model;
+    int d = w->dim, K = w->latent;
+    long nb = (long)((n + PN__ROM_B - 1) / PN__ROM_B), lb;
+    float c1[PN_ROM_MAX_WIDTH];
+    if (w->desc.reference || m->activation == PN_ROM_AFFINE) {
+        pn_rom_eval(m, xhat, n, X, x, F, G);
+        return;
+    }
+    {
+        const float *W = w->wf + w->wf_off[0];
+        int o, i, win = m->width[0];
+        for (o = 0; o < m->width[1]; ++o) {
+            double t = (double)W[m->width[1] * win + o]; /* the bias follows W */
+            for (i = 0; i < K; ++i) t += (double)W[o * win + d + i] * xhat[i];
+            c1[o] = (float)t;
+        }
+    }
+#if defined(_OPENMP)
+#pragma omp parallel for schedule(dynamic, 4) if (n >= (size_t)w->desc.parallel_min)
+#endif
+    for (lb = 0; lb < nb; ++lb) {
+        float Xn[3 * PN__ROM_B], out[3 * PN__ROM_B], J[3 * (3 + PN_ROM_MAX_LATENT) * PN__ROM_B];
+        size_t p0 = (size_t)lb * PN__ROM_B, p;
+        int b, i, k, cnt = (int)(n - p0 < PN__ROM_B ? n - p0 : PN__ROM_B);
+        for (i = 0; i < d; ++i)
+            for (b = 0; b < PN__ROM_B; ++b)
+                Xn[i * PN__ROM_B + b] = b < cnt ? (float)(w->xs[i] * X[(p0 + (size_t)b) * (size_t)d + (size_t)i] + w->xo[i]) : 0.0f;
+        pn__rom_lanes(w, c1, Xn, out, (F || G) ? J : NULL);
+        for (b = 0; b < cnt; ++b) {
+            p = p0 + (size_t)b;
+            for (k = 0; k < d; ++k) {
+                if (x) x[p * (size_t)d + (size_t)k] = m->out_mean[k] + m->out_std[k] * (double)out[k * PN__ROM_B + b];
+                if (F)
+                    for (i = 0; i < d; ++i)
+                        F[p * (size_t)(d * d) + (size_t)(k * d + i)] =
+                            m->out_std[k] * w->xs[i] * (double)J[((size_t)k * (size_t)(d + K) + (size_t)i) * PN__ROM_B + (size_t)b];
+                if (G)
+                    for (i = 0; i < K; ++i)
+                        G[p * (size_t)(d * K) + (size_t)(k * K + i)] =
+                            m->out_std[k] * (double)J[((size_t)k * (size_t)(d + K) + (size_t)(d + i)) * PN__ROM_B + (size_t)b];
+            }
+        }
+    }
+}
+
+/* ======================================================================================
+   >>world: creation, drives, loads, the latent
+   ====================================================================================== */
+
+static pn_result pn__rom_fail(pn_rom_world *w, pn_result r, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(w->error, sizeof w->error, fmt, ap);
+    va_end(ap);
+    return r;
+}
+
+PN__DEF const char *pn_rom_error(const pn_rom_world *w) { return w ? w->error : "no world"; }
+
+static void *pn__rom_alloc(const pn_rom_world *w, size_t count, size_t size, int *fail) {
+    void *p;
+    if (*fail) return NULL;
+    p = pn_alloc(&w->desc.allocator, count * size + 1);
+    if (!p) *fail = 1;
+    else memset(p, 0, count * size + 1);
+    return p;
+}
+
+static void pn__rom_hash_free(const pn_rom_world *w, pn__rom_hash *h) {
+    pn_free(&w->desc.allocator, h->key), pn_free(&w->desc.allocator, h->val), pn_free(&w->desc.allocator, h->used);
+    memset(h, 0, sizeof *h);
+}
+
+static void pn__rom_scratch_free(pn_rom_world *w) {
+    void *a[] = {w->sidx, w->sX, w->sx, w->sF, w->sG, w->sv, w->sxt, w->sdrv, w->qx, w->qX, w->qF, w->qG, w->qv, w->qC,
+                 w->qT, w->qm, w->qV0, w->qflag, w->qsrc, w->qok, w->tX, w->tx, w->tF, w->tG, w->tI,
+                 w->nidx, w->nm, w->np, w->nf, w->ndrv};
+    size_t i;
+    for (i = 0; i < sizeof a / sizeof a[0]; ++i) pn_free(&w->desc.allocator, a[i]);
+    w->sidx = NULL, w->sX = w->sx = w->sF = w->sG = w->sv = w->sxt = NULL, w->sdrv = NULL;
+    w->qx = w->qX = w->qF = w->qG = w->qv = w->qC = w->qT = w->qm = w->qV0 = NULL, w->qflag = NULL, w->qsrc = NULL;
+    w->qok = NULL, w->tX = w->tx = w->tF = w->tG = NULL, w->tI = NULL;
+    w->nidx = NULL, w->nm = w->np = w->nf = NULL, w->ndrv = NULL;
+    w->cap_s = w->cap_q = w->cap_n = 0;
+}
+
+PN__DEF void pn_rom_destroy(pn_rom_world *w) {
+    int a;
+    if (!w) return;
+    pn__rom_scratch_free(w);
+    pn__rom_hash_free(w, &w->nodes);
+    pn__rom_hash_free(w, &w->lat);
+    for (a = 0; a < w->n_drives; ++a) pn_free(&w->desc.allocator, w->drives[a].pts);
+    pn_free(&w->desc.allocator, w->X), pn_free(&w->desc.allocator, w->mass), pn_free(&w->desc.allocator, w->vol);
+    pn_free(&w->desc.allocator, w->wf), pn_free(&w->desc.allocator, w->perm), pn_free(&w->desc.allocator, w->px);
+    pn_free(&w->desc.allocator, w);
+}
+
+PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, char *why, size_t cap) {
+    pn_rom_desc d;
+    pn_rom_world *w;
+    pn_material_desc md;
+    const pn_rom_model *m;
+    pn_result r;
+    int fail = 0, i, dim;
+    size_t p, n;
+    const char *bad;
+    if (!out || !desc) {
+        pn__rom_msg(why, cap, "pn_rom_create: desc or out is NULL");
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    *out = NULL;
+    d = *desc;
+    m = d.model;
+    if ((r = pn_rom_model_check(m, why, cap)) != PN_OK) return r;
+    dim = m->dim;
+    if ((d.allocator.alloc == NULL) != (d.allocator.free == NULL)) {
+        pn__rom_msg(why, cap, "pn_rom_desc.allocator: set both alloc and free, or neither");
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if (d.refine <= 0) d.refine = 1;
+    if (!(d.dx_m > 0)) d.dx_m = m->dx_m;
+    if (!(d.youngs_pa > 0)) d.youngs_pa = m->youngs_pa;
+    if (!(d.poisson != 0)) d.poisson = m->poisson;
+    if (!(d.density_kg_m3 > 0)) d.density_kg_m3 = m->density_kg_m3;
+    if (d.samples == 0) d.samples = 50;
+    if (d.boundary_samples <= 0) d.boundary_samples = 5;
+    if (d.quad_per_axis <= 0) d.quad_per_axis = 2;
+    if (d.seed == 0) d.seed = 1;
+    if (d.gn_max <= 0) d.gn_max = 10;
+    if (d.parallel_min <= 0) d.parallel_min = 256;
+    bad = !pn__rom_finite(d.dx_m) || !(d.dx_m > 0) ? "dx_m (and the model's dx_m) must be > 0"
+          : !pn__rom_all_finite(3, d.gravity) ? "gravity is not finite"
+          : d.quadrature != PN_ROM_EULERIAN && d.quadrature != PN_ROM_LAGRANGIAN ? "quadrature is not a pn_rom_quadrature"
+          : d.projection != PN_ROM_LINEAR && d.projection != PN_ROM_NONLINEAR ? "projection is not a pn_rom_projection"
+          : d.transfer != PN_ROM_APIC && d.transfer != PN_ROM_PIC ? "transfer is not a pn_rom_transfer"
+          : d.quad_per_axis > 8 ? "quad_per_axis is more than 8"
+          : d.points && (d.n_points == 0 || !pn__rom_all_finite(d.n_points * (size_t)dim, d.points)) ? "points: none, or not finite"
+          : !d.points && m->cells[0] <= 0 ? "points is NULL and the model has no reference domain to fill"
+          : d.points && d.point_volume_m3 < 0 ? "point_volume_m3 < 0"
+          : NULL;
+    if (bad) {
+        pn__rom_msg(why, cap, "pn_rom_desc.%s", bad);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED;
+    md.plastic = PN_PLASTIC_NONE;
+    md.youngs_modulus_pa = (pn_real)d.youngs_pa;
+    md.poisson_ratio = (pn_real)d.poisson;
+    w = (pn_rom_world *)pn_alloc(&d.allocator, sizeof *w);
+    if (!w) {
+        pn__rom_msg(why, cap, "pn_rom_create: out of memory");
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
+    memset(w, 0, sizeof *w);
+    w->desc = d;
+    w->model = *m;
+    w->dim = dim, w->latent = m->latent;
+    if ((r = pn_material_init(&w->material, &md, &bad)) != PN_OK) {
+        pn__rom_msg(why, cap, "pn_rom_desc: youngs_pa / poisson: %s", bad ? bad : "invalid");
+        pn_rom_destroy(w);
+        return PN_ERROR_INVALID_PARAMETER;
+    }
+    n = d.points ? d.n_points : pn_rom_lattice(m, d.refine, NULL, 0);
+    w->n = n;
+    w->X = (double *)pn__rom_alloc(w, n * (size_t)dim, sizeof(double), &fail);
+    w->mass = (double *)pn__rom_alloc(w, n, sizeof(double), &fail);
+    w->vol = (double *)pn__rom_alloc(w, n, sizeof(double), &fail);
+    w->perm = (size_t *)pn__rom_alloc(w, n, sizeof(size_t), &fail);
+    if (m->activation == PN_ROM_ELU) {
+        size_t tot = 0;
+        int l;
+        for (l = 0; l < m->n_layers; ++l) {
+            w->wf_off[l] = tot;
+            tot += (size_t)m->width[l + 1] * (size_t)(m->width[l] + 1);
+        }
+        w->wf_off[m->n_layers] = tot;
+        w->wf = (float *)pn__rom_alloc(w, tot, sizeof(float), &fail);
+        if (!fail)
+            for (l = 0; l < m->n_layers; ++l) {
+                size_t nw = (size_t)m->width[l + 1] * (size_t)m->width[l], k;
+                for (k = 0; k < nw; ++k) w->wf[w->wf_off[l] + k] = (float)m->weight[l][k];
+                for (k = 0; k < (size_t)m->width[l + 1]; ++k) w->wf[w->wf_off[l] + nw + k] = (float)m->bias[l][k];
+            }
+    }
+    if (fail) {
+        pn__rom_msg(why, cap, "pn_rom_create: out of memory for %lu points", (unsigned long)n);
+        pn_rom_destroy(w);
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
+    if (d.points) memcpy(w->X, d.points, sizeof(double) * n * (size_t)dim);
+    else pn_rom_lattice(m, d.refine, w->X, n);
+    {
+        double h = m->cells[0] > 0 ? m->cell_m / d.refine : 0, v = 1;
+        for (i = 0; i < dim; ++i) v *= h;
+        if (d.points && d.point_volume_m3 > 0) v = d.point_volume_m3;
+        if (!(v > 0)) {
+            pn__rom_msg(why, cap, "pn_rom_desc.point_volume_m3 is needed: the model has no cell size");
+            pn_rom_destroy(w);
+            return PN_ERROR_INVALID_ARGUMENT;
+        }
+        for (p = 0; p < n; ++p) w->vol[p] = v, w->mass[p] = v * d.density_kg_m3, w->perm[p] = p;
+    }
+    for (i = 0; i < 3; ++i) {
+        w->xs[i] = 2 / (m->in_hi[i] - m->in_lo[i]);
+        w->xo[i] = -2 * m->in_lo[i] / (m->in_hi[i] - m->in_lo[i]) - 1;
+    }
+    for (i = 0; i < w->latent; ++i) w->xhat[i] = w->xhat_prev[i] = m->latent_rest ? m->latent_rest[i] : 0;
+    w->rng = d.seed;
+    *out = w;
+    return PN_OK;
+}
+
+static int pn__rom_in_region(const pn_rom_region *r, int d, const double *X) {
+    int i, box = 0;
+    double d2 = 0;
+    for (i = 0; i < d; ++i) box |= r->lo[i] != 0 || r->hi[i] != 0;
+    for (i = 0; i < d; ++i) {
+        if (box && (X[i] < r->lo[i] || X[i] > r->hi[i])) return 0;
+        d2 += (X[i] - r->center[i]) * (X[i] - r->center[i]);
+    }
+    return r->radius > 0 ? d2 <= r->radius * r->radius : 1;
+}
+
+static const char *pn__rom_region_bad(const pn_rom_region *r) {
+    if (!r) return "region is NULL";
+    if (!pn__rom_all_finite(3, r->lo) || !pn__rom_all_finite(3, r->hi) || !pn__rom_all_finite(3, r->center) ||
+        !pn__rom_finite(r->radius) || r->radius < 0)
+        return "region has a non-finite field or a negative radius";
+    return NULL;
+}
+
+PN__DEF pn_result pn_rom_drive(pn_rom_world *w, const pn_rom_region *r, const double *velocity, const double *center,
+                               const double *omega, int *index) {
+    pn__rom_drive D;
+    const char *bad = pn__rom_region_bad(r);
+    int d = w->dim, a, i, spin = 0, fail = 0;
+    size_t p;
+    w->error[0] = 0;
+    if (bad) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: %s", bad);
+    if ((velocity && !pn__rom_all_finite((size_t)d, velocity)) || (center && !pn__rom_all_finite((size_t)d, center)) ||
+        (omega && !pn__rom_all_finite(3, omega)))
+        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_drive: velocity, center or angular velocity is not finite");
+    memset(&D, 0, sizeof D);
+    D.r = *r;
+    for (i = 0; i < 3; ++i) {
+        D.vel[i] = velocity && i < d ? velocity[i] : 0;
+        D.center[i] = center && i < d ? center[i] : 0;
+        D.omega[i] = omega && (d == 3 || i == 2) ? omega[i] : 0;
+        spin |= D.omega[i] != 0;
+    }
+    if (spin && !center) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: a rotation needs center_m");
+    for (p = 0; p < w->n; ++p) D.n_pts += (size_t)pn__rom_in_region(r, d, w->X + p * (size_t)d);
+    if (!D.n_pts) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: the region holds none of the world's points");
+    for (a = 0; a < w->n_drives && w->drives[a].on; ++a) {}
+    if (a == PN_ROM_MAX_DRIVES)
+        return pn__rom_fail(w, PN_ERROR_CAPACITY, "pn_rom_drive: all PN_ROM_MAX_DRIVES = %d are in use", PN_ROM_MAX_DRIVES);
+    D.pts = (size_t *)pn__rom_alloc(w, D.n_pts, sizeof(size_t), &fail);
+    if (fail) return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_drive: out of memory");
+    for (D.n_pts = 0, p = 0; p < w->n; ++p)
+        if (pn__rom_in_region(r, d, w->X + p * (size_t)d)) D.pts[D.n_pts++] = p;
+    D.t0 = w->time_s;
+    memcpy(D.xhat0, w->xhat, sizeof D.xhat0);
+    D.on = 1;
+    pn_free(&w->desc.allocator, w->drives[a].pts);
+    w->drives[a] = D;
+    if (a == w->n_drives) w->n_drives++;
+    if (index) *index = a;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_rom_release_drive(pn_rom_world *w, int index) {
+    w->error[0] = 0;
+    if (index < 0 || index >= w->n_drives || index >= PN_ROM_MAX_DRIVES)
+        return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_release_drive: drive %d does not exist", index);
+    w->drives[index].on = 0;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_rom_add_load(pn_rom_world *w, const pn_rom_region *r, const double *force, double duration_s, int *index) {
+    pn__rom_load L;
+    const char *bad = pn__rom_region_bad(r);
+    double mass = 0;
+    int d = w->dim, a, i;
+    size_t p;
+    w->error[0] = 0;
+    if (bad) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: %s", bad);
+    if (!force || !pn__rom_all_finite((size_t)d, force))
+        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_add_load: force_N is NULL or not finite");
+    if (!pn__rom_finite(duration_s) || duration_s < 0)
+        return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: duration_s = %g must be finite and >= 0", duration_s);
+    for (p = 0; p < w->n; ++p)
+        if (pn__rom_in_region(r, d, w->X + p * (size_t)d)) mass += w->mass[p];
+    if (!(mass > 0)) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: the region holds none of the world's points");
+    for (a = 0; a < w->n_loads && w->loads[a].on; ++a) {}
+    if (a == PN_ROM_MAX_LOADS)
+        return pn__rom_fail(w, PN_ERROR_CAPACITY, "pn_rom_add_load: all PN_ROM_MAX_LOADS = %d are in use", PN_ROM_MAX_LOADS);
+    memset(&L, 0, sizeof L);
+    L.r = *r;
+    for (i = 0; i < d; ++i) L.acc[i] = force[i] / mass;
+    L.t_end = duration_s > 0 ? w->time_s + duration_s : HUGE_VAL;
+    L.on = 1;
+    w->loads[a] = L;
+    if (a == w->n_loads) w->n_loads++;
+    if (index) *index = a;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_rom_remove_load(pn_rom_world *w, int index) {
+    w->error[0] = 0;
+    if (index < 0 || index >= w->n_loads || index >= PN_ROM_MAX_LOADS)
+        return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_remove_load: load %d does not exist", index);
+    w->loads[index].on = 0;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_rom_set_latent(pn_rom_world *w, const double *xhat, const double *vhat) {
+    int K = w->latent, i;
+    w->error[0] = 0;
+    if (!xhat || !pn__rom_all_finite((size_t)K, xhat) || (vhat && !pn__rom_all_finite((size_t)K, vhat)))
+        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_set_latent: xhat is NULL, or xhat or vhat not finite");
+    for (i = 0; i < K; ++i) w->xhat[i] = w->xhat_prev[i] = xhat[i], w->vhat[i] = vhat ? vhat[i] : 0;
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>step: scratch, hashes, sampling, the quadrature, the full-space update, the projections
+   ====================================================================================== */
+
+/* grow an array to hold n entries (doubling); 0 on failure, nothing lost */
+static int pn__rom_grow(pn_rom_world *w, void **a, size_t have, size_t n, size_t size) {
+    void *b;
+    if (n <= have && *a) return 1;
+    b = pn_alloc(&w->desc.allocator, n * size + 1);
+    if (!b) return 0;
+    memset(b, 0, n * size + 1);
+    if (*a && have) memcpy(b, *a, have * size);
+    pn_free(&w->desc.allocator, *a);
+    *a = b;
+    return 1;
+}
+
+/* room for ns samples and nq quadrature points (the per-point arrays of both) */
+static int pn__rom_reserve(pn_rom_world *w, size_t ns, size_t nq) {
+    int d = w->dim, K = w->latent, ok = 1;
+    size_t dd = (size_t)(d * d), dK = (size_t)(d * K), c;
+    if (ns > w->cap_s) {
+        c = ns > 2 * w->cap_s ? ns : 2 * w->cap_s;
+        ok &= pn__rom_grow(w, (void **)&w->sidx, w->cap_s, c, sizeof(size_t));
+        ok &= pn__rom_grow(w, (void **)&w->sX, w->cap_s * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->sx, w->cap_s * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->sF, w->cap_s * dd, c * dd, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->sG, w->cap_s * dK, c * dK, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->sv, w->cap_s * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->sxt, w->cap_s * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->sdrv, w->cap_s, c, sizeof(int));
+        if (!ok) return 0;
+        w->cap_s = c;
+    }
+    if (nq > w->cap_q) {
+        c = nq > 2 * w->cap_q ? nq : 2 * w->cap_q;
+        ok &= pn__rom_grow(w, (void **)&w->qx, w->cap_q * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qX, w->cap_q * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qF, w->cap_q * dd, c * dd, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qG, w->cap_q * dK, c * dK, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qv, w->cap_q * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qC, w->cap_q * dd, c * dd, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qT, w->cap_q * dd, c * dd, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qm, w->cap_q, c, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qV0, w->cap_q, c, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->qflag, w->cap_q, c, sizeof(int));
+        ok &= pn__rom_grow(w, (void **)&w->qsrc, w->cap_q, c, sizeof(long));
+        ok &= pn__rom_grow(w, (void **)&w->qok, w->cap_q, c, 1);
+        ok &= pn__rom_grow(w, (void **)&w->tX, w->cap_q * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->tx, w->cap_q * (size_t)d, c * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->tF, w->cap_q * dd, c * dd, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->tG, w->cap_q * dK, c * dK, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->tI, w->cap_q, c, sizeof(long));
+        if (!ok) return 0;
+        w->cap_q = c;
+    }
+    return 1;
+}
+
+/* a grid or lattice index triple packed in 63 bits (each coordinate within +-2^20) */
+static unsigned long long pn__rom_key(const long long *i) {
+    return ((unsigned long long)(i[0] + (1 << 20)) << 42) | ((unsigned long long)(i[1] + (1 << 20)) << 21) |
+           (unsigned long long)(i[2] + (1 << 20));
+}
+
+static void pn__rom_hash_clear(pn__rom_hash *h) {
+    size_t k;
+    for (k = 0; k < h->n_used; ++k) h->key[h->used[k]] = 0;
+    h->n_used = 0;
+}
+
+/* the value of key, or -1 */
+static long pn__rom_hash_get(const pn__rom_hash *h, unsigned long long key) {
+    size_t s;
+    if (!h->cap) return -1;
+    s = (size_t)((key * 0x9E3779B97F4A7C15ULL) >> 20) & (h->cap - 1);
+    while (h->key[s]) {
+        if (h->key[s] == key + 1) return h->val[s];
+        s = (s + 1) & (h->cap - 1);
+    }
+    return -1;
+}
+
+/* insert key with value val unless present; returns the stored value, or -2 out of memory */
+static long pn__rom_hash_put(pn_rom_world *w, pn__rom_hash *h, unsigned long long key, long val) {
+    size_t s;
+    if (2 * (h->n_used + 1) > h->cap) { /* grow: rehash every used slot */
+        pn__rom_hash g;
+        size_t k, cap = h->cap ? 2 * h->cap : 1024;
+        int fail = 0;
+        memset(&g, 0, sizeof g);
+        g.key = (unsigned long long *)pn__rom_alloc(w, cap, sizeof(unsigned long long), &fail);
+        g.val = (long *)pn__rom_alloc(w, cap, sizeof(long), &fail);
+        g.used = (size_t *)pn__rom_alloc(w, cap, sizeof(size_t), &fail);
+        if (fail) {
+            pn__rom_hash_free(w, &g);
+            return -2;
+        }
+        g.cap = cap;
+        for (k = 0; k < h->n_used; ++k) {
+            size_t o = h->used[k], t = (size_t)(((h->key[o] - 1) * 0x9E3779B97F4A7C15ULL) >> 20) & (cap - 1);
+            while (g.key[t]) t = (t + 1) & (cap - 1);
+            g.key[t] = h->key[o], g.val[t] = h->val[o], g.used[g.n_used++] = t;
+        }
+        pn__rom_hash_free(w, h);
+        *h = g;
+    }
+    s = (size_t)((key * 0x9E3779B97F4A7C15ULL) >> 20) & (h->cap - 1);
+    while (h->key[s]) {
+        if (h->key[s] == key + 1) return h->val[s];
+        s = (s + 1) & (h->cap - 1);
+    }
+    h->key[s] = key + 1, h->val[s] = val, h->used[h->n_used++] = s;
+    return val;
+}
+
+static double pn__rom_rand(unsigned long long *st) { /* splitmix64, [0, 1) */
+    unsigned long long z = (*st += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    z ^= z >> 31;
+    return (double)(z >> 11) / 9007199254740992.0;
+}
+
+/* quadratic B-spline weights of the 3 nodes from base (f = x/dx - base in [0.5, 1.5)) */
+static void pn__rom_spline(double f, double *wt) {
+    wt[0] = 0.5 * (1.5 - f) * (1.5 - f), wt[1] = 0.75 - (f - 1) * (f - 1), wt[2] = 0.5 * (f - 0.5) * (f - 0.5);
+}
+
+/* solve the symmetric positive definite K x K system A x = b in place (Cholesky); 0 if A is
+   not positive definite */
+static int pn__rom_spd_solve(int K, double *A, double *b) {
+    int i, j, k;
+    for (j = 0; j < K; ++j) {
+        double s = A[j * K + j];
+        for (k = 0; k < j; ++k) s -= A[j * K + k] * A[j * K + k];
+        if (!(s > 0)) return 0;
+        A[j * K + j] = sqrt(s);
+        for (i = j + 1; i < K; ++i) {
+            double t = A[i * K + j];
+            for (k = 0; k < j; ++k) t -= A[i * K + k] * A[j * K + k];
+            A[i * K + j] = t / A[j * K + j];
+        }
+    }
+    for (i = 0; i < K; ++i) {
+        for (k = 0; k < i; ++k) b[i] -= A[i * K + k] * b[k];
+        b[i] /= A[i * K + i];
+    }
+    for (i = K - 1; i >= 0; --i) {
+        for (k = i + 1; k < K; ++k) b[i] -= A[k * K + i] * b[k];
+        b[i] /= A[i * K + i];
+    }
+    return 1;
+}
+
+/* the least-squares solution of sum_p |G_p y - r_p|^2 (n points, G d x K each) into y: the
+   normal equations, in point order, with a relative ridge of 1e-15 against exact
+   rank deficiency; 0 if singular */
+static int pn__rom_lsq(int d, int K, size_t n, const double *G, const double *r, double *y) {
+    double A[PN_ROM_MAX_LATENT * PN_ROM_MAX_LATENT], tr = 0;
+    size_t p;
+    int i, j, k;
+    for (i = 0; i < K * K; ++i) A[i] = 0;
+    for (i = 0; i < K; ++i) y[i] = 0;
+    for (p = 0; p < n; ++p) {
+        const double *Gp = G + p * (size_t)(d * K), *rp = r + p * (size_t)d;
+        for (k = 0; k < d; ++k)
+            for (i = 0; i < K; ++i) {
+                y[i] += Gp[k * K + i] * rp[k];
+                for (j = 0; j <= i; ++j) A[i * K + j] += Gp[k * K + i] * Gp[k * K + j];
+            }
+    }
+    for (i = 0; i < K; ++i) {
+        for (j = 0; j < i; ++j) A[j * K + i] = A[i * K + j];
+        tr += A[i * K + i];
+    }
+    for (i = 0; i < K; ++i) A[i * K + i] += 1e-15 * tr / K + 1e-300;
+    return pn__rom_spd_solve(K, A, y);
+}
+
+static double pn__rom_det(int d, const double *F) {
+    if (d == 2) return F[0] * F[3] - F[1] * F[2];
+    return F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6]) + F[2] * (F[3] * F[7] - F[4] * F[6]);
+}
+
+/* y = F^-1 r (0 if F is singular) */
+static int pn__rom_solve_F(int d, const double *F, const double *r, double *y) {
+    double det = pn__rom_det(d, F);
+    if (!(det != 0) || !pn__rom_finite(det)) return 0;
+    if (d == 2) {
+        y[0] = (F[3] * r[0] - F[1] * r[1]) / det, y[1] = (-F[2] * r[0] + F[0] * r[1]) / det;
+    } else {
+        double I[9];
+        int i;
+        I[0] = F[4] * F[8] - F[5] * F[7], I[1] = F[2] * F[7] - F[1] * F[8], I[2] = F[1] * F[5] - F[2] * F[4];
+        I[3] = F[5] * F[6] - F[3] * F[8], I[4] = F[0] * F[8] - F[2] * F[6], I[5] = F[2] * F[3] - F[0] * F[5];
+        I[6] = F[3] * F[7] - F[4] * F[6], I[7] = F[1] * F[6] - F[0] * F[7], I[8] = F[0] * F[4] - F[1] * F[3];
+        for (i = 0; i < 3; ++i) y[i] = (I[3 * i] * r[0] + I[3 * i + 1] * r[1] + I[3 * i + 2] * r[2]) / det;
+    }
+    return 1;
+}
+
+/* the rigid motion of drive D: its centre at time t, and the velocity there at x */
+static void pn__rom_drive_center(const pn__rom_drive *D, double t, double *c) {
+    int i;
+    for (i = 0; i < 3; ++i) c[i] = D->center[i] + (t - D->t0) * D->vel[i];
+}
+static void pn__rom_drive_vel(const pn__rom_drive *D, int d, const double *c, const double *x, double *v) {
+    double r[3] = {0, 0, 0};
+    int i;
+    for (i = 0; i < d; ++i) r[i] = x[i] - c[i];
+    v[0] = D->vel[0] + D->omega[1] * r[2] - D->omega[2] * r[1];
+    v[1] = D->vel[1] + D->omega[2] * r[0] - D->omega[0] * r[2];
+    if (d == 3) v[2] = D->vel[2] + D->omega[0] * r[1] - D->omega[1] * r[0];
+}
+/* where drive D puts at time t a point that was at x0 at t0 (Rodrigues) */
+static void pn__rom_drive_pos(const pn__rom_drive *D, int d, double t, const double *x0, double *x) {
+    double c[3], r[3] = {0, 0, 0}, wn = 0, k[3], th, cs, sn, kr, kx[3];
+    int i;
+    pn__rom_drive_center(D, t, c);
+    for (i = 0; i < d; ++i) r[i] = x0[i] - D->center[i];
+    for (i = 0; i < 3; ++i) wn += D->omega[i] * D->omega[i];
+    wn = sqrt(wn);
+    if (!(wn > 0)) {
+        for (i = 0; i < d; ++i) x[i] = c[i] + r[i];
+        return;
+    }
+    for (i = 0; i < 3; ++i) k[i] = D->omega[i] / wn;
+    th = wn * (t - D->t0), cs = cos(th), sn = sin(th);
+    kr = k[0] * r[0] + k[1] * r[1] + k[2] * r[2];
+    kx[0] = k[1] * r[2] - k[2] * r[1], kx[1] = k[2] * r[0] - k[0] * r[2], kx[2] = k[0] * r[1] - k[1] * r[0];
+    for (i = 0; i < d; ++i) x[i] = c[i] + r[i] * cs + kx[i] * sn + k[i] * kr * (1 - cs);
+}
+
+/* the first live drive whose region holds X, or -1 */
+static int pn__rom_drive_of(const pn_rom_world *w, const double *X) {
+    int a;
+    for (a = 0; a < w->n_drives; ++a)
+        if (w->drives[a].on && pn__rom_in_region(&w->drives[a].r, w->dim, X)) return a;
+    return -1;
+}
+
+/* draw the samples: at least boundary_samples of each live drive, then random points of the
+   rest, without replacement (a partial Fisher-Yates shuffle of a persistent permutation) */
+static size_t pn__rom_sample(pn_rom_world *w) {
+    size_t n = w->n, want, ns = 0, i, nb = 0;
+    int a, d = w->dim;
+    if (w->desc.samples < 0 || (size_t)w->desc.samples >= n) {
+        for (i = 0; i < n; ++i) w->sidx[i] = i;
+        ns = n;
+    } else {
+        want = (size_t)w->desc.samples;
+        for (a = 0; a < w->n_drives; ++a) { /* boundary points first */
+            pn__rom_drive *D = &w->drives[a];
+            size_t k, m = (size_t)w->desc.boundary_samples < D->n_pts ? (size_t)w->desc.boundary_samples : D->n_pts;
+            if (!D->on) continue;
+            for (k = 0; k < m; ++k) {
+                size_t j = k + (size_t)(pn__rom_rand(&w->rng) * (double)(D->n_pts - k)), t = D->pts[k];
+                D->pts[k] = D->pts[j], D->pts[j] = t;
+                w->sidx[ns++] = D->pts[k];
+            }
+        }
+        nb = ns;
+        for (i = 0; ns < nb + want && i < n; ++i) {
+            size_t j = i + (size_t)(pn__rom_rand(&w->rng) * (double)(n - i)), t = w->perm[i], k;
+            int dup = 0;
+            w->perm[i] = w->perm[j], w->perm[j] = t;
+            for (k = 0; k < nb; ++k) dup |= w->sidx[k] == w->perm[i];
+            if (!dup) w->sidx[ns++] = w->perm[i];
+        }
+    }
+    for (i = 0; i < ns; ++i) {
+        memcpy(w->sX + i * (size_t)d, w->X + w->sidx[i] * (size_t)d, sizeof(double) * (size_t)d);
+        w->sdrv[i] = pn__rom_drive_of(w, w->sX + i * (size_t)d);
+    }
+    return ns;
+}
+
+/* the stencil base node of a point at x (in cells: base = floor(x/dx - 1/2)) and fx = x/dx - base */
+static void pn__rom_base(int d, double inv_dx, const double *x, long long *base, double *fx) {
+    int i;
+    for (i = 0; i < d; ++i) {
+        double u = x[i] * inv_dx;
+        base[i] = (long long)floor(u - 0.5);
+        fx[i] = u - (double)base[i];
+    }
+    for (i = d; i < 3; ++i) base[i] = 0, fx[i] = 1;
+}
+
+/* Eulerian quadrature (Algorithm 4): the lattice of spacing dx/l (cell-centred) within reach
+   of the samples' stencil nodes, each point mapped back to X by Newton on g(X, xhat) = x from
+   its sample's affine guess X_s + F_s^-1 (x - x_s); points whose X is not material, or that
+   Newton does not bring within 1e-5 dx (float; 1e-10 dx on the double path), are left out. */
+static pn_result pn__rom_quad_eulerian(pn_rom_world *w, size_t ns, size_t *nq_out, size_t *failed) {
+    int d = w->dim, K = w->latent, l = w->desc.quad_per_axis, it, i;
+    double dx = w->desc.dx_m, h = dx / l, Vq = 1;
+    double tol = (w->desc.reference || w->model.activation == PN_ROM_AFFINE ? 1e-10 : 1e-5) * dx; /* float: its rounding */
+    size_t s, nq = 0, na, j, q, nf = 0, dd = (size_t)(d * d), dK = (size_t)(d * K);
+    pn__rom_hash_clear(&w->lat);
+    for (i = 0; i < d; ++i) Vq *= h;
+    for (s = 0; s < ns; ++s) {
+        long long b[3], a[3], lo[3], hi[3];
+        double fx[3];
+        pn__rom_base(d, 1 / dx, w->sx + s * (size_t)d, b, fx);
+        for (i = 0; i < 3; ++i) { /* (a + 1/2)/l - b in (-1.5, 3.5): within reach of nodes b .. b+2 */
+            lo[i] = i < d ? (long long)l * b[i] - 2 * l : 0;
+            hi[i] = i < d ? (long long)l * b[i] + 4 * l : 0;
+        }
+        for (a[0] = lo[0]; a[0] <= hi[0]; ++a[0])
+            for (a[1] = lo[1]; a[1] <= hi[1]; ++a[1])
+                for (a[2] = lo[2]; a[2] <= hi[2]; ++a[2]) {
+                    int in = 1;
+                    long v;
+                    for (i = 0; i < d; ++i) {
+                        double u = ((double)a[i] + 0.5) / l - (double)b[i];
+                        in &= u > -1.5 && u < 3.5;
+                    }
+                    if (!in) continue;
+                    if (nq == w->cap_q && !pn__rom_reserve(w, w->cap_s, nq + 1)) return PN_ERROR_OUT_OF_MEMORY;
+                    v = pn__rom_hash_put(w, &w->lat, pn__rom_key(a), (long)nq);
+                    if (v == -2) return PN_ERROR_OUT_OF_MEMORY;
+                    if (v != (long)nq) continue; /* another sample's */
+                    for (i = 0; i < d; ++i) w->qx[nq * (size_t)d + (size_t)i] = ((double)a[i] + 0.5) * h;
+                    w->qsrc[nq] = (long)s;
+                    nq++;
+                }
+    }
+    for (q = 0; q < nq; ++q) { /* the guess from the sample's tangent map */
+        const double *xs = w->sx + (size_t)w->qsrc[q] * (size_t)d, *Xs = w->sX + (size_t)w->qsrc[q] * (size_t)d;
+        double r[3], y[3] = {0, 0, 0};
+        for (i = 0; i < d; ++i) r[i] = w->qx[q * (size_t)d + (size_t)i] - xs[i];
+        pn__rom_solve_F(d, w->sF + (size_t)w->qsrc[q] * dd, r, y);
+        for (i = 0; i < d; ++i) w->tX[q * (size_t)d + (size_t)i] = Xs[i] + y[i];
+        w->tI[q] = (long)q;
+        w->qok[q] = 0;
+    }
+    na = nq;
+    for (it = 0; it <= 10 && na; ++it) { /* Newton on the points not yet converged, compacted */
+        size_t keep = 0;
+        pn__rom_map(w, w->xhat, na, w->tX, w->tx, w->tF, w->tG);
+        for (j = 0; j < na; ++j) {
+            double r[3], y[3], rr = 0;
+            q = (size_t)w->tI[j];
+            for (i = 0; i < d; ++i) {
+                r[i] = w->tx[j * (size_t)d + (size_t)i] - w->qx[q * (size_t)d + (size_t)i];
+                rr += r[i] * r[i];
+            }
+            if (rr <= tol * tol) { /* converged: X, F, G at it */
+                memcpy(w->qX + q * (size_t)d, w->tX + j * (size_t)d, sizeof(double) * (size_t)d);
+                memcpy(w->qF + q * dd, w->tF + j * dd, sizeof(double) * dd);
+                memcpy(w->qG + q * dK, w->tG + j * dK, sizeof(double) * dK);
+                w->qok[q] = pn_rom_inside(&w->model, w->qX + q * (size_t)d) && pn__rom_det(d, w->qF + q * dd) > 0;
+                continue;
+            }
+            if (!pn__rom_finite(rr) || it == 10 || !pn__rom_solve_F(d, w->tF + j * dd, r, y)) {
+                nf++;
+                continue;
+            }
+            w->tI[keep] = (long)q;
+            for (i = 0; i < d; ++i) w->tX[keep * (size_t)d + (size_t)i] = w->tX[j * (size_t)d + (size_t)i] - y[i];
+            keep++;
+        }
+        na = keep;
+    }
+    for (q = 0; q < nq; ++q) {
+        double J;
+        if (!w->qok[q]) continue;
+        J = pn__rom_det(d, w->qF + q * dd);
+        w->qV0[q] = Vq / J;
+        w->qm[q] = w->desc.density_kg_m3 * Vq / J;
+    }
+    *nq_out = nq;
+    *failed = nf;
+    return PN_OK;
+}
+
+/* Lagrangian quadrature (Algorithm 3): the world's points whose stencil reaches a node of the
+   samples' (their positions from g at every point: the cost the paper measures) */
+static pn_result pn__rom_quad_lagrangian(pn_rom_world *w, size_t *nq_out) {
+    int d = w->dim, i;
+    size_t p, nq = 0, dd = (size_t)(d * d);
+    double inv = 1 / w->desc.dx_m;
+    if (!w->px) {
+        int fail = 0;
+        w->px = (double *)pn__rom_alloc(w, w->n * (size_t)d, sizeof(double), &fail);
+        if (fail) return PN_ERROR_OUT_OF_MEMORY;
+    }
+    pn__rom_map(w, w->xhat, w->n, w->X, w->px, NULL, NULL);
+    for (p = 0; p < w->n; ++p) {
+        long long b[3], o[3], k[3];
+        double fx[3];
+        int hit = 0;
+        pn__rom_base(d, inv, w->px + p * (size_t)d, b, fx);
+        for (o[0] = 0; o[0] < 3 && !hit; ++o[0])
+            for (o[1] = 0; o[1] < 3 && !hit; ++o[1])
+                for (o[2] = 0; o[2] < (d == 3 ? 3 : 1) && !hit; ++o[2]) {
+                    for (i = 0; i < 3; ++i) k[i] = b[i] + o[i];
+                    hit = pn__rom_hash_get(&w->nodes, pn__rom_key(k)) >= 0;
+                }
+        if (!hit) continue;
+        if (nq == w->cap_q && !pn__rom_reserve(w, w->cap_s, nq + 1)) return PN_ERROR_OUT_OF_MEMORY;
+        memcpy(w->qX + nq * (size_t)d, w->X + p * (size_t)d, sizeof(double) * (size_t)d);
+        memcpy(w->qx + nq * (size_t)d, w->px + p * (size_t)d, sizeof(double) * (size_t)d);
+        w->qm[nq] = w->mass[p], w->qV0[nq] = w->vol[p], w->qok[nq] = 1;
+        nq++;
+    }
+    pn__rom_map(w, w->xhat, nq, w->qX, NULL, w->qF, w->qG);
+    for (p = 0; p < nq; ++p) w->qok[p] = pn__rom_det(d, w->qF + p * dd) > 0;
+    *nq_out = nq;
+    return PN_OK;
+}
+
+/* the samples' grid nodes (3^dim each) into the node hash, numbered in order */
+static pn_result pn__rom_nodes(pn_rom_world *w, size_t ns, size_t *nn_out) {
+    int d = w->dim, i;
+    size_t s, nn = 0;
+    double inv = 1 / w->desc.dx_m;
+    pn__rom_hash_clear(&w->nodes);
+    for (s = 0; s < ns; ++s) {
+        long long b[3], o[3], k[3];
+        double fx[3];
+        pn__rom_base(d, inv, w->sx + s * (size_t)d, b, fx);
+        for (o[0] = 0; o[0] < 3; ++o[0])
+            for (o[1] = 0; o[1] < 3; ++o[1])
+                for (o[2] = 0; o[2] < (d == 3 ? 3 : 1); ++o[2]) {
+                    long v;
+                    for (i = 0; i < 3; ++i) k[i] = b[i] + o[i];
+                    if (nn == w->cap_n) {
+                        size_t c = w->cap_n ? 2 * w->cap_n : 1024;
+                        int ok = pn__rom_grow(w, (void **)&w->nidx, w->cap_n * 3, c * 3, sizeof(long long)) &&
+                                 pn__rom_grow(w, (void **)&w->nm, w->cap_n, c, sizeof(double)) &&
+                                 pn__rom_grow(w, (void **)&w->np, w->cap_n * 3, c * 3, sizeof(double)) &&
+                                 pn__rom_grow(w, (void **)&w->nf, w->cap_n * 3, c * 3, sizeof(double)) &&
+                                 pn__rom_grow(w, (void **)&w->ndrv, w->cap_n, c, sizeof(int));
+                        if (!ok) return PN_ERROR_OUT_OF_MEMORY;
+                        w->cap_n = c;
+                    }
+                    v = pn__rom_hash_put(w, &w->nodes, pn__rom_key(k), (long)nn);
+                    if (v == -2) return PN_ERROR_OUT_OF_MEMORY;
+                    if (v != (long)nn) continue;
+                    memcpy(w->nidx + 3 * nn, k, sizeof k);
+                    nn++;
+                }
+    }
+    *nn_out = nn;
+    return PN_OK;
+}
+
+/* the stencil of a point at x: for each of its nodes in the node hash, the node's index, the
+   weight and the node's offset x_i - x */
+typedef struct pn__rom_st {
+    long node[27];
+    double wt[27], off[27][3];
+    int n;
+} pn__rom_st;
+
+static void pn__rom_stencil(const pn_rom_world *w, const double *x, pn__rom_st *st) {
+    int d = w->dim, i;
+    double dx = w->desc.dx_m, inv = 1 / dx, fx[3], W[3][3];
+    long long b[3], o[3], k[3];
+    pn__rom_base(d, inv, x, b, fx);
+    for (i = 0; i < d; ++i) pn__rom_spline(fx[i], W[i]);
+    for (i = d; i < 3; ++i) W[i][0] = 1;
+    st->n = 0;
+    for (o[0] = 0; o[0] < 3; ++o[0])
+        for (o[1] = 0; o[1] < 3; ++o[1])
+            for (o[2] = 0; o[2] < (d == 3 ? 3 : 1); ++o[2]) {
+                long v;
+                int c = st->n;
+                for (i = 0; i < 3; ++i) k[i] = b[i] + o[i];
+                v = pn__rom_hash_get(&w->nodes, pn__rom_key(k));
+                if (v < 0) continue;
+                st->node[c] = v;
+                st->wt[c] = W[0][o[0]] * W[1][o[1]] * W[2][o[2]];
+                for (i = 0; i < d; ++i) st->off[c][i] = ((double)o[i] - fx[i]) * dx;
+                st->n++;
+            }
+}
+
+/* the driven position and velocity at time t of a point of drive a at X: where the drive puts
+   the point g(X, xhat at the drive's start) */
+static void pn__rom_driven(const pn_rom_world *w, int a, const double *X, double t, double *x, double *v) {
+    const pn__rom_drive *D = &w->drives[a];
+    double x0[3], c[3];
+    pn_rom_eval(&w->model, D->xhat0, 1, X, x0, NULL, NULL);
+    pn__rom_drive_pos(D, w->dim, t, x0, x);
+    pn__rom_drive_center(D, t, c);
+    pn__rom_drive_vel(D, w->dim, c, x, v);
+}
+
+PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
+    int d = w->dim, K = w->latent, i, j, a;
+    size_t ns, nq = 0, nn, q, s, failed = 0, dd = (size_t)(d * d), dK = (size_t)(d * K);
+    double xh[PN_ROM_MAX_LATENT], vh[PN_ROM_MAX_LATENT], t = w->time_s, g[3] = {0, 0, 0}, tmid = t + dt / 2;
+    double inv4 = 4 / (w->desc.dx_m * w->desc.dx_m), rms = 0;
+    pn_rom_stats st;
+    pn_result r;
+    long lq;
+    w->error[0] = 0;
+    memset(&st, 0, sizeof st);
+    if (!pn__rom_finite(dt) || !(dt > 0)) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_step: dt_s = %g must be > 0", dt);
+    for (i = 0; i < d; ++i) g[i] = w->desc.gravity[i];
+    /* 1. samples and their kinematics at the current latent */
+    ns = w->desc.samples < 0 || (size_t)w->desc.samples >= w->n ? w->n
+                                                                 : (size_t)w->desc.samples + (size_t)(w->desc.boundary_samples * w->n_drives);
+    if (!pn__rom_reserve(w, ns, w->cap_q ? w->cap_q : 64 * ns)) return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_step: out of memory");
+    ns = pn__rom_sample(w);
+    pn__rom_map(w, w->xhat, ns, w->sX, w->sx, w->sF, w->sG);
+    /* 2. their grid nodes, and the quadrature points that reach them */
+    if ((r = pn__rom_nodes(w, ns, &nn)) != PN_OK) return pn__rom_fail(w, r, "pn_rom_step: out of memory (grid nodes)");
+    r = w->desc.quadrature == PN_ROM_EULERIAN ? pn__rom_quad_eulerian(w, ns, &nq, &failed) : pn__rom_quad_lagrangian(w, &nq);
+    if (r != PN_OK) return pn__rom_fail(w, r, "pn_rom_step: out of memory (quadrature)");
+    /* 3. velocity, affine velocity (APIC: C = dF/dt F^-1, dF/dt by a central difference of
+          F along vhat), stress and flags of each quadrature point */
+    for (q = 0; q < nq; ++q) {
+        double *v = w->qv + q * (size_t)d;
+        const double *G = w->qG + q * dK;
+        for (i = 0; i < d; ++i) {
+            v[i] = 0;
+            for (j = 0; j < K; ++j) v[i] += G[i * K + j] * w->vhat[j];
+        }
+    }
+    {
+        double vn = 0, eps, xp[PN_ROM_MAX_LATENT], xm[PN_ROM_MAX_LATENT];
+        for (i = 0; i < K; ++i) {
+            double sc = w->model.latent_std ? w->model.latent_std[i] : 1;
+            vn = fmax(vn, fabs(w->vhat[i]) / (sc > 0 ? sc : 1));
+        }
+        memset(w->qC, 0, sizeof(double) * nq * dd);
+        if (w->desc.transfer == PN_ROM_APIC && vn > 0) {
+            eps = (w->desc.reference || w->model.activation == PN_ROM_AFFINE ? 1e-6 : 1e-3) / vn;
+            for (i = 0; i < K; ++i) xp[i] = w->xhat[i] + eps * w->vhat[i], xm[i] = w->xhat[i] - eps * w->vhat[i];
+            pn__rom_map(w, xp, nq, w->qX, NULL, w->qC, NULL);
+            pn__rom_map(w, xm, nq, w->qX, NULL, w->tF, NULL);
+            for (q = 0; q < nq; ++q) {
+                double Fd[9], Ci[9], *C = w->qC + q * dd;
+                const double *F = w->qF + q * dd;
+                for (i = 0; i < (int)dd; ++i) Fd[i] = (C[i] - w->tF[q * dd + (size_t)i]) / (2 * eps);
+                for (i = 0; i < d; ++i) { /* row i of C solves C F = Fd: F^T c_i = fd_i */
+                    double Ft[9], rhs[3], y[3] = {0, 0, 0};
+                    int k;
+                    for (j = 0; j < d; ++j)
+                        for (k = 0; k < d; ++k) Ft[j * d + k] = F[k * d + j];
+                    for (k = 0; k < d; ++k) rhs[k] = Fd[i * d + k];
+                    pn__rom_solve_F(d, Ft, rhs, y);
+                    for (k = 0; k < d; ++k) Ci[i * d + k] = y[k];
+                }
+                memcpy(C, Ci, sizeof(double) * dd);
+            }
+        }
+    }
+#if defined(_OPENMP)
+#pragma omp parallel for schedule(dynamic, 256) if (nq >= (size_t)w->desc.parallel_min)
+#endif
+    for (lq = 0; lq < (long)nq; ++lq) {
+        pn_real F[9], tau[9];
+        size_t qq = (size_t)lq;
+        int k, fl = 0;
+        if (!w->qok[qq]) continue;
+        for (k = 0; k < (int)dd; ++k) F[k] = (pn_real)w->qF[qq * dd + (size_t)k];
+        if (pn_kirchhoff_stress(&w->material, d, F, 0, tau) != PN_OK) {
+            w->qok[qq] = 0;
+            continue;
+        }
+        for (k = 0; k < (int)dd; ++k) w->qT[qq * dd + (size_t)k] = (double)tau[k];
+        k = pn__rom_drive_of(w, w->qX + qq * (size_t)d);
+        fl = k >= 0 ? k + 1 : 0;
+        for (k = 0; k < w->n_loads; ++k)
+            if (w->loads[k].on && w->loads[k].t_end > t && pn__rom_in_region(&w->loads[k].r, d, w->qX + qq * (size_t)d))
+                fl |= 1 << (8 + k);
+        w->qflag[qq] = fl;
+    }
+    /* 4. particle to grid (MLS-MPM, as plastinet_mpm.h's explicit step), in point order */
+    memset(w->nm, 0, sizeof(double) * nn);
+    memset(w->np, 0, sizeof(double) * nn * 3);
+    memset(w->nf, 0, sizeof(double) * nn * 3);
+    for (s = 0; s < nn; ++s) w->ndrv[s] = -1;
+    for (q = 0; q < nq; ++q) {
+        pn__rom_st stn;
+        const double *v = w->qv + q * (size_t)d, *C = w->qC + q * dd, *T = w->qT + q * dd;
+        double m = w->qm[q], V0 = w->qV0[q], acc[3] = {0, 0, 0};
+        int c, k;
+        if (!w->qok[q]) continue;
+        for (k = 0; k < w->n_loads; ++k)
+            if (w->qflag[q] & (1 << (8 + k))) {
+                double span = fmin(dt, w->loads[k].t_end - t) / dt;
+                for (i = 0; i < d; ++i) acc[i] += w->loads[k].acc[i] * span;
+            }
+        pn__rom_stencil(w, w->qx + q * (size_t)d, &stn);
+        for (c = 0; c < stn.n; ++c) {
+            long nd = stn.node[c];
+            double wt = stn.wt[c], *e = stn.off[c];
+            w->nm[nd] += wt * m;
+            for (i = 0; i < d; ++i) {
+                double ce = 0, te = 0;
+                for (j = 0; j < d; ++j) ce += C[i * d + j] * e[j], te += T[i * d + j] * e[j];
+                w->np[nd * 3 + (size_t)i] += wt * m * (v[i] + ce);
+                w->nf[nd * 3 + (size_t)i] += -V0 * inv4 * wt * te + wt * m * acc[i];
+            }
+            if (w->qflag[q] & 0xff) w->ndrv[nd] = (w->qflag[q] & 0xff) - 1;
+        }
+    }
+    /* 5. grid update: v = (p + dt f) / m + dt g, then the drives' rigid velocity (mid-step) */
+    for (s = 0; s < nn; ++s) {
+        double *v = w->np + s * 3;
+        if (!(w->nm[s] > 0)) continue;
+        for (i = 0; i < d; ++i) v[i] = (v[i] + dt * w->nf[s * 3 + (size_t)i]) / w->nm[s] + dt * g[i];
+        if (w->ndrv[s] >= 0) {
+            double xn[3], c[3];
+            for (i = 0; i < d; ++i) xn[i] = (double)w->nidx[3 * s + (size_t)i] * w->desc.dx_m;
+            pn__rom_drive_center(&w->drives[w->ndrv[s]], tmid, c);
+            pn__rom_drive_vel(&w->drives[w->ndrv[s]], d, c, xn, v);
+        }
+    }
+    /* 6. grid to samples: the trial velocity (over the nodes with mass) and position; driven
+          samples exactly where their drive puts them */
+    for (s = 0; s < ns; ++s) {
+        pn__rom_st stn;
+        double vs[3] = {0, 0, 0}, ws = 0, *xt = w->sxt + s * (size_t)d, *vt = w->sv + s * (size_t)d;
+        int c;
+        if (w->sdrv[s] >= 0) {
+            pn__rom_driven(w, w->sdrv[s], w->sX + s * (size_t)d, t + dt, xt, vt);
+            continue;
+        }
+        pn__rom_stencil(w, w->sx + s * (size_t)d, &stn);
+        for (c = 0; c < stn.n; ++c) {
+            long nd = stn.node[c];
+            if (!(w->nm[nd] > 0)) continue;
+            ws += stn.wt[c];
+            for (i = 0; i < d; ++i) vs[i] += stn.wt[c] * w->np[nd * 3 + (size_t)i];
+        }
+        for (i = 0; i < d; ++i) {
+            vt[i] = ws > 0 ? vs[i] / ws : 0;
+            xt[i] = w->sx[s * (size_t)d + (size_t)i] + dt * vt[i];
+        }
+    }
+    /* 7. projection: vhat by least squares on the velocities (Eq. 21/23); xhat += dt vhat
+          (LINEAR) or by Gauss-Newton on the positions from 2 xhat - xhat_prev (Eq. 22) */
+    if (!pn__rom_lsq(d, K, ns, w->sG, w->sv, vh))
+        return pn__rom_fail(w, PN_ERROR_NOT_CONVERGED, "pn_rom_step: the velocity projection is singular (%lu samples)",
+                            (unsigned long)ns);
+    if (w->desc.projection == PN_ROM_LINEAR) {
+        for (i = 0; i < K; ++i) xh[i] = w->xhat[i] + dt * vh[i];
+        pn__rom_map(w, xh, ns, w->sX, w->tx, NULL, NULL);
+    } else {
+        double obj = 0, dlt[PN_ROM_MAX_LATENT];
+        int it;
+        for (i = 0; i < K; ++i) xh[i] = 2 * w->xhat[i] - w->xhat_prev[i];
+        for (it = 0; it < w->desc.gn_max; ++it) {
+            double step = 1, nobj = 0, dn = 0, xn = 0;
+            pn__rom_map(w, xh, ns, w->sX, w->tx, NULL, w->tG);
+            for (obj = 0, s = 0; s < ns * (size_t)d; ++s) {
+                w->tX[s] = w->sxt[s] - w->tx[s];
+                obj += w->tX[s] * w->tX[s];
+            }
+            if (!pn__rom_lsq(d, K, ns, w->tG, w->tX, dlt)) break;
+            for (i = 0; i < K; ++i) dn += dlt[i] * dlt[i], xn += xh[i] * xh[i];
+            st.gn_iterations = it + 1;
+            for (;;) { /* backtracking: halve until the misfit decreases */
+                double xt[PN_ROM_MAX_LATENT];
+                for (i = 0; i < K; ++i) xt[i] = xh[i] + step * dlt[i];
+                pn__rom_map(w, xt, ns, w->sX, w->tx, NULL, NULL);
+                for (nobj = 0, s = 0; s < ns * (size_t)d; ++s) nobj += (w->sxt[s] - w->tx[s]) * (w->sxt[s] - w->tx[s]);
+                if (nobj <= obj || step < 1e-4) break;
+                step /= 2;
+            }
+            if (!(nobj <= obj)) break;
+            for (i = 0; i < K; ++i) xh[i] += step * dlt[i];
+            obj = nobj;
+            if (step * step * dn <= 1e-24 * (xn + 1)) break;
+        }
+        pn__rom_map(w, xh, ns, w->sX, w->tx, NULL, NULL);
+    }
+    for (s = 0; s < ns * (size_t)d; ++s) rms += (w->sxt[s] - w->tx[s]) * (w->sxt[s] - w->tx[s]);
+    if (!pn__rom_all_finite((size_t)K, xh) || !pn__rom_all_finite((size_t)K, vh) || !pn__rom_finite(rms))
+        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s too large for the "
+                            "scene?)", dt);
+    for (i = 0; i < K; ++i) w->xhat_prev[i] = w->xhat[i], w->xhat[i] = xh[i], w->vhat[i] = vh[i];
+    w->time_s += dt;
+    w->steps++;
+    for (a = 0; a < w->n_loads; ++a)
+        if (w->loads[a].on && w->loads[a].t_end <= w->time_s) w->loads[a].on = 0;
+    st.samples = ns, st.quad_points = nq, st.nodes = nn, st.inverse_failed = failed;
+    st.residual_m = sqrt(rms / (double)(ns ? ns : 1));
+    if (stats) *stats = st;
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>fit and >>render: the latent of a full state (Eq. 19), and g at many points in float
+   ====================================================================================== */
+
+PN__DEF pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, double *rms_m) {
+    int d = w->dim, K = w->latent, i, it;
+    size_t n = w->n, p, nd = n * (size_t)d;
+    double xh[PN_ROM_MAX_LATENT], dl[PN_ROM_MAX_LATENT], obj = HUGE_VAL, *gx = NULL, *G = NULL, *r = NULL;
+    int fail = 0;
+    w->error[0] = 0;
+    if (!x || !pn__rom_all_finite(nd, x) || (v && !pn__rom_all_finite(nd, v)))
+        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_fit: x is NULL, or x or v not finite");
+    gx = (double *)pn__rom_alloc(w, nd, sizeof(double), &fail);
+    r = (double *)pn__rom_alloc(w, nd, sizeof(double), &fail);
+    G = (double *)pn__rom_alloc(w, nd * (size_t)K, sizeof(double), &fail);
+    if (fail) {
+        pn_free(&w->desc.allocator, gx), pn_free(&w->desc.allocator, r), pn_free(&w->desc.allocator, G);
+        return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_fit: out of memory");
+    }
+    memcpy(xh, w->xhat, sizeof xh);
+    for (it = 0; it < 50; ++it) { /* Gauss-Newton with halving */
+        double step = 1, nobj = 0, dn = 0, xn = 0;
+        pn__rom_map(w, xh, n, w->X, gx, NULL, G);
+        for (obj = 0, p = 0; p < nd; ++p) r[p] = x[p] - gx[p], obj += r[p] * r[p];
+        if (!pn__rom_lsq(d, K, n, G, r, dl)) break;
+        for (i = 0; i < K; ++i) dn += dl[i] * dl[i], xn += xh[i] * xh[i];
+        for (;;) {
+            double xt[PN_ROM_MAX_LATENT];
+            for (i = 0; i < K; ++i) xt[i] = xh[i] + step * dl[i];
+            pn__rom_map(w, xt, n, w->X, gx, NULL, NULL);
+            for (nobj = 0, p = 0; p < nd; ++p) nobj += (x[p] - gx[p]) * (x[p] - gx[p]);
+            if (nobj <= obj || step < 1e-6) break;
+            step /= 2;
+        }
+        if (!(nobj <= obj)) break;
+        for (i = 0; i < K; ++i) xh[i] += step * dl[i];
+        obj = nobj;
+        if (step * step * dn <= 1e-28 * (xn + 1)) break;
+    }
+    if (!pn__rom_all_finite((size_t)K, xh)) {
+        pn_free(&w->desc.allocator, gx), pn_free(&w->desc.allocator, r), pn_free(&w->desc.allocator, G);
+        return pn__rom_fail(w, PN_ERROR_NOT_CONVERGED, "pn_rom_fit: Gauss-Newton did not converge");
+    }
+    for (i = 0; i < K; ++i) w->xhat[i] = w->xhat_prev[i] = xh[i], w->vhat[i] = 0;
+    if (v) {
+        pn__rom_map(w, xh, n, w->X, NULL, NULL, G);
+        if (pn__rom_lsq(d, K, n, G, v, dl))
+            for (i = 0; i < K; ++i) w->vhat[i] = dl[i];
+    }
+    if (rms_m) *rms_m = sqrt(obj / (double)(n ? n : 1));
+    pn_free(&w->desc.allocator, gx), pn_free(&w->desc.allocator, r), pn_free(&w->desc.allocator, G);
+    return PN_OK;
+}
+
+/* float positions (and F) at n reference points X from the current latent */
+static void pn__rom_render(const pn_rom_world *w, size_t n, const float *Xf, const double *Xd, float *x, float *F) {
+    const pn_rom_model *m = &w->model;
+    int d = w->dim, K = w->latent;
+    long nb = (long)((n + PN__ROM_B - 1) / PN__ROM_B), lb;
+    float c1[PN_ROM_MAX_WIDTH];
+    if (m->activation == PN_ROM_AFFINE || w->desc.reference) {
+        size_t p;
+        for (p = 0; p < n; ++p) {
+            double X[3], xx[3], FF[9];
+            int i;
+            for (i = 0; i < d; ++i) X[i] = Xf ? (double)Xf[p * (size_t)d + (size_t)i] : Xd[p * (size_t)d + (size_t)i];
+            pn_rom_eval(m, w->xhat, 1, X, xx, F ? FF : NULL, NULL);
+            for (i = 0; i < d; ++i) x[p * (size_t)d + (size_t)i] = (float)xx[i];
+            if (F)
+                for (i = 0; i < d * d; ++i) F[p * (size_t)(d * d) + (size_t)i] = (float)FF[i];
+        }
+        return;
+    }
+    {
+        const float *W = w->wf + w->wf_off[0];
+        int o, i, win = m->width[0];
+        for (o = 0; o < m->width[1]; ++o) {
+            double t = (double)W[m->width[1] * win + o];
+            for (i = 0; i < K; ++i) t += (double)W[o * win + d + i] * w->xhat[i];
+            c1[o] = (float)t;
+        }
+    }
+#if defined(_OPENMP)
+#pragma omp parallel for schedule(dynamic, 16) if (n >= (size_t)w->desc.parallel_min)
+#endif
+    for (lb = 0; lb < nb; ++lb) {
+        float Xn[3 * PN__ROM_B], out[3 * PN__ROM_B], J[3 * (3 + PN_ROM_MAX_LATENT) * PN__ROM_B];
+        size_t p0 = (size_t)lb * PN__ROM_B;
+        int b, i, k, cnt = (int)(n - p0 < PN__ROM_B ? n - p0 : PN__ROM_B);
+        for (i = 0; i < d; ++i)
+            for (b = 0; b < PN__ROM_B; ++b) {
+                size_t at = (p0 + (size_t)(b < cnt ? b : 0)) * (size_t)d + (size_t)i;
+                double X = Xf ? (double)Xf[at] : Xd[at];
+                Xn[i * PN__ROM_B + b] = (float)(w->xs[i] * X + w->xo[i]);
+            }
+        pn__rom_lanes(w, c1, Xn, out, F ? J : NULL);
+        for (b = 0; b < cnt; ++b)
+            for (k = 0; k < d; ++k) {
+                size_t p = p0 + (size_t)b;
+                x[p * (size_t)d + (size_t)k] = (float)(m->out_mean[k] + m->out_std[k] * (double)out[k * PN__ROM_B + b]);
+                if (F)
+                    for (i = 0; i < d; ++i)
+                        F[p * (size_t)(d * d) + (size_t)(k * d + i)] =
+                            (float)(m->out_std[k] * w->xs[i]) * J[((size_t)k * (size_t)(d + K) + (size_t)i) * PN__ROM_B + (size_t)b];
+            }
+    }
+}
+
+PN__DEF pn_result pn_rom_positions(const pn_rom_world *w, size_t first, size_t n, float *x, float *F) {
+    if (!x || first > w->n || n > w->n - first) return PN_ERROR_INVALID_ARGUMENT;
+    pn__rom_render(w, n, NULL, w->X + first * (size_t)w->dim, x, F);
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_rom_map(const pn_rom_world *w, size_t n, const float *X, float *x, float *F) {
+    if (!X || !x) return PN_ERROR_INVALID_ARGUMENT;
+    pn__rom_render(w, n, X, NULL, x, F);
+    return PN_OK;
+}
+
+#endif /* PLASTINET_ROM_IMPLEMENTATION */

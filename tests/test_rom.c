@@ -1,0 +1,468 @@
+/* test_rom.c: plastinet_rom.h. Expected values from finite differences, an affine map whose
+   inverse and projections are written out here, and the full-order explicit step of
+   plastinet_mpm.h (with every point sampled and an affine map, the reduced step is that step
+   followed by a least-squares fit). */
+
+/* A test map that is a diffeomorphism near the box [0.02, 0.06]^d: x = X + amp (small ELU
+   network of X and xhat). Hidden width 12: units 0 .. d-1 carry Xn in the linear regime of
+   ELU (bias +10), the rest are random and nonlinear; the last layer adds them with amp. */
+typedef struct t_rom_net {
+    pn_rom_model m;
+    int width[5];
+    double W[4][16 * 16], b[4][16];
+    const double *Wp[4], *bp[4];
+    double rest[8], sd[8];
+} t_rom_net;
+
+static void t_rom_random_model(t_rom_net *t, int d, int K, unsigned long long seed, double amp) {
+    pn_test_rng r;
+    int l, o, i, H = 12;
+    r.s = seed;
+    memset(t, 0, sizeof *t);
+    t->width[0] = d + K, t->width[1] = H, t->width[2] = H, t->width[3] = H, t->width[4] = d;
+    for (l = 0; l < 4; ++l) {
+        int win = t->width[l], wout = t->width[l + 1];
+        for (o = 0; o < wout; ++o) {
+            for (i = 0; i < win; ++i) t->W[l][o * win + i] = pn_test_rng_range(&r, -0.6, 0.6);
+            t->b[l][o] = pn_test_rng_range(&r, -0.3, 0.3);
+        }
+        for (o = 0; o < d; ++o) { /* the pass-through of Xn */
+            for (i = 0; i < win; ++i) t->W[l][o * win + i] = l + 1 < 4 ? (i == o) : amp * t->W[l][o * win + i];
+            if (l + 1 < 4) {
+                for (i = d; i < win; ++i) t->W[l][o * win + i] = 0;
+                t->b[l][o] = l == 0 ? 10 : 0;
+            } else {
+                t->W[l][o * win + o] = 1;
+                t->b[l][o] = -10;
+            }
+        }
+        if (l + 1 == 4)
+            for (o = 0; o < d; ++o)
+                for (i = d; i < win; ++i) t->W[l][o * win + i] = amp * pn_test_rng_range(&r, -1, 1);
+    }
+    for (l = 0; l < 4; ++l) t->Wp[l] = t->W[l], t->bp[l] = t->b[l];
+    for (i = 0; i < K; ++i) t->rest[i] = 0, t->sd[i] = 1;
+    t->m.format_version = PN_ROM_FORMAT_VERSION;
+    t->m.name = "test";
+    t->m.dim = d, t->m.latent = K, t->m.n_layers = 4;
+    t->m.width = t->width, t->m.weight = t->Wp, t->m.bias = t->bp;
+    t->m.activation = PN_ROM_ELU;
+    for (i = 0; i < 3; ++i) t->m.in_lo[i] = 0.02, t->m.in_hi[i] = 0.06, t->m.out_mean[i] = 0.04, t->m.out_std[i] = 0.02;
+    t->m.latent_rest = t->rest, t->m.latent_std = t->sd;
+    t->m.youngs_pa = 1e4, t->m.poisson = 0.3, t->m.density_kg_m3 = 1000, t->m.dx_m = 0.004, t->m.per_axis = 2;
+    t->m.frame_dt_s = 1.0 / 144;
+}
+
+/* g, F and G of pn_rom_eval against central differences, 2D and 3D */
+static void rom_eval_fd(pn_test_ctx *pn__t) {
+    int d;
+    for (d = 2; d <= 3; ++d) {
+        t_rom_net t;
+        pn_test_rng r;
+        double worst_F = 0, worst_G = 0;
+        int trial;
+        r.s = 5;
+        t_rom_random_model(&t, d, 4, 11 + (unsigned)d, 0.3);
+        PN_CHECK(pn_rom_model_check(&t.m, NULL, 0) == PN_OK);
+        for (trial = 0; trial < 20; ++trial) {
+            double X[3], xh[4], x[3], F[9], G[12], h = 1e-6, hx = 1e-6 * 0.02;
+            int i, k;
+            for (i = 0; i < d; ++i) X[i] = pn_test_rng_range(&r, 0.02, 0.06);
+            for (i = 0; i < 4; ++i) xh[i] = pn_test_rng_range(&r, -1, 1);
+            pn_rom_eval(&t.m, xh, 1, X, x, F, G);
+            for (i = 0; i < d; ++i) {
+                double Xp[3], Xm[3], xp[3], xm[3];
+                memcpy(Xp, X, sizeof X), memcpy(Xm, X, sizeof X);
+                Xp[i] += hx, Xm[i] -= hx;
+                pn_rom_eval(&t.m, xh, 1, Xp, xp, NULL, NULL);
+                pn_rom_eval(&t.m, xh, 1, Xm, xm, NULL, NULL);
+                for (k = 0; k < d; ++k) worst_F = fmax(worst_F, fabs((xp[k] - xm[k]) / (2 * hx) - F[k * d + i]));
+            }
+            for (i = 0; i < 4; ++i) {
+                double hp[4], hm[4], xp[3], xm[3];
+                memcpy(hp, xh, sizeof hp), memcpy(hm, xh, sizeof hm);
+                hp[i] += h, hm[i] -= h;
+                pn_rom_eval(&t.m, hp, 1, X, xp, NULL, NULL);
+                pn_rom_eval(&t.m, hm, 1, X, xm, NULL, NULL);
+                for (k = 0; k < d; ++k) worst_G = fmax(worst_G, fabs((xp[k] - xm[k]) / (2 * h) - G[k * 4 + i]));
+            }
+        }
+        PN_REPORT("%dD: F vs central differences %.2e, G (m per latent unit) %.2e", d, worst_F, worst_G);
+        PN_CHECK_LE(worst_F, 1e-7);
+        PN_CHECK_LE(worst_G, 1e-9);
+    }
+}
+
+/* the float path (pn_rom_map) against the double reference, positions and F */
+static void rom_float_path(pn_test_ctx *pn__t) {
+    t_rom_net t;
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    double pts[3 * 200], xd[3], Fd[9], ex = 0, eF = 0, lat[4] = {0.3, -0.2, 0.5, 0.1};
+    float Xf[3 * 200], xf[3 * 200], Ff[9 * 200];
+    pn_test_rng r;
+    int i, k;
+    r.s = 9;
+    t_rom_random_model(&t, 3, 4, 3, 0.3);
+    for (i = 0; i < 3 * 200; ++i) pts[i] = pn_test_rng_range(&r, 0.02, 0.06), Xf[i] = (float)pts[i];
+    memset(&desc, 0, sizeof desc);
+    desc.model = &t.m, desc.points = pts, desc.n_points = 200, desc.point_volume_m3 = 1e-9;
+    PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+    if (!w) return;
+    PN_CHECK(pn_rom_set_latent(w, lat, NULL) == PN_OK);
+    PN_CHECK(pn_rom_map(w, 200, Xf, xf, Ff) == PN_OK);
+    for (i = 0; i < 200; ++i) {
+        double X[3];
+        for (k = 0; k < 3; ++k) X[k] = (double)Xf[3 * i + k];
+        pn_rom_eval(&t.m, lat, 1, X, xd, Fd, NULL);
+        for (k = 0; k < 3; ++k) ex = fmax(ex, fabs(xd[k] - xf[3 * i + k]));
+        for (k = 0; k < 9; ++k) eF = fmax(eF, fabs(Fd[k] - Ff[9 * i + k]));
+    }
+    PN_REPORT("float path vs double: positions %.2e m (of 0.06 m), F %.2e", ex, eF);
+    /* float rounding: the pass-through units carry Xn + 10 (~11), so the net's output has about
+       11 x 6e-8 absolute error, times out_std 0.02 m */
+    PN_CHECK_LE(ex, 1e-7);
+    PN_CHECK_LE(eF, 2e-6);
+    pn_rom_destroy(w);
+}
+
+/* a body of points on the lattice of spacing h filling the box lo .. lo + n h */
+static size_t t_rom_box(int d, const double *lo, const int *n, double h, double *X) {
+    size_t c = 0;
+    int i, j, k;
+    for (i = 0; i < n[0]; ++i)
+        for (j = 0; j < n[1]; ++j)
+            for (k = 0; k < (d == 3 ? n[2] : 1); ++k) {
+                X[c * d] = lo[0] + (i + 0.5) * h, X[c * d + 1] = lo[1] + (j + 0.5) * h;
+                if (d == 3) X[c * d + 2] = lo[2] + (k + 0.5) * h;
+                c++;
+            }
+    return c;
+}
+
+/* The affine map with every point sampled and Lagrangian quadrature: the reduced step's
+   trial state must be the full-order explicit step of plastinet_mpm.h from the same affine
+   state, and the new latent the least-squares affine fit of that state (solved here by the
+   normal equations on the basis (1, X)). 2D and 3D, APIC, with gravity and stress. */
+static void rom_affine_equals_mpm(pn_test_ctx *pn__t) {
+    int d;
+    for (d = 2; d <= 3; ++d) {
+        const double dx = 1.0 / 32, h = dx / 2, dt = 2e-4, E = 2e4, nu = 0.3, rho = 1000;
+        double lo[3] = {0.35, 0.4, 0.38}, X[3 * 4096], A[9], Ad[9], b[3] = {0.01, -0.02, 0.015}, bd[3] = {0.1, 0.05, -0.2};
+        double lat[12], vlat[12], ex = 0, el = 0, fit[12];
+        int nb[3] = {12, 10, 8}, i, j, k, K = d + d * d;
+        size_t n = t_rom_box(d, lo, nb, h, X), p;
+        pn_test_rng r;
+        pn_mpm_world *mw = t_mpm_world(d, 32, -9.81, PN_MPM_BOUNDARY_STICKY);
+        pn_rom_model am;
+        pn_rom_desc desc;
+        pn_rom_world *w = NULL;
+        pn_material_desc md;
+        pn_material mat;
+        pn_real *xs = (pn_real *)malloc(sizeof(pn_real) * n * 3), *vs = (pn_real *)malloc(sizeof(pn_real) * n * 3);
+        pn_real *Cs = (pn_real *)malloc(sizeof(pn_real) * n * 9), *Fs = (pn_real *)malloc(sizeof(pn_real) * n * 9);
+        int g;
+        r.s = 77 + (unsigned)d;
+        for (i = 0; i < d * d; ++i) A[i] = pn_test_rng_range(&r, -0.05, 0.05), Ad[i] = pn_test_rng_range(&r, -2, 2);
+        memset(&md, 0, sizeof md);
+        md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = E, md.poisson_ratio = nu;
+        PN_CHECK(mw != NULL && pn_material_init(&mat, &md, NULL) == PN_OK);
+        if (!mw) return;
+        g = pn_mpm_add_group(mw, &mat, rho);
+        {
+            pn_real *x0 = (pn_real *)malloc(sizeof(pn_real) * n * 3);
+            for (p = 0; p < n * (size_t)d; ++p) x0[p] = X[p];
+            PN_CHECK(pn_mpm_add_particles(mw, g, n, x0, NULL, pow(h, d)) == PN_OK);
+            free(x0);
+        }
+        { /* the affine state: x = X + b + A X, v = bd + Ad X, F = I + A, C = Ad (I + A)^-1 */
+            double Fi[9], Ci[9], I_A[9];
+            for (i = 0; i < d * d; ++i) I_A[i] = A[i] + ((i / d) == (i % d));
+            if (d == 2) {
+                double det = I_A[0] * I_A[3] - I_A[1] * I_A[2];
+                Fi[0] = I_A[3] / det, Fi[1] = -I_A[1] / det, Fi[2] = -I_A[2] / det, Fi[3] = I_A[0] / det;
+            } else {
+                pn_real M[9], Mi[9];
+                for (i = 0; i < 9; ++i) M[i] = I_A[i];
+                pn_mat_inverse(3, M, Mi);
+                for (i = 0; i < 9; ++i) Fi[i] = Mi[i];
+            }
+            for (i = 0; i < d; ++i)
+                for (j = 0; j < d; ++j) {
+                    Ci[i * d + j] = 0;
+                    for (k = 0; k < d; ++k) Ci[i * d + j] += Ad[i * d + k] * Fi[k * d + j];
+                }
+            for (p = 0; p < n; ++p)
+                for (i = 0; i < d; ++i) {
+                    double s = X[p * d + i] + b[i], v = bd[i];
+                    for (j = 0; j < d; ++j) s += A[i * d + j] * X[p * d + j], v += Ad[i * d + j] * X[p * d + j];
+                    xs[p * d + i] = s, vs[p * d + i] = v;
+                    for (j = 0; j < d; ++j) Cs[p * d * d + i * d + j] = Ci[i * d + j], Fs[p * d * d + i * d + j] = I_A[i * d + j];
+                }
+        }
+        PN_CHECK(pn_mpm_set_particles(mw, 0, n, xs, vs, Cs, Fs, -1) == PN_OK);
+        PN_CHECK(pn_mpm_step_explicit(mw, dt, NULL) == PN_OK);
+        pn_rom_affine_model(d, &am);
+        memset(&desc, 0, sizeof desc);
+        desc.model = &am, desc.points = X, desc.n_points = n, desc.point_volume_m3 = pow(h, d);
+        desc.dx_m = dx, desc.youngs_pa = E, desc.poisson = nu, desc.density_kg_m3 = rho, desc.gravity[1] = -9.81;
+        desc.samples = -1, desc.quadrature = PN_ROM_LAGRANGIAN, desc.transfer = PN_ROM_APIC, desc.reference = 1;
+        PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+        if (!w) return;
+        for (i = 0; i < d; ++i) lat[i] = b[i], vlat[i] = bd[i];
+        for (i = 0; i < d * d; ++i) lat[d + i] = A[i], vlat[d + i] = Ad[i];
+        PN_CHECK(pn_rom_set_latent(w, lat, vlat) == PN_OK);
+        PN_CHECK(pn_rom_step(w, dt, NULL) == PN_OK);
+        for (p = 0; p < n; ++p) /* the trial state, sample p is point p (all sampled, in order) */
+            for (i = 0; i < d; ++i) ex = fmax(ex, fabs(w->sxt[p * d + i] - mw->x[p * d + i]));
+        { /* the affine least-squares fit of the full-order positions: per output row i,
+             minimize sum_p (x_pi - c_i - sum_j M_ij X_pj)^2 over (c_i, M_i.) */
+            double N[16], rhs[16];
+            for (i = 0; i < d; ++i) {
+                int a, c2, m1 = d + 1;
+                for (a = 0; a < m1 * m1; ++a) N[a] = 0;
+                for (a = 0; a < m1; ++a) rhs[a] = 0;
+                for (p = 0; p < n; ++p) {
+                    double phi[4];
+                    phi[0] = 1;
+                    for (j = 0; j < d; ++j) phi[1 + j] = X[p * d + j];
+                    for (a = 0; a < m1; ++a) {
+                        rhs[a] += phi[a] * (mw->x[p * d + i] - X[p * d + i]);
+                        for (c2 = 0; c2 < m1; ++c2) N[a * m1 + c2] += phi[a] * phi[c2];
+                    }
+                }
+                for (a = 0; a < m1; ++a) { /* Gauss-Jordan, N is SPD and small */
+                    double piv = N[a * m1 + a];
+                    for (c2 = 0; c2 < m1; ++c2) N[a * m1 + c2] /= piv;
+                    rhs[a] /= piv;
+                    for (k = 0; k < m1; ++k)
+                        if (k != a) {
+                            double f = N[k * m1 + a];
+                            for (c2 = 0; c2 < m1; ++c2) N[k * m1 + c2] -= f * N[a * m1 + c2];
+                            rhs[k] -= f * rhs[a];
+                        }
+                }
+                fit[i] = rhs[0];
+                for (j = 0; j < d; ++j) fit[d + i * d + j] = rhs[1 + j];
+            }
+        }
+        for (i = 0; i < K; ++i) el = fmax(el, fabs(fit[i] - w->xhat[i]));
+        PN_REPORT("%dD, %lu points: trial state vs the explicit MPM step %.2e m (dx %.3g m); latent vs the affine fit %.2e", d,
+                  (unsigned long)n, ex, dx, el);
+        PN_CHECK_LE(ex, 1e-13);
+        PN_CHECK_LE(el, 1e-9);
+        pn_rom_destroy(w);
+        pn_mpm_destroy(mw);
+        free(xs), free(vs), free(Cs), free(Fs);
+    }
+}
+
+/* projections: a velocity field in the tangent space projects to its own vhat; a state on the
+   manifold fits back to its latent (affine map: unique), and on the ELU map the fit's misfit
+   vanishes */
+static void rom_projections(pn_test_ctx *pn__t) {
+    pn_rom_model am;
+    t_rom_net t;
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    double lo[3] = {0.02, 0.02, 0.02}, X[3 * 4096], x[3 * 4096], v[3 * 4096], lat[12], vl[12], rms = 1, e = 0;
+    int nb[3] = {8, 8, 8}, i;
+    size_t n = t_rom_box(3, lo, nb, 0.005, X);
+    pn_test_rng r;
+    r.s = 4;
+    pn_rom_affine_model(3, &am);
+    memset(&desc, 0, sizeof desc);
+    desc.model = &am, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.25e-7;
+    PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+    if (!w) return;
+    for (i = 0; i < 12; ++i) lat[i] = pn_test_rng_range(&r, -0.1, 0.1), vl[i] = pn_test_rng_range(&r, -1, 1);
+    {
+        double *G = (double *)malloc(sizeof(double) * n * 36);
+        size_t p;
+        int k, j;
+        pn_rom_eval(&am, lat, n, X, x, NULL, G);
+        for (p = 0; p < n; ++p)
+            for (k = 0; k < 3; ++k) {
+                v[p * 3 + k] = 0;
+                for (j = 0; j < 12; ++j) v[p * 3 + k] += G[p * 36 + k * 12 + j] * vl[j];
+            }
+        free(G);
+    }
+    PN_CHECK(pn_rom_fit(w, x, v, &rms) == PN_OK);
+    for (i = 0; i < 12; ++i) e = fmax(e, fmax(fabs(w->xhat[i] - lat[i]), fabs(w->vhat[i] - vl[i]) * 0.1));
+    PN_REPORT("affine: fit of a state on the manifold: latent and velocity off by %.2e, misfit %.2e m", e, rms);
+    PN_CHECK_LE(e, 1e-10);
+    pn_rom_destroy(w);
+    w = NULL;
+    t_rom_random_model(&t, 3, 4, 21, 0.3);
+    desc.model = &t.m;
+    PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+    if (!w) return;
+    {
+        double l4[4] = {0.4, -0.3, 0.2, 0.6};
+        pn_rom_eval(&t.m, l4, n, X, x, NULL, NULL);
+        PN_CHECK(pn_rom_fit(w, x, NULL, &rms) == PN_OK);
+        PN_REPORT("ELU map: fit of a state on the manifold from the rest latent: misfit %.2e m", rms);
+        PN_CHECK_LE(rms, 1e-6); /* float Jacobians: converges to about float rounding of 0.06 m */
+    }
+    pn_rom_destroy(w);
+}
+
+/* Eulerian quadrature: every kept point's X maps back onto its lattice position (checked with
+   the double path, the world's Newton runs on the float one), and with the affine map X is
+   the exact inverse written out here */
+static void rom_inverse_map(pn_test_ctx *pn__t) {
+    t_rom_net t;
+    pn_rom_model am;
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    double lo[3] = {0.02, 0.02, 0.02}, X[3 * 4096], worst = 0, l4[4] = {0.3, 0.2, -0.4, 0.1};
+    int nb[3] = {16, 16, 16}, pass;
+    size_t n = t_rom_box(3, lo, nb, 0.0025, X), q, kept = 0;
+    t_rom_random_model(&t, 3, 4, 8, 0.3);
+    pn_rom_affine_model(3, &am);
+    for (pass = 0; pass < 2; ++pass) {
+        pn_rom_stats st;
+        double A[12] = {0.01, -0.02, 0.005, 0.03, 0.02, 0.01, -0.01, 0.04, -0.02, 0.01, 0.02, -0.03};
+        memset(&desc, 0, sizeof desc);
+        desc.model = pass ? &am : &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.5625e-8;
+        desc.dx_m = 0.004, desc.samples = 30, desc.youngs_pa = 1e4, desc.poisson = 0.3, desc.density_kg_m3 = 1000;
+        PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+        if (!w) return;
+        PN_CHECK(pn_rom_set_latent(w, pass ? A : l4, NULL) == PN_OK);
+        PN_CHECK(pn_rom_step(w, 1e-4, &st) == PN_OK);
+        /* the step keeps the last quadrature: check it at the latent it was built for */
+        worst = 0, kept = 0;
+        for (q = 0; q < st.quad_points; ++q) {
+            double x[3], e = 0;
+            int i;
+            if (!w->qok[q]) continue;
+            kept++;
+            if (!pass) {
+                pn_rom_eval(&t.m, l4, 1, w->qX + 3 * q, x, NULL, NULL);
+                for (i = 0; i < 3; ++i) e = fmax(e, fabs(x[i] - w->qx[3 * q + i]));
+            } else { /* X = (I + A)^-1 (x - b) */
+                pn_real M[9], Mi[9];
+                double r[3];
+                int j;
+                for (i = 0; i < 9; ++i) M[i] = A[3 + i] + (i / 3 == i % 3);
+                pn_mat_inverse(3, M, Mi);
+                for (i = 0; i < 3; ++i) r[i] = w->qx[3 * q + i] - A[i];
+                for (i = 0; i < 3; ++i) {
+                    double s = 0;
+                    for (j = 0; j < 3; ++j) s += Mi[i * 3 + j] * r[j];
+                    e = fmax(e, fabs(s - w->qX[3 * q + i]));
+                }
+            }
+            worst = fmax(worst, e);
+        }
+        PN_REPORT("%s: %lu of %lu lattice points kept, %lu not inverted; worst |g(X) - x| or |X - X_exact| %.2e m (dx 4e-3)",
+                  pass ? "affine" : "ELU", (unsigned long)kept, (unsigned long)st.quad_points, (unsigned long)st.inverse_failed,
+                  worst);
+        PN_CHECK(kept > 1000);
+        PN_CHECK(st.inverse_failed == 0);
+        PN_CHECK_LE(worst, pass ? 1e-12 : 1e-7); /* float: Newton stops within 1e-5 dx of its own float map */
+        pn_rom_destroy(w);
+        w = NULL;
+    }
+}
+
+/* bad models and bad input are refused, naming the culprit, with nothing changed */
+static void rom_bad_input(pn_test_ctx *pn__t) {
+    t_rom_net t;
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    char why[256];
+    double X[3 * 64], lo[3] = {0.02, 0.02, 0.02}, nanv[3] = {0, 0, 0}, f[3] = {1, 0, 0}, keep[4];
+    int nb[3] = {4, 4, 4};
+    size_t n = t_rom_box(3, lo, nb, 0.005, X);
+    pn_rom_region reg;
+    t_rom_random_model(&t, 3, 4, 1, 0.3);
+    memset(&desc, 0, sizeof desc);
+    desc.model = &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.25e-7;
+    t.m.format_version = 99;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_FORMAT && w == NULL);
+    PN_CHECK(strstr(why, "format_version") != NULL);
+    t.m.format_version = PN_ROM_FORMAT_VERSION;
+    t.m.dim = 2; /* a model of the wrong dimension for its widths */
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_DIMENSION);
+    PN_CHECK(strstr(why, "width") != NULL);
+    t.m.dim = 3;
+    t.W[1][5] = NAN;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_NONFINITE);
+    PN_CHECK(strstr(why, "layer 1") != NULL);
+    t.W[1][5] = 0.1;
+    desc.quadrature = (pn_rom_quadrature)7;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(strstr(why, "quadrature") != NULL);
+    desc.quadrature = PN_ROM_EULERIAN;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_OK);
+    if (!w) return;
+    memcpy(keep, w->xhat, sizeof keep);
+    memset(&reg, 0, sizeof reg);
+    reg.lo[0] = 1, reg.hi[0] = 2; /* holds no point */
+    PN_CHECK(pn_rom_drive(w, &reg, NULL, NULL, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(strstr(pn_rom_error(w), "none of the world's points") != NULL);
+    memset(&reg, 0, sizeof reg);
+    nanv[0] = NAN;
+    PN_CHECK(pn_rom_drive(w, &reg, nanv, NULL, NULL, NULL) == PN_ERROR_NONFINITE);
+    PN_CHECK(pn_rom_add_load(w, &reg, nanv, 1, NULL) == PN_ERROR_NONFINITE);
+    PN_CHECK(pn_rom_add_load(w, &reg, f, -1, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    reg.radius = -1;
+    PN_CHECK(pn_rom_drive(w, &reg, NULL, NULL, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(pn_rom_step(w, -1, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(pn_rom_step(w, NAN, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(pn_rom_set_latent(w, nanv, NULL) == PN_ERROR_NONFINITE);
+    PN_CHECK(memcmp(keep, w->xhat, sizeof keep) == 0 && w->time_s == 0 && w->n_drives == 0 && w->n_loads == 0);
+    pn_rom_destroy(w);
+}
+
+/* the same bits for 1 and 2 threads (Eulerian and Lagrangian, with a drive and a load) */
+static void rom_threads_identical(pn_test_ctx *pn__t) {
+    t_rom_net t;
+    double lo[3] = {0.02, 0.02, 0.02}, X[3 * 4096], keep[2][4];
+    int nb[3] = {16, 16, 16}, quad, th, s;
+    size_t n = t_rom_box(3, lo, nb, 0.0025, X);
+    t_rom_random_model(&t, 3, 4, 2, 0.3);
+    for (quad = 0; quad < 2; ++quad) {
+        for (th = 1; th <= 2; ++th) {
+            pn_rom_desc desc;
+            pn_rom_world *w = NULL;
+            pn_rom_region reg;
+            double f[3] = {0.01, 0, -0.02};
+            memset(&desc, 0, sizeof desc);
+            desc.model = &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.5625e-8;
+            desc.quadrature = quad ? PN_ROM_LAGRANGIAN : PN_ROM_EULERIAN, desc.parallel_min = 1, desc.gravity[2] = -9.81;
+            desc.projection = quad ? PN_ROM_NONLINEAR : PN_ROM_LINEAR;
+            PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+            if (!w) return;
+            memset(&reg, 0, sizeof reg);
+            reg.lo[0] = reg.lo[1] = reg.lo[2] = 0, reg.hi[0] = reg.hi[1] = 1, reg.hi[2] = 0.025;
+            PN_CHECK(pn_rom_drive(w, &reg, NULL, NULL, NULL, NULL) == PN_OK);
+            reg.lo[2] = 0.055, reg.hi[2] = 1;
+            PN_CHECK(pn_rom_add_load(w, &reg, f, 0.01, NULL) == PN_OK);
+#ifdef _OPENMP
+            omp_set_num_threads(th);
+#endif
+            for (s = 0; s < 5; ++s) PN_CHECK(pn_rom_step(w, 1e-3, NULL) == PN_OK);
+            memcpy(keep[th - 1], w->xhat, sizeof keep[0]);
+            pn_rom_destroy(w);
+        }
+#ifdef _OPENMP
+        omp_set_num_threads(2);
+#endif
+        PN_CHECK(memcmp(keep[0], keep[1], sizeof keep[0]) == 0);
+        PN_REPORT("%s: latent after 5 steps %.6g %.6g ... identical for 1 and 2 threads", quad ? "Lagrangian" : "Eulerian",
+                  keep[0][0], keep[0][1]);
+    }
+}
+
+static const pn_test_case pn_tests_rom[] = {
+    {"rom_eval_fd", rom_eval_fd},
+    {"rom_float_path", rom_float_path},
+    {"rom_affine_equals_mpm", rom_affine_equals_mpm},
+    {"rom_projections", rom_projections},
+    {"rom_inverse_map", rom_inverse_map},
+    {"rom_bad_input", rom_bad_input},
+    {"rom_threads_identical", rom_threads_identical},
+};
