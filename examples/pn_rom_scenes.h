@@ -223,12 +223,12 @@ static void pn_rs_split(int n, int n_test, unsigned long long seed, int *test) {
     for (i = 0; i < n_test; ++i) test[perm[i]] = 1;
 }
 
-/* the poke: a force of 0.1 N on the top rim within 3 mm of the point at angle theta + pi,
+/* the poke: a force of 0.06 N on the top of the body within 8 mm of the rim point at angle theta + pi,
    pointing across the axis towards theta, tilted 15 degrees down, for 0.25 s */
 static void pn_rs_poke(pn_rs_load *L, double theta, double t_start) {
-    double px = 0.04 - 0.01 * cos(theta), py = 0.04 - 0.01 * sin(theta), ph = 75 * PN_RS_PI / 180, f = 0.1;
+    double px = 0.04 - 0.01 * cos(theta), py = 0.04 - 0.01 * sin(theta), ph = 75 * PN_RS_PI / 180, f = 0.06;
     pn_rs_box(&L->region, -1, 1, -1, 1, -1, 1);
-    L->region.center[0] = px, L->region.center[1] = py, L->region.center[2] = 0.052, L->region.radius = 0.003;
+    L->region.center[0] = px, L->region.center[1] = py, L->region.center[2] = 0.052, L->region.radius = 0.008;
     L->force[0] = f * sin(ph) * cos(theta), L->force[1] = f * sin(ph) * sin(theta), L->force[2] = -f * cos(ph);
     L->t_start = t_start, L->duration = 0.25;
 }
