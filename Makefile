@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-fem bench-explicit bench-deposit clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-fem bench-explicit bench-deposit bench-rom rom-data clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -141,6 +141,29 @@ bench-deposit: build/bench_deposit
 build/bench_deposit: bench/bench_deposit.c $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_deposit.c $(LDLIBS) -o $@
+
+# ---- reduced-order MPM (plastinet_rom.h; docs/rom.md) ------------------------------------------
+# Full-order snapshots of the scenes the ROM models are trained on (gen/rom_data.c, into
+# data/rom/; resumable: run it again after a cut and it continues). About 3 hours on 2 cores,
+# most of it the tower; gen/README.md shows how to spread the instances over machines.
+ROM_SCENES ?= cylinder cuboid poke poke_seq tower
+build/rom_data: gen/rom_data.c examples/pn_rom_scenes.h plastinet.h plastinet_mpm.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) -fopenmp gen/rom_data.c $(LDLIBS) -o $@
+
+rom-data: build/rom_data
+	for s in $(ROM_SCENES); do build/rom_data $$s --out data/rom || exit 1; done
+	build/rom_data cuboid --fine 2 --split test --out data/rom
+
+# The reduced models against full-order MPM on the test instances (bench/bench_rom.c):
+# build/bench_rom.{md,csv,svg}. Needs make rom-data. BENCH_ROM_FLAGS=--instances 1 for a quick look.
+bench-rom: build/bench_rom
+	build/bench_rom --out build $(BENCH_ROM_FLAGS)
+	@cat build/bench_rom.md
+
+build/bench_rom: bench/bench_rom.c examples/pn_rom_scenes.h plastinet_rom.h $(EXAMPLE_DEPS) $(wildcard models/rom_*.h) models/pn_rom_models.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) -fopenmp bench/bench_rom.c $(LDLIBS) -o $@
 
 # Train (resuming checkpoints), export and measure the shipped models: all, or MODEL=name.
 models:

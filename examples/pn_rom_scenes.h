@@ -369,4 +369,104 @@ static int pn_rs_events(pn_mpm_world *w, const pn_rs_instance *in, const double 
     }
     return 1;
 }
+#ifdef PLASTINET_ROM_H
+static pn_rom_region pn_rs_rom_region(const pn_rs_region *r) {
+    pn_rom_region o;
+    memcpy(o.lo, r->lo, sizeof o.lo), memcpy(o.hi, r->hi, sizeof o.hi), memcpy(o.center, r->center, sizeof o.center);
+    o.radius = r->radius;
+    return o;
+}
+
+/* the drives of instance `in` on a reduced world at t = 0 (gravity is the desc's) */
+static int pn_rs_rom_setup(pn_rom_world *w, const pn_rs_instance *in) {
+    int a;
+    for (a = 0; a < in->n_drives; ++a) {
+        pn_rom_region r = pn_rs_rom_region(&in->drive[a].region);
+        if (pn_rom_drive(w, &r, in->drive[a].velocity, in->drive[a].center, in->drive[a].omega, NULL) != PN_OK) {
+            fprintf(stderr, "pn_rs_rom_setup: drive %d: %s\n", a, pn_rom_error(w));
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* the loads of `in` due at time t (as pn_rs_events) */
+static int pn_rs_rom_events(pn_rom_world *w, const pn_rs_instance *in, double t, int *next_load) {
+    while (*next_load < in->n_loads && t >= in->load[*next_load].t_start - 1e-12) {
+        const pn_rs_load *L = &in->load[*next_load];
+        pn_rom_region r = pn_rs_rom_region(&L->region);
+        double left = L->t_start + L->duration - t;
+        if (left > 0 && pn_rom_add_load(w, &r, L->force, left, NULL) != PN_OK) {
+            fprintf(stderr, "pn_rs_rom_events: load %d: %s\n", *next_load, pn_rom_error(w));
+            return 0;
+        }
+        ++*next_load;
+    }
+    return 1;
+}
+#endif
+
+/* A snapshot file of gen/rom_data.c (format: gen/README.md), read whole: the reference points
+   X and per frame x, v, F as float. pn_rs_read returns 0 (message on stderr) if the file is
+   missing or cut short of `frames` frames (0: as many as it holds). */
+typedef struct pn_rs_snap {
+    int n, frames;
+    double frame_dt;
+    float *X;                  /* n x 3                                                     */
+    unsigned char *flags;      /* n                                                         */
+    float *data;               /* frames x (x n x 3, v n x 3, F n x 9)                      */
+} pn_rs_snap;
+
+static int pn_rs_read(const char *path, int frames, pn_rs_snap *s) {
+    FILE *f = fopen(path, "rb");
+    unsigned char h[256];
+    long size, off, fb;
+    int have;
+    memset(s, 0, sizeof *s);
+    if (!f) {
+        fprintf(stderr, "cannot open %s (make rom-data writes it)\n", path);
+        return 0;
+    }
+    if (fread(h, 1, 256, f) != 256 || memcmp(h, "PNROMS1\n", 8) != 0) {
+        fprintf(stderr, "%s is not a snapshot file\n", path);
+        fclose(f);
+        return 0;
+    }
+    s->n = (int)((unsigned)h[16] | (unsigned)h[17] << 8 | (unsigned)h[18] << 16 | (unsigned)h[19] << 24);
+    memcpy(&s->frame_dt, h + 24, 8);
+    fseek(f, 0, SEEK_END);
+    size = ftell(f);
+    off = 256 + 12L * s->n + (s->n + 3) / 4 * 4;
+    fb = 60L * s->n;
+    have = (int)((size - off) / fb);
+    if (frames <= 0) frames = have;
+    if (have < frames) {
+        fprintf(stderr, "%s holds %d of %d frames (make rom-data resumes it)\n", path, have, frames);
+        fclose(f);
+        return 0;
+    }
+    s->frames = frames;
+    s->X = (float *)malloc(sizeof(float) * 3 * (size_t)s->n);
+    s->flags = (unsigned char *)malloc((size_t)s->n + 4);
+    s->data = (float *)malloc((size_t)fb * (size_t)frames);
+    fseek(f, 256, SEEK_SET);
+    if (fread(s->X, 4, 3 * (size_t)s->n, f) != 3 * (size_t)s->n || fread(s->flags, 1, (size_t)(s->n + 3) / 4 * 4, f) == 0 ||
+        fread(s->data, (size_t)fb, (size_t)frames, f) != (size_t)frames) {
+        fprintf(stderr, "%s: short read\n", path);
+        fclose(f);
+        return 0;
+    }
+    fclose(f);
+    return 1;
+}
+
+static void pn_rs_free(pn_rs_snap *s) {
+    free(s->X), free(s->flags), free(s->data);
+    memset(s, 0, sizeof *s);
+}
+
+/* frame k's positions (n x 3 floats) */
+static const float *pn_rs_x(const pn_rs_snap *s, int k) { return s->data + (size_t)k * 15 * (size_t)s->n; }
+static const float *pn_rs_v(const pn_rs_snap *s, int k) { return s->data + (size_t)k * 15 * (size_t)s->n + 3 * (size_t)s->n; }
+
 #endif /* PN_ROM_SCENES_H */

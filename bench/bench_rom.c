@@ -1,0 +1,303 @@
+/* bench_rom.c: the reduced-order models of plastinet_rom.h against full-order explicit MPM
+   (make bench-rom; docs/rom.md explains the scenes and the measures).
+
+   build/bench_rom [--scenes cylinder,cuboid,poke,tower] [--data data/rom] [--out bench/results]
+                   [--samples 10,50,all] [--schemes LN,LL,EN,EL] [--instances N] [--substeps S]
+                   [--no-speed] [--no-superres] [--no-seq]
+
+   For every scene, on its test instances (never trained on), each quadrature x projection
+   scheme (L/E: Lagrangian/Eulerian quadrature, N/L: nonlinear/linear projection) with each
+   projection-point count runs the reduced model from the fitted rest state (Eq. 19) at the
+   snapshot interval divided by S, and measures the paper's relative L2 position error
+   sqrt(sum |x_rom - x_full|^2 / sum |x_full|^2) over every point of every frame of every test
+   instance, the same with positions taken from the initial centroid, and the wall seconds per
+   simulated second of the reduced steps (drawing excluded). In the same run: the full-order
+   explicit MPM (plastinet_mpm.h, the generator's step) on the same scene, its wall seconds
+   per simulated second; zero-shot super-resolution on the cuboid (the model run on the
+   points of the 2x finer full-order run, against it); ten pokes in a row (poke_seq).
+   Writes OUT/bench_rom.md, .csv and .svg (error against wall time, with the real-time line).
+   Needs the snapshots of make rom-data. */
+#define PLASTINET_IMPLEMENTATION
+#include "../examples/pn_example.h"
+#include "../plastinet_rom.h"
+#include "../models/pn_rom_models.h"
+#include "../examples/pn_rom_scenes.h"
+
+typedef struct rrun {
+    char scene[24], scheme[4];
+    int samples;               /* -1: all                                                    */
+    double err, err_c, wall_per_s, quad_mean;
+    int ok;
+} rrun;
+
+typedef struct cfg {
+    const char *data, *out;
+    char scenes[256], schemes[64];
+    int samples[8], n_samples, instances, substeps, speed, superres, seq;
+} cfg;
+
+static const pn_rom_model *model_of(const char *scene) {
+    int i;
+    for (i = 0; pn_rom_models_all[i]; ++i)
+        if (!strcmp(pn_rom_models_all[i]()->name, scene)) return pn_rom_models_all[i]();
+    return NULL;
+}
+
+/* One reduced run of instance `in` against snapshots `snap`; adds to the error sums. */
+static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_instance *in, const pn_rs_snap *snap, int quad,
+                   int proj, int samples, int substeps, unsigned long long seed, double *se, double *sn, double *snc,
+                   double *wall, double *sim, double *quad_sum, long *steps) {
+    pn_rom_desc d;
+    pn_rom_world *w = NULL;
+    char why[256];
+    double *X = (double *)malloc(sizeof(double) * 3 * (size_t)snap->n), c0[3] = {0, 0, 0], h = s->dx / s->per_axis;
+    float *x = (float *)malloc(sizeof(float) * 3 * (size_t)snap->n);
+    int f, k, i, next = 0, ok = 1;
+    size_t p;
+    for (p = 0; p < 3 * (size_t)snap->n; ++p) X[p] = snap->X[p];
+    for (p = 0; p < (size_t)snap->n; ++p)
+        for (i = 0; i < 3; ++i) c0[i] += X[3 * p + (size_t)i] / snap->n;
+    memset(&d, 0, sizeof d);
+    d.model = m, d.points = X, d.n_points = (size_t)snap->n, d.point_volume_m3 = h * h * h, d.dx_m = s->dx;
+    d.youngs_pa = s->youngs_pa, d.poisson = s->poisson, d.density_kg_m3 = s->density;
+    for (i = 0; i < 3; ++i) d.gravity[i] = in->gravity[i];
+    d.samples = samples, d.quadrature = quad ? PN_ROM_EULERIAN : PN_ROM_LAGRANGIAN;
+    d.projection = proj ? PN_ROM_LINEAR : PN_ROM_NONLINEAR, d.seed = seed;
+    if (pn_rom_create(&d, &w, why, sizeof why) != PN_OK || !pn_rs_rom_setup(w, in)) {
+        fprintf(stderr, "pn_rom_create: %s\n", why);
+        free(X), free(x);
+        return 0;
+    }
+    { /* the initial latent: the least-squares fit of the rest state (Eq. 19) */
+        double *x0 = (double *)malloc(sizeof(double) * 3 * (size_t)snap->n);
+        const float *xf = pn_rs_x(snap, 0);
+        for (p = 0; p < 3 * (size_t)snap->n; ++p) x0[p] = xf[p];
+        ok = pn_rom_fit(w, x0, NULL, NULL) == PN_OK;
+        free(x0);
+    }
+    for (f = 0; f < snap->frames && ok; ++f) {
+        const float *xr = pn_rs_x(snap, f);
+        if (f > 0) {
+            double t0;
+            if (!pn_rs_rom_events(w, in, (f - 1) * s->frame_dt, &next)) ok = 0;
+            t0 = pn_ex_seconds();
+            for (k = 0; k < substeps && ok; ++k) {
+                pn_rom_stats st;
+                if (pn_rom_step(w, s->frame_dt / substeps, &st) != PN_OK) {
+                    fprintf(stderr, "  %s frame %d: %s\n", s->name, f, pn_rom_error(w));
+                    ok = 0;
+                }
+                *quad_sum += (double)st.quad_points;
+                ++*steps;
+            }
+            *wall += pn_ex_seconds() - t0;
+            *sim += s->frame_dt;
+        }
+        pn_rom_positions(w, 0, (size_t)snap->n, x, NULL);
+        for (p = 0; p < 3 * (size_t)snap->n; ++p) {
+            double e = (double)x[p] - (double)xr[p], r = (double)xr[p];
+            *se += e * e, *sn += r * r, *snc += (r - c0[p % 3]) * (r - c0[p % 3]);
+        }
+    }
+    pn_rom_destroy(w);
+    free(X), free(x);
+    return ok;
+}
+
+/* wall seconds per simulated second of the full-order explicit step on instance `in` of
+   scene s (the generator's fixed step), over `frames` frames */
+static double fom_speed(const pn_rs_scene *s, const pn_rs_instance *in, int frames) {
+    pn_mpm_desc wd;
+    pn_mpm_world *w = NULL;
+    pn_material_desc md;
+    pn_material mat;
+    size_t cap = pn_rs_points(s, 1, NULL, 0);
+    double *X = (double *)malloc(sizeof(double) * 3 * cap), t0, wall;
+    pn_real dts;
+    int g, i, f, j, nsub, next = 0;
+    memset(&wd, 0, sizeof wd);
+    wd.dim = 3, wd.dx_m = s->dx, wd.boundary = PN_MPM_BOUNDARY_STICKY, wd.max_particles = cap;
+    for (i = 0; i < 3; ++i) wd.res[i] = s->res[i], wd.gravity[i] = in->gravity[i];
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE;
+    md.youngs_modulus_pa = s->youngs_pa, md.poisson_ratio = s->poisson;
+    if (pn_mpm_create(&wd, &w, NULL) != PN_OK || pn_material_init(&mat, &md, NULL) != PN_OK) return -1;
+    g = pn_mpm_add_group(w, &mat, s->density);
+    if (!pn_rs_setup(w, g, s, in, 1, NULL, X, cap)) return -1;
+    pn_mpm_stable_dt(w, &dts);
+    nsub = (int)ceil(s->frame_dt / (0.7 * (double)dts));
+    t0 = pn_ex_seconds();
+    for (f = 0; f < frames; ++f) {
+        pn_rs_events(w, in, X, w->n, f * s->frame_dt, &next);
+        for (j = 0; j < nsub; ++j)
+            if (pn_mpm_step_explicit(w, s->frame_dt / nsub, NULL) != PN_OK) break;
+    }
+    wall = pn_ex_seconds() - t0;
+    pn_mpm_destroy(w);
+    free(X);
+    return wall / (frames * s->frame_dt);
+}
+
+static int listed(const char *list, const char *name) {
+    char b[256], *t, *save = NULL;
+    snprintf(b, sizeof b, "%s", list);
+    for (t = strtok_r(b, ",", &save); t; t = strtok_r(NULL, ",", &save))
+        if (!strcmp(t, name)) return 1;
+    return 0;
+}
+
+static void svg(const char *path, const rrun *r, int n, const double *fom, const char (*fom_scene)[24], int nf) {
+    static const char *cols[] = {"#1f5fbf", "#e07b00", "#2a9d3a", "#b0249a", "#111111"};
+    FILE *f = fopen(path, "w");
+    double x0 = 1e300, x1 = 0, y0 = 1e300, y1 = 0;
+    int k, W = 700, H = 440;
+    if (!f) return;
+    for (k = 0; k < n; ++k)
+        if (r[k].ok && r[k].err > 0 && r[k].wall_per_s > 0)
+            x0 = fmin(x0, r[k].wall_per_s), x1 = fmax(x1, r[k].wall_per_s), y0 = fmin(y0, r[k].err), y1 = fmax(y1, r[k].err);
+    for (k = 0; k < nf; ++k)
+        if (fom[k] > 0) x1 = fmax(x1, fom[k]), x0 = fmin(x0, fom[k]);
+    x0 = fmin(x0, 0.5), x1 = fmax(x1, 2);
+    if (!(y1 > 0)) y0 = 1e-3, y1 = 1e-1;
+    x0 = pow(10, floor(log10(x0))), x1 = pow(10, ceil(log10(x1))), y0 = pow(10, floor(log10(y0))), y1 = pow(10, ceil(log10(y1)));
+    if (y1 <= y0) y1 = 10 * y0;
+#define PX(v) (80 + (W - 110) * (log10(v) - log10(x0)) / (log10(x1) - log10(x0)))
+#define PY(v) (20 + (H - 80) * (1 - (log10(v) - log10(y0)) / (log10(y1) - log10(y0))))
+    fprintf(f, "<svg xmlns='http://www.w3.org/2000/svg' width='%d' height='%d' font-family='sans-serif' font-size='12'>\n"
+               "<rect width='100%%' height='100%%' fill='white'/>\n<rect x='80' y='20' width='%d' height='%d' fill='none' stroke='#444'/>\n",
+            W, H, W - 110, H - 80);
+    fprintf(f, "<text x='%d' y='%d' text-anchor='middle'>wall seconds per simulated second (log)</text>\n", W / 2, H - 20);
+    fprintf(f, "<text x='16' y='%d' transform='rotate(-90 16 %d)' text-anchor='middle'>relative L2 position error (log)</text>\n",
+            H / 2, H / 2);
+    fprintf(f, "<text x='80' y='%d'>%g</text><text x='%d' y='%d' text-anchor='end'>%g</text>\n", H - 45, x0, W - 30, H - 45, x1);
+    fprintf(f, "<text x='76' y='%d' text-anchor='end'>%g</text><text x='76' y='28' text-anchor='end'>%g</text>\n", H - 60, y0, y1);
+    fprintf(f, "<line x1='%.1f' x2='%.1f' y1='20' y2='%d' stroke='#2a9d3a' stroke-dasharray='5 3'/><text x='%.1f' y='34' "
+               "fill='#2a9d3a'>real time</text>\n", PX(1.0), PX(1.0), H - 60, PX(1.0) + 4);
+    for (k = 0; k < nf; ++k)
+        if (fom[k] > 0)
+            fprintf(f, "<line x1='%.1f' x2='%.1f' y1='20' y2='%d' stroke='#c00' stroke-dasharray='2 3'/><text x='%.1f' y='%d' "
+                       "fill='#c00' font-size='10' transform='rotate(-90 %.1f %d)'>full order: %s</text>\n",
+                    PX(fom[k]), PX(fom[k]), H - 60, PX(fom[k]) - 3, H - 64, PX(fom[k]) - 3, H - 64, fom_scene[k]);
+    for (k = 0; k < n; ++k) {
+        int c = !strcmp(r[k].scheme, "LN") ? 0 : !strcmp(r[k].scheme, "LL") ? 1 : !strcmp(r[k].scheme, "EN") ? 2 : 3;
+        if (!r[k].ok || !(r[k].err > 0) || !(r[k].wall_per_s > 0)) continue;
+        fprintf(f, "<circle cx='%.1f' cy='%.1f' r='4' fill='%s'/><text x='%.1f' y='%.1f' font-size='9'>%s %s %s</text>\n",
+                PX(r[k].wall_per_s), PY(r[k].err), cols[c], PX(r[k].wall_per_s) + 6, PY(r[k].err) + 3, r[k].scene, r[k].scheme,
+                r[k].samples < 0 ? "all" : (r[k].samples == 10 ? "10" : r[k].samples == 50 ? "50" : "n"));
+    }
+#undef PX
+#undef PY
+    fprintf(f, "<text x='90' y='%d' font-size='10'>LN LL EN EL: Lagrangian / Eulerian quadrature, nonlinear / linear projection; "
+               "label: projection points</text>\n</svg>\n", H - 66);
+    fclose(f);
+}
+
+int main(int argc, char **argv) {
+    static rrun runs[512];
+    static const char *schemes[4] = {"LN", "LL", "EN", "EL"};
+    double fom[8];
+    char fom_scene[8][24], path[1024];
+    int nr = 0, nf = 0, a, sc;
+    cfg c;
+    FILE *md, *csv;
+    memset(&c, 0, sizeof c);
+    c.data = "data/rom", c.out = "bench/results";
+    snprintf(c.scenes, sizeof c.scenes, "cylinder,cuboid,poke,tower");
+    snprintf(c.schemes, sizeof c.schemes, "LN,LL,EN,EL");
+    c.samples[0] = 10, c.samples[1] = 50, c.samples[2] = -1, c.n_samples = 3;
+    c.substeps = 1, c.speed = 1, c.superres = 1, c.seq = 1;
+    for (a = 1; a < argc; ++a) {
+        if (!strcmp(argv[a], "--scenes") && a + 1 < argc) snprintf(c.scenes, sizeof c.scenes, "%s", argv[++a]);
+        else if (!strcmp(argv[a], "--schemes") && a + 1 < argc) snprintf(c.schemes, sizeof c.schemes, "%s", argv[++a]);
+        else if (!strcmp(argv[a], "--data") && a + 1 < argc) c.data = argv[++a];
+        else if (!strcmp(argv[a], "--out") && a + 1 < argc) c.out = argv[++a];
+        else if (!strcmp(argv[a], "--instances") && a + 1 < argc) c.instances = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--substeps") && a + 1 < argc) c.substeps = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--no-speed")) c.speed = 0;
+        else if (!strcmp(argv[a], "--no-superres")) c.superres = 0;
+        else if (!strcmp(argv[a], "--no-seq")) c.seq = 0;
+        else if (!strcmp(argv[a], "--samples") && a + 1 < argc) {
+            char b[128], *t, *save = NULL;
+            snprintf(b, sizeof b, "%s", argv[++a]);
+            c.n_samples = 0;
+            for (t = strtok_r(b, ",", &save); t && c.n_samples < 8; t = strtok_r(NULL, ",", &save))
+                c.samples[c.n_samples++] = !strcmp(t, "all") ? -1 : atoi(t);
+        } else {
+            fprintf(stderr, "usage: %s [--scenes a,b] [--schemes LN,LL,EN,EL] [--samples 10,50,all] [--data DIR] [--out DIR] "
+                            "[--instances N] [--substeps S] [--no-speed] [--no-superres] [--no-seq]\n", argv[0]);
+            return 2;
+        }
+    }
+    if (c.substeps < 1) c.substeps = 1;
+    for (sc = 0; sc < PN_RS_COUNT; ++sc) {
+        pn_rs_scene s = pn_rs_get(sc, 1);
+        const pn_rom_model *m;
+        int kind, sm, k, used = 0;
+        if (sc == PN_RS_POKE_SEQ || !listed(c.scenes, s.name)) continue;
+        if (!(m = model_of(s.name))) {
+            fprintf(stderr, "no model for %s in models/pn_rom_models.h (make models MODEL=rom_%s)\n", s.name, s.name);
+            continue;
+        }
+        for (kind = 0; kind < 4; ++kind) {
+            if (!listed(c.schemes, schemes[kind])) continue;
+            for (sm = 0; sm < c.n_samples; ++sm) {
+                rrun *r = &runs[nr];
+                double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
+                long steps = 0;
+                memset(r, 0, sizeof *r);
+                snprintf(r->scene, sizeof r->scene, "%s", s.name);
+                snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
+                r->samples = c.samples[sm];
+                r->ok = 1, used = 0;
+                for (k = 0; k < s.n_instances && r->ok; ++k) {
+                    pn_rs_instance in = pn_rs_instance_of(&s, k);
+                    pn_rs_snap snap;
+                    if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
+                    snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, s.name, k);
+                    if (!pn_rs_read(path, s.frames, &snap)) return 1;
+                    r->ok = rom_run(m, &s, &in, &snap, kind >= 2, kind % 2, c.samples[sm], c.substeps, 1000 + (unsigned)k,
+                                    &se, &sn, &snc, &wall, &sim, &qs, &steps);
+                    pn_rs_free(&snap);
+                    used++;
+                }
+                r->err = sqrt(se / sn), r->err_c = sqrt(se / snc), r->wall_per_s = wall / sim, r->quad_mean = qs / (steps ? steps : 1);
+                fprintf(stderr, "%-9s %s %4s points: error %.3f%% (from the centroid %.3f%%), %.3g wall s per simulated s, "
+                                "%.0f quadrature points per step%s\n",
+                        r->scene, r->scheme, r->samples < 0 ? "all" : (snprintf(path, 16, "%d", r->samples), path), 100 * r->err,
+                        100 * r->err_c, r->wall_per_s, r->quad_mean, r->ok ? "" : " (FAILED)");
+                nr++;
+            }
+        }
+        if (c.speed && nf < 8) {
+            pn_rs_instance in = pn_rs_instance_of(&s, s.n_instances - 1);
+            fom[nf] = fom_speed(&s, &in, sc == PN_RS_TOWER ? 4 : 30);
+            snprintf(fom_scene[nf], sizeof fom_scene[nf], "%s", s.name);
+            fprintf(stderr, "%-9s full order explicit: %.3g wall s per simulated s\n", s.name, fom[nf]);
+            nf++;
+        }
+    }
+    snprintf(path, sizeof path, "%s/bench_rom.csv", c.out);
+    csv = fopen(path, "w");
+    snprintf(path, sizeof path, "%s/bench_rom.md", c.out);
+    md = fopen(path, "w");
+    if (!csv || !md) return 1;
+    fprintf(csv, "scene,scheme,samples,error,error_centroid,wall_per_sim_s,quad_points,ok\n");
+    fprintf(md, "| scene | scheme | projection points | error | error from centroid | wall s / simulated s | quadrature points |\n"
+                "|---|---|---|---|---|---|---|\n");
+    for (a = 0; a < nr; ++a) {
+        fprintf(csv, "%s,%s,%d,%.6g,%.6g,%.6g,%.1f,%d\n", runs[a].scene, runs[a].scheme, runs[a].samples, runs[a].err, runs[a].err_c,
+                runs[a].wall_per_s, runs[a].quad_mean, runs[a].ok);
+        fprintf(md, "| %s | %s | %s | %.3f%% | %.3f%% | %.3g | %.0f |%s\n", runs[a].scene, runs[a].scheme,
+                runs[a].samples < 0 ? "all" : (snprintf(path, 16, "%d", runs[a].samples), path), 100 * runs[a].err,
+                100 * runs[a].err_c, runs[a].wall_per_s, runs[a].quad_mean, runs[a].ok ? "" : " failed");
+    }
+    for (a = 0; a < nf; ++a) {
+        fprintf(csv, "%s,full,-1,0,0,%.6g,0,1\n", fom_scene[a], fom[a]);
+        fprintf(md, "| %s | full-order explicit | - | - | - | %.3g | - |\n", fom_scene[a], fom[a]);
+    }
+    fclose(csv), fclose(md);
+    snprintf(path, sizeof path, "%s/bench_rom.svg", c.out);
+    svg(path, runs, nr, fom, fom_scene, nf);
+    fprintf(stderr, "wrote %s/bench_rom.{md,csv,svg}\n", c.out);
+    return 0;
+}
