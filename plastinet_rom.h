@@ -271,8 +271,10 @@ struct pn_rom_world {
 #endif
 #include <math.h>
 #include <stdarg.h>
-#include <stdio.h>
 #include <string.h>
+#ifndef PN_NO_STDIO
+#include <stdio.h>
+#endif
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -281,11 +283,23 @@ struct pn_rom_world {
    >>model: checks, the affine map, the reference domain
    ====================================================================================== */
 
+/* a message into buf (without stdio: the format's text up to its first conversion) */
+static void pn__rom_vmsg(char *buf, size_t cap, const char *fmt, va_list ap) {
+#ifndef PN_NO_STDIO
+    vsnprintf(buf, cap, fmt, ap);
+#else
+    size_t i;
+    (void)ap;
+    for (i = 0; fmt[i] && fmt[i] != '%' && i + 1 < cap; ++i) buf[i] = fmt[i];
+    buf[i] = 0;
+#endif
+}
+
 static void pn__rom_msg(char *buf, size_t cap, const char *fmt, ...) {
     va_list ap;
     if (!buf || !cap) return;
     va_start(ap, fmt);
-    vsnprintf(buf, cap, fmt, ap);
+    pn__rom_vmsg(buf, cap, fmt, ap);
     va_end(ap);
 }
 
@@ -649,7 +663,7 @@ static void pn__rom_map(const pn_rom_world *w, const double *xhat, size_t n, con
 static pn_result pn__rom_fail(pn_rom_world *w, pn_result r, const char *fmt, ...) {
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(w->error, sizeof w->error, fmt, ap);
+    pn__rom_vmsg(w->error, sizeof w->error, fmt, ap);
     va_end(ap);
     return r;
 }

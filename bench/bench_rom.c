@@ -50,7 +50,7 @@ static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_inst
     pn_rom_desc d;
     pn_rom_world *w = NULL;
     char why[256];
-    double *X = (double *)malloc(sizeof(double) * 3 * (size_t)snap->n), c0[3] = {0, 0, 0], h = s->dx / s->per_axis;
+    double *X = (double *)malloc(sizeof(double) * 3 * (size_t)snap->n), c0[3] = {0, 0, 0}, h = s->dx / s->per_axis;
     float *x = (float *)malloc(sizeof(float) * 3 * (size_t)snap->n);
     int f, k, i, next = 0, ok = 1;
     size_t p;
@@ -146,7 +146,7 @@ static int listed(const char *list, const char *name) {
     return 0;
 }
 
-static void svg(const char *path, const rrun *r, int n, const double *fom, const char (*fom_scene)[24], int nf) {
+static void svg(const char *path, const rrun *r, int n, const double *fom, char (*fom_scene)[24], int nf) {
     static const char *cols[] = {"#1f5fbf", "#e07b00", "#2a9d3a", "#b0249a", "#111111"};
     FILE *f = fopen(path, "w");
     double x0 = 1e300, x1 = 0, y0 = 1e300, y1 = 0;

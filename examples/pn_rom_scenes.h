@@ -23,6 +23,11 @@
 #include <stdio.h>
 #include <string.h>
 
+#if defined(__GNUC__)
+#define PN_RS_UNUSED __attribute__((unused))
+#else
+#define PN_RS_UNUSED
+#endif
 #define PN_RS_MAX_DRIVES 2
 #define PN_RS_MAX_LOADS 10
 #define PN_RS_PI 3.14159265358979323846
@@ -70,7 +75,7 @@ typedef struct pn_rs_scene {
 enum { PN_RS_CYLINDER = 0, PN_RS_CUBOID, PN_RS_POKE, PN_RS_POKE_SEQ, PN_RS_TOWER, PN_RS_COUNT };
 
 /* the domain's origin is 0; walls are 3 cells; the bodies sit well inside */
-static pn_rs_scene pn_rs_get(int id, int fine) {
+PN_RS_UNUSED static pn_rs_scene pn_rs_get(int id, int fine) {
     pn_rs_scene s;
     memset(&s, 0, sizeof s);
     s.id = id;
@@ -120,7 +125,7 @@ static pn_rs_scene pn_rs_get(int id, int fine) {
     return s;
 }
 
-static int pn_rs_find(const char *name) {
+PN_RS_UNUSED static int pn_rs_find(const char *name) {
     int i;
     for (i = 0; i < PN_RS_COUNT; ++i)
         if (!strcmp(pn_rs_get(i, 1).name, name)) return i;
@@ -128,7 +133,7 @@ static int pn_rs_find(const char *name) {
 }
 
 /* Is the reference point X material? */
-static int pn_rs_inside(const pn_rs_scene *s, const double *X) {
+PN_RS_UNUSED static int pn_rs_inside(const pn_rs_scene *s, const double *X) {
     int i;
     for (i = 0; i < 3; ++i)
         if (X[i] < s->box_lo[i] || X[i] > s->box_hi[i]) return 0;
@@ -167,7 +172,7 @@ static int pn_rs_inside(const pn_rs_scene *s, const double *X) {
    (i + 1/2) h from the origin, kept where pn_rs_inside holds. Writes up to cap points into X
    (3 per point; NULL: count only) and returns the count. refine > 1 samples the same domain
    refine times finer per axis (super-resolution point sets). */
-static size_t pn_rs_points(const pn_rs_scene *s, int refine, double *X, size_t cap) {
+PN_RS_UNUSED static size_t pn_rs_points(const pn_rs_scene *s, int refine, double *X, size_t cap) {
     double h = s->dx / s->per_axis / (refine > 1 ? refine : 1);
     long lo[3], hi[3], i, j, k;
     size_t n = 0;
@@ -188,7 +193,7 @@ static size_t pn_rs_points(const pn_rs_scene *s, int refine, double *X, size_t c
     return n;
 }
 
-static int pn_rs_in_region(const pn_rs_region *r, const double *X) {
+PN_RS_UNUSED static int pn_rs_in_region(const pn_rs_region *r, const double *X) {
     int i;
     double d2 = 0;
     for (i = 0; i < 3; ++i) {
@@ -198,13 +203,13 @@ static int pn_rs_in_region(const pn_rs_region *r, const double *X) {
     return r->radius > 0 ? d2 <= r->radius * r->radius : 1;
 }
 
-static void pn_rs_box(pn_rs_region *r, double x0, double x1, double y0, double y1, double z0, double z1) {
+PN_RS_UNUSED static void pn_rs_box(pn_rs_region *r, double x0, double x1, double y0, double y1, double z0, double z1) {
     memset(r, 0, sizeof *r);
     r->lo[0] = x0, r->hi[0] = x1, r->lo[1] = y0, r->hi[1] = y1, r->lo[2] = z0, r->hi[2] = z1;
 }
 
 /* a deterministic generator for the splits and the Latin hypercube (splitmix64) */
-static double pn_rs_rand(unsigned long long *st) {
+PN_RS_UNUSED static double pn_rs_rand(unsigned long long *st) {
     unsigned long long z = (*st += 0x9E3779B97F4A7C15ULL);
     z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
     z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
@@ -213,7 +218,7 @@ static double pn_rs_rand(unsigned long long *st) {
 }
 
 /* test[k] = 1 for n_test instances of n, drawn without replacement by a seeded shuffle */
-static void pn_rs_split(int n, int n_test, unsigned long long seed, int *test) {
+PN_RS_UNUSED static void pn_rs_split(int n, int n_test, unsigned long long seed, int *test) {
     int perm[64], i;
     for (i = 0; i < n; ++i) perm[i] = i, test[i] = 0;
     for (i = n - 1; i > 0; --i) {
@@ -225,7 +230,7 @@ static void pn_rs_split(int n, int n_test, unsigned long long seed, int *test) {
 
 /* the poke: a force of 0.06 N on the top of the body within 8 mm of the rim point at angle theta + pi,
    pointing across the axis towards theta, tilted 15 degrees down, for 0.25 s */
-static void pn_rs_poke(pn_rs_load *L, double theta, double t_start) {
+PN_RS_UNUSED static void pn_rs_poke(pn_rs_load *L, double theta, double t_start) {
     double px = 0.04 - 0.01 * cos(theta), py = 0.04 - 0.01 * sin(theta), ph = 75 * PN_RS_PI / 180, f = 0.06;
     pn_rs_box(&L->region, -1, 1, -1, 1, -1, 1);
     L->region.center[0] = px, L->region.center[1] = py, L->region.center[2] = 0.052, L->region.radius = 0.008;
@@ -234,7 +239,7 @@ static void pn_rs_poke(pn_rs_load *L, double theta, double t_start) {
 }
 
 /* Instance k of scene s */
-static pn_rs_instance pn_rs_instance_of(const pn_rs_scene *s, int k) {
+PN_RS_UNUSED static pn_rs_instance pn_rs_instance_of(const pn_rs_scene *s, int k) {
     pn_rs_instance in;
     int test[64], i;
     memset(&in, 0, sizeof in);
@@ -307,7 +312,7 @@ static pn_rs_instance pn_rs_instance_of(const pn_rs_scene *s, int k) {
    that are on at time t (restarting at t: its part of a load still to come; loads that start
    later are added by pn_rs_events). flags (optional, one per point): bit d set for drive d,
    bit 2 for a load. Returns the point count, 0 on failure (message on stderr). */
-static size_t pn_rs_setup(pn_mpm_world *w, int group, const pn_rs_scene *s, const pn_rs_instance *in, int refine,
+PN_RS_UNUSED static size_t pn_rs_setup(pn_mpm_world *w, int group, const pn_rs_scene *s, const pn_rs_instance *in, int refine,
                           unsigned char *flags, double *X, size_t cap) {
     size_t n = pn_rs_points(s, refine, X, cap), p, *sel, ns;
     double h = s->dx / s->per_axis / (refine > 1 ? refine : 1);
@@ -349,7 +354,7 @@ static size_t pn_rs_setup(pn_mpm_world *w, int group, const pn_rs_scene *s, cons
 
 /* Add the loads of `in` that are on at time t and not yet added: a load is added at the first
    call with t >= t_start (with what remains of its duration); *next_load counts those added. */
-static int pn_rs_events(pn_mpm_world *w, const pn_rs_instance *in, const double *X, size_t n, double t, int *next_load) {
+PN_RS_UNUSED static int pn_rs_events(pn_mpm_world *w, const pn_rs_instance *in, const double *X, size_t n, double t, int *next_load) {
     while (*next_load < in->n_loads && t >= in->load[*next_load].t_start - 1e-12) {
         const pn_rs_load *L = &in->load[*next_load];
         double left = L->t_start + L->duration - t;
@@ -370,7 +375,7 @@ static int pn_rs_events(pn_mpm_world *w, const pn_rs_instance *in, const double 
     return 1;
 }
 #ifdef PLASTINET_ROM_H
-static pn_rom_region pn_rs_rom_region(const pn_rs_region *r) {
+PN_RS_UNUSED static pn_rom_region pn_rs_rom_region(const pn_rs_region *r) {
     pn_rom_region o;
     memcpy(o.lo, r->lo, sizeof o.lo), memcpy(o.hi, r->hi, sizeof o.hi), memcpy(o.center, r->center, sizeof o.center);
     o.radius = r->radius;
@@ -378,7 +383,7 @@ static pn_rom_region pn_rs_rom_region(const pn_rs_region *r) {
 }
 
 /* the drives of instance `in` on a reduced world at t = 0 (gravity is the desc's) */
-static int pn_rs_rom_setup(pn_rom_world *w, const pn_rs_instance *in) {
+PN_RS_UNUSED static int pn_rs_rom_setup(pn_rom_world *w, const pn_rs_instance *in) {
     int a;
     for (a = 0; a < in->n_drives; ++a) {
         pn_rom_region r = pn_rs_rom_region(&in->drive[a].region);
@@ -391,7 +396,7 @@ static int pn_rs_rom_setup(pn_rom_world *w, const pn_rs_instance *in) {
 }
 
 /* the loads of `in` due at time t (as pn_rs_events) */
-static int pn_rs_rom_events(pn_rom_world *w, const pn_rs_instance *in, double t, int *next_load) {
+PN_RS_UNUSED static int pn_rs_rom_events(pn_rom_world *w, const pn_rs_instance *in, double t, int *next_load) {
     while (*next_load < in->n_loads && t >= in->load[*next_load].t_start - 1e-12) {
         const pn_rs_load *L = &in->load[*next_load];
         pn_rom_region r = pn_rs_rom_region(&L->region);
@@ -417,7 +422,7 @@ typedef struct pn_rs_snap {
     float *data;               /* frames x (x n x 3, v n x 3, F n x 9)                      */
 } pn_rs_snap;
 
-static int pn_rs_read(const char *path, int frames, pn_rs_snap *s) {
+PN_RS_UNUSED static int pn_rs_read(const char *path, int frames, pn_rs_snap *s) {
     FILE *f = fopen(path, "rb");
     unsigned char h[256];
     long size, off, fb;
@@ -460,13 +465,13 @@ static int pn_rs_read(const char *path, int frames, pn_rs_snap *s) {
     return 1;
 }
 
-static void pn_rs_free(pn_rs_snap *s) {
+PN_RS_UNUSED static void pn_rs_free(pn_rs_snap *s) {
     free(s->X), free(s->flags), free(s->data);
     memset(s, 0, sizeof *s);
 }
 
 /* frame k's positions (n x 3 floats) */
-static const float *pn_rs_x(const pn_rs_snap *s, int k) { return s->data + (size_t)k * 15 * (size_t)s->n; }
-static const float *pn_rs_v(const pn_rs_snap *s, int k) { return s->data + (size_t)k * 15 * (size_t)s->n + 3 * (size_t)s->n; }
+PN_RS_UNUSED static const float *pn_rs_x(const pn_rs_snap *s, int k) { return s->data + (size_t)k * 15 * (size_t)s->n; }
+PN_RS_UNUSED static const float *pn_rs_v(const pn_rs_snap *s, int k) { return s->data + (size_t)k * 15 * (size_t)s->n + 3 * (size_t)s->n; }
 
 #endif /* PN_ROM_SCENES_H */

@@ -143,7 +143,8 @@ def main():
     with open(out, "w") as f:
         f.write("%d %d %d\n" % (d, K, COUNT))
         for p in range(COUNT):
-            vals = X[p].tolist() + xhat[p].tolist() + y[p].tolist() + JX[p].reshape(-1).tolist() + JL[p].reshape(-1).tolist()
+            vals = (X[p].tolist() + xhat[p].tolist() + y[p].tolist() + JX[p].reshape(-1).tolist() +
+                    JL[p].reshape(-1).tolist())
             f.write(" ".join("%.17g" % v for v in vals) + "\n")
     print("%s: %d inputs from %s -> %s" % (model["name"], COUNT, header, out))
 

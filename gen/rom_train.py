@@ -3,7 +3,7 @@
 the material point method via an implicit neural representation of the deformation map").
 
     /usr/bin/python3 gen/rom_train.py SCENE [--data data/rom] [--latent 6] [--iters N]
-                                     [--out gen/ckpt/rom_SCENE.pt] [--threads 2] [--minutes 60]
+                                     [--out gen/ckpt/rom_SCENE.pt] [--threads 1] [--minutes 60]
 
 Learns the manifold parameterisation g(X, xhat) -> x (an MLP of the reference position X and a
 latent xhat) together with a convolutional encoder xhat = e(x_vec) that gives each snapshot of
@@ -48,7 +48,7 @@ ENC_FLAT_MIN = 32         # convolutions shrink channels x length to the least v
 ENC_DENSE = 32
 
 DEFAULTS = dict(latent=6, hidden=(30, 30, 30, 30, 30), iters=30000, batch=16, points=256,
-                lr_max=1e-3, lr_min=1e-6, lambda_f=100.0, lambda_v=0.01, seed=1)
+                lr_max=1e-3, lr_min=1e-6, lambda_f=100.0, lambda_v=0.01, seed=1, v_target="n")
 
 
 # ---- data ------------------------------------------------------------------------------------
@@ -82,6 +82,14 @@ class Instance:
         self.flags = np.array(np.memmap(path, "u1", "r", flag_off, (n,)))
         self.mm = (np.memmap(path, "<f4", "r", self.offset, (self.frames, self.frame_floats))
                    if self.frames > 0 else None)
+
+    def prefetch(self):
+        """Ask the kernel to read the whole file ahead (the batches gather random points)."""
+        try:
+            import mmap
+            self.mm._mmap.madvise(mmap.MADV_WILLNEED)
+        except (AttributeError, OSError, ValueError):
+            pass
 
     def x(self, k):
         return self.mm[k, :self.n * self.dim].reshape(self.n, self.dim)
@@ -120,7 +128,8 @@ class Scene:
                 continue
             self.instances.append(inst)
         if problems:
-            msg = "%s: incomplete data: %s" % (self.dir, "; ".join(problems[:6]) + (" ..." if len(problems) > 6 else ""))
+            msg = "%s: incomplete data: %s" % (self.dir,
+                                               "; ".join(problems[:6]) + (" ..." if len(problems) > 6 else ""))
             if not allow_partial:
                 sys.exit(msg + " (finish gen/rom_data.c, or --allow-partial to use what is there)")
             print("warning: " + msg, file=sys.stderr)
@@ -281,6 +290,8 @@ class Batches:
         self.scene = scene
         self.pairs, self.row = [], {}
         rows = []
+        for inst in scene.train:
+            inst.prefetch()
         mean = model.out_mean.double().numpy()
         std = model.out_std.double().numpy()
         for ii, inst in enumerate(scene.train):
@@ -292,7 +303,7 @@ class Batches:
                     self.pairs.append((ii, k))
         self.enc_x = torch.from_numpy(np.stack(rows))          # (S, dim, L)
 
-    def draw(self, it, seed, B, P):
+    def draw(self, it, seed, B, P, v_target="n"):
         gen = torch.Generator().manual_seed(seed * 1000003 + it)
         pick = torch.randint(0, len(self.pairs), (B,), generator=gen).tolist()
         pts = torch.randint(0, self.scene.n_points, (B, P), generator=gen).numpy()
@@ -303,7 +314,7 @@ class Batches:
             idx = pts[b]
             X.append(inst.X[idx])
             x.append(inst.x(k)[idx])
-            v.append(inst.v(k)[idx])
+            v.append(inst.v(k)[idx] if v_target == "n" else 0.5 * (inst.v(k)[idx] + inst.v(k + 1)[idx]))
             F.append(inst.F(k)[idx])
             r0.append(self.row[(ii, k)])
             r1.append(self.row[(ii, k + 1)])
@@ -358,7 +369,7 @@ def train(a):
     cfg = dict(DEFAULTS)
     cfg.update(scene=scene.name, dim=scene.dim, n_points=scene.n_points, enc_len=len(scene.enc_idx),
                frame_dt=scene.frame_dt, threads=a.threads, data_fingerprint=scene.fingerprint(scene.train))
-    for k in ("latent", "iters", "batch", "points", "seed", "lambda_f", "lambda_v"):
+    for k in ("latent", "iters", "batch", "points", "seed", "lambda_f", "lambda_v", "v_target"):
         if getattr(a, k) is not None:
             cfg[k] = getattr(a, k)
     cfg["hidden"] = tuple(cfg["hidden"])
@@ -369,8 +380,8 @@ def train(a):
         state = torch.load(out)
         old = state["cfg"]
         keys = ("scene", "dim", "n_points", "enc_len", "latent", "hidden", "iters", "batch", "points", "seed",
-                "lambda_f", "lambda_v", "lr_max", "lr_min", "data_fingerprint")
-        diff = [k for k in keys if old.get(k) != cfg[k]]
+                "lambda_f", "lambda_v", "lr_max", "lr_min", "v_target", "data_fingerprint")
+        diff = [k for k in keys if old.get(k, DEFAULTS.get(k)) != cfg[k]]
         if diff:
             sys.exit("%s was trained with other settings or data (%s); delete it or choose --out" %
                      (out, ", ".join("%s %s -> %s" % (k, old.get(k), cfg[k]) for k in diff)))
@@ -409,7 +420,7 @@ def train(a):
     for it in range(start, cfg["iters"]):
         for gr in opt.param_groups:
             gr["lr"] = lr_at(cfg, it)
-        lx, lF, lv = loss_terms(model, batches.draw(it, cfg["seed"], B, P), cfg["frame_dt"], B, P)
+        lx, lF, lv = loss_terms(model, batches.draw(it, cfg["seed"], B, P, cfg["v_target"]), cfg["frame_dt"], B, P)
         loss = lx + lf * lF + lv_w * lv
         opt.zero_grad()
         loss.backward()
@@ -453,7 +464,12 @@ def main():
     ap.add_argument("--seed", type=int, help="[%d]" % DEFAULTS["seed"])
     ap.add_argument("--lambda-f", dest="lambda_f", type=float, help="[%g]" % DEFAULTS["lambda_f"])
     ap.add_argument("--lambda-v", dest="lambda_v", type=float, help="[%g]" % DEFAULTS["lambda_v"])
-    ap.add_argument("--threads", type=int, default=2, help="torch threads [2]; resume with the same count")
+    ap.add_argument("--v-target", dest="v_target", choices=("n", "mid"),
+                    help="velocity the latent finite difference is fit to: v_n (paper Eq. 24) or "
+                         "(v_n + v_n+1)/2, which the data's own (x_n+1 - x_n)/dt matches better [n]")
+    ap.add_argument("--threads", type=int, default=1,
+                    help="torch threads [1]; 2 only on an idle machine (with the other core busy a 2-thread run "
+                         "is many times slower); resume with the same count")
     ap.add_argument("--minutes", type=float, default=60, help="warn if the run looks longer than this [60]")
     ap.add_argument("--allow-partial", action="store_true", help="train on incomplete data (tests)")
     ap.add_argument("--print-every", type=int, default=1000)

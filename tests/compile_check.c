@@ -8,6 +8,7 @@
 #include "../plastinet.h"
 #include "../models/pn_models.h" /* every generated header, in every configuration */
 #include "../plastinet_mpm.h"
+#include "../plastinet_rom.h"
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -180,7 +181,53 @@ static void smoke_mpm(int d) {
     CHECK(pn_mpm_step_implicit(w, (pn_real)1e-3, NULL, &st) == PN_OK);
     pn_mpm_totals(w, &mass, mom);
     CHECK(mass > 0 && mom[1] < 0);
+    { /* driven particles and loads */
+        pn_real lo[3] = {0, 0, 0}, hi[3] = {1, 1, 1}, f[3] = {0, 1, 0}, v[3] = {0, 0, 0};
+        size_t sel[4], cnt = 0;
+        int di = -1, li = -1;
+        CHECK(pn_mpm_select_box(w, lo, hi, sel, 4, &cnt) == PN_OK && cnt == 1);
+        CHECK(pn_mpm_set_particles(w, 0, 1, NULL, v, NULL, NULL, -1) == PN_OK);
+        CHECK(pn_mpm_add_load(w, cnt, sel, f, (pn_real)1e-3, &li) == PN_OK);
+        CHECK(pn_mpm_drive_particles(w, cnt, sel, v, NULL, NULL, &di) == PN_OK);
+        CHECK(pn_mpm_step_explicit(w, (pn_real)1e-3, &st) == PN_OK);
+        CHECK(pn_mpm_release_drive(w, di) == PN_OK && pn_mpm_remove_load(w, li) == PN_OK);
+    }
     pn_mpm_destroy(w);
+}
+
+/* The reduced-order world on the affine map: a few points, a drive, a load, both
+   quadratures, and the reconstruction. */
+static void smoke_rom(int d) {
+    pn_rom_model am;
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    pn_rom_region r;
+    pn_rom_stats st;
+    double X[8 * 3], x[8 * 3], lat[12] = {0}, f[3] = {0, 0, 0};
+    float Xf[3] = {0.5f, 0.5f, 0.5f}, xf[3 * 8];
+    char why[128];
+    int i, q;
+    for (i = 0; i < 8 * d; ++i) X[i] = 0.45 + 0.05 * ((i / d) >> (i % d) & 1);
+    pn_rom_affine_model(d, &am);
+    CHECK(pn_rom_model_check(&am, why, sizeof why) == PN_OK);
+    CHECK(pn_rom_inside(&am, X) == 1 && pn_rom_lattice(&am, 1, NULL, 0) == 0);
+    CHECK(pn_rom_eval(&am, lat, 8, X, x, NULL, NULL) == PN_OK && fabs(x[0] - X[0]) < 1e-12);
+    memset(&desc, 0, sizeof desc);
+    desc.model = &am, desc.points = X, desc.n_points = 8, desc.point_volume_m3 = 1e-4, desc.dx_m = 0.1, desc.samples = -1;
+    for (q = 0; q < 2; ++q) {
+        desc.quadrature = q ? PN_ROM_LAGRANGIAN : PN_ROM_EULERIAN;
+        CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_OK);
+        if (!w) return;
+        memset(&r, 0, sizeof r);
+        r.lo[0] = r.lo[1] = r.lo[2] = 0, r.hi[0] = r.hi[1] = r.hi[2] = 0.46;
+        CHECK(pn_rom_drive(w, &r, NULL, NULL, NULL, &i) == PN_OK && pn_rom_release_drive(w, i) == PN_OK);
+        CHECK(pn_rom_add_load(w, &r, f, 0, &i) == PN_OK && pn_rom_remove_load(w, i) == PN_OK);
+        CHECK(pn_rom_set_latent(w, lat, NULL) == PN_OK && pn_rom_fit(w, X, NULL, NULL) == PN_OK);
+        CHECK(pn_rom_step(w, 1e-4, &st) == PN_OK && pn_rom_error(w)[0] == 0);
+        CHECK(pn_rom_positions(w, 0, 8, xf, NULL) == PN_OK && pn_rom_map(w, 1, Xf, xf, NULL) == PN_OK);
+        pn_rom_destroy(w);
+        w = NULL;
+    }
 }
 
 /* FEM: a square of two triangles (or a cube of six tetrahedra) on a floor, explicit and
@@ -267,6 +314,11 @@ int main(void) {
     smoke_fem(2);
 #else
     smoke_mpm(3);
+#endif
+#ifndef PN_NO_3D
+    smoke_rom(3);
+#else
+    smoke_rom(2);
 #endif
 #ifndef PN_NO_3D
     smoke_fem(3);
