@@ -249,6 +249,10 @@ struct pn_rom_world {
     long *qsrc;                    /* EULERIAN: the sample a lattice point came from         */
     unsigned char *qok;
     pn__rom_hash nodes, lat;
+    pn__rom_hash xc;               /* EULERIAN: lattice point -> its last X (Newton's guess)  */
+    double *xcX;
+    size_t n_xc, cap_xc;
+    unsigned long long *qkey;      /* EULERIAN: each quadrature point's lattice key          */
     size_t cap_n;
     long long *nidx;               /* node integer triples (3 each)                           */
     double *nm, *np, *nf;          /* node mass, momentum (dim), force (dim)                 */
@@ -686,13 +690,13 @@ static void pn__rom_hash_free(const pn_rom_world *w, pn__rom_hash *h) {
 
 static void pn__rom_scratch_free(pn_rom_world *w) {
     void *a[] = {w->sidx, w->sX, w->sx, w->sF, w->sG, w->sv, w->sxt, w->sdrv, w->qx, w->qX, w->qF, w->qG, w->qv, w->qC,
-                 w->qT, w->qm, w->qV0, w->qflag, w->qsrc, w->qok, w->tX, w->tx, w->tF, w->tG, w->tI,
+                 w->qT, w->qm, w->qV0, w->qflag, w->qsrc, w->qkey, w->qok, w->tX, w->tx, w->tF, w->tG, w->tI,
                  w->nidx, w->nm, w->np, w->nf, w->ndrv};
     size_t i;
     for (i = 0; i < sizeof a / sizeof a[0]; ++i) pn_free(&w->desc.allocator, a[i]);
     w->sidx = NULL, w->sX = w->sx = w->sF = w->sG = w->sv = w->sxt = NULL, w->sdrv = NULL;
     w->qx = w->qX = w->qF = w->qG = w->qv = w->qC = w->qT = w->qm = w->qV0 = NULL, w->qflag = NULL, w->qsrc = NULL;
-    w->qok = NULL, w->tX = w->tx = w->tF = w->tG = NULL, w->tI = NULL;
+    w->qok = NULL, w->tX = w->tx = w->tF = w->tG = NULL, w->tI = NULL, w->qkey = NULL;
     w->nidx = NULL, w->nm = w->np = w->nf = NULL, w->ndrv = NULL;
     w->cap_s = w->cap_q = w->cap_n = 0;
 }
@@ -703,6 +707,8 @@ PN__DEF void pn_rom_destroy(pn_rom_world *w) {
     pn__rom_scratch_free(w);
     pn__rom_hash_free(w, &w->nodes);
     pn__rom_hash_free(w, &w->lat);
+    pn__rom_hash_free(w, &w->xc);
+    pn_free(&w->desc.allocator, w->xcX);
     for (a = 0; a < w->n_drives; ++a) pn_free(&w->desc.allocator, w->drives[a].pts);
     pn_free(&w->desc.allocator, w->X), pn_free(&w->desc.allocator, w->mass), pn_free(&w->desc.allocator, w->vol);
     pn_free(&w->desc.allocator, w->wf), pn_free(&w->desc.allocator, w->perm), pn_free(&w->desc.allocator, w->px);
@@ -984,6 +990,7 @@ static int pn__rom_reserve(pn_rom_world *w, size_t ns, size_t nq) {
         ok &= pn__rom_grow(w, (void **)&w->qV0, w->cap_q, c, sizeof(double));
         ok &= pn__rom_grow(w, (void **)&w->qflag, w->cap_q, c, sizeof(int));
         ok &= pn__rom_grow(w, (void **)&w->qsrc, w->cap_q, c, sizeof(long));
+        ok &= pn__rom_grow(w, (void **)&w->qkey, w->cap_q, c, sizeof(unsigned long long));
         ok &= pn__rom_grow(w, (void **)&w->qok, w->cap_q, c, 1);
         ok &= pn__rom_grow(w, (void **)&w->tX, w->cap_q * (size_t)d, c * (size_t)d, sizeof(double));
         ok &= pn__rom_grow(w, (void **)&w->tx, w->cap_q * (size_t)d, c * (size_t)d, sizeof(double));
@@ -1261,15 +1268,21 @@ static pn_result pn__rom_quad_eulerian(pn_rom_world *w, size_t ns, size_t *nq_ou
                     if (v != (long)nq) continue; /* another sample's */
                     for (i = 0; i < d; ++i) w->qx[nq * (size_t)d + (size_t)i] = ((double)a[i] + 0.5) * h;
                     w->qsrc[nq] = (long)s;
+                    w->qkey[nq] = pn__rom_key(a);
                     nq++;
                 }
     }
-    for (q = 0; q < nq; ++q) { /* the guess from the sample's tangent map */
+    for (q = 0; q < nq; ++q) { /* the guess: the point's X of an earlier step, else the sample's tangent map */
         const double *xs = w->sx + (size_t)w->qsrc[q] * (size_t)d, *Xs = w->sX + (size_t)w->qsrc[q] * (size_t)d;
         double r[3], y[3] = {0, 0, 0};
-        for (i = 0; i < d; ++i) r[i] = w->qx[q * (size_t)d + (size_t)i] - xs[i];
-        pn__rom_solve_F(d, w->sF + (size_t)w->qsrc[q] * dd, r, y);
-        for (i = 0; i < d; ++i) w->tX[q * (size_t)d + (size_t)i] = Xs[i] + y[i];
+        long ci = pn__rom_hash_get(&w->xc, w->qkey[q]);
+        if (ci >= 0) {
+            memcpy(w->tX + q * (size_t)d, w->xcX + (size_t)ci * (size_t)d, sizeof(double) * (size_t)d);
+        } else {
+            for (i = 0; i < d; ++i) r[i] = w->qx[q * (size_t)d + (size_t)i] - xs[i];
+            pn__rom_solve_F(d, w->sF + (size_t)w->qsrc[q] * dd, r, y);
+            for (i = 0; i < d; ++i) w->tX[q * (size_t)d + (size_t)i] = Xs[i] + y[i];
+        }
         w->tI[q] = (long)q;
         w->qok[q] = 0;
     }
@@ -1279,13 +1292,17 @@ static pn_result pn__rom_quad_eulerian(pn_rom_world *w, size_t ns, size_t *nq_ou
         pn__rom_map(w, w->xhat, na, w->tX, w->tx, w->tF, w->tG);
         for (j = 0; j < na; ++j) {
             double r[3], y[3], rr = 0;
+            int near;
             q = (size_t)w->tI[j];
             for (i = 0; i < d; ++i) {
                 r[i] = w->tx[j * (size_t)d + (size_t)i] - w->qx[q * (size_t)d + (size_t)i];
                 rr += r[i] * r[i];
             }
-            if (rr <= tol * tol) { /* converged: X, F, G at it */
-                memcpy(w->qX + q * (size_t)d, w->tX + j * (size_t)d, sizeof(double) * (size_t)d);
+            /* within 1e-3 dx, one more Newton step lands within ~1e-6 dx (quadratic
+               convergence): take it and keep F and G of this evaluation */
+            near = rr <= 1e-6 * dx * dx && pn__rom_solve_F(d, w->tF + j * dd, r, y);
+            if (rr <= tol * tol || near) { /* converged: X, F, G */
+                for (i = 0; i < d; ++i) w->qX[q * (size_t)d + (size_t)i] = w->tX[j * (size_t)d + (size_t)i] - (rr > tol * tol ? y[i] : 0);
                 memcpy(w->qF + q * dd, w->tF + j * dd, sizeof(double) * dd);
                 memcpy(w->qG + q * dK, w->tG + j * dK, sizeof(double) * dK);
                 w->qok[q] = pn_rom_inside(&w->model, w->qX + q * (size_t)d) && pn__rom_det(d, w->qF + q * dd) > 0;
@@ -1300,6 +1317,19 @@ static pn_result pn__rom_quad_eulerian(pn_rom_world *w, size_t ns, size_t *nq_ou
             keep++;
         }
         na = keep;
+    }
+    for (q = 0; q < nq; ++q) { /* remember each X found for the next steps' guesses */
+        long ci;
+        if (!w->qok[q] && pn__rom_hash_get(&w->xc, w->qkey[q]) < 0) continue;
+        if (w->n_xc == w->cap_xc) {
+            size_t c = w->cap_xc ? 2 * w->cap_xc : 4096;
+            if (!pn__rom_grow(w, (void **)&w->xcX, w->cap_xc * (size_t)d, c * (size_t)d, sizeof(double))) return PN_ERROR_OUT_OF_MEMORY;
+            w->cap_xc = c;
+        }
+        ci = pn__rom_hash_put(w, &w->xc, w->qkey[q], (long)w->n_xc);
+        if (ci == -2) return PN_ERROR_OUT_OF_MEMORY;
+        if (ci == (long)w->n_xc) w->n_xc++;
+        if (w->qok[q]) memcpy(w->xcX + (size_t)ci * (size_t)d, w->qX + q * (size_t)d, sizeof(double) * (size_t)d);
     }
     for (q = 0; q < nq; ++q) {
         double J;

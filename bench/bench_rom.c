@@ -3,7 +3,7 @@
 
    build/bench_rom [--scenes cylinder,cuboid,poke,tower] [--data data/rom] [--out bench/results]
                    [--samples 10,50,all] [--schemes LN,LL,EN,EL] [--instances N] [--substeps S]
-                   [--no-speed] [--no-superres] [--no-seq]
+                   [--pic] [--no-speed] [--no-superres] [--no-seq]
 
    For every scene, on its test instances (never trained on), each quadrature x projection
    scheme (L/E: Lagrangian/Eulerian quadrature, N/L: nonlinear/linear projection) with each
@@ -33,7 +33,7 @@ typedef struct rrun {
 typedef struct cfg {
     const char *data, *out;
     char scenes[256], schemes[64];
-    int samples[8], n_samples, instances, substeps, speed, superres, seq;
+    int samples[8], n_samples, instances, substeps, speed, superres, seq, pic;
 } cfg;
 
 static const pn_rom_model *model_of(const char *scene) {
@@ -45,7 +45,7 @@ static const pn_rom_model *model_of(const char *scene) {
 
 /* One reduced run of instance `in` against snapshots `snap`; adds to the error sums. */
 static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_instance *in, const pn_rs_snap *snap, int quad,
-                   int proj, int samples, int substeps, unsigned long long seed, double *se, double *sn, double *snc,
+                   int proj, int samples, int substeps, int pic, unsigned long long seed, double *se, double *sn, double *snc,
                    double *wall, double *sim, double *quad_sum, long *steps) {
     pn_rom_desc d;
     pn_rom_world *w = NULL;
@@ -63,6 +63,7 @@ static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_inst
     for (i = 0; i < 3; ++i) d.gravity[i] = in->gravity[i];
     d.samples = samples, d.quadrature = quad ? PN_ROM_EULERIAN : PN_ROM_LAGRANGIAN;
     d.projection = proj ? PN_ROM_LINEAR : PN_ROM_NONLINEAR, d.seed = seed;
+    d.transfer = pic ? PN_ROM_PIC : PN_ROM_APIC;
     if (pn_rom_create(&d, &w, why, sizeof why) != PN_OK || !pn_rs_rom_setup(w, in)) {
         fprintf(stderr, "pn_rom_create: %s\n", why);
         free(X), free(x);
@@ -216,6 +217,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--no-speed")) c.speed = 0;
         else if (!strcmp(argv[a], "--no-superres")) c.superres = 0;
         else if (!strcmp(argv[a], "--no-seq")) c.seq = 0;
+        else if (!strcmp(argv[a], "--pic")) c.pic = 1;
         else if (!strcmp(argv[a], "--samples") && a + 1 < argc) {
             char b[128], *t, *save = NULL;
             snprintf(b, sizeof b, "%s", argv[++a]);
@@ -224,7 +226,7 @@ int main(int argc, char **argv) {
                 c.samples[c.n_samples++] = !strcmp(t, "all") ? -1 : atoi(t);
         } else {
             fprintf(stderr, "usage: %s [--scenes a,b] [--schemes LN,LL,EN,EL] [--samples 10,50,all] [--data DIR] [--out DIR] "
-                            "[--instances N] [--substeps S] [--no-speed] [--no-superres] [--no-seq]\n", argv[0]);
+                            "[--instances N] [--substeps S] [--pic] [--no-speed] [--no-superres] [--no-seq]\n", argv[0]);
             return 2;
         }
     }
@@ -255,7 +257,7 @@ int main(int argc, char **argv) {
                     if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
                     snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, s.name, k);
                     if (!pn_rs_read(path, s.frames, &snap)) return 1;
-                    r->ok = rom_run(m, &s, &in, &snap, kind >= 2, kind % 2, c.samples[sm], c.substeps, 1000 + (unsigned)k,
+                    r->ok = rom_run(m, &s, &in, &snap, kind >= 2, kind % 2, c.samples[sm], c.substeps, c.pic, 1000 + (unsigned)k,
                                     &se, &sn, &snc, &wall, &sim, &qs, &steps);
                     pn_rs_free(&snap);
                     used++;

@@ -283,7 +283,7 @@ PN_RS_UNUSED static pn_rs_instance pn_rs_instance_of(const pn_rs_scene *s, int k
     default: { /* tower: Latin hypercube over speed [0.6, 0.8) cm/s, theta [0, pi/2), phi [-2pi/3, -pi/3) */
         unsigned long long st = 31;
         int perm[3][20], a;
-        double u[3];
+        double u[3] = {0, 0, 0};
         for (a = 0; a < 3; ++a) {
             for (i = 0; i < 20; ++i) perm[a][i] = i;
             for (i = 19; i > 0; --i) {

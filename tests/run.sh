@@ -135,6 +135,19 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     if "$PY" -c "import torch" >/dev/null 2>&1; then
         "$PY" gen/crosscheck.py >build/crosscheck.log 2>&1
         tally crosscheck build/crosscheck.log $?
+        # the reduced-order models (models/rom_*.h): torch references, then the C evaluation
+        if [ -f models/pn_rom_models.h ]; then
+            for h in models/rom_*.h; do
+                n=$(basename "$h" .h); n=${n#rom_}
+                "$PY" gen/rom_crosscheck.py "$n" --out "build/rom_${n}_ref.txt" >>build/rom_crosscheck.log 2>&1
+            done
+            if $CC -std=c99 $W -O2 tests/rom_crosscheck.c -lm -o build/rom_crosscheck 2>>build/rom_crosscheck.log; then
+                ./build/rom_crosscheck build >build/rom_crosscheck.out 2>&1
+                tally rom_crosscheck build/rom_crosscheck.out $?
+            else
+                bad "build rom_crosscheck"; sed 's/^/    /' build/rom_crosscheck.log | head -10
+            fi
+        fi
     elif [ "${CI:-}" = true ]; then
         bad "crosscheck: torch is not installed (CI needs it: apt-get install -y python3-torch)"
     else
