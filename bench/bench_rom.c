@@ -270,6 +270,59 @@ int main(int argc, char **argv) {
                 nr++;
             }
         }
+        if (c.superres && sc == PN_RS_CUBOID) { /* zero-shot super-resolution: the points and grid of the 2x run */
+            pn_rs_scene fine = pn_rs_get(sc, 2);
+            for (kind = 0; kind < 4; ++kind) {
+                rrun *r = &runs[nr];
+                double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
+                long steps = 0;
+                if (!listed(c.schemes, schemes[kind])) continue;
+                memset(r, 0, sizeof *r);
+                snprintf(r->scene, sizeof r->scene, "%s_x2", s.name);
+                snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
+                r->samples = -1, r->ok = 1, used = 0;
+                for (k = 0; k < s.n_instances && r->ok; ++k) {
+                    pn_rs_instance in = pn_rs_instance_of(&s, k);
+                    pn_rs_snap snap;
+                    if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
+                    snprintf(path, sizeof path, "%s/%s_f2/i%03d.pnrs", c.data, s.name, k);
+                    if (!pn_rs_read(path, s.frames, &snap)) return 1;
+                    r->ok = rom_run(m, &fine, &in, &snap, kind >= 2, kind % 2, -1, 2 * c.substeps, c.pic, 1000 + (unsigned)k,
+                                    &se, &sn, &snc, &wall, &sim, &qs, &steps);
+                    pn_rs_free(&snap);
+                    used++;
+                }
+                r->err = sqrt(se / sn), r->err_c = sqrt(se / snc), r->wall_per_s = wall / sim, r->quad_mean = qs / (steps ? steps : 1);
+                fprintf(stderr, "%-9s %s  all points (super-resolution, trained at 1x): error %.3f%% (from the centroid %.3f%%)%s\n",
+                        r->scene, r->scheme, 100 * r->err, 100 * r->err_c, r->ok ? "" : " (FAILED)");
+                nr++;
+            }
+        }
+        if (c.seq && sc == PN_RS_POKE) { /* continual manipulation: ten pokes in a row (poke_seq) */
+            pn_rs_scene q = pn_rs_get(PN_RS_POKE_SEQ, 1);
+            pn_rs_instance in = pn_rs_instance_of(&q, 0);
+            pn_rs_snap snap;
+            snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, q.name, 0);
+            if (!pn_rs_read(path, q.frames, &snap)) return 1;
+            for (kind = 0; kind < 4; ++kind)
+                for (sm = 0; sm < c.n_samples; ++sm) {
+                    rrun *r = &runs[nr];
+                    double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
+                    long steps = 0;
+                    if (!listed(c.schemes, schemes[kind]) || c.samples[sm] == 10) continue;
+                    memset(r, 0, sizeof *r);
+                    snprintf(r->scene, sizeof r->scene, "%s", q.name);
+                    snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
+                    r->samples = c.samples[sm];
+                    r->ok = rom_run(m, &q, &in, &snap, kind >= 2, kind % 2, c.samples[sm], c.substeps, c.pic, 77, &se, &sn, &snc,
+                                    &wall, &sim, &qs, &steps);
+                    r->err = sqrt(se / sn), r->err_c = sqrt(se / snc), r->wall_per_s = wall / sim, r->quad_mean = qs / (steps ? steps : 1);
+                    fprintf(stderr, "%-9s %s %4s points: error %.3f%% (from the centroid %.3f%%)%s\n", r->scene, r->scheme,
+                            r->samples < 0 ? "all" : "50", 100 * r->err, 100 * r->err_c, r->ok ? "" : " (FAILED)");
+                    nr++;
+                }
+            pn_rs_free(&snap);
+        }
         if (c.speed && nf < 8) {
             pn_rs_instance in = pn_rs_instance_of(&s, s.n_instances - 1);
             fom[nf] = fom_speed(&s, &in, sc == PN_RS_TOWER ? 4 : 30);

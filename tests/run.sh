@@ -115,6 +115,7 @@ bg_tally() {
 # the shipped models (models/pn_models.h, written by gen/export.py) are tested when present
 models=
 [ -f models/pn_models.h ] && models=-DPN_TEST_HAVE_MODELS
+[ -f models/pn_rom_models.h ] && models="$models -DPN_TEST_HAVE_ROM_MODELS"
 # test_main with OpenMP: test_mpm.c checks that 1 and 2 threads give the same bits
 # test_main, the longest, on one core while the others build and run on the other
 run_bin_bg test_main tests/test_main.c "$models -fopenmp" "$@"

@@ -6,6 +6,10 @@
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
 #include "../plastinet_rom.h"
+#ifdef PN_TEST_HAVE_ROM_MODELS
+#include "../models/pn_rom_models.h" /* the shipped reduced-order models */
+#include "../examples/pn_rom_scenes.h" /* their scenes */
+#endif
 #include "pn_test.h"
 #ifdef _OPENMP
 #include <omp.h> /* test_mpm.c compares 1 and 2 threads */
