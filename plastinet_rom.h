@@ -1318,6 +1318,10 @@ static pn_result pn__rom_quad_eulerian(pn_rom_world *w, size_t ns, size_t *nq_ou
         }
         na = keep;
     }
+    if (w->n_xc > 16 * w->cap_q) { /* a body that travels: forget the lattice points left behind */
+        pn__rom_hash_clear(&w->xc);
+        w->n_xc = 0;
+    }
     for (q = 0; q < nq; ++q) { /* remember each X found for the next steps' guesses */
         long ci;
         if (!w->qok[q] && pn__rom_hash_get(&w->xc, w->qkey[q]) < 0) continue;
@@ -1491,6 +1495,7 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     }
     {
         double vn = 0, eps, xp[PN_ROM_MAX_LATENT], xm[PN_ROM_MAX_LATENT];
+        size_t nk = 0, k;
         for (i = 0; i < K; ++i) {
             double sc = w->model.latent_std ? w->model.latent_std[i] : 1;
             vn = fmax(vn, fabs(w->vhat[i]) / (sc > 0 ? sc : 1));
@@ -1499,20 +1504,27 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
         if (w->desc.transfer == PN_ROM_APIC && vn > 0) {
             eps = (w->desc.reference || w->model.activation == PN_ROM_AFFINE ? 1e-6 : 1e-3) / vn;
             for (i = 0; i < K; ++i) xp[i] = w->xhat[i] + eps * w->vhat[i], xm[i] = w->xhat[i] - eps * w->vhat[i];
-            pn__rom_map(w, xp, nq, w->qX, NULL, w->qC, NULL);
-            pn__rom_map(w, xm, nq, w->qX, NULL, w->tF, NULL);
-            for (q = 0; q < nq; ++q) {
-                double Fd[9], Ci[9], *C = w->qC + q * dd;
-                const double *F = w->qF + q * dd;
-                for (i = 0; i < (int)dd; ++i) Fd[i] = (C[i] - w->tF[q * dd + (size_t)i]) / (2 * eps);
+            for (q = 0; q < nq; ++q) /* the kept points, gathered */
+                if (w->qok[q]) {
+                    memcpy(w->tX + nk * (size_t)d, w->qX + q * (size_t)d, sizeof(double) * (size_t)d);
+                    w->tI[nk++] = (long)q;
+                }
+            pn__rom_map(w, xp, nk, w->tX, NULL, w->qT, NULL); /* qT: scratch here, the stresses below */
+            pn__rom_map(w, xm, nk, w->tX, NULL, w->tF, NULL);
+            for (k = 0; k < nk; ++k) {
+                double Fd[9], Ci[9], *C;
+                const double *F;
+                q = (size_t)w->tI[k];
+                C = w->qC + q * dd, F = w->qF + q * dd;
+                for (i = 0; i < (int)dd; ++i) Fd[i] = (w->qT[k * dd + (size_t)i] - w->tF[k * dd + (size_t)i]) / (2 * eps);
                 for (i = 0; i < d; ++i) { /* row i of C solves C F = Fd: F^T c_i = fd_i */
                     double Ft[9], rhs[3], y[3] = {0, 0, 0};
-                    int k;
+                    int c;
                     for (j = 0; j < d; ++j)
-                        for (k = 0; k < d; ++k) Ft[j * d + k] = F[k * d + j];
-                    for (k = 0; k < d; ++k) rhs[k] = Fd[i * d + k];
+                        for (c = 0; c < d; ++c) Ft[j * d + c] = F[c * d + j];
+                    for (c = 0; c < d; ++c) rhs[c] = Fd[i * d + c];
                     pn__rom_solve_F(d, Ft, rhs, y);
-                    for (k = 0; k < d; ++k) Ci[i * d + k] = y[k];
+                    for (c = 0; c < d; ++c) Ci[i * d + c] = y[c];
                 }
                 memcpy(C, Ci, sizeof(double) * dd);
             }

@@ -21,6 +21,7 @@
 #define PN_ROM_SCENES_H
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #if defined(__GNUC__)
@@ -408,6 +409,42 @@ PN_RS_UNUSED static int pn_rs_rom_events(pn_rom_world *w, const pn_rs_instance *
         ++*next_load;
     }
     return 1;
+}
+#endif
+
+#ifdef PN_RENDER_H
+/* A picture of n reduced-order points x (z up in the scenes, y up in the renderer) coloured by
+   their displacement from X, times scale (the legend's unit: 100 for cm, 1000 for mm), in the
+   box lo .. hi (scene coordinates), written to path as PNG. 1 on success. */
+PN_RS_UNUSED static int pn_rs_draw(const char *path, size_t n, const float *x, const double *X, double spacing, double t,
+                                   const double *lo, const double *hi, double floor_z, const char *field, double scale,
+                                   double field_hi, const char *title) {
+    pn_render_desc d;
+    pn_real *xr = (pn_real *)malloc(sizeof(pn_real) * 3 * n), *disp = (pn_real *)malloc(sizeof(pn_real) * n);
+    unsigned char *rgb = (unsigned char *)malloc(960 * 540 * 3);
+    size_t p;
+    int ok;
+    if (!xr || !disp || !rgb) {
+        free(xr), free(disp), free(rgb);
+        return 0;
+    }
+    for (p = 0; p < n; ++p) {
+        double e0 = x[3 * p] - X[3 * p], e1 = x[3 * p + 1] - X[3 * p + 1], e2 = x[3 * p + 2] - X[3 * p + 2];
+        xr[3 * p] = x[3 * p], xr[3 * p + 1] = x[3 * p + 2], xr[3 * p + 2] = x[3 * p + 1];
+        disp[p] = (pn_real)(scale * sqrt(e0 * e0 + e1 * e1 + e2 * e2));
+    }
+    memset(&d, 0, sizeof d);
+    d.width = 960, d.height = 540, d.dim = 3;
+    d.lo[0] = lo[0], d.lo[1] = lo[2], d.lo[2] = lo[1], d.hi[0] = hi[0], d.hi[1] = hi[2], d.hi[2] = hi[1];
+    d.radius_m = 0.6 * spacing;
+    d.has_floor = 1, d.floor_m = floor_z;
+    d.yaw_deg = 30, d.pitch_deg = 20;
+    d.field_name = field, d.field_lo = 0, d.field_hi = field_hi;
+    d.time_s = t, d.scale_bar = 1;
+    d.title = title;
+    ok = pn_render_particles(&d, n, xr, disp, NULL, rgb) && pn_png_write(path, 960, 540, rgb);
+    free(xr), free(disp), free(rgb);
+    return ok;
 }
 #endif
 

@@ -15,31 +15,6 @@
 #include "../models/rom_poke.h"
 #include "pn_rom_scenes.h"
 
-static int draw(const char *path, size_t n, const float *x, const double *X, double spacing, double t) {
-    pn_render_desc d;
-    pn_real *xr = (pn_real *)malloc(sizeof(pn_real) * 3 * n), *disp = (pn_real *)malloc(sizeof(pn_real) * n);
-    unsigned char *rgb = (unsigned char *)malloc(960 * 540 * 3);
-    size_t p;
-    int ok;
-    for (p = 0; p < n; ++p) { /* z up in the scene, y up in the renderer */
-        double e0 = x[3 * p] - X[3 * p], e1 = x[3 * p + 1] - X[3 * p + 1], e2 = x[3 * p + 2] - X[3 * p + 2];
-        xr[3 * p] = x[3 * p], xr[3 * p + 1] = x[3 * p + 2], xr[3 * p + 2] = x[3 * p + 1];
-        disp[p] = (pn_real)(1000 * sqrt(e0 * e0 + e1 * e1 + e2 * e2));
-    }
-    memset(&d, 0, sizeof d);
-    d.width = 960, d.height = 540, d.dim = 3;
-    d.lo[0] = 0.02, d.lo[1] = 0.0, d.lo[2] = 0.02, d.hi[0] = 0.06, d.hi[1] = 0.065, d.hi[2] = 0.06;
-    d.radius_m = 0.6 * spacing;
-    d.has_floor = 1, d.floor_m = 0.012;
-    d.yaw_deg = 30, d.pitch_deg = 20;
-    d.field_name = "displacement (mm)", d.field_lo = 0, d.field_hi = 8;
-    d.time_s = t, d.scale_bar = 1;
-    d.title = "reduced-order cylinder, poked (plastinet_rom.h)";
-    ok = pn_render_particles(&d, n, xr, disp, NULL, rgb) && pn_png_write(path, 960, 540, rgb);
-    free(xr), free(disp), free(rgb);
-    return ok;
-}
-
 int main(int argc, char **argv) {
     const pn_rom_model *m = pn_rom_model_poke();
     pn_rs_scene s = pn_rs_get(PN_RS_POKE, 1);
@@ -50,7 +25,7 @@ int main(int argc, char **argv) {
     char why[256], path[1200];
     int pokes = 10, samples = 50, refine = 1, png = 0, quiet = 0, a, step, steps, next = 0, frame = 0;
     unsigned long long seed = 7;
-    double wall = 0, *Xd;
+    double wall = 0, *Xd, lo[3] = {0.02, 0.02, 0.0}, hi[3] = {0.06, 0.06, 0.065};
     float *Xf, *x;
     size_t n, p;
     for (a = 1; a < argc; ++a) {
@@ -102,7 +77,8 @@ int main(int argc, char **argv) {
         if (png && (step + 1) % 6 == 0) {
             pn_rom_map(w, n, Xf, x, NULL);
             snprintf(path, sizeof path, "%s/frame_%04d.png", out, ++frame);
-            draw(path, n, x, Xd, m->cell_m / refine, w->time_s);
+            pn_rs_draw(path, n, x, Xd, m->cell_m / refine, w->time_s, lo, hi, 0.012, "displacement (mm)", 1000, 8,
+                       "reduced-order cylinder, poked (plastinet_rom.h)");
         }
         if (!quiet && (step + 1) % 432 == 0) printf("  t = %4.1f s: poke %d done\n", w->time_s, (step + 1) / 432);
     }

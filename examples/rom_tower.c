@@ -35,32 +35,6 @@ static int write_ply(const char *path, size_t n, const float *x) {
     return fclose(f) == 0;
 }
 
-/* a picture of the points (z up in the scene, y up in the renderer), coloured by displacement */
-static int draw(const char *path, size_t n, const float *x, const double *X, double spacing, double t) {
-    pn_render_desc d;
-    pn_real *xr = (pn_real *)malloc(sizeof(pn_real) * 3 * n), *disp = (pn_real *)malloc(sizeof(pn_real) * n);
-    unsigned char *rgb = (unsigned char *)malloc(960 * 540 * 3);
-    size_t p;
-    int ok;
-    for (p = 0; p < n; ++p) {
-        double e0 = x[3 * p] - X[3 * p], e1 = x[3 * p + 1] - X[3 * p + 1], e2 = x[3 * p + 2] - X[3 * p + 2];
-        xr[3 * p] = x[3 * p], xr[3 * p + 1] = x[3 * p + 2], xr[3 * p + 2] = x[3 * p + 1];
-        disp[p] = (pn_real)(100 * sqrt(e0 * e0 + e1 * e1 + e2 * e2));
-    }
-    memset(&d, 0, sizeof d);
-    d.width = 960, d.height = 540, d.dim = 3;
-    d.lo[0] = 0.02, d.lo[1] = 0.0, d.lo[2] = 0.02, d.hi[0] = 0.14, d.hi[1] = 0.19, d.hi[2] = 0.14;
-    d.radius_m = 0.6 * spacing;
-    d.has_floor = 1, d.floor_m = 0.012;
-    d.yaw_deg = 30, d.pitch_deg = 20;
-    d.field_name = "displacement (cm)", d.field_lo = 0, d.field_hi = 3;
-    d.time_s = t, d.scale_bar = 1;
-    d.title = "reduced-order tower (plastinet_rom.h)";
-    ok = pn_render_particles(&d, n, xr, disp, NULL, rgb) && pn_png_write(path, 960, 540, rgb);
-    free(xr), free(disp), free(rgb);
-    return ok;
-}
-
 int main(int argc, char **argv) {
     const pn_rom_model *m = pn_rom_model_tower();
     pn_rs_scene s = pn_rs_get(PN_RS_TOWER, 1);
@@ -70,7 +44,7 @@ int main(int argc, char **argv) {
     const char *out = "build/rom_tower", *scheme = "EL";
     char why[256], path[1200];
     int refine = 1, frames = 80, substeps = 1, samples = 50, png = 0, ply = 0, quiet = 0, a, f, k;
-    double *Xd, wall = 0, draw_s = 0, spacing;
+    double *Xd, wall = 0, draw_s = 0, spacing, lo[3] = {0.02, 0.02, 0.0}, hi[3] = {0.14, 0.14, 0.19};
     float *Xf, *x;
     size_t n, p;
     for (a = 1; a < argc; ++a) {
@@ -141,7 +115,8 @@ int main(int argc, char **argv) {
         }
         if (png) {
             snprintf(path, sizeof path, "%s/frame_%04d.png", out, f);
-            draw(path, n, x, Xd, spacing, w->time_s);
+            pn_rs_draw(path, n, x, Xd, spacing, w->time_s, lo, hi, 0.012, "displacement (cm)", 100, 3,
+                       "reduced-order tower (plastinet_rom.h)");
         }
         if (ply) {
             snprintf(path, sizeof path, "%s/frame_%04d.ply", out, f);

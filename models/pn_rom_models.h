@@ -3,11 +3,13 @@
    A program that needs one model includes only its header; this index is for tools and tests. */
 #ifndef PN_ROM_MODELS_H
 #define PN_ROM_MODELS_H
+#include "rom_cuboid.h"
 #include "rom_cylinder.h"
-#define PN_ROM_MODEL_COUNT 1
+#define PN_ROM_MODEL_COUNT 2
 /* The accessors of every model, in a fixed order (NULL-terminated). */
 typedef const pn_rom_model *(*pn_rom_model_accessor)(void);
 static const pn_rom_model_accessor pn_rom_models_all[PN_ROM_MODEL_COUNT + 1] = {
+    pn_rom_model_cuboid,
     pn_rom_model_cylinder,
     0};
 #endif /* PN_ROM_MODELS_H */
