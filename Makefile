@@ -12,7 +12,7 @@ PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point build/sand_column build/snowball build/materials build/game_loop build/metal_frame
+examples: build/material_point build/sand_column build/snowball build/materials build/game_loop build/metal_frame build/rom_poke
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
@@ -143,6 +143,12 @@ build/bench_deposit: bench/bench_deposit.c $(EXAMPLE_DEPS)
 	$(CC) $(CFLAGS) bench/bench_deposit.c $(LDLIBS) -o $@
 
 # ---- reduced-order MPM (plastinet_rom.h; docs/rom.md) ------------------------------------------
+# A jelly cylinder poked ten times from random directions, on the shipped reduced model
+# (build/rom_poke --help; --png for frames).
+build/rom_poke: examples/rom_poke.c examples/pn_rom_scenes.h plastinet_rom.h models/rom_poke.h $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/rom_poke.c $(LDLIBS) -o $@
+
 # Full-order snapshots of the scenes the ROM models are trained on (gen/rom_data.c, into
 # data/rom/; resumable: run it again after a cut and it continues). About 3 hours on 2 cores,
 # most of it the tower; gen/README.md shows how to spread the instances over machines.

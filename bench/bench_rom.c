@@ -8,7 +8,7 @@
    For every scene, on its test instances (never trained on), each quadrature x projection
    scheme (L/E: Lagrangian/Eulerian quadrature, N/L: nonlinear/linear projection) with each
    projection-point count runs the reduced model from the fitted rest state (Eq. 19) at the
-   snapshot interval divided by S, and measures the paper's relative L2 position error
+   snapshot interval divided by S (default: the full-order step), and measures the paper's relative L2 position error
    sqrt(sum |x_rom - x_full|^2 / sum |x_full|^2) over every point of every frame of every test
    instance, the same with positions taken from the initial centroid, and the wall seconds per
    simulated second of the reduced steps (drawing excluded). In the same run: the full-order
@@ -103,6 +103,27 @@ static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_inst
     pn_rom_destroy(w);
     free(X), free(x);
     return ok;
+}
+
+/* the full-order step count per frame of scene s (gen/rom_data.c's: 0.7 of the stable step at rest) */
+static int fom_substeps(const pn_rs_scene *s) {
+    pn_mpm_desc wd;
+    pn_mpm_world *w = NULL;
+    pn_material_desc md;
+    pn_material mat;
+    pn_real dts = 0;
+    int i, n = 1;
+    memset(&wd, 0, sizeof wd);
+    wd.dim = 3, wd.dx_m = s->dx, wd.max_particles = 1;
+    for (i = 0; i < 3; ++i) wd.res[i] = s->res[i];
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE;
+    md.youngs_modulus_pa = s->youngs_pa, md.poisson_ratio = s->poisson;
+    if (pn_mpm_create(&wd, &w, NULL) == PN_OK && pn_material_init(&mat, &md, NULL) == PN_OK &&
+        pn_mpm_add_group(w, &mat, s->density) >= 0 && pn_mpm_stable_dt(w, &dts) == PN_OK && dts > 0)
+        n = (int)ceil(s->frame_dt / (0.7 * (double)dts));
+    pn_mpm_destroy(w);
+    return n;
 }
 
 /* wall seconds per simulated second of the full-order explicit step on instance `in` of
@@ -206,7 +227,7 @@ int main(int argc, char **argv) {
     snprintf(c.scenes, sizeof c.scenes, "cylinder,cuboid,poke,tower");
     snprintf(c.schemes, sizeof c.schemes, "LN,LL,EN,EL");
     c.samples[0] = 10, c.samples[1] = 50, c.samples[2] = -1, c.n_samples = 3;
-    c.substeps = 1, c.speed = 1, c.superres = 1, c.seq = 1;
+    c.substeps = 0, c.speed = 1, c.superres = 1, c.seq = 1;
     for (a = 1; a < argc; ++a) {
         if (!strcmp(argv[a], "--scenes") && a + 1 < argc) snprintf(c.scenes, sizeof c.scenes, "%s", argv[++a]);
         else if (!strcmp(argv[a], "--schemes") && a + 1 < argc) snprintf(c.schemes, sizeof c.schemes, "%s", argv[++a]);
@@ -230,16 +251,17 @@ int main(int argc, char **argv) {
             return 2;
         }
     }
-    if (c.substeps < 1) c.substeps = 1;
     for (sc = 0; sc < PN_RS_COUNT; ++sc) {
         pn_rs_scene s = pn_rs_get(sc, 1);
         const pn_rom_model *m;
-        int kind, sm, k, used = 0;
+        int kind, sm, k, used = 0, sub;
         if (sc == PN_RS_POKE_SEQ || !listed(c.scenes, s.name)) continue;
         if (!(m = model_of(s.name))) {
             fprintf(stderr, "no model for %s in models/pn_rom_models.h (make models MODEL=rom_%s)\n", s.name, s.name);
             continue;
         }
+        sub = c.substeps > 0 ? c.substeps : fom_substeps(&s); /* default: the full-order step */
+        fprintf(stderr, "%s: %d reduced steps per frame of %.4g s\n", s.name, sub, s.frame_dt);
         for (kind = 0; kind < 4; ++kind) {
             if (!listed(c.schemes, schemes[kind])) continue;
             for (sm = 0; sm < c.n_samples; ++sm) {
@@ -257,7 +279,7 @@ int main(int argc, char **argv) {
                     if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
                     snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, s.name, k);
                     if (!pn_rs_read(path, s.frames, &snap)) return 1;
-                    r->ok = rom_run(m, &s, &in, &snap, kind >= 2, kind % 2, c.samples[sm], c.substeps, c.pic, 1000 + (unsigned)k,
+                    r->ok = rom_run(m, &s, &in, &snap, kind >= 2, kind % 2, c.samples[sm], sub, c.pic, 1000 + (unsigned)k,
                                     &se, &sn, &snc, &wall, &sim, &qs, &steps);
                     pn_rs_free(&snap);
                     used++;
@@ -287,7 +309,7 @@ int main(int argc, char **argv) {
                     if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
                     snprintf(path, sizeof path, "%s/%s_f2/i%03d.pnrs", c.data, s.name, k);
                     if (!pn_rs_read(path, s.frames, &snap)) return 1;
-                    r->ok = rom_run(m, &fine, &in, &snap, kind >= 2, kind % 2, -1, 2 * c.substeps, c.pic, 1000 + (unsigned)k,
+                    r->ok = rom_run(m, &fine, &in, &snap, kind >= 2, kind % 2, -1, 2 * sub, c.pic, 1000 + (unsigned)k,
                                     &se, &sn, &snc, &wall, &sim, &qs, &steps);
                     pn_rs_free(&snap);
                     used++;
@@ -314,7 +336,7 @@ int main(int argc, char **argv) {
                     snprintf(r->scene, sizeof r->scene, "%s", q.name);
                     snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
                     r->samples = c.samples[sm];
-                    r->ok = rom_run(m, &q, &in, &snap, kind >= 2, kind % 2, c.samples[sm], c.substeps, c.pic, 77, &se, &sn, &snc,
+                    r->ok = rom_run(m, &q, &in, &snap, kind >= 2, kind % 2, c.samples[sm], sub, c.pic, 77, &se, &sn, &snc,
                                     &wall, &sim, &qs, &steps);
                     r->err = sqrt(se / sn), r->err_c = sqrt(se / snc), r->wall_per_s = wall / sim, r->quad_mean = qs / (steps ? steps : 1);
                     fprintf(stderr, "%-9s %s %4s points: error %.3f%% (from the centroid %.3f%%)%s\n", r->scene, r->scheme,

@@ -5,11 +5,13 @@
 #define PN_ROM_MODELS_H
 #include "rom_cuboid.h"
 #include "rom_cylinder.h"
-#define PN_ROM_MODEL_COUNT 2
+#include "rom_poke.h"
+#define PN_ROM_MODEL_COUNT 3
 /* The accessors of every model, in a fixed order (NULL-terminated). */
 typedef const pn_rom_model *(*pn_rom_model_accessor)(void);
 static const pn_rom_model_accessor pn_rom_models_all[PN_ROM_MODEL_COUNT + 1] = {
     pn_rom_model_cuboid,
     pn_rom_model_cylinder,
+    pn_rom_model_poke,
     0};
 #endif /* PN_ROM_MODELS_H */
