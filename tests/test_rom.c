@@ -415,7 +415,10 @@ static void rom_bad_input(pn_test_ctx *pn__t) {
     PN_CHECK(pn_rom_drive(w, &reg, NULL, NULL, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT);
     PN_CHECK(pn_rom_step(w, -1, NULL) == PN_ERROR_INVALID_ARGUMENT);
     PN_CHECK(pn_rom_step(w, NAN, NULL) == PN_ERROR_INVALID_ARGUMENT);
-    PN_CHECK(pn_rom_set_latent(w, nanv, NULL) == PN_ERROR_NONFINITE);
+    {
+        double nl[4] = {0, NAN, 0, 0}; /* the latent has 4 entries */
+        PN_CHECK(pn_rom_set_latent(w, nl, NULL) == PN_ERROR_NONFINITE);
+    }
     PN_CHECK(memcmp(keep, w->xhat, sizeof keep) == 0 && w->time_s == 0 && w->n_drives == 0 && w->n_loads == 0);
     pn_rom_destroy(w);
 }
