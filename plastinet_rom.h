@@ -115,6 +115,19 @@ PN_API int pn_rom_inside(const pn_rom_model *m, const double *X);
 
 typedef enum pn_rom_quadrature { PN_ROM_EULERIAN = 0, PN_ROM_LAGRANGIAN } pn_rom_quadrature;
 typedef enum pn_rom_projection { PN_ROM_LINEAR = 0, PN_ROM_NONLINEAR } pn_rom_projection;
+typedef enum pn_rom_integrator {
+    PN_ROM_EXPLICIT = 0,           /* the paper's step (Algorithm 2): MPM in the full space about
+                                      the samples, projected back; stable up to about the
+                                      full-order step                                          */
+    PN_ROM_IMPLICIT,               /* backward Euler in the latent: xhat minimizes the incremental
+                                      potential summed over a fixed cubature of the body, by
+                                      Newton; stable at a frame per step, and damps motion
+                                      faster than about 1/dt (docs/rom.md#implicit)            */
+    PN_ROM_BDF2,                   /* the same minimization for the second-order backward
+                                      difference: far less damping (backward Euler first)    */
+    PN_ROM_MIDPOINT                /* the implicit midpoint rule, minimized at the midpoint:
+                                      no numerical damping                                     */
+} pn_rom_integrator;
 typedef enum pn_rom_transfer {
     PN_ROM_APIC = 0,               /* quadrature points carry C = dF/dt F^-1 (from the map)  */
     PN_ROM_PIC                     /* momentum m v only (the paper's Algorithm 5)            */
@@ -139,6 +152,14 @@ typedef struct pn_rom_desc {
     unsigned long long seed;       /* of the sampling [1]                                    */
     int gn_max;                    /* NONLINEAR: Gauss-Newton iterations [10]                */
     int parallel_min;              /* -fopenmp: batches of fewer points stay on one thread [256] */
+    pn_rom_integrator integrator;
+    double cubature_m;             /* IMPLICIT: edge of the cubature cells [4 dx_m]: one point per
+                                      cell, drive and load, at the centroid of its material    */
+    int newton_max;                /* IMPLICIT: Newton iterations per step [20]                */
+    double newton_tol;             /* IMPLICIT: done when a Newton step moves each latent by less
+                                      than this fraction of its training spread [1e-3]         */
+    double drive_weight;           /* IMPLICIT: driven points' penalty, in units of their
+                                      inertia plus elastic stiffness [100]                     */
     pn_allocator allocator;
 } pn_rom_desc;
 
@@ -155,6 +176,9 @@ typedef struct pn_rom_stats {
     size_t inverse_failed;         /* EULERIAN: lattice points whose X Newton did not find   */
     int gn_iterations;             /* NONLINEAR                                              */
     double residual_m;             /* RMS distance of the projected samples to their trial   */
+    size_t cubature_points;        /* IMPLICIT                                                */
+    int newton_iterations;         /* IMPLICIT                                                */
+    double energy_J;               /* IMPLICIT: the incremental potential at the new latent   */
 } pn_rom_stats;
 
 typedef struct pn_rom_world pn_rom_world; /* below; read the public part, do not write it */
@@ -258,6 +282,17 @@ struct pn_rom_world {
     double *nm, *np, *nf;          /* node mass, momentum (dim), force (dim)                 */
     int *ndrv;                     /* node's drive (-1)                                      */
     double *px;                    /* LAGRANGIAN: every point's position                     */
+    /* internal: IMPLICIT, the cubature (rebuilt when a drive or load changes) and its scratch */
+    int cub_dirty, cvel_ok;        /* cvel_ok: 1 cvel holds the last step's velocities, 2 and
+                                      cxp, cvp those before it (BDF2)                          */
+    size_t n_c, cap_c;
+    double *cX, *cm, *cV, *cvel;   /* centroid (dim), mass, volume, last velocity (dim)      */
+    double *cxp, *cvp, *cv0;       /* position and velocity a step earlier (BDF2); v_n       */
+    double h_prev;                 /* the last implicit step                                 */
+    int *cdrv;                     /* the cell's drive (-1)                                   */
+    unsigned *cload;               /* its loads (bit k: load k)                               */
+    double *cx, *cx0, *cF, *cG, *cJ, *cFt, *ctgt, *cw; /* x, x_n, F, G, dF/dxhat (d^2 x K), FD scratch,
+                                      inertia target and weight                               */
 };
 
 #ifdef __cplusplus
@@ -709,6 +744,11 @@ PN__DEF void pn_rom_destroy(pn_rom_world *w) {
     pn__rom_hash_free(w, &w->lat);
     pn__rom_hash_free(w, &w->xc);
     pn_free(&w->desc.allocator, w->xcX);
+    {
+        void *c[] = {w->cX, w->cm, w->cV, w->cvel, w->cxp, w->cvp, w->cv0, w->cdrv, w->cload, w->cx, w->cx0, w->cF, w->cG, w->cJ, w->cFt, w->ctgt, w->cw};
+        size_t k;
+        for (k = 0; k < sizeof c / sizeof c[0]; ++k) pn_free(&w->desc.allocator, c[k]);
+    }
     for (a = 0; a < w->n_drives; ++a) pn_free(&w->desc.allocator, w->drives[a].pts);
     pn_free(&w->desc.allocator, w->X), pn_free(&w->desc.allocator, w->mass), pn_free(&w->desc.allocator, w->vol);
     pn_free(&w->desc.allocator, w->wf), pn_free(&w->desc.allocator, w->perm), pn_free(&w->desc.allocator, w->px);
@@ -748,11 +788,19 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     if (d.seed == 0) d.seed = 1;
     if (d.gn_max <= 0) d.gn_max = 10;
     if (d.parallel_min <= 0) d.parallel_min = 256;
+    if (d.cubature_m == 0) d.cubature_m = 4 * d.dx_m;
+    if (d.newton_max <= 0) d.newton_max = 20;
+    if (d.newton_tol == 0) d.newton_tol = 1e-3;
+    if (d.drive_weight == 0) d.drive_weight = 100;
     bad = !pn__rom_finite(d.dx_m) || !(d.dx_m > 0) ? "dx_m (and the model's dx_m) must be > 0"
           : !pn__rom_all_finite(3, d.gravity) ? "gravity is not finite"
           : d.quadrature != PN_ROM_EULERIAN && d.quadrature != PN_ROM_LAGRANGIAN ? "quadrature is not a pn_rom_quadrature"
           : d.projection != PN_ROM_LINEAR && d.projection != PN_ROM_NONLINEAR ? "projection is not a pn_rom_projection"
           : d.transfer != PN_ROM_APIC && d.transfer != PN_ROM_PIC ? "transfer is not a pn_rom_transfer"
+          : (int)d.integrator < PN_ROM_EXPLICIT || (int)d.integrator > PN_ROM_MIDPOINT ? "integrator is not a pn_rom_integrator"
+          : !pn__rom_finite(d.cubature_m) || !(d.cubature_m > 0) ? "cubature_m must be > 0 (0: 4 dx_m)"
+          : !pn__rom_finite(d.drive_weight) || !(d.drive_weight > 0) ? "drive_weight must be > 0 (0: 100)"
+          : !pn__rom_finite(d.newton_tol) || !(d.newton_tol > 0) ? "newton_tol must be > 0 (0: 1e-3)"
           : d.quad_per_axis > 8 ? "quad_per_axis is more than 8"
           : d.points && (d.n_points == 0 || !pn__rom_all_finite(d.n_points * (size_t)dim, d.points)) ? "points: none, or not finite"
           : !d.points && m->cells[0] <= 0 ? "points is NULL and the model has no reference domain to fill"
@@ -827,6 +875,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     }
     for (i = 0; i < w->latent; ++i) w->xhat[i] = w->xhat_prev[i] = m->latent_rest ? m->latent_rest[i] : 0;
     w->rng = d.seed;
+    w->cub_dirty = 1;
     *out = w;
     return PN_OK;
 }
@@ -882,6 +931,7 @@ PN__DEF pn_result pn_rom_drive(pn_rom_world *w, const pn_rom_region *r, const do
     D.t0 = w->time_s;
     memcpy(D.xhat0, w->xhat, sizeof D.xhat0);
     D.on = 1;
+    w->cub_dirty = 1;
     pn_free(&w->desc.allocator, w->drives[a].pts);
     w->drives[a] = D;
     if (a == w->n_drives) w->n_drives++;
@@ -894,6 +944,7 @@ PN__DEF pn_result pn_rom_release_drive(pn_rom_world *w, int index) {
     if (index < 0 || index >= w->n_drives || index >= PN_ROM_MAX_DRIVES)
         return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_release_drive: drive %d does not exist", index);
     w->drives[index].on = 0;
+    w->cub_dirty = 1;
     return PN_OK;
 }
 
@@ -920,6 +971,7 @@ PN__DEF pn_result pn_rom_add_load(pn_rom_world *w, const pn_rom_region *r, const
     for (i = 0; i < d; ++i) L.acc[i] = force[i] / mass;
     L.t_end = duration_s > 0 ? w->time_s + duration_s : HUGE_VAL;
     L.on = 1;
+    w->cub_dirty = 1;
     w->loads[a] = L;
     if (a == w->n_loads) w->n_loads++;
     if (index) *index = a;
@@ -931,6 +983,7 @@ PN__DEF pn_result pn_rom_remove_load(pn_rom_world *w, int index) {
     if (index < 0 || index >= w->n_loads || index >= PN_ROM_MAX_LOADS)
         return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_remove_load: load %d does not exist", index);
     w->loads[index].on = 0;
+    w->cub_dirty = 1;
     return PN_OK;
 }
 
@@ -940,6 +993,7 @@ PN__DEF pn_result pn_rom_set_latent(pn_rom_world *w, const double *xhat, const d
     if (!xhat || !pn__rom_all_finite((size_t)K, xhat) || (vhat && !pn__rom_all_finite((size_t)K, vhat)))
         return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_set_latent: xhat is NULL, or xhat or vhat not finite");
     for (i = 0; i < K; ++i) w->xhat[i] = w->xhat_prev[i] = xhat[i], w->vhat[i] = vhat ? vhat[i] : 0;
+    w->cvel_ok = 0;
     return PN_OK;
 }
 
@@ -1461,6 +1515,8 @@ static void pn__rom_driven(const pn_rom_world *w, int a, const double *X, double
     pn__rom_drive_vel(D, w->dim, c, x, v);
 }
 
+static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *st);
+
 PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     int d = w->dim, K = w->latent, i, j, a;
     size_t ns, nq = 0, nn, q, s, failed = 0, dd = (size_t)(d * d), dK = (size_t)(d * K);
@@ -1472,6 +1528,11 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     w->error[0] = 0;
     memset(&st, 0, sizeof st);
     if (!pn__rom_finite(dt) || !(dt > 0)) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_step: dt_s = %g must be > 0", dt);
+    if (w->desc.integrator != PN_ROM_EXPLICIT) {
+        r = pn__rom_step_implicit(w, dt, &st);
+        if (r == PN_OK && stats) *stats = st;
+        return r;
+    }
     for (i = 0; i < d; ++i) g[i] = w->desc.gravity[i];
     /* 1. samples and their kinematics at the current latent */
     ns = w->desc.samples < 0 || (size_t)w->desc.samples >= w->n ? w->n
@@ -1657,6 +1718,7 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
         return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s too large for the "
                             "scene?)", dt);
     for (i = 0; i < K; ++i) w->xhat_prev[i] = w->xhat[i], w->xhat[i] = xh[i], w->vhat[i] = vh[i];
+    w->cvel_ok = 0;
     w->time_s += dt;
     w->steps++;
     for (a = 0; a < w->n_loads; ++a)
@@ -1664,6 +1726,278 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     st.samples = ns, st.quad_points = nq, st.nodes = nn, st.inverse_failed = failed;
     st.residual_m = sqrt(rms / (double)(ns ? ns : 1));
     if (stats) *stats = st;
+    return PN_OK;
+}
+
+/* ======================================================================================
+   >>implicit: backward Euler in the latent (PN_ROM_IMPLICIT). The new latent z minimizes the
+   incremental potential of the body, summed over a cubature c of the reference domain:
+       E(z) = sum_c  w_c/2 |g(X_c, z) - t_c|^2  +  V_c psi(F(X_c, z))
+   with w_c = m_c / h^2 and t_c = x_c + h v_c + h^2 (gravity + loads) for free material, and
+   for driven material w_c = drive_weight (m_c / h^2 + E V_c / l^2) and t_c the drive's
+   position at the end of the step (a penalty: the latent space cannot hold it exactly). Its
+   gradient and Gauss-Newton Hessian in z:
+       grad = sum_c w_c G_c^T (g_c - t_c) + V_c J_c^T P(F_c)
+       H    = sum_c w_c G_c^T G_c + V_c J_c^T [dP/dF]+ J_c,     J_c = dF_c/dz
+   (G = dg/dz; [dP/dF]+ the PSD projection; J by central differences of F along each latent).
+   Newton with an Armijo line search from z_n + h vhat_n. The cubature is one point per cell
+   of edge cubature_m, per drive and per set of loads, at the centroid of that material with
+   its mass and volume: the midpoint rule, exact for the mass and first moment of each cell.
+   ====================================================================================== */
+
+typedef struct pn__rom_cent { /* a point's cubature class, for the sort */
+    unsigned long long key;
+    unsigned cls;
+    size_t p;
+} pn__rom_cent;
+
+static int pn__rom_cent_cmp(const void *a, const void *b) {
+    const pn__rom_cent *u = (const pn__rom_cent *)a, *v = (const pn__rom_cent *)b;
+    if (u->key != v->key) return u->key < v->key ? -1 : 1;
+    if (u->cls != v->cls) return u->cls < v->cls ? -1 : 1;
+    return u->p < v->p ? -1 : u->p > v->p;
+}
+
+/* (re)build the cubature from the world's points, their drives and live loads */
+static pn_result pn__rom_cubature(pn_rom_world *w) {
+    int d = w->dim, K = w->latent, i, a, ok = 1;
+    size_t n = w->n, p, c, nc = 0, dd = (size_t)(d * d), dK = (size_t)(d * K);
+    double inv = 1 / w->desc.cubature_m;
+    pn__rom_cent *e = (pn__rom_cent *)pn_alloc(&w->desc.allocator, n * sizeof *e + 1);
+    if (!e) return PN_ERROR_OUT_OF_MEMORY;
+    for (p = 0; p < n; ++p) {
+        const double *X = w->X + p * (size_t)d;
+        long long k[3] = {0, 0, 0};
+        unsigned cls = (unsigned)(pn__rom_drive_of(w, X) + 1);
+        for (i = 0; i < d; ++i) k[i] = (long long)floor(X[i] * inv);
+        for (a = 0; a < w->n_loads; ++a)
+            if (w->loads[a].on && pn__rom_in_region(&w->loads[a].r, d, X)) cls |= 1u << (8 + a);
+        e[p].key = pn__rom_key(k), e[p].cls = cls, e[p].p = p;
+    }
+    qsort(e, n, sizeof *e, pn__rom_cent_cmp);
+    for (p = 0; p < n; ++p) nc += p == 0 || e[p].key != e[p - 1].key || e[p].cls != e[p - 1].cls;
+    if (nc > w->cap_c) {
+        size_t h = w->cap_c;
+        ok &= pn__rom_grow(w, (void **)&w->cX, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cm, h, nc, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cV, h, nc, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cvel, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cxp, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cvp, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cv0, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cdrv, h, nc, sizeof(int));
+        ok &= pn__rom_grow(w, (void **)&w->cload, h, nc, sizeof(unsigned));
+        ok &= pn__rom_grow(w, (void **)&w->cx, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cx0, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cF, h * dd, nc * dd, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cG, h * dK, nc * dK, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cJ, h * dd * (size_t)K, nc * dd * (size_t)K, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cFt, h * dd, nc * dd, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->ctgt, h * (size_t)d, nc * (size_t)d, sizeof(double));
+        ok &= pn__rom_grow(w, (void **)&w->cw, h, nc, sizeof(double));
+        if (ok) w->cap_c = nc;
+    }
+    if (!ok) {
+        pn_free(&w->desc.allocator, e);
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
+    for (c = 0, p = 0; p < n; ++c) { /* one run of equal classes: its mass, volume, centroid */
+        size_t q = p;
+        double *X = w->cX + c * (size_t)d, m = 0, V = 0;
+        for (i = 0; i < d; ++i) X[i] = 0;
+        for (; q < n && e[q].key == e[p].key && e[q].cls == e[p].cls; ++q) {
+            m += w->mass[e[q].p], V += w->vol[e[q].p];
+            for (i = 0; i < d; ++i) X[i] += w->mass[e[q].p] * w->X[e[q].p * (size_t)d + (size_t)i];
+        }
+        for (i = 0; i < d; ++i) X[i] /= m;
+        w->cm[c] = m, w->cV[c] = V;
+        w->cdrv[c] = (int)(e[p].cls & 0xffu) - 1, w->cload[c] = e[p].cls >> 8;
+        p = q;
+    }
+    pn_free(&w->desc.allocator, e);
+    w->n_c = nc;
+    w->cub_dirty = 0, w->cvel_ok = 0;
+    return PN_OK;
+}
+
+/* E(z) and, if grad, its gradient and Gauss-Newton Hessian H (K x K); 0 if not finite */
+static int pn__rom_ip(pn_rom_world *w, const double *z, double *E, double *grad, double *H) {
+    int d = w->dim, K = w->latent, i, j, k, l;
+    size_t C = w->n_c, c, dd = (size_t)(d * d), dK = (size_t)(d * K);
+    double e = 0;
+    pn__rom_map(w, z, C, w->cX, w->cx, w->cF, grad ? w->cG : NULL);
+    if (grad) {
+        double zt[PN_ROM_MAX_LATENT];
+        for (i = 0; i < K; ++i) grad[i] = 0;
+        for (i = 0; i < K * K; ++i) H[i] = 0;
+        for (k = 0; k < K; ++k) { /* J[:, k] = (F(z + eps e_k) - F(z - eps e_k)) / (2 eps) */
+            double sc = w->model.latent_std && w->model.latent_std[k] > 0 ? w->model.latent_std[k] : 1;
+            double eps = (w->model.activation == PN_ROM_AFFINE ? 1 : w->desc.reference ? 1e-6 : 1e-2) * sc; /* affine: F is linear */
+            int sgn;
+            for (sgn = 1; sgn >= -1; sgn -= 2) {
+                memcpy(zt, z, sizeof(double) * (size_t)K);
+                zt[k] += sgn * eps;
+                pn__rom_map(w, zt, C, w->cX, NULL, w->cFt, NULL);
+                for (c = 0; c < C; ++c)
+                    for (i = 0; i < (int)dd; ++i)
+                        w->cJ[(c * dd + (size_t)i) * (size_t)K + (size_t)k] =
+                            (sgn > 0 ? 0 : w->cJ[(c * dd + (size_t)i) * (size_t)K + (size_t)k]) +
+                            sgn * w->cFt[c * dd + (size_t)i] / (2 * eps);
+            }
+        }
+    }
+    for (c = 0; c < C; ++c) {
+        pn_real F[9], P[9], A[81], psi;
+        double r[3], Pd[9], JtA[PN_ROM_MAX_LATENT * 9];
+        const double *x = w->cx + c * (size_t)d, *t = w->ctgt + c * (size_t)d, *G = w->cG + c * dK, *J = w->cJ + c * dd * (size_t)K;
+        double wc = w->cw[c], V = w->cV[c];
+        for (i = 0; i < (int)dd; ++i) F[i] = (pn_real)w->cF[c * dd + (size_t)i];
+        if (pn_elastic_energy(&w->material, d, F, 0, &psi, grad ? P : NULL, grad ? A : NULL, PN_EVAL_PROJECT_PSD) != PN_OK)
+            return 0;
+        for (i = 0; i < d; ++i) r[i] = x[i] - t[i], e += 0.5 * wc * r[i] * r[i];
+        e += V * (double)psi;
+        if (!grad) continue;
+        for (i = 0; i < (int)dd; ++i) Pd[i] = (double)P[i];
+        for (i = 0; i < K; ++i) { /* inertia: w G^T r, w G^T G */
+            double s = 0;
+            for (l = 0; l < d; ++l) s += G[l * K + i] * r[l];
+            grad[i] += wc * s;
+            for (j = 0; j <= i; ++j) {
+                double q = 0;
+                for (l = 0; l < d; ++l) q += G[l * K + i] * G[l * K + j];
+                H[i * K + j] += wc * q;
+            }
+        }
+        for (i = 0; i < K; ++i) { /* elasticity: V J^T P, V J^T A J */
+            double s = 0;
+            for (l = 0; l < (int)dd; ++l) s += J[(size_t)l * (size_t)K + (size_t)i] * Pd[l];
+            grad[i] += V * s;
+            for (l = 0; l < (int)dd; ++l) {
+                double q = 0;
+                for (j = 0; j < (int)dd; ++j) q += J[(size_t)j * (size_t)K + (size_t)i] * (double)A[j * (int)dd + l];
+                JtA[i * 9 + l] = q;
+            }
+            for (j = 0; j <= i; ++j) {
+                double q = 0;
+                for (l = 0; l < (int)dd; ++l) q += JtA[i * 9 + l] * J[(size_t)l * (size_t)K + (size_t)j];
+                H[i * K + j] += V * q;
+            }
+        }
+    }
+    if (grad)
+        for (i = 0; i < K; ++i)
+            for (j = 0; j < i; ++j) H[j * K + i] = H[i * K + j];
+    *E = e;
+    return pn__rom_finite(e) && (!grad || pn__rom_all_finite((size_t)K, grad));
+}
+
+static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *st) {
+    int d = w->dim, K = w->latent, i, it, a, mode = (int)w->desc.integrator;
+    size_t C, c, dK = (size_t)(d * K);
+    double z[PN_ROM_MAX_LATENT], grad[PN_ROM_MAX_LATENT], H[PN_ROM_MAX_LATENT * PN_ROM_MAX_LATENT], E = 0, g[3] = {0, 0, 0};
+    double t = w->time_s, l2 = w->desc.cubature_m * w->desc.cubature_m, E_pa = w->desc.youngs_pa, beta, tau, td;
+    pn_result r;
+    if (w->cub_dirty && (r = pn__rom_cubature(w)) != PN_OK) return pn__rom_fail(w, r, "pn_rom_step: out of memory (cubature)");
+    C = w->n_c;
+    if (mode == PN_ROM_BDF2 && (w->cvel_ok < 2 || h != w->h_prev)) mode = PN_ROM_IMPLICIT; /* BDF2 starts as backward Euler */
+    /* each scheme as one minimization: inertia weight beta m, target x_n + tau v_n + tau^2 a
+       (BDF2: the two-step extrapolation), drives at time td:
+         backward Euler  beta = 1/h^2,    tau = h
+         BDF2            beta = 9/(4h^2), tau = 2h/3,  from 4/3 x_n - 1/3 x_n-1 and 4/3 v_n - 1/3 v_n-1
+         midpoint        beta = 4/h^2,    tau = h/2,   the minimizer is the midpoint state */
+    beta = mode == PN_ROM_MIDPOINT ? 4 / (h * h) : mode == PN_ROM_BDF2 ? 9 / (4 * h * h) : 1 / (h * h);
+    tau = mode == PN_ROM_MIDPOINT ? h / 2 : mode == PN_ROM_BDF2 ? 2 * h / 3 : h;
+    td = mode == PN_ROM_MIDPOINT ? t + h / 2 : t + h;
+    for (i = 0; i < d; ++i) g[i] = w->desc.gravity[i];
+    /* the state at the start: x_n, v_n (the last step's velocity, else G vhat), the targets */
+    pn__rom_map(w, w->xhat, C, w->cX, w->cx0, NULL, w->cG);
+    for (c = 0; c < C; ++c) {
+        double *tg = w->ctgt + c * (size_t)d, *v = w->cv0 + c * (size_t)d, acc[3], vd[3];
+        const double *x0 = w->cx0 + c * (size_t)d, *G = w->cG + c * dK;
+        for (i = 0; i < d; ++i) {
+            int j;
+            if (w->cvel_ok) v[i] = w->cvel[c * (size_t)d + (size_t)i];
+            else
+                for (v[i] = 0, j = 0; j < K; ++j) v[i] += G[i * K + j] * w->vhat[j];
+            acc[i] = g[i];
+        }
+        if (w->cdrv[c] >= 0) {
+            pn__rom_driven(w, w->cdrv[c], w->cX + c * (size_t)d, td, tg, vd);
+            w->cw[c] = w->desc.drive_weight * (w->cm[c] * beta + E_pa * w->cV[c] / l2);
+            continue;
+        }
+        for (a = 0; a < w->n_loads; ++a)
+            if ((w->cload[c] >> a & 1u) && w->loads[a].on && w->loads[a].t_end > t) {
+                double span = fmin(h, w->loads[a].t_end - t) / h;
+                for (i = 0; i < d; ++i) acc[i] += w->loads[a].acc[i] * span;
+            }
+        for (i = 0; i < d; ++i) {
+            const size_t k = c * (size_t)d + (size_t)i;
+            if (mode == PN_ROM_BDF2)
+                tg[i] = (4 * x0[i] - w->cxp[k]) / 3 + tau * (4 * v[i] - w->cvp[k]) / 3 + tau * tau * acc[i];
+            else
+                tg[i] = x0[i] + tau * v[i] + tau * tau * acc[i];
+        }
+        w->cw[c] = w->cm[c] * beta;
+    }
+    /* Newton from the predictor z_n + tau vhat_n */
+    for (i = 0; i < K; ++i) z[i] = w->xhat[i] + tau * w->vhat[i];
+    for (it = 0; it < w->desc.newton_max; ++it) {
+        double dz[PN_ROM_MAX_LATENT], A[PN_ROM_MAX_LATENT * PN_ROM_MAX_LATENT], gd = 0, alpha = 1, Et = 0, tr = 0, lam = 0, big = 0;
+        int tries;
+        if (!pn__rom_ip(w, z, &E, grad, H))
+            return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the implicit step's energy is not finite (dt = %g s)", h);
+        for (i = 0; i < K; ++i) tr += H[i * K + i];
+        for (tries = 0; tries < 30; ++tries) { /* Cholesky, with a growing ridge if it fails */
+            memcpy(A, H, sizeof(double) * (size_t)(K * K));
+            for (i = 0; i < K; ++i) A[i * K + i] += lam, dz[i] = -grad[i];
+            if (pn__rom_spd_solve(K, A, dz)) break;
+            lam = lam > 0 ? 10 * lam : 1e-10 * tr / K + 1e-300;
+        }
+        for (i = 0; i < K; ++i) {
+            double sc = w->model.latent_std && w->model.latent_std[i] > 0 ? w->model.latent_std[i] : 1;
+            gd += grad[i] * dz[i];
+            big = fmax(big, fabs(dz[i]) / sc);
+        }
+        if (tries == 30 || !(gd < 0)) break; /* no descent left (the float path's noise floor) */
+        if (big < w->desc.newton_tol) { /* converged: the last, small step needs no line search */
+            for (i = 0; i < K; ++i) z[i] += dz[i];
+            st->newton_iterations = it + 1;
+            break;
+        }
+        for (;;) { /* Armijo backtracking */
+            double zt[PN_ROM_MAX_LATENT];
+            for (i = 0; i < K; ++i) zt[i] = z[i] + alpha * dz[i];
+            if (pn__rom_ip(w, zt, &Et, NULL, NULL) && Et <= E + 1e-4 * alpha * gd) break;
+            alpha /= 2;
+            if (alpha < 1e-4) break;
+        }
+        if (alpha < 1e-4) break;
+        for (i = 0; i < K; ++i) z[i] += alpha * dz[i];
+        E = Et;
+        st->newton_iterations = it + 1;
+    }
+    if (!pn__rom_all_finite((size_t)K, z))
+        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s)", h);
+    /* the new state: the cubature velocities by the scheme's difference formula, the latent
+       (midpoint: extrapolated from the midpoint), its velocity by difference */
+    pn__rom_map(w, z, C, w->cX, w->cx, NULL, NULL);
+    for (c = 0; c < C * (size_t)d; ++c) {
+        double x1 = w->cx[c], x0 = w->cx0[c], v0 = w->cv0[c];
+        w->cvel[c] = mode == PN_ROM_MIDPOINT ? 2 * (x1 - x0) / h - v0
+                     : mode == PN_ROM_BDF2   ? (3 * x1 - 4 * x0 + w->cxp[c]) / (2 * h)
+                                             : (x1 - x0) / h;
+        w->cxp[c] = x0, w->cvp[c] = v0;
+    }
+    if (mode == PN_ROM_MIDPOINT)
+        for (i = 0; i < K; ++i) z[i] = 2 * z[i] - w->xhat[i];
+    for (i = 0; i < K; ++i) w->xhat_prev[i] = w->xhat[i], w->vhat[i] = (z[i] - w->xhat[i]) / h, w->xhat[i] = z[i];
+    w->cvel_ok = 2, w->h_prev = h;
+    w->time_s += h;
+    w->steps++;
+    for (a = 0; a < w->n_loads; ++a)
+        if (w->loads[a].on && w->loads[a].t_end <= w->time_s) w->loads[a].on = 0;
+    st->cubature_points = C, st->energy_J = E;
     return PN_OK;
 }
 
@@ -1711,6 +2045,7 @@ PN__DEF pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, 
         return pn__rom_fail(w, PN_ERROR_NOT_CONVERGED, "pn_rom_fit: Gauss-Newton did not converge");
     }
     for (i = 0; i < K; ++i) w->xhat[i] = w->xhat_prev[i] = xh[i], w->vhat[i] = 0;
+    w->cvel_ok = 0;
     if (v) {
         pn__rom_map(w, xh, n, w->X, NULL, NULL, G);
         if (pn__rom_lsq(d, K, n, G, v, dl))

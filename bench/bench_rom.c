@@ -23,6 +23,8 @@
 #include "../models/pn_rom_models.h"
 #include "../examples/pn_rom_scenes.h"
 
+#define QUAD(kind) ((kind) == 4 ? 2 : (kind) >= 2) /* rom_run's quad: 0 L, 1 E, 2 the implicit integrator */
+
 typedef struct rrun {
     char scene[24], scheme[4];
     int samples;               /* -1: all                                                    */
@@ -33,7 +35,8 @@ typedef struct rrun {
 typedef struct cfg {
     const char *data, *out;
     char scenes[256], schemes[64];
-    int samples[8], n_samples, instances, substeps, speed, superres, seq, pic;
+    int samples[8], n_samples, instances, substeps, speed, superres, seq, pic, im_steps, integrator;
+    double cubature_dx, drive_weight;
 } cfg;
 
 static const pn_rom_model *model_of(const char *scene) {
@@ -45,8 +48,8 @@ static const pn_rom_model *model_of(const char *scene) {
 
 /* One reduced run of instance `in` against snapshots `snap`; adds to the error sums. */
 static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_instance *in, const pn_rs_snap *snap, int quad,
-                   int proj, int samples, int substeps, int pic, unsigned long long seed, double *se, double *sn, double *snc,
-                   double *wall, double *sim, double *quad_sum, long *steps) {
+                   int proj, int samples, int substeps, int pic, const cfg *cf, unsigned long long seed, double *se, double *sn,
+                   double *snc, double *wall, double *sim, double *quad_sum, long *steps) {
     pn_rom_desc d;
     pn_rom_world *w = NULL;
     char why[256];
@@ -64,6 +67,11 @@ static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_inst
     d.samples = samples, d.quadrature = quad ? PN_ROM_EULERIAN : PN_ROM_LAGRANGIAN;
     d.projection = proj ? PN_ROM_LINEAR : PN_ROM_NONLINEAR, d.seed = seed;
     d.transfer = pic ? PN_ROM_PIC : PN_ROM_APIC;
+    if (quad == 2) { /* IM: the implicit integrator, im_steps per frame */
+        d.integrator = (pn_rom_integrator)cf->integrator, d.cubature_m = cf->cubature_dx * s->dx, d.quadrature = PN_ROM_LAGRANGIAN;
+        d.drive_weight = cf->drive_weight;
+        substeps = cf->im_steps;
+    }
     if (pn_rom_create(&d, &w, why, sizeof why) != PN_OK || !pn_rs_rom_setup(w, in)) {
         fprintf(stderr, "pn_rom_create: %s\n", why);
         free(X), free(x);
@@ -88,7 +96,7 @@ static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_inst
                     fprintf(stderr, "  %s frame %d: %s\n", s->name, f, pn_rom_error(w));
                     ok = 0;
                 }
-                *quad_sum += (double)st.quad_points;
+                *quad_sum += (double)(quad == 2 ? st.cubature_points : st.quad_points);
                 ++*steps;
             }
             *wall += pn_ex_seconds() - t0;
@@ -201,22 +209,22 @@ static void svg(const char *path, const rrun *r, int n, const double *fom, char 
                        "fill='#c00' font-size='10' transform='rotate(-90 %.1f %d)'>full order: %s</text>\n",
                     PX(fom[k]), PX(fom[k]), H - 60, PX(fom[k]) - 3, H - 64, PX(fom[k]) - 3, H - 64, fom_scene[k]);
     for (k = 0; k < n; ++k) {
-        int c = !strcmp(r[k].scheme, "LN") ? 0 : !strcmp(r[k].scheme, "LL") ? 1 : !strcmp(r[k].scheme, "EN") ? 2 : 3;
+        int c = !strcmp(r[k].scheme, "LN") ? 0 : !strcmp(r[k].scheme, "LL") ? 1 : !strcmp(r[k].scheme, "EN") ? 2 : !strcmp(r[k].scheme, "IM") ? 4 : 3;
         if (!r[k].ok || !(r[k].err > 0) || !(r[k].wall_per_s > 0)) continue;
         fprintf(f, "<circle cx='%.1f' cy='%.1f' r='4' fill='%s'/><text x='%.1f' y='%.1f' font-size='9'>%s %s %s</text>\n",
                 PX(r[k].wall_per_s), PY(r[k].err), cols[c], PX(r[k].wall_per_s) + 6, PY(r[k].err) + 3, r[k].scene, r[k].scheme,
-                r[k].samples < 0 ? "all" : (r[k].samples == 10 ? "10" : r[k].samples == 50 ? "50" : "n"));
+                r[k].scheme[0] == 'I' ? "" : r[k].samples < 0 ? "all" : (r[k].samples == 10 ? "10" : r[k].samples == 50 ? "50" : "n"));
     }
 #undef PX
 #undef PY
-    fprintf(f, "<text x='90' y='%d' font-size='10'>LN LL EN EL: Lagrangian / Eulerian quadrature, nonlinear / linear projection; "
-               "label: projection points</text>\n</svg>\n", H - 66);
+    fprintf(f, "<text x='90' y='%d' font-size='10'>LN LL EN EL: Lagrangian / Eulerian quadrature, nonlinear / linear projection, "
+               "label: projection points; IM: implicit latent step</text>\n</svg>\n", H - 66);
     fclose(f);
 }
 
 int main(int argc, char **argv) {
     static rrun runs[512];
-    static const char *schemes[4] = {"LN", "LL", "EN", "EL"};
+    static const char *schemes[5] = {"LN", "LL", "EN", "EL", "IM"};
     double fom[8];
     char fom_scene[8][24], path[1024];
     int nr = 0, nf = 0, a, sc;
@@ -225,7 +233,8 @@ int main(int argc, char **argv) {
     memset(&c, 0, sizeof c);
     c.data = "data/rom", c.out = "bench/results";
     snprintf(c.scenes, sizeof c.scenes, "cylinder,cuboid,poke,tower");
-    snprintf(c.schemes, sizeof c.schemes, "LN,LL,EN,EL");
+    snprintf(c.schemes, sizeof c.schemes, "LN,LL,EN,EL,IM");
+    c.im_steps = 1, c.cubature_dx = 4, c.integrator = PN_ROM_BDF2;
     c.samples[0] = 10, c.samples[1] = 50, c.samples[2] = -1, c.n_samples = 3;
     c.substeps = 0, c.speed = 1, c.superres = 1, c.seq = 1;
     for (a = 1; a < argc; ++a) {
@@ -235,6 +244,13 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--out") && a + 1 < argc) c.out = argv[++a];
         else if (!strcmp(argv[a], "--instances") && a + 1 < argc) c.instances = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--substeps") && a + 1 < argc) c.substeps = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--im-steps") && a + 1 < argc) c.im_steps = atoi(argv[++a]);
+        else if (!strcmp(argv[a], "--cubature") && a + 1 < argc) c.cubature_dx = atof(argv[++a]);
+        else if (!strcmp(argv[a], "--drive-weight") && a + 1 < argc) c.drive_weight = atof(argv[++a]);
+        else if (!strcmp(argv[a], "--integrator") && a + 1 < argc) {
+            ++a;
+            c.integrator = !strcmp(argv[a], "be") ? PN_ROM_IMPLICIT : !strcmp(argv[a], "mid") ? PN_ROM_MIDPOINT : PN_ROM_BDF2;
+        }
         else if (!strcmp(argv[a], "--no-speed")) c.speed = 0;
         else if (!strcmp(argv[a], "--no-superres")) c.superres = 0;
         else if (!strcmp(argv[a], "--no-seq")) c.seq = 0;
@@ -262,9 +278,9 @@ int main(int argc, char **argv) {
         }
         sub = c.substeps > 0 ? c.substeps : fom_substeps(&s); /* default: the full-order step */
         fprintf(stderr, "%s: %d reduced steps per frame of %.4g s\n", s.name, sub, s.frame_dt);
-        for (kind = 0; kind < 4; ++kind) {
+        for (kind = 0; kind < 5; ++kind) {
             if (!listed(c.schemes, schemes[kind])) continue;
-            for (sm = 0; sm < c.n_samples; ++sm) {
+            for (sm = 0; sm < (kind == 4 ? 1 : c.n_samples); ++sm) { /* IM: no projection points */
                 rrun *r = &runs[nr];
                 double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
                 long steps = 0;
@@ -279,7 +295,7 @@ int main(int argc, char **argv) {
                     if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
                     snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, s.name, k);
                     if (!pn_rs_read(path, s.frames, &snap)) return 1;
-                    r->ok = rom_run(m, &s, &in, &snap, kind >= 2, kind % 2, c.samples[sm], sub, c.pic, 1000 + (unsigned)k,
+                    r->ok = rom_run(m, &s, &in, &snap, QUAD(kind), kind % 2, c.samples[sm], sub, c.pic, &c, 1000 + (unsigned)k,
                                     &se, &sn, &snc, &wall, &sim, &qs, &steps);
                     pn_rs_free(&snap);
                     used++;
@@ -294,7 +310,7 @@ int main(int argc, char **argv) {
         }
         if (c.superres && sc == PN_RS_CUBOID) { /* zero-shot super-resolution: the points and grid of the 2x run */
             pn_rs_scene fine = pn_rs_get(sc, 2);
-            for (kind = 0; kind < 4; ++kind) {
+            for (kind = 0; kind < 5; ++kind) {
                 rrun *r = &runs[nr];
                 double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
                 long steps = 0;
@@ -309,7 +325,7 @@ int main(int argc, char **argv) {
                     if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
                     snprintf(path, sizeof path, "%s/%s_f2/i%03d.pnrs", c.data, s.name, k);
                     if (!pn_rs_read(path, s.frames, &snap)) return 1;
-                    r->ok = rom_run(m, &fine, &in, &snap, kind >= 2, kind % 2, -1, 2 * sub, c.pic, 1000 + (unsigned)k,
+                    r->ok = rom_run(m, &fine, &in, &snap, QUAD(kind), kind % 2, -1, 2 * sub, c.pic, &c, 1000 + (unsigned)k,
                                     &se, &sn, &snc, &wall, &sim, &qs, &steps);
                     pn_rs_free(&snap);
                     used++;
@@ -326,17 +342,17 @@ int main(int argc, char **argv) {
             pn_rs_snap snap;
             snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, q.name, 0);
             if (!pn_rs_read(path, q.frames, &snap)) return 1;
-            for (kind = 0; kind < 4; ++kind)
+            for (kind = 0; kind < 5; ++kind)
                 for (sm = 0; sm < c.n_samples; ++sm) {
                     rrun *r = &runs[nr];
                     double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
                     long steps = 0;
-                    if (!listed(c.schemes, schemes[kind]) || c.samples[sm] == 10) continue;
+                    if (!listed(c.schemes, schemes[kind]) || c.samples[sm] == 10 || (kind == 4 && sm > 0)) continue;
                     memset(r, 0, sizeof *r);
                     snprintf(r->scene, sizeof r->scene, "%s", q.name);
                     snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
                     r->samples = c.samples[sm];
-                    r->ok = rom_run(m, &q, &in, &snap, kind >= 2, kind % 2, c.samples[sm], sub, c.pic, 77, &se, &sn, &snc,
+                    r->ok = rom_run(m, &q, &in, &snap, QUAD(kind), kind % 2, c.samples[sm], sub, c.pic, &c, 77, &se, &sn, &snc,
                                     &wall, &sim, &qs, &steps);
                     r->err = sqrt(se / sn), r->err_c = sqrt(se / snc), r->wall_per_s = wall / sim, r->quad_mean = qs / (steps ? steps : 1);
                     fprintf(stderr, "%-9s %s %4s points: error %.3f%% (from the centroid %.3f%%)%s\n", r->scene, r->scheme,

@@ -399,6 +399,13 @@ static void rom_bad_input(pn_test_ctx *pn__t) {
     PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT);
     PN_CHECK(strstr(why, "quadrature") != NULL);
     desc.quadrature = PN_ROM_EULERIAN;
+    desc.integrator = (pn_rom_integrator)9;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && strstr(why, "integrator") != NULL);
+    desc.integrator = PN_ROM_BDF2, desc.cubature_m = -1;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && strstr(why, "cubature_m") != NULL);
+    desc.cubature_m = 0, desc.drive_weight = NAN;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && strstr(why, "drive_weight") != NULL);
+    desc.integrator = PN_ROM_EXPLICIT, desc.drive_weight = 0;
     PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_OK);
     if (!w) return;
     memcpy(keep, w->xhat, sizeof keep);
@@ -423,14 +430,14 @@ static void rom_bad_input(pn_test_ctx *pn__t) {
     pn_rom_destroy(w);
 }
 
-/* the same bits for 1 and 2 threads (Eulerian and Lagrangian, with a drive and a load) */
+/* the same bits for 1 and 2 threads (Eulerian, Lagrangian and implicit, with a drive and a load) */
 static void rom_threads_identical(pn_test_ctx *pn__t) {
     t_rom_net t;
     double lo[3] = {0.02, 0.02, 0.02}, X[3 * 4096], keep[2][4];
     int nb[3] = {16, 16, 16}, quad, th, s;
     size_t n = t_rom_box(3, lo, nb, 0.0025, X);
     t_rom_random_model(&t, 3, 4, 2, 0.3);
-    for (quad = 0; quad < 2; ++quad) {
+    for (quad = 0; quad < 3; ++quad) {
         for (th = 1; th <= 2; ++th) {
             pn_rom_desc desc;
             pn_rom_world *w = NULL;
@@ -440,6 +447,7 @@ static void rom_threads_identical(pn_test_ctx *pn__t) {
             desc.model = &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.5625e-8;
             desc.quadrature = quad ? PN_ROM_LAGRANGIAN : PN_ROM_EULERIAN, desc.parallel_min = 1, desc.gravity[2] = -9.81;
             desc.projection = quad ? PN_ROM_NONLINEAR : PN_ROM_LINEAR;
+            desc.integrator = quad == 2 ? PN_ROM_BDF2 : PN_ROM_EXPLICIT, desc.cubature_m = 0.004;
             PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
             if (!w) return;
             memset(&reg, 0, sizeof reg);
@@ -450,7 +458,7 @@ static void rom_threads_identical(pn_test_ctx *pn__t) {
 #ifdef _OPENMP
             omp_set_num_threads(th);
 #endif
-            for (s = 0; s < 5; ++s) PN_CHECK(pn_rom_step(w, 1e-3, NULL) == PN_OK);
+            for (s = 0; s < 5; ++s) PN_CHECK(pn_rom_step(w, quad == 2 ? 1e-2 : 1e-3, NULL) == PN_OK);
             memcpy(keep[th - 1], w->xhat, sizeof keep[0]);
             pn_rom_destroy(w);
         }
@@ -458,9 +466,141 @@ static void rom_threads_identical(pn_test_ctx *pn__t) {
         omp_set_num_threads(2);
 #endif
         PN_CHECK(memcmp(keep[0], keep[1], sizeof keep[0]) == 0);
-        PN_REPORT("%s: latent after 5 steps %.6g %.6g ... identical for 1 and 2 threads", quad ? "Lagrangian" : "Eulerian",
+        PN_REPORT("%s: latent after 5 steps %.6g %.6g ... identical for 1 and 2 threads",
+                  quad == 2 ? "implicit (BDF2)" : quad ? "Lagrangian" : "Eulerian",
                   keep[0][0], keep[0][1]);
     }
+}
+
+/* The implicit integrators on an affine body in pure dilation about its centre, x = c + s(t)
+   (X - c), no gravity and no drive: the latent minimization must reproduce the scalar
+   recurrence of each scheme for s, written here from the energy of a dilation,
+       min_s  I beta / 2 (s - sigma)^2 + V psi(s),   psi(s) = d mu (s - 1)^2 + lambda/2 (s^d - 1)^2
+   (I = sum m |X - c|^2, fixed corotated at F = s 1), solved by scalar Newton. Every point is
+   its own cubature point (cubature_m below the spacing), so the sums are exact. */
+static double t_rom_dilation_step(int d, double I, double V, double mu, double lam, double beta, double sigma) {
+    double s = sigma;
+    int it;
+    for (it = 0; it < 100; ++it) {
+        double sd = pow(s, d), g = I * beta * (s - sigma) + V * (2 * d * mu * (s - 1) + lam * d * pow(s, d - 1) * (sd - 1));
+        double H = I * beta + V * (2 * d * mu + lam * d * ((d - 1) * pow(s, d - 2) * (sd - 1) + d * pow(s, 2 * d - 2)));
+        s -= g / H;
+        if (fabs(g / H) < 1e-16) break;
+    }
+    return s;
+}
+
+static void rom_implicit_dilation(pn_test_ctx *pn__t) {
+    int d, scheme;
+    for (d = 2; d <= 3; ++d)
+        for (scheme = PN_ROM_IMPLICIT; scheme <= PN_ROM_MIDPOINT; ++scheme) {
+            const double hx = 0.005, rho = 1000, E = 1e4, nu = 0.3, dt = 4e-3, sdot0 = 20;
+            double X[3 * 216], lo[3] = {0.02, 0.02, 0.02}, c[3], xh[12], vh[12], I = 0, V, mu, lam, s = 1, sv = sdot0;
+            double sp = 1, svp = sdot0, worst = 0, amp = 0;
+            int nb[3] = {6, 6, 6}, i, step;
+            size_t n = t_rom_box(d, lo, nb, hx, X), p;
+            pn_rom_model am;
+            pn_rom_desc desc;
+            pn_rom_world *w = NULL;
+            pn_rom_affine_model(d, &am);
+            memset(&desc, 0, sizeof desc);
+            desc.model = &am, desc.points = X, desc.n_points = n, desc.point_volume_m3 = pow(hx, d), desc.dx_m = 2 * hx;
+            desc.youngs_pa = E, desc.poisson = nu, desc.density_kg_m3 = rho, desc.integrator = (pn_rom_integrator)scheme;
+            desc.cubature_m = hx / 2, desc.newton_tol = 1e-12;
+            PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+            if (!w) return;
+            for (i = 0; i < d; ++i) c[i] = lo[i] + nb[i] * hx / 2;
+            for (i = 0; i < d + d * d; ++i) xh[i] = vh[i] = 0;
+            for (i = 0; i < d; ++i) vh[i] = -sdot0 * c[i], vh[d + i * d + i] = sdot0; /* b' = -s' c, A' = s' 1 */
+            PN_CHECK(pn_rom_set_latent(w, xh, vh) == PN_OK);
+            V = (double)n * pow(hx, d);
+            for (p = 0; p < n; ++p)
+                for (i = 0; i < d; ++i) I += rho * pow(hx, d) * (X[p * d + i] - c[i]) * (X[p * d + i] - c[i]);
+            mu = E / (2 * (1 + nu)), lam = E * nu / ((1 + nu) * (1 - 2 * nu));
+            for (step = 1; step <= 12; ++step) {
+                double sn, svn, got = 0;
+                int bdf = scheme == PN_ROM_BDF2 && step > 1;
+                if (scheme == PN_ROM_MIDPOINT) {
+                    double m = t_rom_dilation_step(d, I, V, mu, lam, 4 / (dt * dt), s + dt / 2 * sv);
+                    sn = 2 * m - s, svn = 2 * (m - s) / dt - sv;
+                } else if (bdf) {
+                    double tau = 2 * dt / 3;
+                    sn = t_rom_dilation_step(d, I, V, mu, lam, 1 / (tau * tau), (4 * s - sp) / 3 + tau * (4 * sv - svp) / 3);
+                    svn = (3 * sn - 4 * s + sp) / (2 * dt);
+                } else {
+                    sn = t_rom_dilation_step(d, I, V, mu, lam, 1 / (dt * dt), s + dt * sv);
+                    svn = (sn - s) / dt;
+                }
+                sp = s, svp = sv, s = sn, sv = svn;
+                amp = fmax(amp, fabs(s - 1));
+                PN_CHECK(pn_rom_step(w, dt, NULL) == PN_OK);
+                for (i = 0; i < d; ++i) got += (w->xhat[d + i * d + i] + 1) / d; /* s = 1 + A_ii */
+                worst = fmax(worst, fabs(got - s));
+                for (i = 0; i < d; ++i) worst = fmax(worst, fabs(w->xhat[d + i * d + i] + 1 - s));
+            }
+            PN_REPORT("%dD %s: s after 12 steps %.6f (the scalar recurrence %.6f, amplitude %.3f), largest difference %.1e", d,
+                      scheme == PN_ROM_IMPLICIT ? "backward Euler" : scheme == PN_ROM_BDF2 ? "BDF2" : "midpoint", 1 + w->xhat[d], s,
+                      amp, worst);
+            PN_CHECK(amp > 0.01); /* it moved */
+            PN_CHECK_LE(worst, 1e-9);
+            pn_rom_destroy(w);
+        }
+}
+
+/* The implicit step's gradient (from F's central differences in the latent) against central
+   differences of the incremental potential itself, on a nonlinear test map in double; and its
+   Gauss-Newton Hessian against differences of the gradient on the affine map, where g is
+   linear in the latent and (stretched, so dP/dF needs no projection) the Hessian is exact. */
+static void rom_implicit_gradient(pn_test_ctx *pn__t) {
+    int d, aff;
+    for (d = 2; d <= 3; ++d)
+        for (aff = 0; aff <= 1; ++aff) {
+            t_rom_net t;
+            pn_rom_model am;
+            pn_rom_desc desc;
+            pn_rom_world *w = NULL;
+            pn_test_rng r;
+            double X[3 * 64], lo[3] = {0.02, 0.02, 0.02}, z[12], g[12], H[144], gp[12], gm[12], Hs[144], E, Ep, Em;
+            double eg = 0, ng = 0, eh = 0, nh = 0;
+            int nb[3] = {4, 4, 4}, K, i, j;
+            size_t n = t_rom_box(d, lo, nb, 0.005, X), c;
+            r.s = 5 + (unsigned long long)d;
+            t_rom_random_model(&t, d, 4, 3, 0.3);
+            pn_rom_affine_model(d, &am);
+            memset(&desc, 0, sizeof desc);
+            desc.model = aff ? &am : &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = pow(0.005, d);
+            desc.reference = 1, desc.integrator = PN_ROM_IMPLICIT, desc.cubature_m = 0.01, desc.dx_m = 0.005;
+            PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+            if (!w) return;
+            K = w->latent;
+            PN_CHECK(pn__rom_cubature(w) == PN_OK && w->n_c == (d == 2 ? 4u : 8u));
+            for (c = 0; c < w->n_c; ++c) {
+                w->cw[c] = pn_test_rng_range(&r, 10, 100);
+                for (i = 0; i < d; ++i) w->ctgt[c * d + i] = w->cX[c * d + i] + pn_test_rng_range(&r, -0.002, 0.002);
+            }
+            for (i = 0; i < K; ++i) z[i] = w->xhat[i] + pn_test_rng_range(&r, -0.05, 0.05);
+            if (aff)
+                for (i = 0; i < d; ++i) z[d + i * d + i] = 0.1 + 0.05 * i; /* stretched */
+            PN_CHECK(pn__rom_ip(w, z, &E, g, H));
+            for (i = 0; i < K; ++i) {
+                const double e = 1e-6;
+                double zz[12];
+                memcpy(zz, z, sizeof zz);
+                zz[i] = z[i] + e;
+                pn__rom_ip(w, zz, &Ep, gp, Hs);
+                zz[i] = z[i] - e;
+                pn__rom_ip(w, zz, &Em, gm, Hs);
+                eg = fmax(eg, fabs((Ep - Em) / (2 * e) - g[i])), ng = fmax(ng, fabs(g[i]));
+                for (j = 0; j < K; ++j) eh = fmax(eh, fabs((gp[j] - gm[j]) / (2 * e) - H[j * K + i])), nh = fmax(nh, fabs(H[j * K + i]));
+            }
+            PN_REPORT("%dD %s map: gradient against differences of E %.1e (of %.2g)", d, aff ? "affine" : "ELU", eg, ng);
+            PN_CHECK_LE(eg, 1e-6 * ng);
+            if (aff) {
+                PN_REPORT("%dD affine map: Hessian against differences of the gradient %.1e (of %.2g)", d, eh, nh);
+                PN_CHECK_LE(eh, 1e-6 * nh);
+            }
+            pn_rom_destroy(w);
+        }
 }
 
 #ifdef PN_TEST_HAVE_ROM_MODELS
@@ -482,8 +622,9 @@ static void rom_cylinder_vs_mpm(pn_test_ctx *pn__t) {
     pn_material_desc md;
     pn_material mat;
     pn_rom_desc desc;
-    pn_rom_world *w = NULL;
+    pn_rom_world *w = NULL, *wi = NULL;
     pn_real dts;
+    double sei = 0;
     int g, i, f, k, nsub, same = 1;
     PN_CHECK(in.test == 1);
     memset(&wd, 0, sizeof wd);
@@ -506,15 +647,27 @@ static void rom_cylinder_vs_mpm(pn_test_ctx *pn__t) {
     if (!w) return;
     PN_CHECK(pn_rs_rom_setup(w, &in));
     PN_CHECK(pn_rom_fit(w, X, NULL, NULL) == PN_OK);
+    desc.integrator = PN_ROM_BDF2, desc.cubature_m = 2 * s.dx; /* the implicit twin: one step per frame */
+    PN_CHECK(pn_rom_create(&desc, &wi, NULL, 0) == PN_OK);
+    if (!wi) return;
+    PN_CHECK(pn_rs_rom_setup(wi, &in));
+    PN_CHECK(pn_rom_fit(wi, X, NULL, NULL) == PN_OK);
     pn_mpm_stable_dt(mw, &dts);
     nsub = (int)ceil(s.frame_dt / (0.7 * (double)dts));
-    for (f = 1; f <= 6; ++f)
+    for (f = 1; f <= 6; ++f) {
         for (k = 0; k < nsub; ++k) {
             PN_CHECK(pn_mpm_step_explicit(mw, s.frame_dt / nsub, NULL) == PN_OK);
             PN_CHECK(pn_rom_step(w, s.frame_dt / nsub, NULL) == PN_OK);
         }
+        PN_CHECK(pn_rom_step(wi, s.frame_dt, NULL) == PN_OK);
+    }
+    pn_rom_positions(wi, 0, n, x, NULL);
+    for (p = 0; p < 3 * n; ++p) sei += ((double)x[p] - mw->x[p]) * ((double)x[p] - mw->x[p]);
     pn_rom_positions(w, 0, n, x, NULL);
     for (p = 0; p < 3 * n; ++p) se += ((double)x[p] - mw->x[p]) * ((double)x[p] - mw->x[p]), sn += (double)mw->x[p] * mw->x[p];
+    PN_REPORT("implicit (BDF2, cubature of 2 dx cells), 6 steps of a frame: relative L2 position error %.3f%%", 100 * sqrt(sei / sn));
+    PN_CHECK_LE(sqrt(sei / sn), 0.01);
+    pn_rom_destroy(wi);
     {
         double tip = 0, tipr = 0;
         for (p = 0; p < n; ++p)
@@ -538,6 +691,8 @@ static const pn_test_case pn_tests_rom[] = {
     {"rom_inverse_map", rom_inverse_map},
     {"rom_bad_input", rom_bad_input},
     {"rom_threads_identical", rom_threads_identical},
+    {"rom_implicit_dilation", rom_implicit_dilation},
+    {"rom_implicit_gradient", rom_implicit_gradient},
 #ifdef PN_TEST_HAVE_ROM_MODELS
     {"rom_cylinder_vs_mpm", rom_cylinder_vs_mpm},
 #endif
