@@ -2,19 +2,26 @@
    (make bench-rom; docs/rom.md explains the scenes and the measures).
 
    build/bench_rom [--scenes cylinder,cuboid,poke,tower] [--data data/rom] [--out bench/results]
-                   [--samples 10,50,all] [--schemes LN,LL,EN,EL] [--instances N] [--substeps S]
-                   [--pic] [--no-speed] [--no-superres] [--no-seq]
+                   [--samples 10,50,all] [--schemes LN,LL,EN,EL,IM] [--instances N] [--substeps S]
+                   [--integrator bdf2|be|mid] [--im-steps S] [--cubature C] [--drive-weight W]
+                   [--tower-frames N] [--pic] [--no-speed] [--no-superres] [--no-seq]
 
-   For every scene, on its test instances (never trained on), each quadrature x projection
-   scheme (L/E: Lagrangian/Eulerian quadrature, N/L: nonlinear/linear projection) with each
-   projection-point count runs the reduced model from the fitted rest state (Eq. 19) at the
-   snapshot interval divided by S (default: the full-order step), and measures the paper's relative L2 position error
-   sqrt(sum |x_rom - x_full|^2 / sum |x_full|^2) over every point of every frame of every test
-   instance, the same with positions taken from the initial centroid, and the wall seconds per
-   simulated second of the reduced steps (drawing excluded). In the same run: the full-order
-   explicit MPM (plastinet_mpm.h, the generator's step) on the same scene, its wall seconds
-   per simulated second; zero-shot super-resolution on the cuboid (the model run on the
-   points of the 2x finer full-order run, against it); ten pokes in a row (poke_seq).
+   For every scene, on its test instances (never trained on), each scheme runs the reduced
+   model from the fitted rest state (Eq. 19) and is measured by the paper's relative L2
+   position error sqrt(sum |x_rom - x_full|^2 / sum |x_full|^2) over every point of every frame
+   of every test instance, the same with positions taken from the initial centroid, and the
+   wall seconds per simulated second of the reduced steps (drawing excluded). Schemes:
+     LN LL EN EL  the paper's explicit step (L/E: Lagrangian/Eulerian quadrature, N/L:
+                  nonlinear/linear projection) with each projection-point count, at the
+                  snapshot interval divided by S (default: the full-order step); on the tower
+                  one test instance, its first --tower-frames frames [24], not with all points
+     IM           the implicit latent step (--integrator, default BDF2), --im-steps per frame
+                  [1], on a cubature of cells C grid cells wide [4]
+   In the same run: the full-order explicit MPM (plastinet_mpm.h, the generator's step) on the
+   same scene, its wall seconds per simulated second; zero-shot super-resolution on the cuboid
+   (the model run on the points of the 2x finer full-order run, against it); ten pokes in a
+   row (poke_seq); the tower at 1x and 3x per axis (1.56 million points): reduced dynamics,
+   reconstruction rate and the full-order speed at that size.
    Writes OUT/bench_rom.md, .csv and .svg (error against wall time, with the real-time line).
    Needs the snapshots of make rom-data. */
 #define PLASTINET_IMPLEMENTATION
@@ -37,6 +44,7 @@ typedef struct cfg {
     char scenes[256], schemes[64];
     int samples[8], n_samples, instances, substeps, speed, superres, seq, pic, im_steps, integrator;
     double cubature_dx, drive_weight;
+    int tower_frames;
 } cfg;
 
 static const pn_rom_model *model_of(const char *scene) {
@@ -84,7 +92,10 @@ static int rom_run(const pn_rom_model *m, const pn_rs_scene *s, const pn_rs_inst
         ok = pn_rom_fit(w, x0, NULL, NULL) == PN_OK;
         free(x0);
     }
-    for (f = 0; f < snap->frames && ok; ++f) {
+    /* the tower's explicit schemes (about 150 steps per frame): its first tower_frames frames */
+    int nfr = s->id == PN_RS_TOWER && quad < 2 && cf->tower_frames > 0 && cf->tower_frames < snap->frames ? cf->tower_frames + 1
+                                                                                                          : snap->frames;
+    for (f = 0; f < nfr && ok; ++f) {
         const float *xr = pn_rs_x(snap, f);
         if (f > 0) {
             double t0;
@@ -136,7 +147,14 @@ static int fom_substeps(const pn_rs_scene *s) {
 
 /* wall seconds per simulated second of the full-order explicit step on instance `in` of
    scene s (the generator's fixed step), over `frames` frames */
+static double fom_speed_steps(const pn_rs_scene *s, const pn_rs_instance *in, int frames, int max_steps, size_t *n_out);
 static double fom_speed(const pn_rs_scene *s, const pn_rs_instance *in, int frames) {
+    return fom_speed_steps(s, in, frames, 0, NULL);
+}
+
+/* wall s per simulated s of full-order explicit MPM on scene s (any refinement): `frames`
+   frames, or (max_steps > 0) the first max_steps steps timed at the per-frame step count */
+static double fom_speed_steps(const pn_rs_scene *s, const pn_rs_instance *in, int frames, int max_steps, size_t *n_out) {
     pn_mpm_desc wd;
     pn_mpm_world *w = NULL;
     pn_material_desc md;
@@ -144,7 +162,7 @@ static double fom_speed(const pn_rs_scene *s, const pn_rs_instance *in, int fram
     size_t cap = pn_rs_points(s, 1, NULL, 0);
     double *X = (double *)malloc(sizeof(double) * 3 * cap), t0, wall;
     pn_real dts;
-    int g, i, f, j, nsub, next = 0;
+    int g, i, f, j, nsub, next = 0, done = 0;
     memset(&wd, 0, sizeof wd);
     wd.dim = 3, wd.dx_m = s->dx, wd.boundary = PN_MPM_BOUNDARY_STICKY, wd.max_particles = cap;
     for (i = 0; i < 3; ++i) wd.res[i] = s->res[i], wd.gravity[i] = in->gravity[i];
@@ -156,16 +174,77 @@ static double fom_speed(const pn_rs_scene *s, const pn_rs_instance *in, int fram
     if (!pn_rs_setup(w, g, s, in, 1, NULL, X, cap)) return -1;
     pn_mpm_stable_dt(w, &dts);
     nsub = (int)ceil(s->frame_dt / (0.7 * (double)dts));
+    if (n_out) *n_out = w->n;
     t0 = pn_ex_seconds();
-    for (f = 0; f < frames; ++f) {
+    for (f = 0; f < frames && !(max_steps > 0 && done >= max_steps); ++f) {
         pn_rs_events(w, in, X, w->n, f * s->frame_dt, &next);
-        for (j = 0; j < nsub; ++j)
+        for (j = 0; j < nsub && !(max_steps > 0 && done >= max_steps); ++j, ++done)
             if (pn_mpm_step_explicit(w, s->frame_dt / nsub, NULL) != PN_OK) break;
     }
     wall = pn_ex_seconds() - t0;
     pn_mpm_destroy(w);
     free(X);
-    return wall / (frames * s->frame_dt);
+    return wall / (done * (s->frame_dt / nsub));
+}
+
+/* The tower at the training resolution and three times finer per axis (1.56 million
+   points, zero-shot): the implicit reduced dynamics (one step per frame) in wall s per
+   simulated s, the reconstruction rate of every point (pn_rom_positions), and the
+   full-order explicit MPM at the fine resolution, timed over its first steps. */
+typedef struct tscale {
+    int refine;
+    size_t n;
+    double rom_wall_per_s, recon_pts_per_s, fom_wall_per_s, max_pts_30fps;
+} tscale;
+
+static void tower_scale(const pn_rs_scene *s, const pn_rom_model *m, const cfg *cf, tscale *out, int *n_out) {
+    pn_rs_instance in = pn_rs_instance_of(s, s->n_instances - 1);
+    int r, f, k = 0;
+    for (r = 1; r <= 3; r += 2) {
+        pn_rom_desc d;
+        pn_rom_world *w = NULL;
+        tscale *t = &out[k];
+        char why[256];
+        float *x;
+        double t0, wall = 0;
+        memset(&d, 0, sizeof d);
+        memset(t, 0, sizeof *t);
+        d.model = m, d.refine = r, d.dx_m = s->dx, d.youngs_pa = s->youngs_pa, d.poisson = s->poisson;
+        d.density_kg_m3 = s->density, d.integrator = (pn_rom_integrator)cf->integrator, d.cubature_m = cf->cubature_dx * s->dx;
+        d.drive_weight = cf->drive_weight;
+        if (pn_rom_create(&d, &w, why, sizeof why) != PN_OK || !pn_rs_rom_setup(w, &in)) {
+            fprintf(stderr, "tower x%d: %s\n", r, why);
+            return;
+        }
+        t->refine = r, t->n = w->n;
+        for (f = 0; f < 24; ++f) {
+            t0 = pn_ex_seconds();
+            if (pn_rom_step(w, s->frame_dt, NULL) != PN_OK) fprintf(stderr, "tower x%d: %s\n", r, pn_rom_error(w));
+            wall += pn_ex_seconds() - t0;
+        }
+        t->rom_wall_per_s = wall / (24 * s->frame_dt);
+        x = (float *)malloc(sizeof(float) * 3 * w->n);
+        t0 = pn_ex_seconds();
+        for (f = 0; f < 3; ++f) pn_rom_positions(w, 0, w->n, x, NULL);
+        t->recon_pts_per_s = 3.0 * (double)w->n / (pn_ex_seconds() - t0);
+        /* a 30 fps display in real time: per frame 1/30 s of dynamics, the rest of the 1/30 s
+           for reconstruction */
+        t->max_pts_30fps = t->rom_wall_per_s < 1 ? t->recon_pts_per_s * (1 - t->rom_wall_per_s) / 30 : 0;
+        free(x);
+        pn_rom_destroy(w);
+        if (r == 3) {
+            pn_rs_scene fine = pn_rs_get(PN_RS_TOWER, 3);
+            size_t nf = 0;
+            fine.frames = 1;
+            t->fom_wall_per_s = fom_speed_steps(&fine, &in, 1, 6, &nf);
+        }
+        fprintf(stderr, "tower x%d: %lu points; reduced dynamics %.3g wall s per simulated s; reconstruction %.3g points/s "
+                        "(30 fps in real time: %.3g points)%s",
+                r, (unsigned long)t->n, t->rom_wall_per_s, t->recon_pts_per_s, t->max_pts_30fps, r == 3 ? "" : "\n");
+        if (r == 3) fprintf(stderr, "; full order at this resolution %.4g wall s per simulated s\n", t->fom_wall_per_s);
+        k++;
+    }
+    *n_out = k;
 }
 
 static int listed(const char *list, const char *name) {
@@ -227,14 +306,15 @@ int main(int argc, char **argv) {
     static const char *schemes[5] = {"LN", "LL", "EN", "EL", "IM"};
     double fom[8];
     char fom_scene[8][24], path[1024];
-    int nr = 0, nf = 0, a, sc;
+    int nr = 0, nf = 0, a, sc, nts = 0;
+    tscale ts[2];
     cfg c;
     FILE *md, *csv;
     memset(&c, 0, sizeof c);
     c.data = "data/rom", c.out = "bench/results";
     snprintf(c.scenes, sizeof c.scenes, "cylinder,cuboid,poke,tower");
     snprintf(c.schemes, sizeof c.schemes, "LN,LL,EN,EL,IM");
-    c.im_steps = 1, c.cubature_dx = 4, c.integrator = PN_ROM_BDF2;
+    c.im_steps = 1, c.cubature_dx = 4, c.integrator = PN_ROM_BDF2, c.tower_frames = 24;
     c.samples[0] = 10, c.samples[1] = 50, c.samples[2] = -1, c.n_samples = 3;
     c.substeps = 0, c.speed = 1, c.superres = 1, c.seq = 1;
     for (a = 1; a < argc; ++a) {
@@ -247,6 +327,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--im-steps") && a + 1 < argc) c.im_steps = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--cubature") && a + 1 < argc) c.cubature_dx = atof(argv[++a]);
         else if (!strcmp(argv[a], "--drive-weight") && a + 1 < argc) c.drive_weight = atof(argv[++a]);
+        else if (!strcmp(argv[a], "--tower-frames") && a + 1 < argc) c.tower_frames = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--integrator") && a + 1 < argc) {
             ++a;
             c.integrator = !strcmp(argv[a], "be") ? PN_ROM_IMPLICIT : !strcmp(argv[a], "mid") ? PN_ROM_MIDPOINT : PN_ROM_BDF2;
@@ -289,10 +370,12 @@ int main(int argc, char **argv) {
                 snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
                 r->samples = c.samples[sm];
                 r->ok = 1, used = 0;
+                if (sc == PN_RS_TOWER && kind < 4 && c.samples[sm] < 0) continue; /* all 57,840 points: hours */
                 for (k = 0; k < s.n_instances && r->ok; ++k) {
                     pn_rs_instance in = pn_rs_instance_of(&s, k);
                     pn_rs_snap snap;
                     if (!in.test || (c.instances > 0 && used >= c.instances)) continue;
+                    if (sc == PN_RS_TOWER && kind < 4 && used >= 1) continue; /* explicit: one test instance */
                     snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, s.name, k);
                     if (!pn_rs_read(path, s.frames, &snap)) return 1;
                     r->ok = rom_run(m, &s, &in, &snap, QUAD(kind), kind % 2, c.samples[sm], sub, c.pic, &c, 1000 + (unsigned)k,
@@ -361,6 +444,7 @@ int main(int argc, char **argv) {
                 }
             pn_rs_free(&snap);
         }
+        if (c.speed && sc == PN_RS_TOWER) tower_scale(&s, m, &c, ts, &nts);
         if (c.speed && nf < 8) {
             pn_rs_instance in = pn_rs_instance_of(&s, s.n_instances - 1);
             fom[nf] = fom_speed(&s, &in, sc == PN_RS_TOWER ? 4 : 30);
@@ -387,6 +471,16 @@ int main(int argc, char **argv) {
     for (a = 0; a < nf; ++a) {
         fprintf(csv, "%s,full,-1,0,0,%.6g,0,1\n", fom_scene[a], fom[a]);
         fprintf(md, "| %s | full-order explicit | - | - | - | %.3g | - |\n", fom_scene[a], fom[a]);
+    }
+    for (a = 0; a < nts; ++a) {
+        if (!a)
+            fprintf(md, "\n| tower | points | reduced dynamics, wall s / simulated s | reconstruction, points / s | points at 30 fps in "
+                        "real time | full order at this resolution, wall s / simulated s |\n|---|---|---|---|---|---|\n");
+        fprintf(md, "| x%d | %lu | %.3g | %.3g | %.3g | %s |\n", ts[a].refine, (unsigned long)ts[a].n, ts[a].rom_wall_per_s,
+                ts[a].recon_pts_per_s, ts[a].max_pts_30fps,
+                ts[a].fom_wall_per_s > 0 ? (snprintf(path, 32, "%.4g", ts[a].fom_wall_per_s), path) : "(table above)");
+        fprintf(csv, "tower_x%d,IM_scale,%lu,0,0,%.6g,0,1\n", ts[a].refine, (unsigned long)ts[a].n, ts[a].rom_wall_per_s);
+        if (ts[a].fom_wall_per_s > 0) fprintf(csv, "tower_x%d,full,-1,0,0,%.6g,0,1\n", ts[a].refine, ts[a].fom_wall_per_s);
     }
     fclose(csv), fclose(md);
     snprintf(path, sizeof path, "%s/bench_rom.svg", c.out);

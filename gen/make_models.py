@@ -8,6 +8,9 @@
    A model whose gen/ckpt/NAME.done.pt exists is not retrained; delete it to retrain.
 2. Export each to models/pn_model_NAME.h, build bench/model_report.c against it, and export
    again with the quality lines model_report measured in the banner.
+Reduced-order models rom_SCENE (rom_cylinder, rom_cuboid, rom_poke, rom_tower) train with
+gen/rom_train.py on the snapshots of make rom-data (data/rom/SCENE), resuming
+gen/ckpt/rom_SCENE.pt, and export with gen/rom_export.py to models/rom_SCENE.h.
 Training is deterministic (seeded per iteration, one thread), so the headers are reproducible.
 """
 import argparse
@@ -22,6 +25,29 @@ sys.path.insert(0, HERE)
 from models import MODELS  # noqa: E402
 
 PY = sys.executable or "/usr/bin/python3"
+ROM_MODELS = ["rom_cylinder", "rom_cuboid", "rom_poke", "rom_tower"]
+
+
+def make_rom(names, jobs):
+    """Train (resuming) and export the reduced-order models, up to jobs at a time."""
+    queue, running = list(names), []
+    while queue or running:
+        while queue and len(running) < jobs:
+            n = queue.pop(0)
+            log = open(os.path.join(ROOT, "build", "train_%s.log" % n), "a")
+            print("training %s (log build/train_%s.log)" % (n, n), flush=True)
+            running.append((n, subprocess.Popen([PY, os.path.join(HERE, "rom_train.py"), n[4:], "--threads", "1"],
+                                                stdout=log, stderr=subprocess.STDOUT)))
+        time.sleep(1)
+        for item in list(running):
+            n, p = item
+            if p.poll() is not None:
+                running.remove(item)
+                if p.returncode != 0:
+                    for _, q in running:
+                        q.terminate()
+                    sys.exit("training %s failed: see build/train_%s.log" % (n, n))
+                subprocess.check_call([PY, os.path.join(HERE, "rom_export.py"), n[4:]])
 
 
 def run_parallel(names, jobs):
@@ -60,10 +86,15 @@ def main():
                 st = torch.load(p)
                 print("%-22s %6.0f s  %6d iterations  final loss %.4g" % (n, st["seconds"], MODELS[n]["iters"], st["final_loss"]))
         return
-    names = a.names or list(MODELS)
+    names = a.names or list(MODELS) + ROM_MODELS
     for n in names:
-        if n not in MODELS:
-            sys.exit("unknown model %s; known: %s" % (n, " ".join(MODELS)))
+        if n not in MODELS and n not in ROM_MODELS:
+            sys.exit("unknown model %s; known: %s" % (n, " ".join(list(MODELS) + ROM_MODELS)))
+    os.makedirs(os.path.join(ROOT, "build"), exist_ok=True)
+    make_rom([n for n in names if n in ROM_MODELS], a.jobs)
+    names = [n for n in names if n not in ROM_MODELS]
+    if not names:
+        return
     # a model's learned return mapping comes first, even if only the energy was named
     need = []
     for n in names:
