@@ -12,7 +12,7 @@ PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point build/sand_column build/snowball build/materials build/game_loop build/metal_frame build/rom_poke
+examples: build/material_point build/sand_column build/snowball build/materials build/game_loop build/metal_frame build/rom_poke build/rom_tower
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
@@ -148,6 +148,12 @@ build/bench_deposit: bench/bench_deposit.c $(EXAMPLE_DEPS)
 build/rom_poke: examples/rom_poke.c examples/pn_rom_scenes.h plastinet_rom.h models/rom_poke.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/rom_poke.c $(LDLIBS) -o $@
+
+# The reduced tower, one implicit step per frame, drawn at any resolution
+# (build/rom_tower --refine 3 --png: 1.56 million points; --help).
+build/rom_tower: examples/rom_tower.c examples/pn_rom_scenes.h plastinet_rom.h models/rom_tower.h $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/rom_tower.c $(LDLIBS) -o $@
 
 # Full-order snapshots of the scenes the ROM models are trained on (gen/rom_data.c, into
 # data/rom/; resumable: run it again after a cut and it continues). About 3 hours on 2 cores,

@@ -6,12 +6,14 @@
 #include "rom_cuboid.h"
 #include "rom_cylinder.h"
 #include "rom_poke.h"
-#define PN_ROM_MODEL_COUNT 3
+#include "rom_tower.h"
+#define PN_ROM_MODEL_COUNT 4
 /* The accessors of every model, in a fixed order (NULL-terminated). */
 typedef const pn_rom_model *(*pn_rom_model_accessor)(void);
 static const pn_rom_model_accessor pn_rom_models_all[PN_ROM_MODEL_COUNT + 1] = {
     pn_rom_model_cuboid,
     pn_rom_model_cylinder,
     pn_rom_model_poke,
+    pn_rom_model_tower,
     0};
 #endif /* PN_ROM_MODELS_H */

@@ -196,7 +196,7 @@ static void smoke_mpm(int d) {
 }
 
 /* The reduced-order world on the affine map: a few points, a drive, a load, both
-   quadratures, and the reconstruction. */
+   quadratures, the implicit step, and the reconstruction (also by an embedding). */
 static void smoke_rom(int d) {
     pn_rom_model am;
     pn_rom_desc desc;
@@ -214,8 +214,10 @@ static void smoke_rom(int d) {
     CHECK(pn_rom_eval(&am, lat, 8, X, x, NULL, NULL) == PN_OK && fabs(x[0] - X[0]) < 1e-12);
     memset(&desc, 0, sizeof desc);
     desc.model = &am, desc.points = X, desc.n_points = 8, desc.point_volume_m3 = 1e-4, desc.dx_m = 0.1, desc.samples = -1;
-    for (q = 0; q < 2; ++q) {
+    for (q = 0; q < 3; ++q) {
+        pn_rom_embedding *e = NULL;
         desc.quadrature = q ? PN_ROM_LAGRANGIAN : PN_ROM_EULERIAN;
+        desc.integrator = q == 2 ? PN_ROM_BDF2 : PN_ROM_EXPLICIT;
         CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_OK);
         if (!w) return;
         memset(&r, 0, sizeof r);
@@ -225,6 +227,8 @@ static void smoke_rom(int d) {
         CHECK(pn_rom_set_latent(w, lat, NULL) == PN_OK && pn_rom_fit(w, X, NULL, NULL) == PN_OK);
         CHECK(pn_rom_step(w, 1e-4, &st) == PN_OK && pn_rom_error(w)[0] == 0);
         CHECK(pn_rom_positions(w, 0, 8, xf, NULL) == PN_OK && pn_rom_map(w, 1, Xf, xf, NULL) == PN_OK);
+        CHECK(pn_rom_embed(w, 1, Xf, 0.1, &e) == PN_OK && pn_rom_embed_positions(w, e, xf) == PN_OK);
+        pn_rom_embed_destroy(e);
         pn_rom_destroy(w);
         w = NULL;
     }

@@ -603,6 +603,56 @@ static void rom_implicit_gradient(pn_test_ctx *pn__t) {
         }
 }
 
+/* The render embedding: on the affine map the Taylor step from a node is exact (to float
+   rounding); on a nonlinear map its error against pn_rom_map falls as spacing^2 (checked:
+   halving the spacing divides it by more than 3); bad spacing and points refused. */
+static void rom_embed(pn_test_ctx *pn__t) {
+    t_rom_net t;
+    pn_rom_model am;
+    int aff;
+    for (aff = 1; aff >= 0; --aff) {
+        pn_rom_desc desc;
+        pn_rom_world *w = NULL;
+        pn_rom_embedding *e = NULL;
+        double lo[3] = {0.02, 0.02, 0.02}, X[3 * 512], err[2] = {0, 0}, xh[12];
+        float Xf[3 * 512], xe[3 * 512], xr[3 * 512];
+        int nb[3] = {8, 8, 8}, k, i;
+        size_t n = t_rom_box(3, lo, nb, 0.005, X), p;
+        t_rom_random_model(&t, 3, 4, 9, 0.3);
+        pn_rom_affine_model(3, &am);
+        memset(&desc, 0, sizeof desc);
+        desc.model = aff ? &am : &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.25e-7, desc.dx_m = 0.005;
+        PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+        if (!w) return;
+        for (i = 0; i < w->latent; ++i) xh[i] = 0.1 * sin(1.0 + i); /* a deformed state */
+        PN_CHECK(pn_rom_set_latent(w, xh, NULL) == PN_OK);
+        for (p = 0; p < 3 * n; ++p) Xf[p] = (float)X[p];
+        PN_CHECK(pn_rom_map(w, n, Xf, xr, NULL) == PN_OK);
+        for (k = 0; k < 2; ++k) {
+            PN_CHECK(pn_rom_embed(w, n, Xf, k ? 0.01 : 0.02, &e) == PN_OK);
+            if (!e) return;
+            PN_CHECK(e->n_nodes < n);
+            PN_CHECK(pn_rom_embed_positions(w, e, xe) == PN_OK);
+            for (p = 0; p < 3 * n; ++p) err[k] = fmax(err[k], fabs((double)xe[p] - (double)xr[p]));
+            pn_rom_embed_destroy(e);
+        }
+        if (aff) {
+            PN_REPORT("affine map: embedding off the exact map by %.1e m at most (float rounding)", fmax(err[0], err[1]));
+            PN_CHECK_LE(fmax(err[0], err[1]), 1e-7);
+        } else {
+            PN_REPORT("ELU map: embedding off the exact map by %.2e m (spacing 2 cm), %.2e m (1 cm): ratio %.2f", err[0], err[1],
+                      err[0] / err[1]);
+            PN_CHECK(err[1] > 1e-7 && err[0] > 3 * err[1]);
+        }
+        Xf[4] = NAN;
+        PN_CHECK(pn_rom_embed(w, n, Xf, 0.01, &e) == PN_ERROR_NONFINITE && e == NULL);
+        PN_CHECK(strstr(pn_rom_error(w), "point 1") != NULL);
+        Xf[4] = 0.03f;
+        PN_CHECK(pn_rom_embed(w, n, Xf, 0, &e) == PN_ERROR_INVALID_ARGUMENT && e == NULL);
+        pn_rom_destroy(w);
+    }
+}
+
 #ifdef PN_TEST_HAVE_ROM_MODELS
 /* The shipped cylinder model against the full-order explicit MPM of plastinet_mpm.h on a
    test instance (g = 9.38 m/s^2, never trained on), both from rest for 6 frames (0.042 s,
@@ -693,6 +743,7 @@ static const pn_test_case pn_tests_rom[] = {
     {"rom_threads_identical", rom_threads_identical},
     {"rom_implicit_dilation", rom_implicit_dilation},
     {"rom_implicit_gradient", rom_implicit_gradient},
+    {"rom_embed", rom_embed},
 #ifdef PN_TEST_HAVE_ROM_MODELS
     {"rom_cylinder_vs_mpm", rom_cylinder_vs_mpm},
 #endif
