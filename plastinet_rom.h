@@ -21,8 +21,13 @@
      projection  LINEAR: vhat from the velocities, xhat += dt vhat (Eq. 23);
                  NONLINEAR: vhat as well, xhat by Gauss-Newton on the positions (Eqs. 21-22)
      sampling    new random points every step, at least boundary_samples per drive (Sec. 3.3)
-   The reduced step costs the same whatever the body's point count; drawing the body costs
-   one evaluation of g per drawn point (pn_rom_map, pn_rom_positions), paid only when drawn.
+   That step is explicit: stable up to about the full-order MPM step. integrator =
+   PN_ROM_BDF2 (or PN_ROM_IMPLICIT, PN_ROM_MIDPOINT) replaces it by an implicit step over the
+   latent alone (>>implicit): the incremental potential summed over a fixed cubature of the
+   body, minimized by Newton, stable at one step per frame.
+   Either step costs the same whatever the body's point count; drawing the body costs one
+   evaluation of g per drawn point (pn_rom_map, pn_rom_positions), or, through a render
+   embedding (pn_rom_embed), one per lattice node plus a 3 x 3 product per point.
 
    QUICK START
        pn_rom_desc d;  pn_rom_world *w;  char why[256];  pn_rom_region base;
@@ -32,6 +37,7 @@
        memset(&base, 0, sizeof base);  base.hi[0] = 0.024;   // hold the points with X < 2.4 cm
        pn_rom_drive(w, &base, NULL, NULL, NULL, NULL);
        for (;;) { pn_rom_step(w, 1.0 / 144, NULL);  pn_rom_map(w, n, X, x, NULL); draw(x); }
+   (d.integrator = PN_ROM_BDF2 before pn_rom_create: pn_rom_step(w, 1.0 / 60, NULL) per frame)
 
    MEMORY: pn_rom_create allocates the points, the float weights and the step's scratch for
    the sample count it is given; the first steps grow the quadrature buffers to what the
@@ -153,8 +159,9 @@ typedef struct pn_rom_desc {
     int gn_max;                    /* NONLINEAR: Gauss-Newton iterations [10]                */
     int parallel_min;              /* -fopenmp: batches of fewer points stay on one thread [256] */
     pn_rom_integrator integrator;
-    double cubature_m;             /* IMPLICIT: edge of the cubature cells [4 dx_m]: one point per
-                                      cell, drive and load, at the centroid of its material    */
+    double cubature_m;             /* IMPLICIT: edge of the cubature cells [2 dx_m]: one point per
+                                      cell, drive and load, at the centroid of its material;
+                                      coarser is faster (4 dx_m: about 5 times fewer points)  */
     int newton_max;                /* IMPLICIT: Newton iterations per step [20]                */
     double newton_tol;             /* IMPLICIT: done when a Newton step moves each latent by less
                                       than this fraction of its training spread [1e-3]         */
@@ -805,7 +812,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     if (d.seed == 0) d.seed = 1;
     if (d.gn_max <= 0) d.gn_max = 10;
     if (d.parallel_min <= 0) d.parallel_min = 256;
-    if (d.cubature_m == 0) d.cubature_m = 4 * d.dx_m;
+    if (d.cubature_m == 0) d.cubature_m = 2 * d.dx_m;
     if (d.newton_max <= 0) d.newton_max = 20;
     if (d.newton_tol == 0) d.newton_tol = 1e-3;
     if (d.drive_weight == 0) d.drive_weight = 100;
@@ -815,7 +822,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
           : d.projection != PN_ROM_LINEAR && d.projection != PN_ROM_NONLINEAR ? "projection is not a pn_rom_projection"
           : d.transfer != PN_ROM_APIC && d.transfer != PN_ROM_PIC ? "transfer is not a pn_rom_transfer"
           : (int)d.integrator < PN_ROM_EXPLICIT || (int)d.integrator > PN_ROM_MIDPOINT ? "integrator is not a pn_rom_integrator"
-          : !pn__rom_finite(d.cubature_m) || !(d.cubature_m > 0) ? "cubature_m must be > 0 (0: 4 dx_m)"
+          : !pn__rom_finite(d.cubature_m) || !(d.cubature_m > 0) ? "cubature_m must be > 0 (0: 2 dx_m)"
           : !pn__rom_finite(d.drive_weight) || !(d.drive_weight > 0) ? "drive_weight must be > 0 (0: 100)"
           : !pn__rom_finite(d.newton_tol) || !(d.newton_tol > 0) ? "newton_tol must be > 0 (0: 1e-3)"
           : d.quad_per_axis > 8 ? "quad_per_axis is more than 8"

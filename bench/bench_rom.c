@@ -3,7 +3,7 @@
 
    build/bench_rom [--scenes cylinder,cuboid,poke,tower] [--data data/rom] [--out bench/results]
                    [--samples 10,50,all] [--schemes LN,LL,EN,EL,IM] [--instances N] [--substeps S]
-                   [--integrator bdf2|be|mid] [--im-steps S] [--cubature C] [--drive-weight W]
+                   [--integrator bdf2|be|mid] [--im-steps S] [--cubature 2,4] [--drive-weight W]
                    [--tower-frames N] [--pic] [--no-speed] [--no-superres] [--no-seq]
 
    For every scene, on its test instances (never trained on), each scheme runs the reduced
@@ -14,9 +14,10 @@
      LN LL EN EL  the paper's explicit step (L/E: Lagrangian/Eulerian quadrature, N/L:
                   nonlinear/linear projection) with each projection-point count, at the
                   snapshot interval divided by S (default: the full-order step); on the tower
-                  one test instance, its first --tower-frames frames [24], not with all points
-     IM           the implicit latent step (--integrator, default BDF2), --im-steps per frame
-                  [1], on a cubature of cells C grid cells wide [4]
+                  one test instance, its first --tower-frames frames [6], not with all points
+     IM<C>        the implicit latent step (--integrator, default BDF2), --im-steps per frame
+                  [1], on a cubature of cells C grid cells wide, for each C of --cubature [2,4]
+                  (super-resolution and the ten pokes: the first C; the tower's scaling: the last)
    In the same run: the full-order explicit MPM (plastinet_mpm.h, the generator's step) on the
    same scene, its wall seconds per simulated second; zero-shot super-resolution on the cuboid
    (the model run on the points of the 2x finer full-order run, against it); ten pokes in a
@@ -33,7 +34,7 @@
 #define QUAD(kind) ((kind) == 4 ? 2 : (kind) >= 2) /* rom_run's quad: 0 L, 1 E, 2 the implicit integrator */
 
 typedef struct rrun {
-    char scene[24], scheme[4];
+    char scene[24], scheme[24];
     int samples;               /* -1: all                                                    */
     double err, err_c, wall_per_s, quad_mean;
     int ok;
@@ -43,7 +44,8 @@ typedef struct cfg {
     const char *data, *out;
     char scenes[256], schemes[64];
     int samples[8], n_samples, instances, substeps, speed, superres, seq, pic, im_steps, integrator;
-    double cubature_dx, drive_weight;
+    double cubature_dx, drive_weight, cubs[4];
+    int n_cubs;
     int tower_frames;
 } cfg;
 
@@ -211,7 +213,7 @@ static void tower_scale(const pn_rs_scene *s, const pn_rom_model *m, const cfg *
         memset(&d, 0, sizeof d);
         memset(t, 0, sizeof *t);
         d.model = m, d.refine = r, d.dx_m = s->dx, d.youngs_pa = s->youngs_pa, d.poisson = s->poisson;
-        d.density_kg_m3 = s->density, d.integrator = (pn_rom_integrator)cf->integrator, d.cubature_m = cf->cubature_dx * s->dx;
+        d.density_kg_m3 = s->density, d.integrator = (pn_rom_integrator)cf->integrator, d.cubature_m = cf->cubs[cf->n_cubs - 1] * s->dx;
         d.drive_weight = cf->drive_weight;
         if (pn_rom_create(&d, &w, why, sizeof why) != PN_OK || !pn_rs_rom_setup(w, &in)) {
             fprintf(stderr, "tower x%d: %s\n", r, why);
@@ -317,7 +319,7 @@ static void svg(const char *path, const rrun *r, int n, const double *fom, char 
                        "fill='#c00' font-size='10' transform='rotate(-90 %.1f %d)'>full order: %s</text>\n",
                     PX(fom[k]), PX(fom[k]), H - 60, PX(fom[k]) - 3, H - 64, PX(fom[k]) - 3, H - 64, fom_scene[k]);
     for (k = 0; k < n; ++k) {
-        int c = !strcmp(r[k].scheme, "LN") ? 0 : !strcmp(r[k].scheme, "LL") ? 1 : !strcmp(r[k].scheme, "EN") ? 2 : !strcmp(r[k].scheme, "IM") ? 4 : 3;
+        int c = !strcmp(r[k].scheme, "LN") ? 0 : !strcmp(r[k].scheme, "LL") ? 1 : !strcmp(r[k].scheme, "EN") ? 2 : r[k].scheme[0] == 'I' ? 4 : 3;
         if (!r[k].ok || !(r[k].err > 0) || !(r[k].wall_per_s > 0)) continue;
         fprintf(f, "<circle cx='%.1f' cy='%.1f' r='4' fill='%s'/><text x='%.1f' y='%.1f' font-size='9'>%s %s %s</text>\n",
                 PX(r[k].wall_per_s), PY(r[k].err), cols[c], PX(r[k].wall_per_s) + 6, PY(r[k].err) + 3, r[k].scene, r[k].scheme,
@@ -343,7 +345,8 @@ int main(int argc, char **argv) {
     c.data = "data/rom", c.out = "bench/results";
     snprintf(c.scenes, sizeof c.scenes, "cylinder,cuboid,poke,tower");
     snprintf(c.schemes, sizeof c.schemes, "LN,LL,EN,EL,IM");
-    c.im_steps = 1, c.cubature_dx = 4, c.integrator = PN_ROM_BDF2, c.tower_frames = 24;
+    c.im_steps = 1, c.integrator = PN_ROM_BDF2, c.tower_frames = 6;
+    c.cubs[0] = 2, c.cubs[1] = 4, c.n_cubs = 2, c.cubature_dx = 2;
     c.samples[0] = 10, c.samples[1] = 50, c.samples[2] = -1, c.n_samples = 3;
     c.substeps = 0, c.speed = 1, c.superres = 1, c.seq = 1;
     for (a = 1; a < argc; ++a) {
@@ -354,7 +357,13 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[a], "--instances") && a + 1 < argc) c.instances = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--substeps") && a + 1 < argc) c.substeps = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--im-steps") && a + 1 < argc) c.im_steps = atoi(argv[++a]);
-        else if (!strcmp(argv[a], "--cubature") && a + 1 < argc) c.cubature_dx = atof(argv[++a]);
+        else if (!strcmp(argv[a], "--cubature") && a + 1 < argc) {
+            char b[128], *t, *save = NULL;
+            snprintf(b, sizeof b, "%s", argv[++a]);
+            c.n_cubs = 0;
+            for (t = strtok_r(b, ",", &save); t && c.n_cubs < 4; t = strtok_r(NULL, ",", &save)) c.cubs[c.n_cubs++] = atof(t);
+            c.cubature_dx = c.cubs[0];
+        }
         else if (!strcmp(argv[a], "--drive-weight") && a + 1 < argc) c.drive_weight = atof(argv[++a]);
         else if (!strcmp(argv[a], "--tower-frames") && a + 1 < argc) c.tower_frames = atoi(argv[++a]);
         else if (!strcmp(argv[a], "--integrator") && a + 1 < argc) {
@@ -390,14 +399,16 @@ int main(int argc, char **argv) {
         fprintf(stderr, "%s: %d reduced steps per frame of %.4g s\n", s.name, sub, s.frame_dt);
         for (kind = 0; kind < 5; ++kind) {
             if (!listed(c.schemes, schemes[kind])) continue;
-            for (sm = 0; sm < (kind == 4 ? 1 : c.n_samples); ++sm) { /* IM: no projection points */
+            for (sm = 0; sm < (kind == 4 ? c.n_cubs : c.n_samples); ++sm) { /* IM: each cubature */
                 rrun *r = &runs[nr];
+                cfg cc = c;
                 double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
                 long steps = 0;
                 memset(r, 0, sizeof *r);
                 snprintf(r->scene, sizeof r->scene, "%s", s.name);
                 snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
-                r->samples = c.samples[sm];
+                r->samples = kind == 4 ? 0 : c.samples[sm];
+                if (kind == 4) cc.cubature_dx = c.cubs[sm], snprintf(r->scheme, sizeof r->scheme, "IM%g", c.cubs[sm]);
                 r->ok = 1, used = 0;
                 if (sc == PN_RS_TOWER && kind < 4 && c.samples[sm] < 0) continue; /* all 57,840 points: hours */
                 for (k = 0; k < s.n_instances && r->ok; ++k) {
@@ -407,15 +418,15 @@ int main(int argc, char **argv) {
                     if (sc == PN_RS_TOWER && kind < 4 && used >= 1) continue; /* explicit: one test instance */
                     snprintf(path, sizeof path, "%s/%s/i%03d.pnrs", c.data, s.name, k);
                     if (!pn_rs_read(path, s.frames, &snap)) return 1;
-                    r->ok = rom_run(m, &s, &in, &snap, QUAD(kind), kind % 2, c.samples[sm], sub, c.pic, &c, 1000 + (unsigned)k,
+                    r->ok = rom_run(m, &s, &in, &snap, QUAD(kind), kind % 2, r->samples, sub, c.pic, &cc, 1000 + (unsigned)k,
                                     &se, &sn, &snc, &wall, &sim, &qs, &steps);
                     pn_rs_free(&snap);
                     used++;
                 }
                 r->err = sqrt(se / sn), r->err_c = sqrt(se / snc), r->wall_per_s = wall / sim, r->quad_mean = qs / (steps ? steps : 1);
                 fprintf(stderr, "%-9s %s %4s points: error %.3f%% (from the centroid %.3f%%), %.3g wall s per simulated s, "
-                                "%.0f quadrature points per step%s\n",
-                        r->scene, r->scheme, r->samples < 0 ? "all" : (snprintf(path, 16, "%d", r->samples), path), 100 * r->err,
+                                "%.0f quadrature or cubature points per step%s\n",
+                        r->scene, r->scheme, r->samples < 0 ? "all" : kind == 4 ? "-" : (snprintf(path, 16, "%d", r->samples), path), 100 * r->err,
                         100 * r->err_c, r->wall_per_s, r->quad_mean, r->ok ? "" : " (FAILED)");
                 nr++;
             }
@@ -430,6 +441,7 @@ int main(int argc, char **argv) {
                 memset(r, 0, sizeof *r);
                 snprintf(r->scene, sizeof r->scene, "%s_x2", s.name);
                 snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
+                if (kind == 4) snprintf(r->scheme, sizeof r->scheme, "IM%g", c.cubature_dx);
                 r->samples = -1, r->ok = 1, used = 0;
                 for (k = 0; k < s.n_instances && r->ok; ++k) {
                     pn_rs_instance in = pn_rs_instance_of(&s, k);
@@ -463,12 +475,13 @@ int main(int argc, char **argv) {
                     memset(r, 0, sizeof *r);
                     snprintf(r->scene, sizeof r->scene, "%s", q.name);
                     snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);
-                    r->samples = c.samples[sm];
+                    if (kind == 4) snprintf(r->scheme, sizeof r->scheme, "IM%g", c.cubature_dx);
+                    r->samples = kind == 4 ? 0 : c.samples[sm];
                     r->ok = rom_run(m, &q, &in, &snap, QUAD(kind), kind % 2, c.samples[sm], sub, c.pic, &c, 77, &se, &sn, &snc,
                                     &wall, &sim, &qs, &steps);
                     r->err = sqrt(se / sn), r->err_c = sqrt(se / snc), r->wall_per_s = wall / sim, r->quad_mean = qs / (steps ? steps : 1);
                     fprintf(stderr, "%-9s %s %4s points: error %.3f%% (from the centroid %.3f%%)%s\n", r->scene, r->scheme,
-                            r->samples < 0 ? "all" : "50", 100 * r->err, 100 * r->err_c, r->ok ? "" : " (FAILED)");
+                            kind == 4 ? "-" : r->samples < 0 ? "all" : "50", 100 * r->err, 100 * r->err_c, r->ok ? "" : " (FAILED)");
                     nr++;
                 }
             pn_rs_free(&snap);
@@ -494,7 +507,7 @@ int main(int argc, char **argv) {
         fprintf(csv, "%s,%s,%d,%.6g,%.6g,%.6g,%.1f,%d\n", runs[a].scene, runs[a].scheme, runs[a].samples, runs[a].err, runs[a].err_c,
                 runs[a].wall_per_s, runs[a].quad_mean, runs[a].ok);
         fprintf(md, "| %s | %s | %s | %.3f%% | %.3f%% | %.3g | %.0f |%s\n", runs[a].scene, runs[a].scheme,
-                runs[a].samples < 0 ? "all" : (snprintf(path, 16, "%d", runs[a].samples), path), 100 * runs[a].err,
+                runs[a].scheme[0] == 'I' ? "-" : runs[a].samples < 0 ? "all" : (snprintf(path, 16, "%d", runs[a].samples), path), 100 * runs[a].err,
                 100 * runs[a].err_c, runs[a].wall_per_s, runs[a].quad_mean, runs[a].ok ? "" : " failed");
     }
     for (a = 0; a < nf; ++a) {
