@@ -471,7 +471,7 @@ int main(int argc, char **argv) {
                     rrun *r = &runs[nr];
                     double se = 0, sn = 0, snc = 0, wall = 0, sim = 0, qs = 0;
                     long steps = 0;
-                    if (!listed(c.schemes, schemes[kind]) || c.samples[sm] == 10 || (kind == 4 && sm > 0)) continue;
+                    if (!listed(c.schemes, schemes[kind]) || (kind == 4 ? sm > 0 : c.samples[sm] == 10)) continue;
                     memset(r, 0, sizeof *r);
                     snprintf(r->scene, sizeof r->scene, "%s", q.name);
                     snprintf(r->scheme, sizeof r->scheme, "%s", schemes[kind]);

@@ -28,38 +28,22 @@ PY = sys.executable or "/usr/bin/python3"
 ROM_MODELS = ["rom_cylinder", "rom_cuboid", "rom_poke", "rom_tower"]
 
 
-def make_rom(names, jobs):
-    """Train (resuming) and export the reduced-order models, up to jobs at a time."""
+def train_command(n):
+    """The training command of model n: gen/rom_train.py for rom_SCENE, else gen/train.py."""
+    if n in ROM_MODELS:
+        return [PY, os.path.join(HERE, "rom_train.py"), n[4:], "--threads", "1", "--quiet"]
+    return [PY, os.path.join(HERE, "train.py"), "--model", n, "--quiet"]
+
+
+def run_parallel(names, jobs, done=None):
+    """Train names, at most jobs at once, calling done(name) after each; stop on the first failure."""
     queue, running = list(names), []
     while queue or running:
         while queue and len(running) < jobs:
             n = queue.pop(0)
             log = open(os.path.join(ROOT, "build", "train_%s.log" % n), "a")
             print("training %s (log build/train_%s.log)" % (n, n), flush=True)
-            running.append((n, subprocess.Popen([PY, os.path.join(HERE, "rom_train.py"), n[4:], "--threads", "1"],
-                                                stdout=log, stderr=subprocess.STDOUT)))
-        time.sleep(1)
-        for item in list(running):
-            n, p = item
-            if p.poll() is not None:
-                running.remove(item)
-                if p.returncode != 0:
-                    for _, q in running:
-                        q.terminate()
-                    sys.exit("training %s failed: see build/train_%s.log" % (n, n))
-                subprocess.check_call([PY, os.path.join(HERE, "rom_export.py"), n[4:]])
-
-
-def run_parallel(names, jobs):
-    """Train names, at most jobs at once; stop on the first failure."""
-    queue, running = list(names), []
-    while queue or running:
-        while queue and len(running) < jobs:
-            n = queue.pop(0)
-            log = open(os.path.join(ROOT, "build", "train_%s.log" % n), "a")
-            print("training %s (log build/train_%s.log)" % (n, n), flush=True)
-            running.append((n, subprocess.Popen([PY, os.path.join(HERE, "train.py"), "--model", n, "--quiet"],
-                                                stdout=log, stderr=subprocess.STDOUT)))
+            running.append((n, subprocess.Popen(train_command(n), stdout=log, stderr=subprocess.STDOUT)))
         time.sleep(1)
         for item in list(running):
             n, p = item
@@ -70,6 +54,12 @@ def run_parallel(names, jobs):
                         q.terminate()
                     sys.exit("training %s failed: see build/train_%s.log" % (n, n))
                 print("trained %s" % n, flush=True)
+                if done:
+                    done(n)
+
+
+def export_rom(n):
+    subprocess.check_call([PY, os.path.join(HERE, "rom_export.py"), n[4:]])
 
 
 def main():
@@ -91,7 +81,7 @@ def main():
         if n not in MODELS and n not in ROM_MODELS:
             sys.exit("unknown model %s; known: %s" % (n, " ".join(list(MODELS) + ROM_MODELS)))
     os.makedirs(os.path.join(ROOT, "build"), exist_ok=True)
-    make_rom([n for n in names if n in ROM_MODELS], a.jobs)
+    run_parallel([n for n in names if n in ROM_MODELS], a.jobs, export_rom)
     names = [n for n in names if n not in ROM_MODELS]
     if not names:
         return
