@@ -128,7 +128,7 @@ typedef enum pn_rom_integrator {
     PN_ROM_IMPLICIT,               /* backward Euler in the latent: xhat minimizes the incremental
                                       potential summed over a fixed cubature of the body, by
                                       Newton; stable at a frame per step, and damps motion
-                                      faster than about 1/dt (docs/rom.md#implicit)            */
+                                      faster than about 1/dt (docs/rom.md, "The implicit step") */
     PN_ROM_BDF2,                   /* the same minimization for the second-order backward
                                       difference: far less damping (backward Euler first)    */
     PN_ROM_MIDPOINT                /* the implicit midpoint rule, minimized at the midpoint:
