@@ -167,6 +167,9 @@ typedef struct pn_rom_desc {
                                       than this fraction of its training spread [1e-3]         */
     double drive_weight;           /* IMPLICIT: driven points' penalty, in units of their
                                       inertia plus elastic stiffness [100]                     */
+    int drive_region_only;         /* IMPLICIT: nonzero drives just the region's points; 0: also
+                                      the points MPM holds with them, whose whole interpolation
+                                      stencil lies on nodes the region's points touch [0]      */
     pn_allocator allocator;
 } pn_rom_desc;
 
@@ -1093,16 +1096,22 @@ static void pn__rom_hash_clear(pn__rom_hash *h) {
     h->n_used = 0;
 }
 
-/* the value of key, or -1 */
-static long pn__rom_hash_get(const pn__rom_hash *h, unsigned long long key) {
+/* the stored value of key, or NULL */
+static long *pn__rom_hash_ref(const pn__rom_hash *h, unsigned long long key) {
     size_t s;
-    if (!h->cap) return -1;
+    if (!h->cap) return NULL;
     s = (size_t)((key * 0x9E3779B97F4A7C15ULL) >> 20) & (h->cap - 1);
     while (h->key[s]) {
-        if (h->key[s] == key + 1) return h->val[s];
+        if (h->key[s] == key + 1) return h->val + s;
         s = (s + 1) & (h->cap - 1);
     }
-    return -1;
+    return NULL;
+}
+
+/* the value of key, or -1 */
+static long pn__rom_hash_get(const pn__rom_hash *h, unsigned long long key) {
+    const long *v = pn__rom_hash_ref(h, key);
+    return v ? *v : -1;
 }
 
 /* insert key with value val unless present; returns the stored value, or -2 out of memory */
@@ -1782,17 +1791,68 @@ static int pn__rom_cent_cmp(const void *a, const void *b) {
     return u->p < v->p ? -1 : u->p > v->p;
 }
 
+/* The drive of each point as MPM applies it (into drv): a driven particle's whole stencil of
+   grid nodes takes the drive's velocity, so a free particle whose stencil lies entirely on
+   such nodes moves with the drive too: the reference is stiffer by that layer of material
+   (about half a cell). Reference positions; a node touched by two drives holds no one. */
+static int pn__rom_drive_marks(pn_rom_world *w, int *drv) {
+    int d = w->dim, i;
+    size_t n = w->n, p;
+    double inv = 1 / w->desc.dx_m;
+    pn__rom_hash held;
+    memset(&held, 0, sizeof held);
+    for (p = 0; p < n; ++p) drv[p] = pn__rom_drive_of(w, w->X + p * (size_t)d);
+    if (w->desc.drive_region_only || !w->n_drives) return 1;
+    for (p = 0; p < n; ++p) { /* the nodes the driven points touch, by drive (-2: two drives) */
+        long long b[3], k[3] = {0, 0, 0}, o;
+        double fx[3];
+        if (drv[p] < 0) continue;
+        pn__rom_base(d, inv, w->X + p * (size_t)d, b, fx);
+        for (o = 0; o < (d == 3 ? 27 : 9); ++o) {
+            long v;
+            for (i = 0; i < d; ++i) k[i] = b[i] + (i == 0 ? o % 3 : i == 1 ? o / 3 % 3 : o / 9);
+            v = pn__rom_hash_put(w, &held, pn__rom_key(k), drv[p]);
+            if (v == -2) {
+                pn__rom_hash_free(w, &held);
+                return 0;
+            }
+            if (v != drv[p]) *pn__rom_hash_ref(&held, pn__rom_key(k)) = -2;
+        }
+    }
+    for (p = 0; p < n; ++p) { /* free points wholly on one drive's nodes */
+        long long b[3], k[3] = {0, 0, 0}, o;
+        double fx[3];
+        long a = -1;
+        if (drv[p] >= 0) continue;
+        pn__rom_base(d, inv, w->X + p * (size_t)d, b, fx);
+        for (o = 0; o < (d == 3 ? 27 : 9); ++o) {
+            long v;
+            for (i = 0; i < d; ++i) k[i] = b[i] + (i == 0 ? o % 3 : i == 1 ? o / 3 % 3 : o / 9);
+            v = pn__rom_hash_get(&held, pn__rom_key(k));
+            if (v < 0 || (a >= 0 && v != a)) break;
+            a = v;
+        }
+        if (o == (d == 3 ? 27 : 9)) drv[p] = (int)a;
+    }
+    pn__rom_hash_free(w, &held);
+    return 1;
+}
+
 /* (re)build the cubature from the world's points, their drives and live loads */
 static pn_result pn__rom_cubature(pn_rom_world *w) {
-    int d = w->dim, K = w->latent, i, a, ok = 1;
+    int d = w->dim, K = w->latent, i, a, ok = 1, *drv;
     size_t n = w->n, p, c, nc = 0, dd = (size_t)(d * d), dK = (size_t)(d * K);
     double inv = 1 / w->desc.cubature_m;
     pn__rom_cent *e = (pn__rom_cent *)pn_alloc(&w->desc.allocator, n * sizeof *e + 1);
-    if (!e) return PN_ERROR_OUT_OF_MEMORY;
+    drv = (int *)pn_alloc(&w->desc.allocator, n * sizeof *drv + 1);
+    if (!e || !drv || !pn__rom_drive_marks(w, drv)) {
+        pn_free(&w->desc.allocator, e), pn_free(&w->desc.allocator, drv);
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
     for (p = 0; p < n; ++p) {
         const double *X = w->X + p * (size_t)d;
         long long k[3] = {0, 0, 0};
-        unsigned cls = (unsigned)(pn__rom_drive_of(w, X) + 1);
+        unsigned cls = (unsigned)(drv[p] + 1);
         for (i = 0; i < d; ++i) k[i] = (long long)floor(X[i] * inv);
         for (a = 0; a < w->n_loads; ++a)
             if (w->loads[a].on && pn__rom_in_region(&w->loads[a].r, d, X)) cls |= 1u << (8 + a);
@@ -1822,7 +1882,7 @@ static pn_result pn__rom_cubature(pn_rom_world *w) {
         if (ok) w->cap_c = nc;
     }
     if (!ok) {
-        pn_free(&w->desc.allocator, e);
+        pn_free(&w->desc.allocator, e), pn_free(&w->desc.allocator, drv);
         return PN_ERROR_OUT_OF_MEMORY;
     }
     for (c = 0, p = 0; p < n; ++c) { /* one run of equal classes: its mass, volume, centroid */
@@ -1838,7 +1898,7 @@ static pn_result pn__rom_cubature(pn_rom_world *w) {
         w->cdrv[c] = (int)(e[p].cls & 0xffu) - 1, w->cload[c] = e[p].cls >> 8;
         p = q;
     }
-    pn_free(&w->desc.allocator, e);
+    pn_free(&w->desc.allocator, e), pn_free(&w->desc.allocator, drv);
     w->n_c = nc;
     w->cub_dirty = 0, w->cvel_ok = 0;
     return PN_OK;
@@ -2003,8 +2063,11 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
     }
     if (!pn__rom_all_finite((size_t)K, z))
         return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s)", h);
-    /* the new state: the cubature velocities by the scheme's difference formula, the latent
-       (midpoint: extrapolated from the midpoint), its velocity by difference */
+    /* the new state: the latent (midpoint: extrapolated from the midpoint state, z_n+1 =
+       2 z_n+1/2 - z_n), the cubature velocities by the scheme's difference formula (midpoint:
+       v_n+1 = 2 v_n+1/2 - v_n = 2 (x_n+1 - x_n) / h - v_n), the latent velocity by difference */
+    if (mode == PN_ROM_MIDPOINT)
+        for (i = 0; i < K; ++i) z[i] = 2 * z[i] - w->xhat[i];
     pn__rom_map(w, z, C, w->cX, w->cx, NULL, NULL);
     for (c = 0; c < C * (size_t)d; ++c) {
         double x1 = w->cx[c], x0 = w->cx0[c], v0 = w->cv0[c];
@@ -2013,8 +2076,6 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
                                              : (x1 - x0) / h;
         w->cxp[c] = x0, w->cvp[c] = v0;
     }
-    if (mode == PN_ROM_MIDPOINT)
-        for (i = 0; i < K; ++i) z[i] = 2 * z[i] - w->xhat[i];
     for (i = 0; i < K; ++i) w->xhat_prev[i] = w->xhat[i], w->vhat[i] = (z[i] - w->xhat[i]) / h, w->xhat[i] = z[i];
     w->cvel_ok = 2, w->h_prev = h;
     w->time_s += h;

@@ -292,7 +292,7 @@ PN_RS_UNUSED static pn_rs_instance pn_rs_instance_of(const pn_rs_scene *s, int k
                 perm[a][i] = perm[a][j], perm[a][j] = t;
             }
         }
-        for (i = 0; i <= k; ++i) /* the jitter of instance k: drawn in order, so k's depends only on k */
+        for (i = 0; i <= k && i < 20; ++i) /* the jitter of instance k: drawn in order, so k's depends only on k */
             for (a = 0; a < 3; ++a) u[a] = (perm[a][i] + pn_rs_rand(&st)) / 20;
         in.params[0] = 0.6 + 0.2 * u[0], in.params[1] = PN_RS_PI / 2 * u[1], in.params[2] = -2 * PN_RS_PI / 3 + PN_RS_PI / 3 * u[2];
         in.n_drives = 2;
