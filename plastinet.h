@@ -417,8 +417,10 @@ PN_API pn_result pn_lagged_energy(const pn_material *m, int dim, const pn_real *
 
 /* Layout version of the pn_model structs written by gen/export.py; a model of another version
    is refused with PN_ERROR_FORMAT. Version 2 added the array lengths of pn_mlp (weight_count,
-   bias_count), checked against the layer sizes (gen/upgrade_format.py converts version 1). */
-#define PN_MODEL_FORMAT_VERSION 2
+   bias_count), checked against the layer sizes; version 3 the material parameters a model
+   takes as inputs and the output form (gen/upgrade_format.py converts versions 1 and 2). */
+#define PN_MODEL_FORMAT_VERSION 3
+#define PN_MODEL_MAX_PARAMS 4   /* material parameters a conditioned model takes as inputs */
 #define PN_MLP_MAX_LAYERS 8     /* linear layers */
 #define PN_MLP_MAX_WIDTH 64     /* units per layer (inputs and outputs included) */
 #define PN_MLP_MAX_DIFF 8       /* inputs an evaluation can differentiate with respect to */
@@ -469,6 +471,30 @@ typedef enum pn_model_kind {
     PN_MODEL_RETURN_MAP         /* learned volume-preserving return mapping (Eqs. 12-13)       */
 } pn_model_kind;
 
+/* Material parameters a conditioned model takes as network inputs (pn_model.param), in the
+   units of pn_material_desc; plastic stresses as ratios to E. */
+typedef enum pn_model_param_kind {
+    PN_MODEL_PARAM_POISSON = 1,      /* poisson_ratio                                       */
+    PN_MODEL_PARAM_FRICTION_DEG,     /* friction_angle_deg (Drucker-Prager, Cam-Clay)       */
+    PN_MODEL_PARAM_COHESION,         /* cohesion_strain (Drucker-Prager)                    */
+    PN_MODEL_PARAM_YIELD_RATIO,      /* yield_stress_pa / E (von Mises)                     */
+    PN_MODEL_PARAM_HARDENING_RATIO,  /* hardening_modulus_pa / E (von Mises)                */
+    PN_MODEL_PARAM_CAMCLAY_BETA,     /* camclay_beta                                        */
+    PN_MODEL_PARAM_CAMCLAY_XI        /* camclay_xi                                          */
+} pn_model_param_kind;
+
+typedef struct pn_model_param {
+    int kind;                        /* a pn_model_param_kind                               */
+    double lo, hi;                   /* the range the model was trained over               */
+} pn_model_param;
+
+/* The energy network's output m as N (at E = E_train): out_scale m, or out_scale softplus(m)
+   >= 0, which bounds the energy below (see pn_pnet_init). */
+typedef enum pn_model_output {
+    PN_MODEL_OUTPUT_LINEAR = 0,
+    PN_MODEL_OUTPUT_SOFTPLUS = 1
+} pn_model_output;
+
 /* A trained model as a generated header in models/ describes it (see models/README.md). The
    material fields describe what it was trained for; plastic stresses are ratios to E. */
 typedef struct pn_model {
@@ -495,6 +521,10 @@ typedef struct pn_model {
     double out_scale;                /* energy: N = out_scale mlp(u) at E = E_train        */
     pn_mlp mlp;
     const char *summary;             /* training and quality summary, one line             */
+    int n_params;                    /* conditioned: material parameters as network inputs,
+                                        after h (0: one material, the fields above)       */
+    pn_model_param param[PN_MODEL_MAX_PARAMS]; /* which, and the range served             */
+    int output;                      /* a pn_model_output                                   */
 } pn_model;
 
 /* Check a model's format version, kind, layout and dimension (dim = 0: any), that its array
@@ -537,6 +567,8 @@ typedef struct pn_pnet {
     pn_real scale;                   /* E / E_train                                        */
     pn_real reg;                     /* w mu (Pa)                                          */
     pn_pnet_regularizer reg_form;
+    pn_real cond[PN_MODEL_MAX_PARAMS]; /* a conditioned model's parameter inputs            */
+    char message[192];               /* pn_pnet_init's reason, when it names numbers       */
 } pn_pnet;
 
 /* Per-point data, computed once per F0 by pn_pnet_prepare. */
@@ -2784,14 +2816,29 @@ static void pn__features_eval(int d, const pn_real *F, int level, pn__features *
 static int pn__model_nf(const pn_model *mo) { return mo->dim == 2 ? 2 : 3; }
 
 /* An energy network has 2 nf + 1 inputs (raw encoding) or 2 nf + 2 (scaled encoding: the
-   strain scale s is the extra input, see >>pnet). */
+   strain scale s is the extra input, see >>pnet), then a conditioned model's n_params. */
 static int pn__model_scaled(const pn_model *mo) {
-    return mo->kind == PN_MODEL_ENERGY && mo->n_inputs == 2 * pn__model_nf(mo) + 2;
+    return mo->kind == PN_MODEL_ENERGY && mo->n_inputs - mo->n_params == 2 * pn__model_nf(mo) + 2;
 }
 
 static int pn__model_inputs(const pn_model *mo) {
-    return mo->kind == PN_MODEL_ENERGY ? 2 * pn__model_nf(mo) + 1 + pn__model_scaled(mo)
+    return mo->kind == PN_MODEL_ENERGY ? 2 * pn__model_nf(mo) + 1 + pn__model_scaled(mo) + mo->n_params
                                        : (mo->dim == 2 ? 3 : 4);
+}
+
+/* the parameter list: each kind known and used once, each range finite and ordered */
+static int pn__model_params_ok(const pn_model *mo) {
+    int i, j;
+    if (mo->n_params < 0 || mo->n_params > PN_MODEL_MAX_PARAMS || (mo->n_params && mo->kind != PN_MODEL_ENERGY)) return 0;
+    for (i = 0; i < mo->n_params; ++i) {
+        const pn_model_param *q = &mo->param[i];
+        if (q->kind < PN_MODEL_PARAM_POISSON || q->kind > PN_MODEL_PARAM_CAMCLAY_XI || !pn__finite((pn_real)q->lo) ||
+            !pn__finite((pn_real)q->hi) || !(q->lo <= q->hi))
+            return 0;
+        for (j = 0; j < i; ++j)
+            if (mo->param[j].kind == q->kind) return 0;
+    }
+    return mo->output == PN_MODEL_OUTPUT_LINEAR || mo->output == PN_MODEL_OUTPUT_SOFTPLUS;
 }
 
 static int pn__model_normalisation_ok(const pn_model *mo) {
@@ -2822,6 +2869,9 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
     } else if (dim != 0 && mo->dim != dim) {
         w = "model was trained for another dimension";
         r = PN_ERROR_DIMENSION;
+    } else if (!pn__model_params_ok(mo)) {
+        w = "model parameter list or output form is malformed (pn_model.n_params, param, output)";
+        r = PN_ERROR_FORMAT;
     } else if (!pn__mlp_ok(&mo->mlp) || mo->n_inputs != mo->mlp.size[0] ||
                mo->n_inputs != pn__model_inputs(mo) || mo->mlp.size[mo->mlp.n_layers] != 1) {
         w = "model network layout is malformed (layer sizes, array lengths or input count disagree)";
@@ -2859,27 +2909,58 @@ PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *
 
 static int pn__close(double a, double b) { return fabs(a - b) <= 1e-6 * (fabs(a) + fabs(b)) + 1e-12; }
 
-/* Does material m match the model's training material (up to E)? */
+/* A material's value of parameter kind k (pn_model_param_kind units), and its name */
+static double pn__model_param_value(const pn_material *m, int k) {
+    double E = (double)m->E;
+    switch (k) {
+    case PN_MODEL_PARAM_POISSON: return (double)m->nu;
+    case PN_MODEL_PARAM_FRICTION_DEG: return asin((double)m->sin_phi) * 180 / 3.14159265358979323846;
+    case PN_MODEL_PARAM_COHESION: return (double)m->cohesion_strain;
+    case PN_MODEL_PARAM_YIELD_RATIO: return (double)m->yield_stress / E;
+    case PN_MODEL_PARAM_HARDENING_RATIO: return (double)m->hardening_modulus / E;
+    case PN_MODEL_PARAM_CAMCLAY_BETA: return (double)m->beta;
+    case PN_MODEL_PARAM_CAMCLAY_XI: return (double)m->xi;
+    default: return 0;
+    }
+}
+
+static const char *pn__model_param_name(int k) {
+    static const char *names[] = {"?", "poisson_ratio", "friction_angle_deg", "cohesion_strain", "yield_stress_pa / E",
+                                  "hardening_modulus_pa / E", "camclay_beta", "camclay_xi"};
+    return k >= PN_MODEL_PARAM_POISSON && k <= PN_MODEL_PARAM_CAMCLAY_XI ? names[k] : names[0];
+}
+
+/* does the model take parameter kind k as an input? */
+static int pn__model_conditions(const pn_model *mo, int k) {
+    int i;
+    for (i = 0; i < mo->n_params; ++i)
+        if (mo->param[i].kind == k) return 1;
+    return 0;
+}
+
+/* Does material m match the model's training material (up to E, and but for the parameters
+   it takes as inputs, checked against their ranges by pn_pnet_init)? */
 static pn_result pn__model_matches(const pn_model *mo, const pn_material *m, const char **why) {
     const char *w = NULL;
     double E = (double)m->E;
+    int dp = m->plastic == PN_PLASTIC_DRUCKER_PRAGER, cc = m->plastic == PN_PLASTIC_CAM_CLAY, vm = m->plastic == PN_PLASTIC_VON_MISES;
+#define PN__FIXED(k, a, b) (!pn__model_conditions(mo, k) && !pn__close(a, b))
     if (m->elastic != mo->elastic) w = "the material's elastic model differs from the model's";
     else if (m->plastic != mo->plastic) w = "the material's plastic model differs from the model's";
-    else if (!pn__close((double)m->nu, mo->poisson_ratio))
+    else if (PN__FIXED(PN_MODEL_PARAM_POISSON, (double)m->nu, mo->poisson_ratio))
         w = "the material's poisson_ratio differs from the model's training material";
-    else if ((m->plastic == PN_PLASTIC_DRUCKER_PRAGER || m->plastic == PN_PLASTIC_CAM_CLAY) &&
-             !pn__close((double)m->sin_phi, sin(mo->friction_angle_deg * 3.14159265358979323846 / 180)))
+    else if ((dp || cc) && PN__FIXED(PN_MODEL_PARAM_FRICTION_DEG, (double)m->sin_phi,
+                                     sin(mo->friction_angle_deg * 3.14159265358979323846 / 180)))
         w = "the material's friction_angle_deg differs from the model's training material";
-    else if (m->plastic == PN_PLASTIC_DRUCKER_PRAGER &&
-             (!pn__close((double)m->cohesion_strain, mo->cohesion_strain) || m->volume_correction))
+    else if (dp && (PN__FIXED(PN_MODEL_PARAM_COHESION, (double)m->cohesion_strain, mo->cohesion_strain) || m->volume_correction))
         w = "the material's cohesion_strain or volume_correction differs from the model's";
-    else if (m->plastic == PN_PLASTIC_VON_MISES &&
-             (!pn__close((double)m->yield_stress / E, mo->yield_stress_ratio) ||
-              !pn__close((double)m->hardening_modulus / E, mo->hardening_ratio)))
+    else if (vm && (PN__FIXED(PN_MODEL_PARAM_YIELD_RATIO, (double)m->yield_stress / E, mo->yield_stress_ratio) ||
+                    PN__FIXED(PN_MODEL_PARAM_HARDENING_RATIO, (double)m->hardening_modulus / E, mo->hardening_ratio)))
         w = "the material's yield_stress_pa or hardening_modulus_pa relative to E differs from the model's";
-    else if (m->plastic == PN_PLASTIC_CAM_CLAY &&
-             (!pn__close((double)m->beta, mo->camclay_beta) || !pn__close((double)m->xi, mo->camclay_xi)))
+    else if (cc && (PN__FIXED(PN_MODEL_PARAM_CAMCLAY_BETA, (double)m->beta, mo->camclay_beta) ||
+                    PN__FIXED(PN_MODEL_PARAM_CAMCLAY_XI, (double)m->xi, mo->camclay_xi)))
         w = "the material's camclay_beta or camclay_xi differs from the model's";
+#undef PN__FIXED
     if (!w) return PN_OK;
     if (why) *why = w;
     return PN_ERROR_INVALID_PARAMETER;
@@ -2890,6 +2971,8 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
     const pn_model *e, *rm;
     pn_result r;
     const char *w = NULL;
+    pn_real cond[PN_MODEL_MAX_PARAMS];
+    int i;
     PN_ASSERT(net && desc && m);
     e = desc->energy;
     rm = desc->return_map;
@@ -2930,6 +3013,18 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
         if (why) *why = "pn_pnet_desc.regularizer is not finite";
         return PN_ERROR_NONFINITE;
     }
+    for (i = 0; i < e->n_params; ++i) { /* a conditioned model serves its ranges only */
+        const pn_model_param *q = &e->param[i];
+        double v = pn__model_param_value(m, q->kind), tol = 1e-9 * (fabs(q->lo) + fabs(q->hi)) + 1e-15;
+        if (!(v >= q->lo - tol && v <= q->hi + tol)) {
+            snprintf(net->message, sizeof net->message,
+                     "the material's %s = %.6g is outside the range this model was trained over, [%.6g, %.6g]",
+                     pn__model_param_name(q->kind), v, q->lo, q->hi);
+            if (why) *why = net->message;
+            return PN_ERROR_INVALID_PARAMETER;
+        }
+        cond[i] = (pn_real)v;
+    }
     if (desc->regularizer_form != PN_PNET_REG_DISPLACEMENT && desc->regularizer_form != PN_PNET_REG_STRAIN) {
         if (why) *why = "pn_pnet_desc.regularizer_form is neither PN_PNET_REG_DISPLACEMENT nor PN_PNET_REG_STRAIN";
         return PN_ERROR_INVALID_ARGUMENT;
@@ -2940,6 +3035,7 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
     net->scale = (pn_real)((double)m->E / e->youngs_modulus_train_pa);
     net->reg = desc->regularizer < 0 ? 0 : (desc->regularizer == 0 ? 1 : desc->regularizer) * m->mu;
     net->reg_form = desc->regularizer_form;
+    for (i = 0; i < PN_MODEL_MAX_PARAMS; ++i) net->cond[i] = i < e->n_params ? cond[i] : 0;
     return PN_OK;
 }
 
@@ -2960,39 +3056,61 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
 typedef struct pn__mlp_io {
     int mode, nu, nd, ns; /* inputs, gradient entries, Hessian directions (0: the unit ones) */
     pn_real u[PN_MLP_MAX_WIDTH], m, gm[PN_MLP_MAX_DIFF], hm[PN_MLP_MAX_DIFF * PN_MLP_MAX_DIFF];
-    pn_real seed[3 * PN_MLP_MAX_DIFF]; /* direction c, input i: seed[c nu + i] (ns > 0) */
+    pn_real seed[3 * PN_MLP_MAX_WIDTH]; /* direction c, input i: seed[c nu + i] (ns > 0) */
 } pn__mlp_io;
 
 /* The network at u: its value m, gradient over the first nd inputs gm and, with want_h, the
    Hessian hm over them (nd x nd). With lanes (io mode 1: the inputs handed over; mode 2: the
    results handed back) and ns > 0, the Hessian comes back along the ns directions of seed
    instead, hm[j ns + c] = seed_j^T H seed_c (pn__mlp_lanes): what the caller's chain rule
-   needs, at a fraction of the cost. */
-static pn_result pn__mlp_call(const pn_mlp *mlp, const pn_real *u, int nu, int nd, int want_h, const pn_real *seed,
-                              int ns, pn__mlp_io *io, pn_real *m, pn_real *gm, pn_real *hm) {
-    int i;
-    if (!io || io->mode == 0) return pn_mlp_eval(mlp, u, nd, m, gm, want_h ? hm : NULL);
-    if (io->mode == 1) {
+   needs, at a fraction of the cost. A softplus output (PN_MODEL_OUTPUT_SOFTPLUS) is applied
+   here: m -> log(1 + e^m), g -> sig g, H -> sig H + sig (1 - sig) g g^T, sig = 1/(1 + e^-m). */
+static pn_result pn__mlp_call(const pn_mlp *mlp, int softplus, const pn_real *u, int nu, int nd, int want_h,
+                              const pn_real *seed, int ns, pn__mlp_io *io, pn_real *m, pn_real *gm, pn_real *hm) {
+    int i, j, dirs = 0;
+    pn_real x, sg, gs[3];
+    if (!io || io->mode == 0) {
+        pn_result r = pn_mlp_eval(mlp, u, nd, m, gm, want_h ? hm : NULL);
+        if (r != PN_OK) return r;
+    } else if (io->mode == 1) {
         memcpy(io->u, u, sizeof(pn_real) * (size_t)nu);
         io->nu = nu;
         io->nd = nd;
-        io->ns = want_h && seed && nu <= PN_MLP_MAX_DIFF ? ns : 0;
+        io->ns = want_h && seed && nu <= PN_MLP_MAX_WIDTH ? ns : 0;
         if (io->ns) memcpy(io->seed, seed, sizeof(pn_real) * (size_t)(ns * nu));
         return PN_OK;
+    } else {
+        *m = io->m;
+        for (i = 0; i < nd; ++i) gm[i] = io->gm[i];
+        for (i = 0; want_h && i < (io->ns ? io->ns * io->ns : nd * nd); ++i) hm[i] = io->hm[i];
+        dirs = io->ns;
     }
-    *m = io->m;
-    for (i = 0; i < nd; ++i) gm[i] = io->gm[i];
-    for (i = 0; want_h && i < (io->ns ? io->ns * io->ns : nd * nd); ++i) hm[i] = io->hm[i];
+    if (!softplus) return PN_OK;
+    x = *m;
+    sg = 1 / (1 + PN__EXP(-x));
+    *m = x > 0 ? x + PN__LOG1P(PN__EXP(-x)) : PN__LOG1P(PN__EXP(x));
+    if (want_h && nd > 0) {
+        if (dirs) { /* along the directions: the gradient's component on each */
+            for (j = 0; j < dirs; ++j)
+                for (gs[j] = 0, i = 0; i < nd; ++i) gs[j] += gm[i] * io->seed[j * io->nu + i];
+            for (j = 0; j < dirs; ++j)
+                for (i = 0; i < dirs; ++i) hm[j * dirs + i] = sg * hm[j * dirs + i] + sg * (1 - sg) * gs[j] * gs[i];
+        } else {
+            for (j = 0; j < nd; ++j)
+                for (i = 0; i < nd; ++i) hm[j * nd + i] = sg * hm[j * nd + i] + sg * (1 - sg) * gm[j] * gm[i];
+        }
+    }
+    for (i = 0; i < nd; ++i) gm[i] *= sg;
     return PN_OK;
 }
 
-static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_real *y0, pn_real h,
+static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_real *y0, pn_real h, const pn_real *cond,
                                  int level, pn_real *N, pn_real *gN, pn_real *HN, pn__mlp_io *io) {
-    int nf = pn__model_nf(mo), nr = 2 * nf + 1, d = mo->dim, i, j, l, k;
+    int nf = pn__model_nf(mo), nr = 2 * nf + 1, nu = nr + 1 + mo->n_params, d = mo->dim, i, j, l, k;
     pn_real c = d == 2 ? 1 : (pn_real)1.5, q0, S, s, qj[3] = {0, 0, 0}, qjl[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
     pn_real sj[3], sjl[3][3]; /* qj, qjl zeroed: gcc -O3 cannot see that nf >= 2 fills them */
-    pn_real a[3], a1[3], a2[3], raw[8], u[8], J[7][3], K[7][3][3], m, gm[7], hm[7 * 7];
-    pn_real gr[7], Mj[3], Mjl[3][3], seed[3 * 8];
+    pn_real a[3], a1[3], a2[3], raw[8], u[8 + PN_MODEL_MAX_PARAMS], J[7][3], K[7][3][3], m, gm[7], hm[7 * 7];
+    pn_real gr[7], Mj[3], Mjl[3][3], seed[3 * (8 + PN_MODEL_MAX_PARAMS)];
     pn_result r;
     q0 = y0[0] * y0[0] / d + c * y0[1];
     S = y[0] * y[0] / d + c * y[1] + q0 + (pn_real)(PN__SCALED_EPS * PN__SCALED_EPS);
@@ -3025,6 +3143,7 @@ static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_
     raw[2 * nf] = s;
     raw[2 * nf + 1] = PN__MIN(PN__MAX(h, (pn_real)mo->h_min), (pn_real)mo->h_max);
     for (i = 0; i < nr + 1; ++i) u[i] = (raw[i] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
+    for (i = nr + 1; i < nu; ++i) u[i] = (cond[i - nr - 1] - (pn_real)mo->in_shift[i]) * (pn_real)mo->in_scale[i];
     /* J = d raw / d y (nr x nf) and K = d2 raw / d y2, known before the network: with lanes,
        its Hessian is taken along J's columns (in u), one direction per feature */
     for (k = 0; k < nf; ++k)
@@ -3034,10 +3153,11 @@ static pn_result pn__pnet_scaled(const pn_model *mo, const pn_real *y, const pn_
         }
     for (j = 0; j < nf; ++j) J[2 * nf][j] = sj[j];
     for (j = 0; j < nf; ++j) {
-        for (i = 0; i < nr; ++i) seed[j * (nr + 1) + i] = (pn_real)mo->in_scale[i] * J[i][j];
-        seed[j * (nr + 1) + nr] = 0; /* h is not a function of F */
+        for (i = 0; i < nr; ++i) seed[j * nu + i] = (pn_real)mo->in_scale[i] * J[i][j];
+        for (i = nr; i < nu; ++i) seed[j * nu + i] = 0; /* h and the material are not functions of F */
     }
-    r = pn__mlp_call(&mo->mlp, u, nr + 1, level > 0 ? nr : 0, level > 1, seed, nf, io, &m, gm, hm);
+    r = pn__mlp_call(&mo->mlp, mo->output == PN_MODEL_OUTPUT_SOFTPLUS, u, nu, level > 0 ? nr : 0, level > 1, seed, nf, io,
+                     &m, gm, hm);
     if (r != PN_OK || (io && io->mode == 1)) return r;
     *N = S * m;
     if (level < 1) return PN_OK;
@@ -3084,7 +3204,7 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
     h = PN__MIN(PN__MAX(pt->h, (pn_real)mo->h_min), (pn_real)mo->h_max);
     s = net->scale * (pn_real)mo->out_scale;
     if (pn__model_scaled(mo)) {
-        r = pn__pnet_scaled(mo, f->x, pt->x0, pt->h, level, &out, g, H, io);
+        r = pn__pnet_scaled(mo, f->x, pt->x0, pt->h, net->cond, level, &out, g, H, io);
         if (r != PN_OK || (io && io->mode == 1)) return r;
         for (k = 0; level > 0 && k < nf; ++k) g[k] *= s; /* only what was asked is set */
         for (k = 0; level > 1 && k < nf * nf; ++k) H[k] *= s;
@@ -3094,7 +3214,10 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
             u[nf + i] = (pt->x0[i] - (pn_real)mo->in_shift[nf + i]) * (pn_real)mo->in_scale[nf + i];
         }
         u[2 * nf] = (h - (pn_real)mo->in_shift[2 * nf]) * (pn_real)mo->in_scale[2 * nf];
-        r = pn__mlp_call(&mo->mlp, u, 2 * nf + 1, level > 0 ? nf : 0, level > 1, NULL, 0, io, &out, g, H);
+        for (i = 0; i < mo->n_params; ++i)
+            u[2 * nf + 1 + i] = (net->cond[i] - (pn_real)mo->in_shift[2 * nf + 1 + i]) * (pn_real)mo->in_scale[2 * nf + 1 + i];
+        r = pn__mlp_call(&mo->mlp, mo->output == PN_MODEL_OUTPUT_SOFTPLUS, u, 2 * nf + 1 + mo->n_params, level > 0 ? nf : 0,
+                         level > 1, NULL, 0, io, &out, g, H);
         if (r != PN_OK || (io && io->mode == 1)) return r;
         /* chain rule through u_k = (x_k - x0_k - shift_k) scale_k */
         for (k = 0; level > 0 && k < nf; ++k) g[k] *= s * (pn_real)mo->in_scale[k];
@@ -3244,7 +3367,7 @@ PN__DEF pn_result pn_pnet_energy_lanes(const pn_pnet *net, int n, const pn_pnet_
     pn__features f[PN_MLP_LANES];
     pn__mlp_io io[PN_MLP_LANES];
     float xin[PN_MLP_MAX_WIDTH * L], m[L], gm[PN_MLP_MAX_DIFF * L], hm[PN_MLP_MAX_DIFF * PN_MLP_MAX_DIFF * L];
-    float seed[3 * PN_MLP_MAX_DIFF * L];
+    float seed[3 * PN_MLP_MAX_WIDTH * L];
     int d, dd, level, i, k, first = -1, nu = 0, nd = 0, ns = 0, nh;
     pn_result r, worst = PN_OK;
     PN_ASSERT(net && net->energy && pt && F && status);

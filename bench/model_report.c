@@ -14,6 +14,12 @@
                     step). T is always the analytic return mapping (root find for metal_nh).
      objectivity    max relative change of Psi and grad Psi under a random rotation of F and F0
      Hessian        max |dP/dF - central FD of P| / max |dP/dF| (step 1e-6), 1000 samples
+     least energy   min over samples of Psi(F; F0) - Psi(F0; F0), regularizer on (as simulated),
+                    per unit E: F0 in the box, F within de_box (the box) and with log stretches
+                    anywhere in [-10, 3] (far beyond it, crushed: a Newton step's trial states)
+   Conditioned models (material parameters as inputs) are measured the same way at every
+   point of a grid over their ranges (corners, edge midpoints, centre) and at the points of
+   the single-material models of their family, next to those models.
      cost           ns per prepare (once per F0), per energy + gradient + Hessian, and with the
                     PSD projection
    Return-map models: |log z - log z_ref| against the root find of plastinet.h (mean, max),
@@ -33,6 +39,7 @@ typedef struct energy_figures {
     double net_aligned, lag_aligned, objectivity_psi, objectivity_P, hess_fd;
     double ns_prepare, ns_energy, ns_energy_psd;
     double small_ratio;          /* ratio to lagged at |e0| <= 1e-3, |de| <= 1e-2 */
+    double least_box, least_far; /* min Psi(F) - Psi(F0) / E: F in the box, far beyond */
     int failures;
 } energy_figures;
 
@@ -72,9 +79,9 @@ static double mean(const double *v, int n) {
     return s / n;
 }
 
-static void energy_report(const pn_model *mo, int n, int timing, energy_figures *fg) {
+static void energy_report(const pn_model *mo, const pn_material *mat, int n, int timing, energy_figures *fg) {
     int d = mo->dim, dd = d * d, k, i, j;
-    pn_material m;
+    pn_material m = *mat;
     pn_pnet net, net_reg;
     pn_pnet_desc desc;
     bench_rng rng;
@@ -83,7 +90,6 @@ static void energy_report(const pn_model *mo, int n, int timing, energy_figures 
     double *cst = (double *)malloc(sizeof(double) * (size_t)n);
     double tsum = 0, al_net = 0, al_lag = 0, ex_rel = 0, ex_abs = 0;
     memset(fg, 0, sizeof *fg);
-    pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL);
     memset(&desc, 0, sizeof desc);
     desc.energy = mo;
     desc.return_map = NULL;
@@ -156,6 +162,35 @@ static void energy_report(const pn_model *mo, int n, int timing, energy_figures 
     fg->const_p95 = p95(cst, n) / tsum;
     fg->net_aligned = al_net / n / tsum;
     fg->lag_aligned = al_lag / n / tsum;
+    { /* the least energy, regularizer on: F within the box's step, and anywhere in [-3, 3] */
+        fg->least_box = fg->least_far = HUGE_VAL;
+        for (k = 0; k < n / 10; ++k) {
+            pn_real F0[9], F[9], Fa[9], h, psi0, psi;
+            pn_pnet_point pt;
+            int far;
+            bench_box_sample(&rng, d, mo->e_box, mo->de_box, F0, F, Fa);
+            h = (pn_real)(mo->h_min + (mo->h_max - mo->h_min) * bench_uniform(&rng));
+            if (pn_pnet_prepare(&net_reg, F0, h, &pt, NULL, NULL) != PN_OK ||
+                pn_pnet_energy(&net_reg, &pt, F0, &psi0, NULL, NULL, 0) != PN_OK) {
+                fg->failures++;
+                continue;
+            }
+            for (far = 0; far <= 1; ++far) {
+                if (far) { /* a fresh F, log stretches in [-10, 3]: crushed far beyond the box */
+                    pn_real R1[9], R2[9];
+                    double e[3];
+                    for (i = 0; i < d; ++i) e[i] = -10 + 13 * bench_uniform(&rng);
+                    bench_rotation(&rng, d, R1);
+                    bench_rotation(&rng, d, R2);
+                    bench_compose(d, R1, e, R2, F);
+                }
+                if (pn_pnet_energy(&net_reg, &pt, F, &psi, NULL, NULL, 0) != PN_OK) continue; /* overflow: +inf */
+                psi = (psi - psi0) / m.E;
+                if (far) fg->least_far = fmin(fg->least_far, (double)psi);
+                else fg->least_box = fmin(fg->least_box, (double)psi);
+            }
+        }
+    }
     /* objectivity and the Hessian, with the regularizer on (as simulated) */
     for (k = 0; k < 1000; ++k) {
         pn_real F0[9], F[9], Fa[9], Q[9], QF0[9], QF[9], h, psi1, psi2, P1[9], P2[9], QP1[9];
@@ -307,6 +342,131 @@ static void hidden_of(const pn_model *mo, char *buf, size_t cap) {
         len += (size_t)sprintf(buf + len, l == 1 ? "%d" : "-%d", mo->mlp.size[l]);
 }
 
+/* the material of model mo with its conditioned parameters set to v (pn_model_param units) */
+static int material_at(const pn_model *mo, const double *v, pn_material *m) {
+    pn_material_desc d;
+    int i;
+    memset(&d, 0, sizeof d);
+    d.elastic = mo->elastic, d.plastic = mo->plastic, d.youngs_modulus_pa = (pn_real)mo->youngs_modulus_train_pa;
+    d.poisson_ratio = (pn_real)mo->poisson_ratio, d.friction_angle_deg = (pn_real)mo->friction_angle_deg;
+    d.cohesion_strain = (pn_real)mo->cohesion_strain;
+    d.yield_stress_pa = (pn_real)(mo->yield_stress_ratio * mo->youngs_modulus_train_pa);
+    d.hardening_modulus_pa = (pn_real)(mo->hardening_ratio * mo->youngs_modulus_train_pa);
+    d.camclay_beta = (pn_real)mo->camclay_beta, d.camclay_xi = (pn_real)mo->camclay_xi;
+    for (i = 0; i < mo->n_params; ++i) switch (mo->param[i].kind) {
+        case PN_MODEL_PARAM_POISSON: d.poisson_ratio = (pn_real)v[i]; break;
+        case PN_MODEL_PARAM_FRICTION_DEG: d.friction_angle_deg = (pn_real)v[i]; break;
+        case PN_MODEL_PARAM_COHESION: d.cohesion_strain = (pn_real)v[i]; break;
+        case PN_MODEL_PARAM_YIELD_RATIO: d.yield_stress_pa = (pn_real)(v[i] * mo->youngs_modulus_train_pa); break;
+        case PN_MODEL_PARAM_HARDENING_RATIO: d.hardening_modulus_pa = (pn_real)(v[i] * mo->youngs_modulus_train_pa); break;
+        case PN_MODEL_PARAM_CAMCLAY_BETA: d.camclay_beta = (pn_real)v[i]; break;
+        default: d.camclay_xi = (pn_real)v[i]; break;
+        }
+    return pn_material_init(m, &d, NULL) == PN_OK;
+}
+
+/* a single-material model's value of parameter kind k (pn_model_param units) */
+static double model_value(const pn_model *s, int k) {
+    return k == PN_MODEL_PARAM_POISSON ? s->poisson_ratio
+         : k == PN_MODEL_PARAM_FRICTION_DEG ? s->friction_angle_deg
+         : k == PN_MODEL_PARAM_COHESION ? s->cohesion_strain
+         : k == PN_MODEL_PARAM_YIELD_RATIO ? s->yield_stress_ratio
+         : k == PN_MODEL_PARAM_HARDENING_RATIO ? s->hardening_ratio
+         : k == PN_MODEL_PARAM_CAMCLAY_BETA ? s->camclay_beta : s->camclay_xi;
+}
+
+/* a single-material model of mo's family and dimension trained at parameter values v, or NULL */
+static const pn_model *single_at(const pn_model *mo, const double *v) {
+    int k;
+    for (k = 0; pn_models_all[k]; ++k) {
+        const pn_model *s = pn_models_all[k]();
+        pn_material a;
+        pn_pnet net;
+        pn_pnet_desc nd;
+        if (s->n_params || s->kind != PN_MODEL_ENERGY || s->dim != mo->dim || s->elastic != mo->elastic ||
+            s->plastic != mo->plastic || s->return_map || !material_at(mo, v, &a))
+            continue;
+        memset(&nd, 0, sizeof nd);
+        nd.energy = s;
+        if (pn_pnet_init(&net, &nd, &a, mo->dim, NULL) == PN_OK) return s; /* it serves a: the same material */
+    }
+    return NULL;
+}
+
+/* Conditioned models: the figures at every grid point of their ranges (3 values per parameter:
+   the ends and the middle) and at the points of the single-material models of their family. */
+static int conditioned_report(FILE *f, const char *only, int n, int banner) {
+    int k, fails = 0, header = 0;
+    for (k = 0; pn_models_all[k]; ++k) {
+        const pn_model *mo = pn_models_all[k]();
+        double pts[64][PN_MODEL_MAX_PARAMS];
+        int np = mo->n_params, npts = 1, g, i, j, q;
+        if (!np || mo->kind != PN_MODEL_ENERGY || (only && strcmp(only, mo->name))) continue;
+        for (i = 0; i < np; ++i) npts *= 3;
+        for (g = 0; g < npts; ++g)
+            for (q = g, i = 0; i < np; ++i, q /= 3)
+                pts[g][i] = mo->param[i].lo + 0.5 * (q % 3) * (mo->param[i].hi - mo->param[i].lo);
+        for (j = 0; pn_models_all[j] && npts < 64; ++j) { /* the single-material models' points, once each */
+            const pn_model *s = pn_models_all[j]();
+            pn_material sm;
+            if (s->n_params || s->kind != PN_MODEL_ENERGY || s->dim != mo->dim || s->plastic != mo->plastic ||
+                s->elastic != mo->elastic || s->return_map || pn_model_material(s, 1, &sm, NULL) != PN_OK)
+                continue;
+            for (i = 0; i < np; ++i) pts[npts][i] = model_value(s, mo->param[i].kind);
+            for (g = 0; g < npts; ++g) {
+                for (i = 0; i < np && fabs(pts[g][i] - pts[npts][i]) <= 1e-9 * (fabs(pts[npts][i]) + 1); ++i) {}
+                if (i == np) break;
+            }
+            if (g == npts) ++npts;
+        }
+        if (!banner && !header) {
+            fprintf(f, "\n## Conditioned energies over their parameter ranges\n\n");
+            fprintf(f, "Each row: the conditioned model at one material (the ends and middle of every range, and\n");
+            fprintf(f, "the single-material models' points), measured as above; \"single\" is the single-material\n");
+            fprintf(f, "model trained at that material where one ships, and the conditioned / single ratio of the means.\n\n");
+            fprintf(f, "| model | material | exact at F0 | mean | p95 | lagged mean | ratio | small strains | objectivity Psi / P | Hessian vs FD | least energy: box / far | single: model, mean | conditioned / single | ns E+P+H |\n");
+            fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+            header = 1;
+        }
+        for (g = 0; g < npts; ++g) {
+            energy_figures e, es;
+            pn_material m;
+            const pn_model *s;
+            char mat[128];
+            size_t len = 0;
+            if (!material_at(mo, pts[g], &m)) {
+                fails++;
+                continue;
+            }
+            for (i = 0; i < np; ++i)
+                len += (size_t)snprintf(mat + len, sizeof mat - len, "%s%s %.3g", i ? ", " : "",
+                                        mo->param[i].kind == PN_MODEL_PARAM_POISSON ? "nu"
+                                        : mo->param[i].kind == PN_MODEL_PARAM_FRICTION_DEG ? "phi" : "p",
+                                        pts[g][i]);
+            energy_report(mo, &m, n, !banner && g == 0, &e);
+            fails += e.failures;
+            s = single_at(mo, pts[g]);
+            if (s) energy_report(s, &m, n, 0, &es);
+            if (banner) {
+                fprintf(f, "at %s: mean %.4f, p95 %.4f, ratio to lagged %.3f, small strains %.3f, least energy %.3g / %.3g",
+                        mat, e.net_mean, e.net_p95, e.net_mean / e.lag_mean, e.small_ratio, e.least_box, e.least_far);
+                if (s) fprintf(f, "; %s %.4f", s->name, es.net_mean);
+                fprintf(f, "\n");
+                continue;
+            }
+            fprintf(f, "| %s | %s | %.1e | %.4f | %.4f | %.4f | **%.3f** | %.3f | %.0e / %.0e | %.1e | %.3g / %.3g | ", mo->name,
+                    mat, e.exact_max, e.net_mean, e.net_p95, e.lag_mean, e.net_mean / e.lag_mean, e.small_ratio,
+                    e.objectivity_psi, e.objectivity_P, e.hess_fd, e.least_box, e.least_far);
+            if (s) fprintf(f, "%s, %.4f | %.2f | ", s->name, es.net_mean, e.net_mean / es.net_mean);
+            else fprintf(f, "- | - | ");
+            if (g == 0) fprintf(f, "%.0f |\n", e.ns_energy);
+            else fprintf(f, "|\n");
+            fflush(f);
+        }
+    }
+    return fails;
+}
+
 int main(int argc, char **argv) {
     const char *out = NULL, *only = NULL;
     int n = 100000, banner = 0, k, fails = 0;
@@ -339,15 +499,20 @@ int main(int argc, char **argv) {
         fprintf(f, "Small strains: the ratio to lagged with |e0| <= 1e-3 and |de| <= 1e-2, far below the box,\n");
         fprintf(f, "where a simulation at a realistic E lives (a sand column at 1e7 Pa strains ~1e-4).\n\n");
         fprintf(f, "## Energies\n\n");
-        fprintf(f, "| model | hidden | params | exact at F0 | mean | p95 | lagged mean | lagged p95 | T(F0) mean | ratio | small strains | aligned: net / lagged | objectivity Psi / P | Hessian vs FD | ns prepare | ns E+P+H | ns +PSD |\n");
-        fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        fprintf(f, "Least energy: min of Psi(F) - Psi(F0) per unit E with the regularizer on, F near F0 (the box)\n");
+        fprintf(f, "and with log stretches anywhere in [-10, 3] (crushed far beyond the box); bounded models\n");
+        fprintf(f, "(softplus output) stay above -C:F0 - |C|^2 / (2 mu).\n\n");
+        fprintf(f, "| model | hidden | params | exact at F0 | mean | p95 | lagged mean | lagged p95 | T(F0) mean | ratio | small strains | aligned: net / lagged | objectivity Psi / P | Hessian vs FD | least energy: box / far | ns prepare | ns E+P+H | ns +PSD |\n");
+        fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     }
     for (k = 0; pn_models_all[k]; ++k) {
         const pn_model *mo = pn_models_all[k]();
         energy_figures e;
+        pn_material m;
         char hid[64];
-        if (mo->kind != PN_MODEL_ENERGY || (only && strcmp(only, mo->name))) continue;
-        energy_report(mo, n, !banner, &e);
+        if (mo->kind != PN_MODEL_ENERGY || mo->n_params || (only && strcmp(only, mo->name))) continue;
+        pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL);
+        energy_report(mo, &m, n, !banner, &e);
         fails += e.failures;
         hidden_of(mo, hid, sizeof hid);
         if (banner) {
@@ -361,13 +526,14 @@ int main(int argc, char **argv) {
             fprintf(f, "objectivity: Psi %.1e, grad %.1e; Hessian vs FD of gradient %.1e\n", e.objectivity_psi,
                     e.objectivity_P, e.hess_fd);
         } else {
-            fprintf(f, "| %s | %s | %d | %.1e | %.4f | %.4f | %.4f | %.4f | %.4f | **%.3f** | %.3f | %.4f / %.4f | %.0e / %.0e | %.1e | %.0f | %.0f | %.0f |\n",
+            fprintf(f, "| %s | %s | %d | %.1e | %.4f | %.4f | %.4f | %.4f | %.4f | **%.3f** | %.3f | %.4f / %.4f | %.0e / %.0e | %.1e | %.3g / %.3g | %.0f | %.0f | %.0f |\n",
                     mo->name, hid, params_of(mo), e.exact_max, e.net_mean, e.net_p95, e.lag_mean, e.lag_p95,
                     e.const_mean, e.net_mean / e.lag_mean, e.small_ratio, e.net_aligned, e.lag_aligned, e.objectivity_psi,
-                    e.objectivity_P, e.hess_fd, e.ns_prepare, e.ns_energy, e.ns_energy_psd);
+                    e.objectivity_P, e.hess_fd, e.least_box, e.least_far, e.ns_prepare, e.ns_energy, e.ns_energy_psd);
             fflush(f);
         }
     }
+    fails += conditioned_report(f, only, n, banner);
     if (!banner) {
         fprintf(f, "\n## Learned return mappings (against the root find of plastinet.h)\n\n");
         fprintf(f, "| model | hidden | params | log z error mean | max | T rel. error mean | max | yield residual max | ns learned | ns root find |\n");

@@ -30,6 +30,7 @@ DT = pt.DT
 EL = {"fixed_corotated": 1, "stvk_hencky": 2, "neo_hookean": 3, "neo_hookean_snow": 4}
 PL = {"none": 0, "drucker_prager": 1, "von_mises": 2, "cam_clay": 3}
 ACT = {1: torch.nn.functional.silu, 2: torch.tanh, 3: torch.nn.functional.softplus}
+KIND = {k + 1: name for k, name in enumerate(pt.PARAMS)}   # pn_model_param_kind -> pn_torch.PARAMS
 passed = failed = 0
 
 
@@ -92,8 +93,8 @@ class CModel:
     """A model rebuilt in torch from the numbers the C library holds."""
 
     def __init__(self, lib, i):
-        ints = (ctypes.c_int * 14)()
-        dbl = (ctypes.c_double * 38)()
+        ints = (ctypes.c_int * 20)()
+        dbl = (ctypes.c_double * 46)()
         lib.capi_model_info(i, ints, dbl)
         self.name = lib.capi_model_name(i).decode()
         self.kind, self.dim, nl, act = ints[0], ints[1], ints[2], ints[3]
@@ -106,6 +107,9 @@ class CModel:
         self.out_scale, self.E = dbl[32], dbl[33]
         self.h = (dbl[34], dbl[35])
         self.e_box, self.de_box = dbl[36], dbl[37]
+        # a conditioned model: its parameters (pn_torch.PARAMS names) and ranges, softplus output
+        self.params = [(KIND[ints[16 + k]], dbl[38 + 2 * k], dbl[39 + 2 * k]) for k in range(ints[14])]
+        self.softplus = ints[15] == 1
         self.layers = []
         for l in range(nl):
             W = torch.zeros(self.sizes[l + 1], self.sizes[l], dtype=torch.float32)
@@ -120,14 +124,19 @@ class CModel:
                 u = self.act(u)
         return u
 
-    def energy_N(self, F, F0, h):
+    def out(self, u):
+        m = self.mlp(u)
+        return torch.nn.functional.softplus(m) if self.softplus else m
+
+    def energy_N(self, F, F0, h, prm):
+        """N at F; prm [B, n_params]: a conditioned model's parameter inputs, after h"""
         x, x0 = pt.features_F(F), pt.features_F(F0)
         hc = torch.clamp(h, self.h[0], self.h[1])
-        if len(self.shift) == 2 * x.shape[-1] + 2:   # scaled encoding (pn_torch.scaled_raw)
+        if len(self.shift) - len(self.params) == 2 * x.shape[-1] + 2:   # scaled encoding (pn_torch.scaled_raw)
             raw, S = pt.scaled_raw(x, x0)
-            return self.out_scale * S * self.mlp((torch.cat([raw, hc], -1) - self.shift) * self.scale)
-        raw = torch.cat([x - x0, x0, hc], -1)
-        return self.out_scale * self.mlp((raw - self.shift) * self.scale)
+            return self.out_scale * S * self.out((torch.cat([raw, hc, prm], -1) - self.shift) * self.scale)
+        raw = torch.cat([x - x0, x0, hc, prm], -1)
+        return self.out_scale * self.out((raw - self.shift) * self.scale)
 
     def radius(self, mat, s, h):
         import train  # the ReturnNet formula, with these weights
@@ -192,34 +201,47 @@ def check_models(lib, n=10000):
                    "learned T: max relative |T_C - T_torch| %.2e over %d F (bar 1e-5)" % (err, n))
             check_export(m)
             continue
-        F0 = random_F(n, d, gen, m.e_box)
-        dF = (torch.rand(n, d, d, dtype=DT, generator=gen) * 2 - 1) * m.de_box
-        F = (F0 + dF @ F0).contiguous()     # near F0, in every direction
-        psi_c = torch.zeros(n, dtype=DT)
-        P_c = torch.zeros(n, d, d, dtype=DT)
-        fails = lib.capi_energy(i, n, ptr(F0), ptr(F), ptr(h), ptr(psi_c), ptr(P_c))
-        hh = h.unsqueeze(-1)
-        learned = models[m.rm_index] if m.rm_index >= 0 else None
-        # T(F0) in torch: the analytic map, or this learned return mapping
-        U, s0, V = pt.svd_rot(F0)
-        with torch.no_grad():
-            z0 = learned.project(mat, s0, hh) if learned else pt.return_map(mat, s0, hh)
-        T0 = U @ torch.diag_embed(pt.tau_principal(mat, z0) / s0) @ V.transpose(-1, -2)
-        F0g = F0.clone().requires_grad_(True)
-        (gN0,) = torch.autograd.grad(m.energy_N(F0g, F0, hh).sum(), F0g)
-        C = gN0 - T0
-        Fg = F.clone().requires_grad_(True)
-        N = m.energy_N(Fg, F0, hh).squeeze(-1)
-        CF = (C * Fg).sum((-1, -2))
-        psi_t = N - CF
-        (P_t,) = torch.autograd.grad(psi_t.sum(), Fg)
-        psi_t = psi_t.detach()
-        mag = N.detach().abs() + CF.detach().abs() + 1e-12
-        e_psi = float(((psi_c - psi_t).abs() / mag).max())
-        e_P = rel_err(P_c, P_t, 1e-9 * float(torch.linalg.matrix_norm(P_t).mean()))
-        report(fails == 0 and e_psi <= 1e-5 and e_P <= 1e-5, "model %s" % m.name,
-               "max relative error psi %.2e, grad %.2e over %d inputs (bar 1e-5)" % (e_psi, e_P, n))
+        for point in range(3 if m.params else 1):   # a conditioned model: its low corner, centre, a random point
+            check_energy(lib, models, i, m, mat, n, gen, h, point)
         check_export(m)
+
+
+def check_energy(lib, models, i, m, mat, n, gen, h, point):
+    """Psi and grad Psi of energy model m (at parameter point `point` if conditioned): C against torch"""
+    d = m.dim
+    u = [0.0, 0.5, float(torch.rand(1, dtype=DT, generator=gen))][point]
+    values = torch.tensor([lo + u * (hi - lo) for _, lo, hi in m.params], dtype=DT)
+    prm = values.expand(n, len(m.params))
+    if m.params:
+        mat = pt.with_params(mat, [p[0] for p in m.params], prm)
+    F0 = random_F(n, d, gen, m.e_box)
+    dF = (torch.rand(n, d, d, dtype=DT, generator=gen) * 2 - 1) * m.de_box
+    F = (F0 + dF @ F0).contiguous()     # near F0, in every direction
+    psi_c = torch.zeros(n, dtype=DT)
+    P_c = torch.zeros(n, d, d, dtype=DT)
+    fails = lib.capi_energy(i, ptr(values), n, ptr(F0), ptr(F), ptr(h), ptr(psi_c), ptr(P_c))
+    hh = h.unsqueeze(-1)
+    learned = models[m.rm_index] if m.rm_index >= 0 else None
+    # T(F0) in torch: the analytic map, or this learned return mapping
+    U, s0, V = pt.svd_rot(F0)
+    with torch.no_grad():
+        z0 = learned.project(mat, s0, hh) if learned else pt.return_map(mat, s0, hh)
+    T0 = U @ torch.diag_embed(pt.tau_principal(mat, z0) / s0) @ V.transpose(-1, -2)
+    F0g = F0.clone().requires_grad_(True)
+    (gN0,) = torch.autograd.grad(m.energy_N(F0g, F0, hh, prm).sum(), F0g)
+    C = gN0 - T0
+    Fg = F.clone().requires_grad_(True)
+    N = m.energy_N(Fg, F0, hh, prm).squeeze(-1)
+    CF = (C * Fg).sum((-1, -2))
+    psi_t = N - CF
+    (P_t,) = torch.autograd.grad(psi_t.sum(), Fg)
+    psi_t = psi_t.detach()
+    mag = N.detach().abs() + CF.detach().abs() + 1e-12
+    e_psi = float(((psi_c - psi_t).abs() / mag).max())
+    e_P = rel_err(P_c, P_t, 1e-9 * float(torch.linalg.matrix_norm(P_t).mean()))
+    at = (" at " + ", ".join("%s %.4g" % (p[0], float(v)) for p, v in zip(m.params, values))) if m.params else ""
+    report(fails == 0 and e_psi <= 1e-5 and e_P <= 1e-5, "model %s%s" % (m.name, at),
+           "max relative error psi %.2e, grad %.2e over %d inputs (bar 1e-5)" % (e_psi, e_P, n))
 
 
 def main():

@@ -18,8 +18,9 @@ import torch
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from models import MODELS  # noqa: E402
 import train as tr  # noqa: E402
+import pn_torch as pt  # noqa: E402
 
-FORMAT_VERSION = 2  # 2: pn_mlp carries its array lengths (weight_count, bias_count)
+FORMAT_VERSION = 3  # 2: pn_mlp carries its array lengths (weight_count, bias_count); 3: n_params, param, output
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MODELS_DIR = os.path.join(ROOT, "models")
 ENUM_E = {"stvk_hencky": "PN_ELASTIC_STVK_HENCKY", "neo_hookean": "PN_ELASTIC_NEO_HOOKEAN",
@@ -69,6 +70,9 @@ def export(cfg, quality_path=None):
         else:
             shift = [0.0] * nf + model.m0.tolist() + model.mh.tolist()
             scale = model.sd.tolist() + model.s0.tolist() + model.sh.tolist()
+        if cfg.get("params"):                 # then the material parameters
+            shift += model.mp.tolist()
+            scale += model.sp.tolist()
         out_scale = float(model.out_scale)
         kind = "PN_MODEL_ENERGY"
     else:
@@ -110,6 +114,13 @@ def export(cfg, quality_path=None):
         banner += [
             "   Sampling: half with log singular values uniform in [-%g, %g]^%d, half with |e_hat|" % (cfg["e_box"], cfg["e_box"], d),
             "   log-uniform in [1e-3, 2] (near the yield surface) and tr e in [-%g, %g]; h uniform." % (cfg["e_box"], cfg["e_box"])]
+    if cfg.get("params"):
+        banner += [
+            "   Conditioned: the network also takes %s," % ", ".join(
+                "%s in [%g, %g]" % (pt.PARAMS[p[0]][0], p[1], p[2]) for p in cfg["params"]),
+            "   drawn uniformly per sample; pn_pnet_init accepts any material inside these ranges.",
+            "   Softplus output: N >= 0, so Psi >= -C:F0 - |C|^2 / (2 w mu) with the regularizer on"
+            if cfg.get("output") == "softplus" else "   Linear output."]
     if cfg.get("return_map"):
         banner.append("   Target stresses from the learned return mapping %s (pn_model_%s.h)." % (cfg["return_map"], cfg["return_map"]))
     banner += [
@@ -162,6 +173,10 @@ def export(cfg, quality_path=None):
             ", ".join(str(v) for v in pad([m.weight.numel() for m in lin], 8, 0)),
             ", ".join(str(v) for v in pad([m.bias.numel() for m in lin], 8, 0))),
         c_string(summary),
+        str(len(cfg.get("params", ()))),
+        "{" + ", ".join(["{%s, %s, %s}" % (pt.PARAMS[p[0]][1], g17(p[1]), g17(p[2])) for p in cfg.get("params", ())] +
+                        ["{0, 0, 0}"] * (4 - len(cfg.get("params", ())))) + "}",
+        "PN_MODEL_OUTPUT_SOFTPLUS" if cfg.get("output") == "softplus" else "PN_MODEL_OUTPUT_LINEAR",
     ]
     out.append("PN__DEF const pn_model *pn_model_%s(void) {\n" % name)
     out.append("    static const pn_model m = {\n        " + ",\n        ".join(fields) + "};\n")

@@ -34,12 +34,13 @@ MODELS = {}
 
 
 def _add(name, material, dim, kind="energy", hidden=(32, 32, 32), iters=20000, batch=2048,
-         lr=2e-3, activation="silu", seed=1, return_map=None, encoding="raw", e_box=1.0):
+         lr=2e-3, activation="silu", seed=1, return_map=None, encoding="raw", e_box=1.0,
+         params=(), output="linear"):
     m = MATERIALS[material]
     MODELS[name] = dict(name=name, material=material, mat=m["mat"], dim=dim, kind=kind,
                         hidden=tuple(hidden), iters=iters, batch=batch, lr=lr,
                         activation=activation, seed=seed, h=m["h"], de=m["de"], e_box=e_box,
-                        return_map=return_map, encoding=encoding)
+                        return_map=return_map, encoding=encoding, params=tuple(params), output=output)
 
 
 _add("sand_2d", "sand", 2, encoding="scaled")
@@ -53,3 +54,10 @@ _add("metal_nh_return_2d", "metal_nh", 2, kind="return_map", hidden=(16, 16), it
 _add("metal_nh_return_3d", "metal_nh", 3, kind="return_map", hidden=(16, 16), iters=6000)
 _add("metal_nh_2d", "metal_nh", 2, return_map="metal_nh_return_2d", encoding="scaled", e_box=0.1)
 _add("metal_nh_3d", "metal_nh", 3, return_map="metal_nh_return_3d", encoding="scaled", e_box=0.1)
+
+# Conditioned models (any material in the ranges, no retraining): the parameters that change the
+# return mapping's shape are network inputs, (name, lo, hi) in pn_torch.PARAMS units; the others
+# stay the material's above. The output is a softplus (N >= 0: the energy is bounded below).
+SAND_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 20.0, 45.0))
+_add("sand_any_2d", "sand", 2, encoding="scaled", params=SAND_RANGES, output="softplus")
+_add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus")

@@ -35,6 +35,33 @@ class Material:
         return self.lam + 2 * self.mu / d
 
 
+# The material parameters a conditioned model takes as inputs: name -> (Material attribute,
+# plastinet.h pn_model_param_kind). Plastic stresses are ratios to E (E = 1 in training).
+PARAMS = {
+    "nu": ("nu", "PN_MODEL_PARAM_POISSON"),
+    "friction_deg": ("friction_angle_deg", "PN_MODEL_PARAM_FRICTION_DEG"),
+    "cohesion": ("cohesion_strain", "PN_MODEL_PARAM_COHESION"),
+    "yield": ("yield_stress", "PN_MODEL_PARAM_YIELD_RATIO"),
+    "hardening": ("hardening_modulus", "PN_MODEL_PARAM_HARDENING_RATIO"),
+    "beta": ("beta", "PN_MODEL_PARAM_CAMCLAY_BETA"),
+    "xi": ("xi", "PN_MODEL_PARAM_CAMCLAY_XI"),
+}
+
+
+def with_params(base, names, values):
+    """A copy of material base whose parameters `names` are per sample: values [B, len(names)]
+    (columns in the order of names). Every formula below broadcasts over the batch."""
+    import copy
+    m = copy.copy(base)
+    for i, n in enumerate(names):
+        setattr(m, PARAMS[n][0], values[:, i:i + 1])
+    m.mu = m.E / (2 * (1 + m.nu))
+    m.lam = m.E * m.nu / ((1 + m.nu) * (1 - 2 * m.nu))
+    phi = m.friction_angle_deg
+    m.sin_phi = torch.sin(phi * (math.pi / 180)) if torch.is_tensor(phi) else math.sin(math.radians(phi))
+    return m
+
+
 def dp_alpha(sin_phi, d):
     """Drucker-Prager cone coefficient for the Mohr-Coulomb angle (plastinet.h pn__dp_alpha):
     3D the triaxial-compression fit, 2D the exact in-plane Mohr-Coulomb limit sin(phi) / sqrt(2)."""
@@ -93,7 +120,7 @@ def return_drucker_prager(mat, s):
     rsafe = torch.where(r > 0, r, torch.ones_like(r))
     shear = torch.exp(e - dg * ehat / rsafe + c)
     z = torch.where(dg > 0, shear, s)
-    z = torch.where(tr >= 0, torch.full_like(s, math.exp(c)), z)
+    z = torch.where(tr >= 0, torch.ones_like(s) * (torch.exp(c) if torch.is_tensor(c) else math.exp(c)), z)
     return z
 
 

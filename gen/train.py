@@ -62,7 +62,25 @@ def sample_box(cfg, n, gen):
     h = lo + (hi - lo) * torch.rand(n, 1, dtype=DT, generator=gen)
     A = pt.random_rotations(n, d, gen)
     B = pt.random_rotations(n, d, gen)
-    return torch.exp(e), torch.exp(e + de), h, A, B
+    return torch.exp(e), torch.exp(e + de), h, A, B, sample_params(cfg, n, gen)
+
+
+def sample_params(cfg, n, gen):
+    """A conditioned model's material parameters, uniform over their ranges ([n, P]; [n, 0]
+    for a single material). Drawn after everything else, so a single-material model's
+    samples do not change."""
+    ps = cfg.get("params", ())
+    if not ps:
+        return torch.zeros(n, 0, dtype=DT)
+    lo = torch.tensor([p[1] for p in ps], dtype=DT)
+    hi = torch.tensor([p[2] for p in ps], dtype=DT)
+    return lo + (hi - lo) * torch.rand(n, len(ps), dtype=DT, generator=gen)
+
+
+def material_of(cfg, prm):
+    """The training material, with a conditioned model's parameters per sample."""
+    ps = cfg.get("params", ())
+    return pt.with_params(cfg["mat"], [p[0] for p in ps], prm) if ps else cfg["mat"]
 
 
 # ---- learned return mapping (PlasticityNet Eqs. 12-13) ------------------------------------------
@@ -115,7 +133,7 @@ class ReturnNet(torch.nn.Module):
 def sample_return(cfg, n, gen):
     """Half from the energy's box, half with |e_hat| log-uniform in [1e-3, 2] (near the surface)."""
     d = cfg["dim"]
-    s_box, _, h, _, _ = sample_box(cfg, n, gen)
+    s_box, _, h, _, _, _ = sample_box(cfg, n, gen)
     k = n // 2
     v = torch.randn(k, d, dtype=DT, generator=gen)
     v = v - v.mean(-1, keepdim=True)
@@ -141,41 +159,53 @@ def return_loss(model, mat, s, h):
 
 
 # ---- PlasticityNet energy (Eq. 8) ---------------------------------------------------------------
-# N(F, F0, h) = out_scale * MLP([(x(F) - x(F0)) * sd, (x(F0) - m0) * s0, (h - mh) * sh]) with x the
-# rotation-invariant features of pn_torch.features, so grad_F N = U diag(dN/ds) V^T.
+# N(F, F0, h) = out_scale * MLP([(x(F) - x(F0)) * sd, (x(F0) - m0) * s0, (h - mh) * sh, (p - mp) * sp])
+# with x the rotation-invariant features of pn_torch.features (so grad_F N = U diag(dN/ds) V^T) and
+# p a conditioned model's material parameters. output "softplus": out_scale * softplus(MLP) >= 0.
 
 class EnergyNet(torch.nn.Module):
     def __init__(self, cfg, stats):
         super().__init__()
         self.cfg = cfg
         nx = cfg["dim"] if cfg["dim"] == 3 else 2
-        self.net = mlp(2 * nx + 1 + (cfg.get("encoding") == "scaled"), cfg["hidden"], cfg["activation"])
+        n_in = 2 * nx + 1 + (cfg.get("encoding") == "scaled") + len(cfg.get("params", ()))
+        self.net = mlp(n_in, cfg["hidden"], cfg["activation"])
         for k, v in stats.items():
             self.register_buffer(k, v)
 
-    def forward(self, s, s0, h):
+    def out(self, u):
+        m = self.net(u)
+        return torch.nn.functional.softplus(m) if self.cfg.get("output") == "softplus" else m
+
+    def forward(self, s, s0, h, prm):
         x, x0 = pt.features(s), pt.features(s0)
+        cond = [(prm - self.mp) * self.sp] if prm.shape[-1] else []
         if self.cfg.get("encoding") == "scaled":
             raw, S = pt.scaled_raw(x, x0)
-            u = torch.cat([(raw - self.m0) * self.s0, (h - self.mh) * self.sh], -1)
-            return self.out_scale * S * self.net(u)
-        u = torch.cat([(x - x0) * self.sd, (x0 - self.m0) * self.s0, (h - self.mh) * self.sh], -1)
-        return self.out_scale * self.net(u)
+            u = torch.cat([(raw - self.m0) * self.s0, (h - self.mh) * self.sh] + cond, -1)
+            return self.out_scale * S * self.out(u)
+        u = torch.cat([(x - x0) * self.sd, (x0 - self.m0) * self.s0, (h - self.mh) * self.sh] + cond, -1)
+        return self.out_scale * self.out(u)
 
-    def grad_s(self, s, s0, h, create_graph):
-        """dN/ds at the first slot, with F0 (s0) and h held fixed."""
+    def grad_s(self, s, s0, h, prm, create_graph):
+        """dN/ds at the first slot, with F0 (s0), h and the material held fixed."""
         s = s.detach().requires_grad_(True)
-        N = self.forward(s, s0, h)
+        N = self.forward(s, s0, h, prm)
         (g,) = torch.autograd.grad(N.sum(), s, create_graph=create_graph)
         return g
 
 
 def energy_stats(cfg, mat, learned):
     gen = torch.Generator().manual_seed(12345)
-    s0, s, h, _, _ = sample_box(cfg, 100000, gen)
+    s0, s, h, _, _, prm = sample_box(cfg, 100000, gen)
+    mat = material_of(cfg, prm)
     x, x0 = pt.features(s), pt.features(s0)
     lo, hi = cfg["h"]
     t = pt.target_principal(mat, s, h, learned)
+    ps = cfg.get("params", ())   # parameters to [-1, 1]
+    cond = {} if not ps else dict(
+        mp=torch.tensor([(p[1] + p[2]) / 2 for p in ps], dtype=DT),
+        sp=torch.tensor([2 / (p[2] - p[1]) if p[2] > p[1] else 0.0 for p in ps], dtype=DT))
     if cfg.get("encoding") == "scaled":
         # raw = [(x - x0)/s^p, x0/s^p, s]: one shift and scale per column; errors relative to s
         raw, S = pt.scaled_raw(x, x0)
@@ -183,21 +213,22 @@ def energy_stats(cfg, mat, learned):
         return dict(m0=raw.mean(0), s0=1 / raw.std(0),
                     mh=torch.tensor([(lo + hi) / 2], dtype=DT),
                     sh=torch.tensor([2 / (hi - lo) if hi > lo else 0.0], dtype=DT),
-                    out_scale=torch.sqrt(w.mean()).reshape(1), t_rms=torch.sqrt(w.mean()).reshape(1))
+                    out_scale=torch.sqrt(w.mean()).reshape(1), t_rms=torch.sqrt(w.mean()).reshape(1), **cond)
     return dict(sd=1 / (x - x0).std(0), m0=x0.mean(0), s0=1 / x0.std(0),
                 mh=torch.tensor([(lo + hi) / 2], dtype=DT),
                 sh=torch.tensor([2 / (hi - lo) if hi > lo else 0.0], dtype=DT),
                 out_scale=torch.sqrt((t * t).sum(-1).mean()).reshape(1),
-                t_rms=torch.sqrt((t * t).sum(-1).mean()).reshape(1))
+                t_rms=torch.sqrt((t * t).sum(-1).mean()).reshape(1), **cond)
 
 
-def energy_error(model, mat, learned, s0, s, h, A, B, create_graph=False):
-    """|grad Psi(F, F0) - T(F)|^2 per sample, in the principal frames (see README)."""
+def energy_error(model, mat, learned, s0, s, h, A, B, prm, create_graph=False):
+    """|grad Psi(F, F0) - T(F)|^2 per sample, in the principal frames (see README); mat is the
+    batch's material (material_of), prm its parameter inputs."""
     with torch.no_grad():
         t = pt.target_principal(mat, s, h, learned)
         t0 = pt.target_principal(mat, s0, h, learned)
-    diff = model.grad_s(s, s0, h, create_graph) - t
-    c = model.grad_s(s0, s0, h, create_graph) - t0
+    diff = model.grad_s(s, s0, h, prm, create_graph) - t
+    c = model.grad_s(s0, s0, h, prm, create_graph) - t0
     cross = torch.einsum("bi,bij,bj,bji->b", diff, A, c, B)
     err2 = (diff * diff).sum(-1) + (c * c).sum(-1) - 2 * cross
     if model.cfg.get("encoding") == "scaled":   # relative to the strain scale of the pair
@@ -265,8 +296,8 @@ def batch_loss(cfg, model, learned, it, norm):
     if cfg["kind"] == "return_map":
         s, h = sample_return(cfg, cfg["batch"], gen)
         return return_loss(model, cfg["mat"], s, h)
-    s0, s, h, A, B = sample_box(cfg, cfg["batch"], gen)
-    err2, _ = energy_error(model, cfg["mat"], learned, s0, s, h, A, B, create_graph=True)
+    s0, s, h, A, B, prm = sample_box(cfg, cfg["batch"], gen)
+    err2, _ = energy_error(model, material_of(cfg, prm), learned, s0, s, h, A, B, prm, create_graph=True)
     return err2.mean() / norm
 
 
@@ -331,8 +362,9 @@ def load_trained(cfg):
     return model, learned, state
 
 
-def evaluate(cfg, model, learned, n=100000, seed=777):
-    """Python-side figures on n fresh samples (models/REPORT.md has the C-side ones)."""
+def evaluate(cfg, model, learned, n=100000, seed=777, at=None):
+    """Python-side figures on n fresh samples (models/REPORT.md has the C-side ones); at: a
+    conditioned model's parameter values to hold fixed (else drawn over the ranges)."""
     mat = cfg["mat"]
     gen = torch.Generator().manual_seed(seed)
     if cfg["kind"] == "return_map":
@@ -344,8 +376,11 @@ def evaluate(cfg, model, learned, n=100000, seed=777):
         return dict(log_z_err_mean=float(rel.mean()), log_z_err_max=float(rel.max()))
     errs, lags, consts, tn = [], [], [], []
     for k in range(0, n, 10000):
-        s0, s, h, A, B = sample_box(cfg, 10000, gen)
-        e2, t = energy_error(model, mat, learned, s0, s, h, A, B)
+        s0, s, h, A, B, prm = sample_box(cfg, 10000, gen)
+        if at is not None:
+            prm = torch.tensor([list(at)], dtype=DT).expand(10000, len(at))
+        mat = material_of(cfg, prm)
+        e2, t = energy_error(model, mat, learned, s0, s, h, A, B, prm)
         lag, const = lagged_and_constant_error(mat, learned, s0, s, h, A, B)
         if cfg.get("encoding") == "scaled":   # the same relative measure as energy_error
             _, S = pt.scaled_raw(pt.features(s), pt.features(s0))
@@ -371,6 +406,7 @@ def main():
     ap.add_argument("--hidden", help="override the hidden sizes, e.g. 32,32 (experiments)")
     ap.add_argument("--tag", help="train under another name (experiments)")
     ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--at", help="--eval a conditioned model at these parameter values, e.g. 0.3,30")
     a = ap.parse_args()
     torch.set_num_threads(1)
     cfg = dict(MODELS[a.model])
@@ -383,7 +419,8 @@ def main():
     if a.eval:
         model, learned, state = load_trained(cfg)
         print(cfg["name"], "trained %.0f s, final loss %.4e" % (state["seconds"], state["final_loss"]))
-        for k, v in evaluate(cfg, model, learned).items():
+        at = tuple(float(v) for v in a.at.split(",")) if a.at else None
+        for k, v in evaluate(cfg, model, learned, at=at).items():
             print("  %-16s %.4g" % (k, v))
         return
     train(cfg, a.quiet)

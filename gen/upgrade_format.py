@@ -1,14 +1,16 @@
 #!/usr/bin/python3
-"""Rewrite format-1 model headers (models/pn_model_*.h) as format 2, from their own arrays.
+"""Rewrite format-1 or format-2 model headers (models/pn_model_*.h) as format 3, from their own
+arrays.
 
     /usr/bin/python3 gen/upgrade_format.py models/pn_model_*.h
 
 Format 2 adds the lengths of the weight and bias arrays to the pn_mlp initializer (plastinet.h
 checks them against the layer sizes, so a malformed network is refused instead of read past).
-The weights, the banner and everything else stay byte for byte; the lengths are read from the
-arrays' declarations and must equal the products of the layer sizes. The result is what
-gen/export.py (FORMAT_VERSION 2) writes from the same trained network, without retraining.
-Needs no torch. Headers already at format 2 are left alone.
+The lengths are read from the arrays' declarations and must equal the products of the layer
+sizes. Format 3 appends the material-parameter inputs of a conditioned model and the output
+form: none and linear for every model made before it. The weights, the banner and everything
+else stay byte for byte: the result is what gen/export.py (FORMAT_VERSION 3) writes from the
+same trained network, without retraining. Needs no torch. Format-3 headers are left alone.
 """
 import re
 import sys
@@ -16,8 +18,10 @@ import sys
 
 def upgrade(path):
     src = open(path).read()
+    if "Format version 3 (PN_MODEL_FORMAT_VERSION)" in src:
+        return "already format 3"
     if "Format version 2 (PN_MODEL_FORMAT_VERSION)" in src:
-        return "already format 2"
+        return upgrade_2_to_3(path, src)
     decl = {m.group(1): int(m.group(2)) for m in re.finditer(r"static const float (\w+)\[(\d+)\]", src)}
     init = re.search(r"\{(\d+), \{([\d, ]+)\}, (PN_ACTIVATION_\w+), \{([\w, ]+)\}, \{([\w, ]+)\}\}", src)
     if not init or "Format version 1 (PN_MODEL_FORMAT_VERSION)" not in src:
@@ -40,7 +44,20 @@ def upgrade(path):
     if not sep:
         raise SystemExit("%s: pn_model initializer not found" % path)
     open(path, "w").write(head + "static const pn_model m = {\n        2," + tail)
-    return "format 2 (%d layers)" % n_layers
+    return "format 2 (%d layers); " % n_layers + upgrade_2_to_3(path, open(path).read())
+
+
+def upgrade_2_to_3(path, src):
+    head, sep, tail = src.partition("static const pn_model m = {\n        2,")
+    end = re.search(r'(\n        "[^"\n]*")\};\n', tail)
+    if not sep or not end:
+        raise SystemExit("%s: pn_model initializer not found" % path)
+    tail = tail[:end.end(1)] + (",\n        0,\n        {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}, {0, 0, 0}},"
+                                "\n        PN_MODEL_OUTPUT_LINEAR") + tail[end.end(1):]
+    out = head + "static const pn_model m = {\n        3," + tail
+    out = out.replace("Format version 2 (PN_MODEL_FORMAT_VERSION)", "Format version 3 (PN_MODEL_FORMAT_VERSION)")
+    open(path, "w").write(out)
+    return "format 3"
 
 
 if __name__ == "__main__":

@@ -24,6 +24,13 @@ void capi_model_info(int i, int *ints, double *dbl) {
     ints[13] = -1;
     for (k = 0; m->return_map && pn_models_all[k]; ++k)
         if (!strcmp(pn_models_all[k]()->name, m->return_map)) ints[13] = k;
+    ints[14] = m->n_params; /* a conditioned model: its parameters (kind, range) and output */
+    ints[15] = m->output;
+    for (k = 0; k < PN_MODEL_MAX_PARAMS; ++k) {
+        ints[16 + k] = k < m->n_params ? m->param[k].kind : 0;
+        dbl[38 + 2 * k] = k < m->n_params ? m->param[k].lo : 0;
+        dbl[39 + 2 * k] = k < m->n_params ? m->param[k].hi : 0;
+    }
     for (k = 0; k < 16; ++k) {
         dbl[k] = m->in_shift[k];
         dbl[16 + k] = m->in_scale[k];
@@ -66,11 +73,13 @@ int capi_T(int elastic, int plastic, const double *par, int d, int n, const doub
     return fails;
 }
 
-/* Psi(F; F0, h) and its gradient with model i at E_train, regularizer off (Eq. 8) */
-int capi_energy(int i, int n, const double *F0, const double *F, const double *h, double *psi,
+/* Psi(F; F0, h) and its gradient with model i at E_train, regularizer off (Eq. 8); a
+   conditioned model at its parameter values `values` (pn_model_param units, one per input) */
+int capi_energy(int i, const double *values, int n, const double *F0, const double *F, const double *h, double *psi,
                 double *P) {
     const pn_model *mo = pn_models_all[i]();
     pn_pnet_desc desc;
+    pn_material_desc md;
     pn_material m;
     pn_pnet net;
     int k, j, d = mo->dim, fails = 0;
@@ -79,9 +88,22 @@ int capi_energy(int i, int n, const double *F0, const double *F, const double *h
     desc.regularizer = -1;
     for (j = 0; mo->return_map && pn_models_all[j]; ++j)
         if (!strcmp(pn_models_all[j]()->name, mo->return_map)) desc.return_map = pn_models_all[j]();
-    if (pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL) != PN_OK ||
-        pn_pnet_init(&net, &desc, &m, d, NULL) != PN_OK)
-        return n;
+    memset(&md, 0, sizeof md);
+    md.elastic = mo->elastic, md.plastic = mo->plastic, md.youngs_modulus_pa = mo->youngs_modulus_train_pa;
+    md.poisson_ratio = mo->poisson_ratio, md.friction_angle_deg = mo->friction_angle_deg;
+    md.cohesion_strain = mo->cohesion_strain, md.camclay_beta = mo->camclay_beta, md.camclay_xi = mo->camclay_xi;
+    md.yield_stress_pa = mo->yield_stress_ratio * mo->youngs_modulus_train_pa;
+    md.hardening_modulus_pa = mo->hardening_ratio * mo->youngs_modulus_train_pa;
+    for (k = 0; k < mo->n_params; ++k) switch (mo->param[k].kind) {
+        case PN_MODEL_PARAM_POISSON: md.poisson_ratio = values[k]; break;
+        case PN_MODEL_PARAM_FRICTION_DEG: md.friction_angle_deg = values[k]; break;
+        case PN_MODEL_PARAM_COHESION: md.cohesion_strain = values[k]; break;
+        case PN_MODEL_PARAM_YIELD_RATIO: md.yield_stress_pa = values[k] * mo->youngs_modulus_train_pa; break;
+        case PN_MODEL_PARAM_HARDENING_RATIO: md.hardening_modulus_pa = values[k] * mo->youngs_modulus_train_pa; break;
+        case PN_MODEL_PARAM_CAMCLAY_BETA: md.camclay_beta = values[k]; break;
+        default: md.camclay_xi = values[k]; break;
+        }
+    if (pn_material_init(&m, &md, NULL) != PN_OK || pn_pnet_init(&net, &desc, &m, d, NULL) != PN_OK) return n;
     for (k = 0; k < n; ++k) {
         pn_pnet_point pt;
         if (pn_pnet_prepare(&net, F0 + k * d * d, h[k], &pt, NULL, NULL) != PN_OK ||

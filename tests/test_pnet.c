@@ -744,6 +744,157 @@ PN_TEST(pnet_scaled_encoding) {
     }
 }
 
+
+/* ================================================================================================
+   2d. Conditioned models (material parameters as network inputs, softplus output): Psi against
+      its definition written here (the parameters after h, normalized like every input; N =
+      out_scale softplus(M) (times s^2, scaled)), gradient and Hessian against central
+      differences, the float lanes against the double path, a parameter outside its range
+      refused with its name and range, the parameters wired (another nu, another Psi), and the
+      energy above its analytic lower bound -C:F0 - |C|^2 / (2 w mu) at F far outside the box.
+   ================================================================================================ */
+
+static void t_lanes_block(pn_test_ctx *pn__t, const pn_pnet *net, int dim, int n, pn_test_rng *rng, double r, int bad,
+                          double *worst); /* section 10 */
+
+/* a sand test model taking nu in [0.2, 0.4] and the friction angle in [20, 45] deg */
+static void t_pn_cond_model(t_pn_model *tm, int dim, int scaled, pn_test_rng *rng) {
+    pn_material_desc d1;
+    pn_material m1;
+    pn_model *mo = &tm->model;
+    int size[4], i;
+    t_pn_desc(&d1, T_PN_SAND, 1);
+    pn_material_init(&m1, &d1, NULL);
+    t_pn_model_make_enc(tm, PN_MODEL_ENERGY, dim, &d1, &m1, "t_sand_any", NULL, PN_ACTIVATION_SILU, rng, scaled);
+    mo->n_params = 2;
+    mo->param[0].kind = PN_MODEL_PARAM_POISSON, mo->param[0].lo = 0.2, mo->param[0].hi = 0.4;
+    mo->param[1].kind = PN_MODEL_PARAM_FRICTION_DEG, mo->param[1].lo = 20, mo->param[1].hi = 45;
+    mo->output = PN_MODEL_OUTPUT_SOFTPLUS;
+    for (i = mo->n_inputs; i < mo->n_inputs + 2; ++i) mo->in_shift[i] = i == mo->n_inputs ? 0.3 : 32.5;
+    mo->in_scale[mo->n_inputs] = 10, mo->in_scale[mo->n_inputs + 1] = 0.08;
+    mo->n_inputs += 2;
+    size[0] = mo->n_inputs, size[1] = size[2] = 8, size[3] = 1;
+    t_pn_mlp_random(&mo->mlp, tm->buf, 3, size, PN_ACTIVATION_SILU, 0.5, rng);
+}
+
+PN_TEST(pnet_conditioned) {
+    double worst_psi = 0, worst_g = 0, worst_h = 0, worst_lanes[3] = {0, 0, 0}, worst_bound = HUGE_VAL, wired = 0;
+    long fails = 0, samples = 0, refused = 0;
+    int dim, scaled, i, k;
+    for (dim = 2; dim <= 3; ++dim)
+        for (scaled = 0; scaled <= 1; ++scaled) {
+            const int nf = dim == 2 ? 2 : 3, n2 = dim * dim, n4 = n2 * n2;
+            const double E = 1e5, c = dim == 2 ? 1 : 1.5;
+            t_pn_model tm;
+            pn_material_desc md;
+            pn_material m, m2;
+            pn_pnet net, net2;
+            pn_pnet_desc pd;
+            pn_test_rng rng;
+            const char *why = NULL;
+            rng.s = 3300 + 10 * (unsigned long long)dim + (unsigned long long)scaled;
+            t_pn_cond_model(&tm, dim, scaled, &rng);
+            memset(&pd, 0, sizeof pd);
+            pd.energy = &tm.model;
+            /* outside the ranges: refused, naming the parameter and the range */
+            t_pn_desc(&md, T_PN_SAND, E);
+            md.poisson_ratio = 0.45;
+            pn_material_init(&m, &md, NULL);
+            if (pn_pnet_init(&net, &pd, &m, dim, &why) == PN_ERROR_INVALID_PARAMETER && why &&
+                strstr(why, "poisson_ratio = 0.45") && strstr(why, "[0.2, 0.4]"))
+                ++refused;
+            md.poisson_ratio = 0.3, md.friction_angle_deg = 50;
+            pn_material_init(&m, &md, NULL);
+            if (pn_pnet_init(&net, &pd, &m, dim, &why) == PN_ERROR_INVALID_PARAMETER && why &&
+                strstr(why, "friction_angle_deg = 50") && strstr(why, "[20, 45]"))
+                ++refused;
+            md.cohesion_strain = 1e-3, md.friction_angle_deg = 30; /* not an input: must be the model's */
+            pn_material_init(&m, &md, NULL);
+            refused += pn_pnet_init(&net, &pd, &m, dim, &why) == PN_ERROR_INVALID_PARAMETER;
+            /* inside (the ends included) */
+            md.cohesion_strain = 0, md.poisson_ratio = 0.4, md.friction_angle_deg = 20;
+            pn_material_init(&m2, &md, NULL);
+            fails += pn_pnet_init(&net2, &pd, &m2, dim, NULL) != PN_OK;
+            md.poisson_ratio = 0.25, md.friction_angle_deg = 40;
+            pn_material_init(&m, &md, NULL);
+            fails += pn_pnet_init(&net, &pd, &m, dim, NULL) != PN_OK;
+            for (i = 0; i < 40; ++i) {
+                const double r = i % 4 == 3 ? 1e-2 : 0.5;
+                double R[4][9], s0[3], sv[3], F0[9], F[9], x0[3], x[3], S = 1, sq = 1, pw[3] = {1, 1, 1}, u[12], out;
+                double psi = 0, psi2 = 0, P[9], H[81], fd[81], cf = 0, cc = 0, ref, h = 0;
+                pn_pnet_point pt, pt2;
+                for (k = 0; k < 4; ++k) t_rand_rot(&rng, dim, R[k]);
+                for (k = 0; k < dim; ++k) {
+                    double e0 = pn_test_rng_range(&rng, -r, r);
+                    s0[k] = exp(e0);
+                    sv[k] = exp(e0 + pn_test_rng_range(&rng, -r, r));
+                }
+                t_adb(dim, R[0], s0, R[1], F0);
+                t_adb(dim, R[2], sv, R[3], F);
+                ++samples;
+                if (pn_pnet_prepare(&net, F0, h, &pt, NULL, NULL) != PN_OK ||
+                    pn_pnet_energy(&net, &pt, F, &psi, P, H, 0) != PN_OK ||
+                    pn_pnet_prepare(&net2, F0, h, &pt2, NULL, NULL) != PN_OK ||
+                    pn_pnet_energy(&net2, &pt2, F, &psi2, NULL, NULL, 0) != PN_OK) {
+                    ++fails;
+                    continue;
+                }
+                t_pn_features(dim, s0, x0);
+                t_pn_features(dim, sv, x);
+                if (scaled) {
+                    S = x[0] * x[0] / dim + c * x[1] + x0[0] * x0[0] / dim + c * x0[1] + 1e-12;
+                    sq = sqrt(S), pw[0] = sq, pw[1] = pw[2] = S;
+                }
+                for (k = 0; k < nf; ++k) {
+                    u[k] = ((x[k] - x0[k]) / pw[k] - tm.model.in_shift[k]) * tm.model.in_scale[k];
+                    u[nf + k] = (x0[k] / pw[k] - tm.model.in_shift[nf + k]) * tm.model.in_scale[nf + k];
+                }
+                k = 2 * nf;
+                if (scaled) u[k] = (sq - tm.model.in_shift[k]) * tm.model.in_scale[k], ++k;
+                u[k] = (h - tm.model.in_shift[k]) * tm.model.in_scale[k], ++k;
+                u[k] = (0.25 - tm.model.in_shift[k]) * tm.model.in_scale[k], ++k;
+                u[k] = (40 - tm.model.in_shift[k]) * tm.model.in_scale[k];
+                t_pn_forward(&tm.model.mlp, u, &out);
+                out = out > 0 ? out + log1p(exp(-out)) : log1p(exp(out));
+                for (k = 0; k < n2; ++k) cf += pt.C[k] * F[k], cc += pt.C[k] * pt.C[k];
+                { /* the regularizer (w = 1): Eq. 11 */
+                    double d2 = 0;
+                    for (k = 0; k < n2; ++k) d2 += (F[k] - F0[k]) * (F[k] - F0[k]);
+                    ref = E * tm.model.out_scale * S * out - cf + m.mu / 2 * d2;
+                }
+                t_pn_worst(&worst_psi, fabs(psi - ref) / (fabs(ref) + fabs(cf) + 1e-300) * (scaled ? r * r : 1));
+                wired = fmax(wired, fabs(psi2 - psi) / (fabs(psi) + 1e-300));
+                fails += t_pn_fd(&net, &pt, dim, F, r < 1 ? 1e-2 * r : 5e-4, 0, fd);
+                t_pn_worst(&worst_g, t_pn_rel(n2, fd, P, 0));
+                fails += t_pn_fd(&net, &pt, dim, F, r < 1 ? 1e-2 * r : 5e-4, 1, fd);
+                t_pn_worst(&worst_h, t_pn_rel(n4, fd, H, 0));
+                { /* far beyond the box: Psi >= -C:F0 - |C|^2 / (2 mu) (N >= 0, w = 1) */
+                    double Ff[9], sf[3], psif = 0, cf0 = 0;
+                    for (k = 0; k < dim; ++k) sf[k] = exp(pn_test_rng_range(&rng, -3, 3));
+                    t_adb(dim, R[2], sf, R[3], Ff);
+                    for (k = 0; k < n2; ++k) cf0 += pt.C[k] * F0[k];
+                    if (pn_pnet_energy(&net, &pt, Ff, &psif, NULL, NULL, 0) == PN_OK)
+                        worst_bound = fmin(worst_bound, (psif - (-cf0 - cc / (2 * m.mu))) / (fabs(cf0) + cc / m.mu + E * 1e-12));
+                }
+            }
+            for (i = 0; i < 4; ++i) t_lanes_block(pn__t, &net, dim, PN_MLP_LANES, &rng, i % 2 ? 1e-2 : 0.5, -1, worst_lanes);
+        }
+    PN_REPORT("%ld samples (2D, 3D; raw, scaled): psi vs its definition %.2e, FD grad %.2e, FD hess %.2e; lanes psi "
+              "%.1e, P %.1e, dP/dF %.1e; another material changes psi by up to %.2f; least (Psi - bound) / scale "
+              "%.2e (>= 0); %ld of 12 bad materials refused; failed %ld",
+              samples, worst_psi, worst_g, worst_h, worst_lanes[0], worst_lanes[1], worst_lanes[2], wired, worst_bound,
+              refused, fails);
+    PN_CHECK(fails == 0);
+    PN_CHECK(refused == 12);
+    PN_CHECK_LE(worst_psi, 1e-12);
+    PN_CHECK_LE(worst_g, 1e-5);
+    PN_CHECK_LE(worst_h, 1e-5);
+    PN_CHECK_LE(worst_lanes[1], 1e-4);
+    PN_CHECK_LE(worst_lanes[2], 1e-4);
+    PN_CHECK(wired > 1e-3);
+    PN_CHECK(worst_bound >= -1e-12);
+}
+
 /* ================================================================================================
    3. Exactness at F0: P(F0; F0) = T(F0) = T0 of pn_pnet_prepare, which is the return mapping's
       (analytic for sand, learned for metal), for every regularizer.
@@ -1598,11 +1749,13 @@ static double t_pn_shipped_ratio(const pn_pnet *net, const pn_material *m, const
     return sum_lag > 0 ? sum_net / sum_lag : HUGE_VAL;
 }
 
-static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
+/* an energy model bound to material m (its own, or for a conditioned model any in its ranges):
+   exact at F0, and well below the lagged energy's error in the box and far below it */
+static void t_pn_shipped_energy_at(pn_test_ctx *pn__t, const pn_model *mo, const pn_material *mat, const char *at) {
     const int dim = mo->dim, n2 = dim * dim, ns = 2000;
     double box = mo->e_box > 0 ? mo->e_box : 1, worst_exact = 0, ratio_box;
     long fails = 0;
-    pn_material m;
+    pn_material m = *mat;
     pn_pnet net;
     pn_pnet_desc desc;
     pn_test_rng rng;
@@ -1610,10 +1763,6 @@ static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
     pn_result r;
     int i, k;
     rng.s = 9200;
-    if (pn_model_material(mo, 1, &m, NULL) != PN_OK) {
-        PN_CHECK(!"pn_model_material");
-        return;
-    }
     memset(&desc, 0, sizeof desc);
     desc.energy = mo;
     desc.return_map = mo->return_map ? t_pn_find_model(mo->return_map) : NULL;
@@ -1644,8 +1793,8 @@ static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
         t_pn_worst(&worst_exact, t_pn_rel(n2, P, T0, t_pn_maxabs(n2, T0) + t_pn_maxabs(n2, pt.C)));
     }
     ratio_box = t_pn_shipped_ratio(&net, &m, mo, box, mo->de_box, ns, &rng, &fails, NULL, NULL);
-    PN_REPORT("%s: exact at F0 %.2e (200 samples); mean |grad Psi - T| / that of the lagged energy %.3f "
-              "(%d samples of the training box); failed %ld", mo->name, worst_exact, ratio_box, ns, fails);
+    PN_REPORT("%s%s: exact at F0 %.2e (200 samples); mean |grad Psi - T| / that of the lagged energy %.3f "
+              "(%d samples of the training box); failed %ld", mo->name, at, worst_exact, ratio_box, ns, fails);
     PN_CHECK(fails == 0);
     PN_CHECK_LE(worst_exact, T_PN_EXACT_TOL);
     PN_CHECK_LE(ratio_box, 0.25);
@@ -1657,13 +1806,52 @@ static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
         static const double r0[3] = {1e-2, 1e-3, 1e-4}, r1[3] = {1e-2, 1e-2, 1e-3};
         double rel = 0, lag_rel = 0, ratio = t_pn_shipped_ratio(&net, &m, mo, r0[k], r1[k], ns / 4, &rng, &fails, &rel, &lag_rel);
         int elastic = lag_rel <= 1e-12;
-        PN_REPORT("%s: |e0| <= %.0e, |de| <= %.0e: ratio to lagged %.3f, error / |T| %.2e%s", mo->name, r0[k], r1[k],
+        PN_REPORT("%s%s: |e0| <= %.0e, |de| <= %.0e: ratio to lagged %.3f, error / |T| %.2e%s", mo->name, at, r0[k], r1[k],
                   ratio, rel, !pn__model_scaled(mo) ? " (raw encoding: not checked)" : elastic ? " (elastic: lagged exact)" : "");
         PN_CHECK(fails == 0);
         if (pn__model_scaled(mo)) {
             if (elastic) PN_CHECK_LE(rel, 1e-2);
             else PN_CHECK_LE(ratio, 0.25);
         }
+    }
+}
+
+/* a model at its own material and, conditioned, at every corner of its parameter ranges */
+static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
+    pn_material m;
+    int c, i;
+    if (pn_model_material(mo, 1, &m, NULL) != PN_OK) {
+        PN_CHECK(!"pn_model_material");
+        return;
+    }
+    t_pn_shipped_energy_at(pn__t, mo, &m, "");
+    for (c = 0; mo->n_params && c < 1 << mo->n_params; ++c) {
+        pn_material_desc d;
+        char at[128];
+        size_t len = (size_t)snprintf(at, sizeof at, " at");
+        memset(&d, 0, sizeof d);
+        d.elastic = mo->elastic, d.plastic = mo->plastic, d.youngs_modulus_pa = 1, d.poisson_ratio = mo->poisson_ratio;
+        d.friction_angle_deg = mo->friction_angle_deg, d.cohesion_strain = mo->cohesion_strain;
+        d.yield_stress_pa = mo->yield_stress_ratio, d.hardening_modulus_pa = mo->hardening_ratio;
+        d.camclay_beta = mo->camclay_beta, d.camclay_xi = mo->camclay_xi;
+        for (i = 0; i < mo->n_params; ++i) {
+            double v = c >> i & 1 ? mo->param[i].hi : mo->param[i].lo;
+            switch (mo->param[i].kind) {
+            case PN_MODEL_PARAM_POISSON: d.poisson_ratio = v; break;
+            case PN_MODEL_PARAM_FRICTION_DEG: d.friction_angle_deg = v; break;
+            case PN_MODEL_PARAM_COHESION: d.cohesion_strain = v; break;
+            case PN_MODEL_PARAM_YIELD_RATIO: d.yield_stress_pa = v; break;
+            case PN_MODEL_PARAM_HARDENING_RATIO: d.hardening_modulus_pa = v; break;
+            case PN_MODEL_PARAM_CAMCLAY_BETA: d.camclay_beta = v; break;
+            default: d.camclay_xi = v; break;
+            }
+            len += (size_t)snprintf(at + len, sizeof at - len, " %g", v);
+        }
+        if (pn_material_init(&m, &d, NULL) != PN_OK) {
+            PN_CHECK(!"pn_material_init at a corner");
+            continue;
+        }
+        t_pn_shipped_energy_at(pn__t, mo, &m, at);
     }
 }
 #endif
@@ -1868,6 +2056,7 @@ static const pn_test_case pn_tests_pnet[] = {
     {"pnet_fd", pnet_fd},
     {"pnet_energy_reference", pnet_energy_reference},
     {"pnet_scaled_encoding", pnet_scaled_encoding},
+    {"pnet_conditioned", pnet_conditioned},
     {"pnet_exact_at_F0", pnet_exact_at_F0},
     {"pnet_objectivity_isotropy", pnet_objectivity_isotropy},
     {"pnet_E_scaling", pnet_E_scaling},
