@@ -536,6 +536,15 @@ PN_API pn_result pn_model_check(const pn_model *model, int dim, const char **why
    malformed model) m is untouched and *why (optional) says why. */
 PN_API pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m, const char **why);
 
+/* The same as a description, to change what a conditioned model takes as inputs before
+   pn_material_init (pn_model.param lists them and their ranges), e.g. another friction angle:
+     pn_model_material_desc(pn_model_sand_any_2d(), 1e7, &d); d.friction_angle_deg = 40; */
+PN_API void pn_model_material_desc(const pn_model *model, pn_real E, pn_material_desc *d);
+
+/* Set parameter `kind` (a pn_model_param_kind, in its units: ratios to E are multiplied by
+   d->youngs_modulus_pa) of a description: how tools walk a conditioned model's ranges. */
+PN_API void pn_model_param_set(pn_material_desc *d, int kind, double value);
+
 /* PlasticityNet (Li et al. 2022): the energy
      Psi(F; F0, h) = N(F, F0, h) - (grad_F N(F0, F0, h) - T(F0)) : F + R(F, F0)
    (Eqs. 8 and 11) whose gradient at F = F0 is exactly T(F0) = tau(Z(F0)) F0^-T and approximates
@@ -2893,6 +2902,13 @@ PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *
     pn_result r;
     PN_ASSERT(mo && m);
     if ((r = pn_model_check(mo, 0, why)) != PN_OK) return r;
+    pn_model_material_desc(mo, E, &d);
+    return pn_material_init(m, &d, why);
+}
+
+PN__DEF void pn_model_material_desc(const pn_model *mo, pn_real E, pn_material_desc *dst) {
+    pn_material_desc d;
+    PN_ASSERT(mo && dst);
     memset(&d, 0, sizeof d);
     d.elastic = mo->elastic;
     d.plastic = mo->plastic;
@@ -2904,7 +2920,21 @@ PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *
     d.hardening_modulus_pa = (pn_real)(mo->hardening_ratio * E);
     d.camclay_beta = (pn_real)mo->camclay_beta;
     d.camclay_xi = (pn_real)mo->camclay_xi;
-    return pn_material_init(m, &d, why);
+    *dst = d;
+}
+
+PN__DEF void pn_model_param_set(pn_material_desc *d, int kind, double v) {
+    PN_ASSERT(d);
+    switch (kind) {
+    case PN_MODEL_PARAM_POISSON: d->poisson_ratio = (pn_real)v; break;
+    case PN_MODEL_PARAM_FRICTION_DEG: d->friction_angle_deg = (pn_real)v; break;
+    case PN_MODEL_PARAM_COHESION: d->cohesion_strain = (pn_real)v; break;
+    case PN_MODEL_PARAM_YIELD_RATIO: d->yield_stress_pa = (pn_real)(v * (double)d->youngs_modulus_pa); break;
+    case PN_MODEL_PARAM_HARDENING_RATIO: d->hardening_modulus_pa = (pn_real)(v * (double)d->youngs_modulus_pa); break;
+    case PN_MODEL_PARAM_CAMCLAY_BETA: d->camclay_beta = (pn_real)v; break;
+    case PN_MODEL_PARAM_CAMCLAY_XI: d->camclay_xi = (pn_real)v; break;
+    default: break;
+    }
 }
 
 static int pn__close(double a, double b) { return fabs(a - b) <= 1e-6 * (fabs(a) + fabs(b)) + 1e-12; }
@@ -3015,11 +3045,18 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
     }
     for (i = 0; i < e->n_params; ++i) { /* a conditioned model serves its ranges only */
         const pn_model_param *q = &e->param[i];
-        double v = pn__model_param_value(m, q->kind), tol = 1e-9 * (fabs(q->lo) + fabs(q->hi)) + 1e-15;
+        /* the ends included, to float precision (a float build stores 0.4 as 0.40000001) */
+        double v = pn__model_param_value(m, q->kind), tol = 1e-5 * (fabs(q->lo) + fabs(q->hi)) + 1e-12;
         if (!(v >= q->lo - tol && v <= q->hi + tol)) {
+#ifndef PN_NO_STDIO
             snprintf(net->message, sizeof net->message,
                      "the material's %s = %.6g is outside the range this model was trained over, [%.6g, %.6g]",
                      pn__model_param_name(q->kind), v, q->lo, q->hi);
+#else /* the name without the numbers */
+            strcpy(net->message, "the material's ");
+            strcat(net->message, pn__model_param_name(q->kind));
+            strcat(net->message, " is outside the range this model was trained over (pn_model.param)");
+#endif
             if (why) *why = net->message;
             return PN_ERROR_INVALID_PARAMETER;
         }

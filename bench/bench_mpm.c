@@ -8,7 +8,7 @@
                     [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
                     [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..]
                     [--sweep-runs I,I,..] [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]
-                    [--energy-rise-tol X]
+                    [--energy-rise-tol X] [--materials]
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated (the snow press for at most 0.2 s, while its plate goes 0.08 domain_m deep), at
    most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
@@ -27,6 +27,13 @@
    least an implicit step at 1e-3 s can cost (one Newton and one CG iteration), each further
    CG iteration, and a real step, against the budget docs/validation.md's time bar leaves a step
    (sand: half the fair explicit time, snow: the same).
+
+   --materials: instead, the 2D sand column at friction angles 20, 30, 45 deg and Poisson
+   ratios 0.3, 0.4 (E 1e7 Pa), each against its own explicit reference (the fair step / 4):
+   implicit at --dts (default 1e-4 s, 2 fixed-point passes; 1e-3 s, 4) with the conditioned
+   model pn_model_sand_any_2d, with the lagged energy, and at 30 deg / 0.3 with the
+   single-material sand_2d; mass IoU and the runout (the deposit's half-width at the end,
+   against the reference's). DIR/bench_mpm_materials.md.
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -65,6 +72,7 @@
    limit) is a row that says so, with the figures of the frames it completed. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
+#include "../models/pn_model_sand_any_2d.h"
 
 #define BENCH_FPS 25 /* 0.04 s frames: 1e-4, 1e-3 and 1e-2 s all divide them */
 #define BENCH_MAX_FRAMES 1000
@@ -92,6 +100,7 @@ typedef struct bench_run {
     double mm_mean, mm_min;         /* min/max IoU (1 for identical fields)        */
     double biou_mean;               /* binary occupancy IoU                        */
     int scored;                     /* compared with a reference                   */
+    double runout;                  /* at the end: the largest |x - domain centre| */
 } bench_run;
 
 typedef struct bench_cfg {
@@ -251,6 +260,12 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     }
     r->fail_t = r->sim;
     if (ref) bench_score(r, r->frames_done, NULL, NULL, nodes);
+    { /* the deposit's half-width */
+        size_t p;
+        r->runout = 0;
+        for (p = 0; p < w->n; ++p)
+            if (w->active[p]) r->runout = fmax(r->runout, fabs((double)w->x[p * (size_t)w->dim] - 0.5 * s.domain_m));
+    }
     free(field);
     pn_mpm_destroy(w);
 }
@@ -972,13 +987,90 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
     fclose(f);
 }
 
+/* ---- materials: one conditioned model across friction angles and Poisson ratios ------------- */
+
+static void bench_materials(const bench_cfg *cfg, int n_dts, const double *dts, const int *fps) {
+    static const double phis[3] = {20, 30, 45}, nus[2] = {0.3, 0.4};
+    char path[1024];
+    FILE *md;
+    int a, b, k, frames;
+    snprintf(path, sizeof path, "%s/bench_mpm_materials.md", cfg->out);
+    if (!(md = fopen(path, "w"))) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        exit(1);
+    }
+    fprintf(md, "<!-- written by bench/bench_mpm.c --materials -->\n");
+    fprintf(md, "The 2D sand column (res %d over 1 m, E 1e7 Pa, %.2f s) at three friction angles and two Poisson ratios, "
+                "each against its own explicit reference (the fair step / %d). One conditioned model, "
+                "`pn_model_sand_any_2d`, serves all six; `sand_2d` is trained at 30 deg, 0.3 only. IoU: min/max "
+                "mass IoU mean over frames (soft in brackets); runout: the deposit's half-width at the end over the "
+                "reference's.\n\n", cfg->res[2], cfg->duration[2], BENCH_REF_DIV);
+    fprintf(md, "| friction | nu | energy | dt (s) | FP | min/max IoU (soft) | runout / reference | wall s / sim s | status |\n");
+    fprintf(md, "|---|---|---|---|---|---|---|---|---|\n");
+    for (b = 0; b < 2; ++b)
+        for (a = 0; a < 3; ++a) {
+            pn_ex_scene s;
+            bench_run fair, ref;
+            double *fields, ref_run;
+            size_t nodes;
+            pn_mpm_world *w;
+            const char *why;
+            pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
+            s.res = cfg->res[2];
+            s.model = pn_model_sand_any_2d();
+            s.nu = nus[b], s.friction_deg = phis[a];
+            frames = bench_frames(cfg, &s);
+            if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+                fprintf(stderr, "bench_mpm: %s\n", why);
+                exit(1);
+            }
+            nodes = pn_ex_field_size(w);
+            pn_mpm_destroy(w);
+            fields = (double *)malloc(sizeof(double) * nodes * (size_t)frames);
+            if (!fields || !bench_fair(&s, frames, &fair, NULL)) {
+                fprintf(stderr, "bench_mpm: no stable explicit step at %g deg, nu %g\n", phis[a], nus[b]);
+                exit(1);
+            }
+            memset(&ref, 0, sizeof ref);
+            strcpy(ref.role, "reference");
+            ref.dt = fair.dt / BENCH_REF_DIV;
+            bench_run_scene(&s, &ref, frames, 0, NULL, fields, NULL);
+            ref_run = ref.runout;
+            fprintf(stderr, "  %g deg, nu %g: reference dt %.3g, runout %.4f m\n", phis[a], nus[b], ref.dt, ref_run);
+            fprintf(md, "| %g | %g | explicit (fair) | %.3g | - | - | - | %.3g | |\n", phis[a], nus[b], fair.dt, wall_per_sim(&fair));
+            for (k = 0; k < 3 * n_dts; ++k) {
+                pn_ex_scene sk = s;
+                bench_run r;
+                double ro;
+                int which = k % 3; /* 0 conditioned, 1 lagged, 2 single-material */
+                if (which == 2 && !(phis[a] == 30 && nus[b] == 0.3)) continue;
+                memset(&r, 0, sizeof r);
+                strcpy(r.role, "implicit");
+                r.implicit = 1, r.dt = dts[k / 3], r.fp = fps[k / 3];
+                r.energy = which == 1 ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_PNET;
+                if (which == 2) sk.model = pn_model_sand_2d(), sk.nu = sk.friction_deg = 0;
+                bench_run_scene(&sk, &r, frames, 0, NULL, NULL, fields);
+                ro = r.status == RUN_OK ? r.runout : 0;
+                bench_progress("sand", 2, &r);
+                fprintf(md, "| %g | %g | %s | %.3g | %d | %.3f (%.3f) | %.3f | %.3g | %s |\n", phis[a], nus[b],
+                        which == 0 ? "PlasticityNet, sand_any_2d" : which == 1 ? "lagged" : "PlasticityNet, sand_2d",
+                        r.dt, r.fp, r.mm_mean, r.iou_mean, ref_run > 0 ? ro / ref_run : 0, wall_per_sim(&r), status_name(&r));
+                fflush(md);
+            }
+            free(fields);
+        }
+    fclose(md);
+    fprintf(stderr, "wrote %s\n", path);
+}
+
 static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
                     "       [--dts S,S,..] [--passes N,N,..] [--energies pnet,lagged,dp,stress] [--no-sweep]\n"
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
                     "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n"
-                    "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X] [--energy-rise-tol X]\n");
+                    "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X] [--energy-rise-tol X]\n"
+                    "       [--materials]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -1018,7 +1110,7 @@ int main(int argc, char **argv) {
     static const int fp_full[] = {1, 2, 4}, fp_quick[] = {1, 2};
     static const double Es_full[] = {1e6, 1e7, 1e8, 1e9, 1e10}, Es_quick[] = {1e6, 1e7};
     static double Es_arg[8];
-    int n_Es_arg = 0, sweep_only = 0;
+    int n_Es_arg = 0, sweep_only = 0, materials = 0;
     bench_cfg cfg;
     int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0, n_dts = 0, n_passes = 0, sweep = 1, bad = 0, cost = 0;
     static double dts_arg[8], passes_arg[8];
@@ -1047,6 +1139,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--no-hardening")) cfg.no_hardening = 1;
         else if (!strcmp(a, "--snowball")) cfg.snowball = 1;
         else if (!strcmp(a, "--cost")) cost = 1;
+        else if (!strcmp(a, "--materials")) materials = 1;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
         else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
@@ -1109,6 +1202,14 @@ int main(int argc, char **argv) {
     if (!pn_ex_mkdirs(cfg.out)) {
         fprintf(stderr, "bench_mpm: cannot create the folder %s\n", cfg.out);
         return 1;
+    }
+    if (materials) { /* the material table only */
+        static const double m_dts[] = {1e-4, 1e-3};
+        static const int m_fps[] = {2, 4};
+        int q, m_fp[8];
+        for (q = 0; q < n_dts; ++q) m_fp[q] = n_passes > q ? (int)passes_arg[q] : 2;
+        bench_materials(&cfg, n_dts ? n_dts : 2, n_dts ? dts_arg : m_dts, n_dts ? m_fp : m_fps);
+        return 0;
     }
     if (cost) { /* the cost table only */
         snprintf(path, sizeof path, "%s/bench_mpm_cost.md", cfg.out);

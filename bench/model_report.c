@@ -346,22 +346,8 @@ static void hidden_of(const pn_model *mo, char *buf, size_t cap) {
 static int material_at(const pn_model *mo, const double *v, pn_material *m) {
     pn_material_desc d;
     int i;
-    memset(&d, 0, sizeof d);
-    d.elastic = mo->elastic, d.plastic = mo->plastic, d.youngs_modulus_pa = (pn_real)mo->youngs_modulus_train_pa;
-    d.poisson_ratio = (pn_real)mo->poisson_ratio, d.friction_angle_deg = (pn_real)mo->friction_angle_deg;
-    d.cohesion_strain = (pn_real)mo->cohesion_strain;
-    d.yield_stress_pa = (pn_real)(mo->yield_stress_ratio * mo->youngs_modulus_train_pa);
-    d.hardening_modulus_pa = (pn_real)(mo->hardening_ratio * mo->youngs_modulus_train_pa);
-    d.camclay_beta = (pn_real)mo->camclay_beta, d.camclay_xi = (pn_real)mo->camclay_xi;
-    for (i = 0; i < mo->n_params; ++i) switch (mo->param[i].kind) {
-        case PN_MODEL_PARAM_POISSON: d.poisson_ratio = (pn_real)v[i]; break;
-        case PN_MODEL_PARAM_FRICTION_DEG: d.friction_angle_deg = (pn_real)v[i]; break;
-        case PN_MODEL_PARAM_COHESION: d.cohesion_strain = (pn_real)v[i]; break;
-        case PN_MODEL_PARAM_YIELD_RATIO: d.yield_stress_pa = (pn_real)(v[i] * mo->youngs_modulus_train_pa); break;
-        case PN_MODEL_PARAM_HARDENING_RATIO: d.hardening_modulus_pa = (pn_real)(v[i] * mo->youngs_modulus_train_pa); break;
-        case PN_MODEL_PARAM_CAMCLAY_BETA: d.camclay_beta = (pn_real)v[i]; break;
-        default: d.camclay_xi = (pn_real)v[i]; break;
-        }
+    pn_model_material_desc(mo, (pn_real)mo->youngs_modulus_train_pa, &d);
+    for (i = 0; i < mo->n_params; ++i) pn_model_param_set(&d, mo->param[i].kind, v[i]);
     return pn_material_init(m, &d, NULL) == PN_OK;
 }
 

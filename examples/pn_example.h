@@ -200,6 +200,10 @@ typedef struct pn_ex_scene {
     int no_hardening;            /* snowball: Cam-Clay with h held (no hardening) [0]        */
     double press_m_s;            /* snow press: the plate's speed, downwards [0.4 domain_m/s] */
     int jitter;                  /* particles jittered in their lattice cells [0]           */
+    const pn_model *model;       /* the PlasticityNet model [NULL: the scene's own]          */
+    double nu, friction_deg;     /* another Poisson ratio / friction angle [0: the model's]:
+                                    a PNET energy then needs a model conditioned on them
+                                    (pn_model_sand_any_2d)                                  */
 } pn_ex_scene;
 
 /* Fill s with the defaults above for a scene kind and dimension. */
@@ -232,6 +236,7 @@ PN_EX_UNUSED static double pn_ex_scene_dx(const pn_ex_scene *s) { return s->doma
 PN_EX_UNUSED static double pn_ex_scene_floor(const pn_ex_scene *s) { return PN_EX_WALL_CELLS * pn_ex_scene_dx(s); }
 
 PN_EX_UNUSED static const pn_model *pn_ex_scene_model(const pn_ex_scene *s) {
+    if (s->model) return s->model;
     if (s->kind == PN_EX_SAND_COLUMN) return s->dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
     return s->dim == 2 ? pn_model_snow_2d() : pn_model_snow_3d();
 }
@@ -306,7 +311,14 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
         return PN_ERROR_INVALID_ARGUMENT;
     }
     model = pn_ex_scene_model(s);
-    if ((r = pn_model_material(model, (pn_real)s->E_pa, &m, why)) != PN_OK) return r;
+    if ((r = pn_model_check(model, d, why)) != PN_OK) return r;
+    { /* the model's material, or another Poisson ratio or friction angle */
+        pn_material_desc md;
+        pn_model_material_desc(model, (pn_real)s->E_pa, &md);
+        if (s->nu > 0) md.poisson_ratio = (pn_real)s->nu;
+        if (s->friction_deg > 0) md.friction_angle_deg = (pn_real)s->friction_deg;
+        if ((r = pn_material_init(&m, &md, why)) != PN_OK) return r;
+    }
     if (s->no_hardening) m.camclay_hardening = 0;
     pn_ex__scene_setup(s, &wd, &f);
     if ((r = pn_mpm_fill_count(&wd, &f, &n, why)) != PN_OK) return r;

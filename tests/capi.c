@@ -88,21 +88,8 @@ int capi_energy(int i, const double *values, int n, const double *F0, const doub
     desc.regularizer = -1;
     for (j = 0; mo->return_map && pn_models_all[j]; ++j)
         if (!strcmp(pn_models_all[j]()->name, mo->return_map)) desc.return_map = pn_models_all[j]();
-    memset(&md, 0, sizeof md);
-    md.elastic = mo->elastic, md.plastic = mo->plastic, md.youngs_modulus_pa = mo->youngs_modulus_train_pa;
-    md.poisson_ratio = mo->poisson_ratio, md.friction_angle_deg = mo->friction_angle_deg;
-    md.cohesion_strain = mo->cohesion_strain, md.camclay_beta = mo->camclay_beta, md.camclay_xi = mo->camclay_xi;
-    md.yield_stress_pa = mo->yield_stress_ratio * mo->youngs_modulus_train_pa;
-    md.hardening_modulus_pa = mo->hardening_ratio * mo->youngs_modulus_train_pa;
-    for (k = 0; k < mo->n_params; ++k) switch (mo->param[k].kind) {
-        case PN_MODEL_PARAM_POISSON: md.poisson_ratio = values[k]; break;
-        case PN_MODEL_PARAM_FRICTION_DEG: md.friction_angle_deg = values[k]; break;
-        case PN_MODEL_PARAM_COHESION: md.cohesion_strain = values[k]; break;
-        case PN_MODEL_PARAM_YIELD_RATIO: md.yield_stress_pa = values[k] * mo->youngs_modulus_train_pa; break;
-        case PN_MODEL_PARAM_HARDENING_RATIO: md.hardening_modulus_pa = values[k] * mo->youngs_modulus_train_pa; break;
-        case PN_MODEL_PARAM_CAMCLAY_BETA: md.camclay_beta = values[k]; break;
-        default: md.camclay_xi = values[k]; break;
-        }
+    pn_model_material_desc(mo, (pn_real)mo->youngs_modulus_train_pa, &md);
+    for (k = 0; k < mo->n_params; ++k) pn_model_param_set(&md, mo->param[k].kind, values[k]);
     if (pn_material_init(&m, &md, NULL) != PN_OK || pn_pnet_init(&net, &desc, &m, d, NULL) != PN_OK) return n;
     for (k = 0; k < n; ++k) {
         pn_pnet_point pt;

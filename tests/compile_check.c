@@ -84,6 +84,12 @@ static void smoke_models(void) {
         CHECK(pn_model_check(mo, 0, &why) == (ok_dim ? PN_OK : PN_ERROR_DIMENSION));
         if (!ok_dim) continue;
         CHECK(pn_model_material(mo, 1e6, &m, NULL) == PN_OK);
+        if (mo->n_params) { /* a conditioned model: another material inside its ranges */
+            pn_material_desc md;
+            pn_model_material_desc(mo, 1e6, &md);
+            for (i = 0; i < mo->n_params; ++i) pn_model_param_set(&md, mo->param[i].kind, mo->param[i].hi);
+            CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+        }
         for (i = 0; i < d; ++i) F[i * d + i] = (pn_real)(1 + 0.05 * i);
         F[1] = (pn_real)0.02;
         if (mo->kind == PN_MODEL_RETURN_MAP) {

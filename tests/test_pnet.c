@@ -1829,22 +1829,10 @@ static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
         pn_material_desc d;
         char at[128];
         size_t len = (size_t)snprintf(at, sizeof at, " at");
-        memset(&d, 0, sizeof d);
-        d.elastic = mo->elastic, d.plastic = mo->plastic, d.youngs_modulus_pa = 1, d.poisson_ratio = mo->poisson_ratio;
-        d.friction_angle_deg = mo->friction_angle_deg, d.cohesion_strain = mo->cohesion_strain;
-        d.yield_stress_pa = mo->yield_stress_ratio, d.hardening_modulus_pa = mo->hardening_ratio;
-        d.camclay_beta = mo->camclay_beta, d.camclay_xi = mo->camclay_xi;
+        pn_model_material_desc(mo, 1, &d);
         for (i = 0; i < mo->n_params; ++i) {
             double v = c >> i & 1 ? mo->param[i].hi : mo->param[i].lo;
-            switch (mo->param[i].kind) {
-            case PN_MODEL_PARAM_POISSON: d.poisson_ratio = v; break;
-            case PN_MODEL_PARAM_FRICTION_DEG: d.friction_angle_deg = v; break;
-            case PN_MODEL_PARAM_COHESION: d.cohesion_strain = v; break;
-            case PN_MODEL_PARAM_YIELD_RATIO: d.yield_stress_pa = v; break;
-            case PN_MODEL_PARAM_HARDENING_RATIO: d.hardening_modulus_pa = v; break;
-            case PN_MODEL_PARAM_CAMCLAY_BETA: d.camclay_beta = v; break;
-            default: d.camclay_xi = v; break;
-            }
+            pn_model_param_set(&d, mo->param[i].kind, v);
             len += (size_t)snprintf(at + len, sizeof at - len, " %g", v);
         }
         if (pn_material_init(&m, &d, NULL) != PN_OK) {
