@@ -667,6 +667,25 @@ static void rom_embed(pn_test_ctx *pn__t) {
    projection points, at the full-order step) must stay within 1% relative L2 position error
    (the paper's measure; its cylinder reaches < 1% with 10 points) and its occupancy lattice
    must be the training points. */
+/* the cylinder scene's instance `in` as a full-order MPM world (fixed corotated, sticky
+   walls, its drives), its points in X; returns the point count (0 on failure) */
+static size_t t_rom_cylinder_mpm(const pn_rs_scene *s, const pn_rs_instance *in, pn_mpm_world **mw, double *X, size_t cap) {
+    pn_mpm_desc wd;
+    pn_material_desc md;
+    pn_material mat;
+    int g, i;
+    memset(&wd, 0, sizeof wd);
+    wd.dim = 3, wd.dx_m = s->dx, wd.boundary = PN_MPM_BOUNDARY_STICKY, wd.max_particles = cap;
+    for (i = 0; i < 3; ++i) wd.res[i] = s->res[i], wd.gravity[i] = in->gravity[i];
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = s->youngs_pa;
+    md.poisson_ratio = s->poisson;
+    *mw = NULL;
+    if (pn_mpm_create(&wd, mw, NULL) != PN_OK || pn_material_init(&mat, &md, NULL) != PN_OK) return 0;
+    g = pn_mpm_add_group(*mw, &mat, s->density);
+    return pn_rs_setup(*mw, g, s, in, 1, NULL, X, cap);
+}
+
 static void rom_cylinder_vs_mpm(pn_test_ctx *pn__t) {
     const pn_rom_model *m = pn_rom_model_cylinder();
     pn_rs_scene s = pn_rs_get(PN_RS_CYLINDER, 1);
@@ -674,26 +693,15 @@ static void rom_cylinder_vs_mpm(pn_test_ctx *pn__t) {
     size_t cap = pn_rs_points(&s, 1, NULL, 0), n, p;
     double *X = (double *)malloc(sizeof(double) * 3 * cap), *L = (double *)malloc(sizeof(double) * 3 * cap), se = 0, sn = 0;
     float *x = (float *)malloc(sizeof(float) * 3 * cap);
-    pn_mpm_desc wd;
     pn_mpm_world *mw = NULL;
-    pn_material_desc md;
-    pn_material mat;
     pn_rom_desc desc;
     pn_rom_world *w = NULL, *wi = NULL;
     pn_real dts;
     double sei = 0;
-    int g, i, f, k, nsub, same = 1;
+    int f, k, nsub, same = 1;
     PN_CHECK(in.test == 1);
-    memset(&wd, 0, sizeof wd);
-    wd.dim = 3, wd.dx_m = s.dx, wd.boundary = PN_MPM_BOUNDARY_STICKY, wd.max_particles = cap;
-    for (i = 0; i < 3; ++i) wd.res[i] = s.res[i], wd.gravity[i] = in.gravity[i];
-    memset(&md, 0, sizeof md);
-    md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = s.youngs_pa;
-    md.poisson_ratio = s.poisson;
-    PN_CHECK(pn_mpm_create(&wd, &mw, NULL) == PN_OK && pn_material_init(&mat, &md, NULL) == PN_OK);
+    n = t_rom_cylinder_mpm(&s, &in, &mw, X, cap);
     if (!mw) return;
-    g = pn_mpm_add_group(mw, &mat, s.density);
-    n = pn_rs_setup(mw, g, &s, &in, 1, NULL, X, cap);
     PN_CHECK(n == 1600 && pn_rom_lattice(m, 1, NULL, 0) == n);
     pn_rom_lattice(m, 1, L, n);
     for (p = 0; p < 3 * n; ++p) same &= fabs(L[p] - X[p]) < 1e-8; /* the header's cells come from float32 X */
@@ -750,21 +758,10 @@ static void rom_drive_as_mpm(pn_test_ctx *pn__t) {
     size_t cap = pn_rs_points(&s, 1, NULL, 0), n, p, c, held = 0, region = 0, agree = 0, agree_r = 0;
     double *X = (double *)malloc(sizeof(double) * 3 * cap);
     unsigned char *rest = (unsigned char *)calloc(cap, 1);
-    pn_mpm_desc wd;
     pn_mpm_world *mw = NULL;
-    pn_material_desc md;
-    pn_material mat;
-    int g, i, only;
-    memset(&wd, 0, sizeof wd);
-    wd.dim = 3, wd.dx_m = s.dx, wd.boundary = PN_MPM_BOUNDARY_STICKY, wd.max_particles = cap;
-    for (i = 0; i < 3; ++i) wd.res[i] = s.res[i], wd.gravity[i] = in.gravity[i];
-    memset(&md, 0, sizeof md);
-    md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = s.youngs_pa;
-    md.poisson_ratio = s.poisson;
-    PN_CHECK(pn_mpm_create(&wd, &mw, NULL) == PN_OK && pn_material_init(&mat, &md, NULL) == PN_OK);
+    int only;
+    n = t_rom_cylinder_mpm(&s, &in, &mw, X, cap);
     if (!mw) return;
-    g = pn_mpm_add_group(mw, &mat, s.density);
-    n = pn_rs_setup(mw, g, &s, &in, 1, NULL, X, cap);
     PN_CHECK(pn_mpm_step_explicit(mw, s.frame_dt / 20, NULL) == PN_OK);
     for (p = 0; p < n; ++p) {
         rest[p] = mw->v[3 * p] == 0 && mw->v[3 * p + 1] == 0 && mw->v[3 * p + 2] == 0;
