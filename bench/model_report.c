@@ -425,10 +425,12 @@ static int conditioned_report(FILE *f, const char *only, int n, int banner) {
                 continue;
             }
             for (i = 0; i < np; ++i)
+            {
+                static const char *const label[] = {"?", "nu", "phi", "c", "sY/E", "K/E", "beta", "xi"};
+                int kd = mo->param[i].kind;
                 len += (size_t)snprintf(mat + len, sizeof mat - len, "%s%s %.3g", i ? ", " : "",
-                                        mo->param[i].kind == PN_MODEL_PARAM_POISSON ? "nu"
-                                        : mo->param[i].kind == PN_MODEL_PARAM_FRICTION_DEG ? "phi" : "p",
-                                        pts[g][i]);
+                                        label[kd >= 1 && kd <= 7 ? kd : 0], pts[g][i]);
+            }
             energy_report(mo, &m, n, !banner && g == 0, &e);
             fails += e.failures;
             s = single_at(mo, pts[g]);
