@@ -76,7 +76,7 @@ def main():
                 st = torch.load(p)
                 print("%-22s %6.0f s  %6d iterations  final loss %.4g" % (n, st["seconds"], MODELS[n]["iters"], st["final_loss"]))
         return
-    names = a.names or list(MODELS) + ROM_MODELS
+    names = a.names or [n for n in MODELS if MODELS[n]["ship"]] + ROM_MODELS
     for n in names:
         if n not in MODELS and n not in ROM_MODELS:
             sys.exit("unknown model %s; known: %s" % (n, " ".join(list(MODELS) + ROM_MODELS)))

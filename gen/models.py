@@ -35,12 +35,13 @@ MODELS = {}
 
 def _add(name, material, dim, kind="energy", hidden=(32, 32, 32), iters=20000, batch=2048,
          lr=2e-3, activation="silu", seed=1, return_map=None, encoding="raw", e_box=1.0,
-         params=(), output="linear"):
+         params=(), output="linear", ship=True):
     m = MATERIALS[material]
     MODELS[name] = dict(name=name, material=material, mat=m["mat"], dim=dim, kind=kind,
                         hidden=tuple(hidden), iters=iters, batch=batch, lr=lr,
                         activation=activation, seed=seed, h=m["h"], de=m["de"], e_box=e_box,
-                        return_map=return_map, encoding=encoding, params=tuple(params), output=output)
+                        return_map=return_map, encoding=encoding, params=tuple(params), output=output,
+                        ship=ship)
 
 
 _add("sand_2d", "sand", 2, encoding="scaled")
@@ -58,14 +59,20 @@ _add("metal_nh_3d", "metal_nh", 3, return_map="metal_nh_return_3d", encoding="sc
 # Conditioned models (any material in the ranges, no retraining): the parameters that change the
 # return mapping's shape are network inputs, (name, lo, hi) in pn_torch.PARAMS units; the others
 # stay the material's above. The output is a softplus (N >= 0: the energy is bounded below).
+# ship=False: not in models/ yet (it misses a bar of tests/test_pnet.c, see models/README.md);
+# `make models` leaves it out, `make models MODEL=name` makes it.
 SAND_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 20.0, 45.0))
 _add("sand_any_2d", "sand", 2, encoding="scaled", params=SAND_RANGES, output="softplus")
-# 3D: 20000 iterations left the small-strain ratio at 0.28 at (0.2, 45 deg), above the 0.25 bar
-_add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000)
+# 3D: the small-strain ratio at (nu 0.2, 45 deg) is 0.28 after 20000 iterations, 0.27 after
+# 40000 (22 min): above the 0.25 bar there, everything else met
+_add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000, ship=False)
 # snow: xi <= 3 keeps p0 = kappa sinh(xi 0.15) < kappa / 2 over h in [-0.15, 0] (the tip exists)
 SNOW_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 30.0, 50.0), ("beta", 0.1, 0.5), ("xi", 1.5, 3.0))
-_add("snow_any_2d", "snow", 2, params=SNOW_RANGES, output="softplus")
-_add("snow_any_3d", "snow", 3, params=SNOW_RANGES, output="softplus")
+_add("snow_any_2d", "snow", 2, params=SNOW_RANGES, output="softplus", ship=False)
+_add("snow_any_3d", "snow", 3, params=SNOW_RANGES, output="softplus", ship=False)
 METAL_RANGES = (("nu", 0.2, 0.4), ("yield", 1e-3, 1e-2), ("hardening", 0.0, 0.05))
-_add("metal_any_2d", "metal", 2, encoding="scaled", e_box=0.1, params=METAL_RANGES, output="softplus")
-_add("metal_any_3d", "metal", 3, encoding="scaled", e_box=0.1, params=METAL_RANGES, output="softplus")
+# metal: at 20000 iterations the box ratio is <= 0.106 over the grid, but near-elastic pairs
+# (few plastic) leave the network's 0.3-1 % error floor far above the lagged energy's (exact
+# when elastic), and at its own point it is 1.7x metal_2d
+_add("metal_any_2d", "metal", 2, encoding="scaled", e_box=0.1, params=METAL_RANGES, output="softplus", ship=False)
+_add("metal_any_3d", "metal", 3, encoding="scaled", e_box=0.1, params=METAL_RANGES, output="softplus", ship=False)
