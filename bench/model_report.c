@@ -379,20 +379,26 @@ static const pn_model *single_at(const pn_model *mo, const double *v) {
     return NULL;
 }
 
-/* Conditioned models: the figures at every grid point of their ranges (3 values per parameter:
-   the ends and the middle) and at the points of the single-material models of their family. */
+/* Conditioned models: the figures at every grid point of their ranges (3 values per parameter,
+   the ends and the middle; with 4 parameters the corners and the centre) and at the points of
+   the single-material models of their family. */
 static int conditioned_report(FILE *f, const char *only, int n, int banner) {
     int k, fails = 0, header = 0;
     for (k = 0; pn_models_all[k]; ++k) {
         const pn_model *mo = pn_models_all[k]();
-        double pts[64][PN_MODEL_MAX_PARAMS];
-        int np = mo->n_params, npts = 1, g, i, j, q;
+        double pts[96][PN_MODEL_MAX_PARAMS];
+        int np = mo->n_params, npts = 1, g, i, j, q, per = np <= 3 ? 3 : 2;
         if (!np || mo->kind != PN_MODEL_ENERGY || (only && strcmp(only, mo->name))) continue;
-        for (i = 0; i < np; ++i) npts *= 3;
+        /* up to 3 parameters: ends and middles (3^k points); more: the 2^k corners and the centre */
+        for (i = 0; i < np; ++i) npts *= per;
         for (g = 0; g < npts; ++g)
-            for (q = g, i = 0; i < np; ++i, q /= 3)
-                pts[g][i] = mo->param[i].lo + 0.5 * (q % 3) * (mo->param[i].hi - mo->param[i].lo);
-        for (j = 0; pn_models_all[j] && npts < 64; ++j) { /* the single-material models' points, once each */
+            for (q = g, i = 0; i < np; ++i, q /= per)
+                pts[g][i] = mo->param[i].lo + (q % per) / (per - 1.0) * (mo->param[i].hi - mo->param[i].lo);
+        if (per == 2) {
+            for (i = 0; i < np; ++i) pts[npts][i] = 0.5 * (mo->param[i].lo + mo->param[i].hi);
+            ++npts;
+        }
+        for (j = 0; pn_models_all[j] && npts < 96; ++j) { /* the single-material models' points, once each */
             const pn_model *s = pn_models_all[j]();
             pn_material sm;
             if (s->n_params || s->kind != PN_MODEL_ENERGY || s->dim != mo->dim || s->plastic != mo->plastic ||
@@ -407,9 +413,10 @@ static int conditioned_report(FILE *f, const char *only, int n, int banner) {
         }
         if (!banner && !header) {
             fprintf(f, "\n## Conditioned energies over their parameter ranges\n\n");
-            fprintf(f, "Each row: the conditioned model at one material (the ends and middle of every range, and\n");
-            fprintf(f, "the single-material models' points), measured as above; \"single\" is the single-material\n");
-            fprintf(f, "model trained at that material where one ships, and the conditioned / single ratio of the means.\n\n");
+            fprintf(f, "Each row: the conditioned model at one material (the ends and middle of every range; with four\n");
+            fprintf(f, "parameters the corners and the centre; and the single-material models' points), measured as above;\n");
+            fprintf(f, "\"single\" is the single-material model trained at that material where one ships, and the\n");
+            fprintf(f, "conditioned / single ratio of the means.\n\n");
             fprintf(f, "| model | material | exact at F0 | mean | p95 | lagged mean | ratio | small strains | objectivity Psi / P | Hessian vs FD | least energy: box / far | single: model, mean | conditioned / single | ns E+P+H |\n");
             fprintf(f, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
             header = 1;

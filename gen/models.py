@@ -68,8 +68,8 @@ _add("sand_any_2d", "sand", 2, encoding="scaled", params=SAND_RANGES, output="so
 _add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000, ship=False)
 # snow: xi <= 3 keeps p0 = kappa sinh(xi 0.15) < kappa / 2 over h in [-0.15, 0] (the tip exists)
 SNOW_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 30.0, 50.0), ("beta", 0.1, 0.5), ("xi", 1.5, 3.0))
-_add("snow_any_2d", "snow", 2, params=SNOW_RANGES, output="softplus", ship=False)
-_add("snow_any_3d", "snow", 3, params=SNOW_RANGES, output="softplus", ship=False)
+_add("snow_any_2d", "snow", 2, params=SNOW_RANGES, output="softplus")
+_add("snow_any_3d", "snow", 3, params=SNOW_RANGES, output="softplus")
 METAL_RANGES = (("nu", 0.2, 0.4), ("yield", 1e-3, 1e-2), ("hardening", 0.0, 0.05))
 # metal: at 20000 iterations the box ratio is <= 0.106 over the grid, but near-elastic pairs
 # (few plastic) leave the network's 0.3-1 % error floor far above the lagged energy's (exact
