@@ -1897,6 +1897,8 @@ static void t_lanes_block(pn_test_ctx *pn__t, const pn_pnet *net, int dim, int n
     double F[PN_MLP_LANES * 9], psi[PN_MLP_LANES], P[PN_MLP_LANES * 9], H[PN_MLP_LANES * 81];
     double rpsi[PN_MLP_LANES], rP[PN_MLP_LANES * 9], rH[PN_MLP_LANES * 81];
     pn_result st[PN_MLP_LANES], rst[PN_MLP_LANES];
+    memset(F, 0, sizeof F); /* gcc -O1 cannot see that n >= 1 fills what the call reads */
+    for (i = 0; i < PN_MLP_LANES; ++i) ptp[i] = &pt[i];
     for (i = 0; i < n; ++i) {
         double R[4][9], s0[3], sv[3], F0[9];
         for (k = 0; k < 4; ++k) t_rand_rot(rng, dim, R[k]);
