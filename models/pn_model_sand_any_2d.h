@@ -17,17 +17,16 @@
    seed 1, one thread; final loss 0.01168 (mean |grad Psi - T|^2 / mean |T|^2).
 
    Quality (bench/model_report.c on fresh samples; models/REPORT.md):
-     at nu 0.2, phi 20: mean 0.0394, p95 0.1511, ratio to lagged 0.049, small strains 0.113, least energy -0.199 / -1.12
-     at nu 0.3, phi 20: mean 0.0233, p95 0.0909, ratio to lagged 0.046, small strains 0.119, least energy -0.282 / -1.57
-     at nu 0.4, phi 20: mean 0.0257, p95 0.1052, ratio to lagged 0.111, small strains 0.101, least energy -0.524 / -3.3
-     at nu 0.2, phi 32.5: mean 0.0292, p95 0.1068, ratio to lagged 0.042, small strains 0.153, least energy -0.201 / -1.11
-     at nu 0.3, phi 32.5: mean 0.0202, p95 0.0727, ratio to lagged 0.046, small strains 0.151, least energy -0.282 / -1.57
-     at nu 0.4, phi 32.5: mean 0.0237, p95 0.0868, ratio to lagged 0.114, small strains 0.115, least energy -0.525 / -3.2
-     at nu 0.2, phi 45: mean 0.0291, p95 0.1031, ratio to lagged 0.045, small strains 0.180, least energy -0.201 / -1.14
-     at nu 0.3, phi 45: mean 0.0227, p95 0.0836, ratio to lagged 0.055, small strains 0.170, least energy -0.281 / -1.6
-     at nu 0.4, phi 45: mean 0.0256, p95 0.0917, ratio to lagged 0.131, small strains 0.122, least energy -0.526 / -3.17
-     at nu 0.3, phi 30: mean 0.0202, p95 0.0730, ratio to lagged 0.045, small strains 0.146, least energy -0.282 / -1.57; sand_2d 0.0220
-     at nu 0.3, phi 30: mean 0.0202, p95 0.0730, ratio to lagged 0.045, small strains 0.146, least energy -0.282 / -1.57; sand_2d 0.0220
+     at nu 0.2, phi 20: mean 0.0394, p95 0.1511, ratio to lagged 0.049, small strains 0.113, least energy -0.176 / -0.674
+     at nu 0.3, phi 20: mean 0.0233, p95 0.0909, ratio to lagged 0.046, small strains 0.119, least energy -0.265 / -1.09
+     at nu 0.4, phi 20: mean 0.0257, p95 0.1052, ratio to lagged 0.111, small strains 0.101, least energy -0.447 / -2.52
+     at nu 0.2, phi 32.5: mean 0.0292, p95 0.1068, ratio to lagged 0.042, small strains 0.153, least energy -0.186 / -0.69
+     at nu 0.3, phi 32.5: mean 0.0202, p95 0.0727, ratio to lagged 0.046, small strains 0.151, least energy -0.267 / -1.07
+     at nu 0.4, phi 32.5: mean 0.0237, p95 0.0868, ratio to lagged 0.114, small strains 0.115, least energy -0.454 / -2.35
+     at nu 0.2, phi 45: mean 0.0291, p95 0.1031, ratio to lagged 0.045, small strains 0.180, least energy -0.184 / -0.69
+     at nu 0.3, phi 45: mean 0.0227, p95 0.0836, ratio to lagged 0.055, small strains 0.170, least energy -0.262 / -1.06
+     at nu 0.4, phi 45: mean 0.0256, p95 0.0917, ratio to lagged 0.131, small strains 0.122, least energy -0.457 / -2.3
+     at nu 0.3, phi 30: mean 0.0202, p95 0.0730, ratio to lagged 0.045, small strains 0.146, least energy -0.267 / -1.08; sand_2d 0.0220
 
    Use: #include "plastinet.h" first, then this header; the weights are compiled where
    PLASTINET_IMPLEMENTATION is defined. pn_model_sand_any_2d() returns the description.
