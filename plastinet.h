@@ -418,8 +418,9 @@ PN_API pn_result pn_lagged_energy(const pn_material *m, int dim, const pn_real *
 /* Layout version of the pn_model structs written by gen/export.py; a model of another version
    is refused with PN_ERROR_FORMAT. Version 2 added the array lengths of pn_mlp (weight_count,
    bias_count), checked against the layer sizes; version 3 the material parameters a model
-   takes as inputs and the output form (gen/upgrade_format.py converts versions 1 and 2). */
-#define PN_MODEL_FORMAT_VERSION 3
+   takes as inputs and the output form; version 4 the base energy (gen/upgrade_format.py
+   converts versions 1 to 3). */
+#define PN_MODEL_FORMAT_VERSION 4
 #define PN_MODEL_MAX_PARAMS 4   /* material parameters a conditioned model takes as inputs */
 #define PN_MLP_MAX_LAYERS 8     /* linear layers */
 #define PN_MLP_MAX_WIDTH 64     /* units per layer (inputs and outputs included) */
@@ -495,6 +496,15 @@ typedef enum pn_model_output {
     PN_MODEL_OUTPUT_SOFTPLUS = 1
 } pn_model_output;
 
+/* An analytic energy B the network is a correction to: N fits T - grad B. */
+typedef enum pn_model_base {
+    PN_MODEL_BASE_NONE = 0,
+    /* pn_von_mises_energy of the material with StVK-Hencky elasticity (same nu, yield and
+       hardening), from the point's h: exact for StVK-Hencky, and within second order in the
+       strain of any von Mises metal whose elasticity linearizes alike (Neo-Hookean) */
+    PN_MODEL_BASE_VON_MISES_HENCKY = 1
+} pn_model_base;
+
 /* A trained model as a generated header in models/ describes it (see models/README.md). The
    material fields describe what it was trained for; plastic stresses are ratios to E. */
 typedef struct pn_model {
@@ -525,6 +535,7 @@ typedef struct pn_model {
                                         after h (0: one material, the fields above)       */
     pn_model_param param[PN_MODEL_MAX_PARAMS]; /* which, and the range served             */
     int output;                      /* a pn_model_output                                   */
+    int base;                        /* a pn_model_base                                     */
 } pn_model;
 
 /* Check a model's format version, kind, layout and dimension (dim = 0: any), that its array
@@ -548,7 +559,8 @@ PN_API void pn_model_param_set(pn_material_desc *d, int kind, double value);
 /* PlasticityNet (Li et al. 2022): the energy
      Psi(F; F0, h) = N(F, F0, h) - (grad_F N(F0, F0, h) - T(F0)) : F + R(F, F0)
    (Eqs. 8 and 11) whose gradient at F = F0 is exactly T(F0) = tau(Z(F0)) F0^-T and approximates
-   T(F) nearby. N is a function of rotation invariants of F and F0 (exactly objective and
+   T(F) nearby. A model with a base energy B (pn_model.base) adds B(F; h) to N, in the
+   correction too. N is a function of rotation invariants of F and F0 (exactly objective and
    isotropic), scaled by E / E_train. R is the regularizer, zero with zero gradient at F0:
      PN_PNET_REG_DISPLACEMENT  w mu/2 |F - F0|^2 (Eq. 11): it also resists rotating F, a
                                viscosity on spin that suits MPM's small rotations per step;
@@ -577,6 +589,7 @@ typedef struct pn_pnet {
     pn_real reg;                     /* w mu (Pa)                                          */
     pn_pnet_regularizer reg_form;
     pn_real cond[PN_MODEL_MAX_PARAMS]; /* a conditioned model's parameter inputs            */
+    pn_material base;                /* the base energy's material (pn_model.base)          */
     char message[192];               /* pn_pnet_init's reason, when it names numbers       */
 } pn_pnet;
 
@@ -2847,6 +2860,9 @@ static int pn__model_params_ok(const pn_model *mo) {
         for (j = 0; j < i; ++j)
             if (mo->param[j].kind == q->kind) return 0;
     }
+    if (mo->base != PN_MODEL_BASE_NONE &&
+        (mo->base != PN_MODEL_BASE_VON_MISES_HENCKY || mo->kind != PN_MODEL_ENERGY || mo->plastic != PN_PLASTIC_VON_MISES))
+        return 0;
     return mo->output == PN_MODEL_OUTPUT_LINEAR || mo->output == PN_MODEL_OUTPUT_SOFTPLUS;
 }
 
@@ -2863,7 +2879,7 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
     PN_ASSERT(mo);
     if (mo->format_version != PN_MODEL_FORMAT_VERSION) {
         w = "model format version differs from PN_MODEL_FORMAT_VERSION: regenerate it (make models; "
-            "gen/upgrade_format.py for format 1)";
+            "gen/upgrade_format.py for older formats)";
         r = PN_ERROR_FORMAT;
     } else if (mo->mlp.n_layers >= 1 && mo->mlp.n_layers <= PN_MLP_MAX_LAYERS &&
                (mo->mlp.weight_count[0] == 0 || mo->mlp.bias_count[0] == 0)) {
@@ -2879,7 +2895,7 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
         w = "model was trained for another dimension";
         r = PN_ERROR_DIMENSION;
     } else if (!pn__model_params_ok(mo)) {
-        w = "model parameter list or output form is malformed (pn_model.n_params, param, output)";
+        w = "model parameter list, output form or base energy is malformed (pn_model.n_params, param, output, base)";
         r = PN_ERROR_FORMAT;
     } else if (!pn__mlp_ok(&mo->mlp) || mo->n_inputs != mo->mlp.size[0] ||
                mo->n_inputs != pn__model_inputs(mo) || mo->mlp.size[mo->mlp.n_layers] != 1) {
@@ -3073,6 +3089,8 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
     net->reg = desc->regularizer < 0 ? 0 : (desc->regularizer == 0 ? 1 : desc->regularizer) * m->mu;
     net->reg_form = desc->regularizer_form;
     for (i = 0; i < PN_MODEL_MAX_PARAMS; ++i) net->cond[i] = i < e->n_params ? cond[i] : 0;
+    net->base = *m;
+    net->base.elastic = PN_ELASTIC_STVK_HENCKY; /* same mu, lambda: the base's elasticity */
     return PN_OK;
 }
 
@@ -3285,6 +3303,21 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
     return PN_OK;
 }
 
+/* Add the model's base energy B(F; h) (pn_model.base) to e, g (level > 0) and H (level > 1). */
+static pn_result pn__pnet_base(const pn_pnet *net, const pn_real *F, pn_real h, int level, pn_real *e, pn_real *g,
+                               pn_real *H) {
+    int d = net->energy->dim, n = d * d, a;
+    pn_real b, gb[9], Hb[81];
+    pn_result r;
+    if (net->energy->base == PN_MODEL_BASE_NONE) return PN_OK;
+    r = pn_von_mises_energy(&net->base, d, F, h, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
+    if (r != PN_OK) return r;
+    *e += b;
+    for (a = 0; level > 0 && a < n; ++a) g[a] += gb[a];
+    for (a = 0; level > 1 && a < n * n; ++a) H[a] += Hb[a];
+    return PN_OK;
+}
+
 PN__DEF pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real h,
                                   pn_pnet_point *pt, pn_real *h_new, pn_real *T0) {
     pn_pnet_point p;
@@ -3308,6 +3341,7 @@ PN__DEF pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real
     pn__features_eval(d, F0, 1, &f);
     for (i = 0; i < f.nf; ++i) p.x0[i] = f.x[i];
     r = pn__pnet_network(net, &p, d, &f, 1, &N, gN, NULL, NULL);
+    if (r == PN_OK) r = pn__pnet_base(net, F0, h, 1, &N, gN, NULL);
     if (r != PN_OK) return r;
     for (i = 0; i < n; ++i) p.C[i] = gN[i] - T[i];
     if (!pn__all_finite(n, p.C)) return PN_ERROR_OVERFLOW;
@@ -3367,14 +3401,16 @@ static void pn__pnet_strain_reg(int d, pn_real k, const pn_real *F, const pn_rea
                             k * ((i == l ? D[m * d + j] : 0) + F[i * d + m] * F[l * d + j] + (j == m ? FF[i * d + l] : 0));
 }
 
-/* pn_pnet_energy after the network: the linear correction, the regularizer (Eq. 11 or the
-   strain form), the PSD projection, checks */
+/* pn_pnet_energy after the network: the base energy, the linear correction, the regularizer
+   (Eq. 11 or the strain form), the PSD projection, checks */
 static pn_result pn__pnet_finish(const pn_pnet *net, const pn_pnet_point *pt, const pn_real *F, int level, pn_real N,
                                  pn_real *gN, pn_real *HN, unsigned flags, pn_real *psi, pn_real *P, pn_real *dPdF) {
     int n = net->energy->dim * net->energy->dim, a, strain = net->reg_form == PN_PNET_REG_STRAIN;
     pn_real e;
     pn_result r;
     e = N;
+    r = pn__pnet_base(net, F, pt->h, level, &e, gN, HN);
+    if (r != PN_OK) return r;
     for (a = 0; a < n; ++a) {
         pn_real df = F[a] - pt->F0[a];
         e += -pt->C[a] * F[a];
@@ -3506,6 +3542,7 @@ PN__DEF pn_result pn_pnet_prepare_lanes(const pn_pnet *net, int n, const pn_real
             io[i].m = (pn_real)m[i];
             for (k = 0; k < nd; ++k) io[i].gm[k] = (pn_real)gm[k * L + i];
             status[i] = pn__pnet_network(net, &q[i], d, &f[i], 1, &N, gN, NULL, &io[i]);
+            if (status[i] == PN_OK) status[i] = pn__pnet_base(net, q[i].F0, q[i].h, 1, &N, gN, NULL);
             for (k = 0; status[i] == PN_OK && k < dd; ++k) q[i].C[k] = gN[k] - T[i][k];
             if (status[i] == PN_OK && !pn__all_finite(dd, q[i].C)) status[i] = PN_ERROR_OVERFLOW;
             if (status[i] == PN_OK) pt[i] = q[i];

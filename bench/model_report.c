@@ -369,11 +369,14 @@ static const pn_model *single_at(const pn_model *mo, const double *v) {
         pn_material a;
         pn_pnet net;
         pn_pnet_desc nd;
+        int j;
         if (s->n_params || s->kind != PN_MODEL_ENERGY || s->dim != mo->dim || s->elastic != mo->elastic ||
-            s->plastic != mo->plastic || s->return_map || !material_at(mo, v, &a))
+            s->plastic != mo->plastic || !material_at(mo, v, &a))
             continue;
         memset(&nd, 0, sizeof nd);
-        nd.energy = s;
+        nd.energy = s; /* with its learned return mapping, if it has one (the errors are against pn_return_map) */
+        for (j = 0; s->return_map && pn_models_all[j]; ++j)
+            if (!strcmp(pn_models_all[j]()->name, s->return_map)) nd.return_map = pn_models_all[j]();
         if (pn_pnet_init(&net, &nd, &a, mo->dim, NULL) == PN_OK) return s; /* it serves a: the same material */
     }
     return NULL;
@@ -402,7 +405,7 @@ static int conditioned_report(FILE *f, const char *only, int n, int banner) {
             const pn_model *s = pn_models_all[j]();
             pn_material sm;
             if (s->n_params || s->kind != PN_MODEL_ENERGY || s->dim != mo->dim || s->plastic != mo->plastic ||
-                s->elastic != mo->elastic || s->return_map || pn_model_material(s, 1, &sm, NULL) != PN_OK)
+                s->elastic != mo->elastic || pn_model_material(s, 1, &sm, NULL) != PN_OK)
                 continue;
             for (i = 0; i < np; ++i) pts[npts][i] = model_value(s, mo->param[i].kind);
             for (g = 0; g < npts; ++g) {

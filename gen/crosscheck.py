@@ -93,7 +93,7 @@ class CModel:
     """A model rebuilt in torch from the numbers the C library holds."""
 
     def __init__(self, lib, i):
-        ints = (ctypes.c_int * 20)()
+        ints = (ctypes.c_int * 24)()
         dbl = (ctypes.c_double * 46)()
         lib.capi_model_info(i, ints, dbl)
         self.name = lib.capi_model_name(i).decode()
@@ -110,6 +110,7 @@ class CModel:
         # a conditioned model: its parameters (pn_torch.PARAMS names) and ranges, softplus output
         self.params = [(KIND[ints[16 + k]], dbl[38 + 2 * k], dbl[39 + 2 * k]) for k in range(ints[14])]
         self.softplus = ints[15] == 1
+        self.base = ints[20]   # 1: PN_MODEL_BASE_VON_MISES_HENCKY
         self.layers = []
         for l in range(nl):
             W = torch.zeros(self.sizes[l + 1], self.sizes[l], dtype=torch.float32)
@@ -206,6 +207,23 @@ def check_models(lib, n=10000):
         check_export(m)
 
 
+def base_vm_hencky(mat, F, h):
+    """B(F; h) of PN_MODEL_BASE_VON_MISES_HENCKY: the StVK-Hencky von Mises incremental potential
+    (docs/method.md) with the material's nu, yield and hardening, from the singular values."""
+    d = F.shape[-1]
+    e = torch.log(torch.linalg.svdvals(F))
+    tr = e.sum(-1)
+    r = torch.linalg.vector_norm(e - tr.unsqueeze(-1) / d, dim=-1)
+    mu, lam = mat.mu, mat.lam
+    if torch.is_tensor(mu):
+        mu, lam = mu.squeeze(-1), lam.squeeze(-1)
+    K = mat.hardening_modulus.squeeze(-1) if torch.is_tensor(mat.hardening_modulus) else mat.hardening_modulus
+    kappa, beta = lam + 2 * mu / d, 2 * K / 3
+    tauy = pt.vm_tau_y(mat, h).squeeze(-1)
+    g = torch.clamp((2 * mu * r - tauy) / (2 * mu + beta), min=0)
+    return kappa / 2 * tr * tr + mu * (r - g) ** 2 + tauy * g + beta / 2 * g * g
+
+
 def check_energy(lib, models, i, m, mat, n, gen, h, point):
     """Psi and grad Psi of energy model m (at parameter point `point` if conditioned): C against torch"""
     d = m.dim
@@ -233,6 +251,12 @@ def check_energy(lib, models, i, m, mat, n, gen, h, point):
     Fg = F.clone().requires_grad_(True)
     N = m.energy_N(Fg, F0, hh, prm).squeeze(-1)
     CF = (C * Fg).sum((-1, -2))
+    if m.base == 1:   # the base energy B(F; h), in the gradient at F0 too
+        F0g = F0.clone().requires_grad_(True)
+        (gB0,) = torch.autograd.grad(base_vm_hencky(mat, F0g, hh).sum(), F0g)
+        C = C + gB0
+        CF = (C * Fg).sum((-1, -2))
+        N = N + base_vm_hencky(mat, Fg, hh)
     psi_t = N - CF
     (P_t,) = torch.autograd.grad(psi_t.sum(), Fg)
     psi_t = psi_t.detach()

@@ -20,7 +20,8 @@ from models import MODELS  # noqa: E402
 import train as tr  # noqa: E402
 import pn_torch as pt  # noqa: E402
 
-FORMAT_VERSION = 3  # 2: pn_mlp carries its array lengths (weight_count, bias_count); 3: n_params, param, output
+FORMAT_VERSION = 4  # 2: pn_mlp carries its array lengths (weight_count, bias_count); 3: n_params, param, output;
+                    # 4: base
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MODELS_DIR = os.path.join(ROOT, "models")
 ENUM_E = {"stvk_hencky": "PN_ELASTIC_STVK_HENCKY", "neo_hookean": "PN_ELASTIC_NEO_HOOKEAN",
@@ -121,6 +122,10 @@ def export(cfg, quality_path=None):
             "   drawn uniformly per sample; pn_pnet_init accepts any material inside these ranges.",
             "   Softplus output: N >= 0, so Psi >= -C:F0 - |C|^2 / (2 w mu) with the regularizer on"
             if cfg.get("output") == "softplus" else "   Linear output."]
+    if cfg.get("base") == "von_mises_hencky":
+        banner += [
+            "   On a base: N fits T - grad B, B the exact StVK-Hencky von Mises potential at the same",
+            "   nu, yield and hardening (pn_von_mises_energy); plastinet.h adds B back (pn_model.base)."]
     if cfg.get("return_map"):
         banner.append("   Target stresses from the learned return mapping %s (pn_model_%s.h)." % (cfg["return_map"], cfg["return_map"]))
     banner += [
@@ -177,6 +182,7 @@ def export(cfg, quality_path=None):
         "{" + ", ".join(["{%s, %s, %s}" % (pt.PARAMS[p[0]][1], g17(p[1]), g17(p[2])) for p in cfg.get("params", ())] +
                         ["{0, 0, 0}"] * (4 - len(cfg.get("params", ())))) + "}",
         "PN_MODEL_OUTPUT_SOFTPLUS" if cfg.get("output") == "softplus" else "PN_MODEL_OUTPUT_LINEAR",
+        "PN_MODEL_BASE_VON_MISES_HENCKY" if cfg.get("base") == "von_mises_hencky" else "PN_MODEL_BASE_NONE",
     ]
     out.append("PN__DEF const pn_model *pn_model_%s(void) {\n" % name)
     out.append("    static const pn_model m = {\n        " + ",\n        ".join(fields) + "};\n")

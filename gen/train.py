@@ -74,7 +74,12 @@ def sample_params(cfg, n, gen):
         return torch.zeros(n, 0, dtype=DT)
     lo = torch.tensor([p[1] for p in ps], dtype=DT)
     hi = torch.tensor([p[2] for p in ps], dtype=DT)
-    return lo + (hi - lo) * torch.rand(n, len(ps), dtype=DT, generator=gen)
+    u = torch.rand(n, len(ps), dtype=DT, generator=gen)
+    if cfg.get("param_edges"):
+        # twice the density at the ends of each range as in its middle (u/2 + (1 - cos pi u)/4):
+        # a network fits the middle of its input box best, and the ends are where users go too
+        u = 0.5 * u + 0.25 * (1 - torch.cos(math.pi * u))
+    return lo + (hi - lo) * u
 
 
 def material_of(cfg, prm):
@@ -202,6 +207,7 @@ def energy_stats(cfg, mat, learned):
     x, x0 = pt.features(s), pt.features(s0)
     lo, hi = cfg["h"]
     t = pt.target_principal(mat, s, h, learned)
+    r = t - base_principal(cfg, mat, s, h)   # what the network fits (t without a base)
     ps = cfg.get("params", ())   # parameters to [-1, 1]
     cond = {} if not ps else dict(
         mp=torch.tensor([(p[1] + p[2]) / 2 for p in ps], dtype=DT),
@@ -210,31 +216,48 @@ def energy_stats(cfg, mat, learned):
         # raw = [(x - x0)/s^p, x0/s^p, s]: one shift and scale per column; errors relative to s
         raw, S = pt.scaled_raw(x, x0)
         w = (t * t).sum(-1, keepdim=True) / S
+        wr = (r * r).sum(-1, keepdim=True) / S
         return dict(m0=raw.mean(0), s0=1 / raw.std(0),
                     mh=torch.tensor([(lo + hi) / 2], dtype=DT),
                     sh=torch.tensor([2 / (hi - lo) if hi > lo else 0.0], dtype=DT),
-                    out_scale=torch.sqrt(w.mean()).reshape(1), t_rms=torch.sqrt(w.mean()).reshape(1), **cond)
+                    out_scale=torch.sqrt(wr.mean()).reshape(1), t_rms=torch.sqrt(w.mean()).reshape(1), **cond)
     return dict(sd=1 / (x - x0).std(0), m0=x0.mean(0), s0=1 / x0.std(0),
                 mh=torch.tensor([(lo + hi) / 2], dtype=DT),
                 sh=torch.tensor([2 / (hi - lo) if hi > lo else 0.0], dtype=DT),
-                out_scale=torch.sqrt((t * t).sum(-1).mean()).reshape(1),
+                out_scale=torch.sqrt((r * r).sum(-1).mean()).reshape(1),
                 t_rms=torch.sqrt((t * t).sum(-1).mean()).reshape(1), **cond)
+
+
+def base_principal(cfg, mat, s, h):
+    """The principal gradient of a model's analytic base energy B(F; h) (0 without one):
+    "von_mises_hencky" is the exact incremental potential of the StVK-Hencky von Mises return
+    (plastinet.h pn_von_mises_energy) at the material's nu, yield and hardening. Its gradient
+    is coaxial with F, as the network's is, so the residual T - grad B stays learnable."""
+    if cfg.get("base") != "von_mises_hencky":
+        return torch.zeros_like(s)
+    import copy
+    mh = copy.copy(mat)
+    mh.elastic = "stvk_hencky"
+    return pt.target_principal(mh, s, h)
 
 
 def energy_error(model, mat, learned, s0, s, h, A, B, prm, create_graph=False):
     """|grad Psi(F, F0) - T(F)|^2 per sample, in the principal frames (see README); mat is the
-    batch's material (material_of), prm its parameter inputs."""
+    batch's material (material_of), prm its parameter inputs. With a base energy the network
+    fits T - grad B (both coaxial with F, so the same principal-frame algebra holds)."""
+    cfg = model.cfg
     with torch.no_grad():
-        t = pt.target_principal(mat, s, h, learned)
-        t0 = pt.target_principal(mat, s0, h, learned)
+        t_full = pt.target_principal(mat, s, h, learned)
+        t = t_full - base_principal(cfg, mat, s, h)
+        t0 = pt.target_principal(mat, s0, h, learned) - base_principal(cfg, mat, s0, h)
     diff = model.grad_s(s, s0, h, prm, create_graph) - t
     c = model.grad_s(s0, s0, h, prm, create_graph) - t0
     cross = torch.einsum("bi,bij,bj,bji->b", diff, A, c, B)
     err2 = (diff * diff).sum(-1) + (c * c).sum(-1) - 2 * cross
-    if model.cfg.get("encoding") == "scaled":   # relative to the strain scale of the pair
+    if cfg.get("encoding") == "scaled":   # relative to the strain scale of the pair
         _, S = pt.scaled_raw(pt.features(s), pt.features(s0))
-        err2, t = err2 / S[:, 0], t / torch.sqrt(S)
-    return err2, t
+        err2, t_full = err2 / S[:, 0], t_full / torch.sqrt(S)
+    return err2, t_full
 
 
 def lagged_and_constant_error(mat, learned, s0, s, h, A, B):

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Rewrite format-1 or format-2 model headers (models/pn_model_*.h) as format 3, from their own
+"""Rewrite format-1, -2 or -3 model headers (models/pn_model_*.h) as format 4, from their own
 arrays.
 
     /usr/bin/python3 gen/upgrade_format.py models/pn_model_*.h
@@ -8,9 +8,10 @@ Format 2 adds the lengths of the weight and bias arrays to the pn_mlp initialize
 checks them against the layer sizes, so a malformed network is refused instead of read past).
 The lengths are read from the arrays' declarations and must equal the products of the layer
 sizes. Format 3 appends the material-parameter inputs of a conditioned model and the output
-form: none and linear for every model made before it. The weights, the banner and everything
-else stay byte for byte: the result is what gen/export.py (FORMAT_VERSION 3) writes from the
-same trained network, without retraining. Needs no torch. Format-3 headers are left alone.
+form: none and linear for every model made before it. Format 4 appends the base energy: none
+before it. The weights, the banner and everything else stay byte for byte: the result is what
+gen/export.py (FORMAT_VERSION 4) writes from the same trained network, without retraining.
+Needs no torch. Format-4 headers are left alone.
 """
 import re
 import sys
@@ -18,8 +19,10 @@ import sys
 
 def upgrade(path):
     src = open(path).read()
+    if "Format version 4 (PN_MODEL_FORMAT_VERSION)" in src:
+        return "already format 4"
     if "Format version 3 (PN_MODEL_FORMAT_VERSION)" in src:
-        return "already format 3"
+        return upgrade_3_to_4(path, src)
     if "Format version 2 (PN_MODEL_FORMAT_VERSION)" in src:
         return upgrade_2_to_3(path, src)
     decl = {m.group(1): int(m.group(2)) for m in re.finditer(r"static const float (\w+)\[(\d+)\]", src)}
@@ -57,7 +60,19 @@ def upgrade_2_to_3(path, src):
     out = head + "static const pn_model m = {\n        3," + tail
     out = out.replace("Format version 2 (PN_MODEL_FORMAT_VERSION)", "Format version 3 (PN_MODEL_FORMAT_VERSION)")
     open(path, "w").write(out)
-    return "format 3"
+    return "format 3; " + upgrade_3_to_4(path, out)
+
+
+def upgrade_3_to_4(path, src):
+    head, sep, tail = src.partition("static const pn_model m = {\n        3,")
+    end = re.search(r"\n        (PN_MODEL_OUTPUT_\w+)\};\n", tail)
+    if not sep or not end:
+        raise SystemExit("%s: pn_model initializer not found" % path)
+    tail = tail[:end.end(1)] + ",\n        PN_MODEL_BASE_NONE" + tail[end.end(1):]
+    out = head + "static const pn_model m = {\n        4," + tail
+    out = out.replace("Format version 3 (PN_MODEL_FORMAT_VERSION)", "Format version 4 (PN_MODEL_FORMAT_VERSION)")
+    open(path, "w").write(out)
+    return "format 4"
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ void capi_model_info(int i, int *ints, double *dbl) {
         if (!strcmp(pn_models_all[k]()->name, m->return_map)) ints[13] = k;
     ints[14] = m->n_params; /* a conditioned model: its parameters (kind, range) and output */
     ints[15] = m->output;
+    ints[20] = m->base;
     for (k = 0; k < PN_MODEL_MAX_PARAMS; ++k) {
         ints[16 + k] = k < m->n_params ? m->param[k].kind : 0;
         dbl[38 + 2 * k] = k < m->n_params ? m->param[k].lo : 0;

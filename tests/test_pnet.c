@@ -1799,15 +1799,18 @@ static void t_pn_shipped_energy_at(pn_test_ctx *pn__t, const pn_model *mo, const
     PN_CHECK_LE(worst_exact, T_PN_EXACT_TOL);
     PN_CHECK_LE(ratio_box, 0.25);
     /* strains far below the box, as in a simulation at a realistic E (a sand column at 1e7 Pa
-       strains ~1e-4 and steps ~1e-3): the scaled encoding must hold there too. Where every
-       pair stays elastic (metal below its yield strain of 3e-3) the lagged energy is exact, and
-       the network's own error relative to |T| is checked instead */
+       strains ~1e-4 and steps ~1e-3): the scaled encoding must hold there too. Where (nearly)
+       every pair stays elastic (metal below its yield strain) the lagged energy is exact on
+       them, and its error over the set falls below 1 % of |T|: a ratio to it then measures
+       how few pairs yield, not the network. There the network's own error is held to 1 % of
+       |T| instead (the elastic bar); the ratio bar holds wherever the lagged energy is off by
+       more */
     for (k = 0; k < 3; ++k) {
         static const double r0[3] = {1e-2, 1e-3, 1e-4}, r1[3] = {1e-2, 1e-2, 1e-3};
         double rel = 0, lag_rel = 0, ratio = t_pn_shipped_ratio(&net, &m, mo, r0[k], r1[k], ns / 4, &rng, &fails, &rel, &lag_rel);
-        int elastic = lag_rel <= 1e-12;
+        int elastic = lag_rel <= 1e-2;
         PN_REPORT("%s%s: |e0| <= %.0e, |de| <= %.0e: ratio to lagged %.3f, error / |T| %.2e%s", mo->name, at, r0[k], r1[k],
-                  ratio, rel, !pn__model_scaled(mo) ? " (raw encoding: not checked)" : elastic ? " (elastic: lagged exact)" : "");
+                  ratio, rel, !pn__model_scaled(mo) ? " (raw encoding: not checked)" : elastic ? " (nearly elastic: lagged within 1 %)" : "");
         PN_CHECK(fails == 0);
         if (pn__model_scaled(mo)) {
             if (elastic) PN_CHECK_LE(rel, 1e-2);
@@ -2041,12 +2044,126 @@ PN_TEST(pnet_lanes) {
     PN_CHECK_LE(worst[2], 1e-4);
 }
 
+/* ================================================================================================
+   A base energy (pn_model.base = PN_MODEL_BASE_VON_MISES_HENCKY): a Neo-Hookean von Mises
+   model whose network is a correction to the exact StVK-Hencky von Mises potential B. Against
+   the same network without the base, Psi changes by exactly B(F; h) - grad B(F0; h) : F
+   (pn_von_mises_energy of an independently described StVK-Hencky material), P by
+   grad B(F) - grad B(F0) and dP/dF by the Hessian of B (B is only C1 across the yield surface,
+   so finite differences of the sum are not a fair check there); exact at F0; the float lanes
+   against the double path;
+   a base on a material that is not von Mises is refused.
+   ================================================================================================ */
+
+PN_TEST(pnet_base_energy) {
+    double worst_diff = 0, worst_exact = 0, worst_g = 0, worst_h = 0, worst_lanes[3] = {0, 0, 0}, prep = 0, moved = 0;
+    long fails = 0, samples = 0, refused = 0;
+    int dim, scaled, i, k;
+    for (dim = 2; dim <= 3; ++dim)
+        for (scaled = 0; scaled <= 1; ++scaled) {
+            const int n2 = dim * dim, n4 = n2 * n2;
+            const double E = 2e5;
+            t_pn_model tm, plain;
+            pn_material_desc md, hd;
+            pn_material m, mh;
+            pn_pnet net, net0;
+            pn_pnet_desc pd;
+            pn_test_rng rng;
+            const char *why = NULL;
+            rng.s = 4400 + 10 * (unsigned long long)dim + (unsigned long long)scaled;
+            t_pn_desc(&md, T_PN_METAL, E); /* Neo-Hookean + von Mises */
+            hd = md;
+            hd.elastic = PN_ELASTIC_STVK_HENCKY;
+            if (pn_material_init(&m, &md, NULL) != PN_OK || pn_material_init(&mh, &hd, NULL) != PN_OK) {
+                PN_CHECK(!"pn_material_init");
+                continue;
+            }
+            t_pn_model_make_enc(&tm, PN_MODEL_ENERGY, dim, &md, &m, "t_base", NULL, PN_ACTIVATION_SILU, &rng, scaled);
+            tm.model.e_box = 0.05;
+            tm.model.out_scale = 1e-3; /* a correction: small against B */
+            plain = tm; /* the same network: its weights stay in tm.buf */
+            tm.model.base = PN_MODEL_BASE_VON_MISES_HENCKY;
+            memset(&pd, 0, sizeof pd);
+            pd.energy = &tm.model;
+            pd.regularizer = -1;
+            if (pn_pnet_init(&net, &pd, &m, dim, &why) != PN_OK) {
+                PN_CHECK(!"pn_pnet_init with a base");
+                continue;
+            }
+            pd.energy = &plain.model;
+            plain.model.base = PN_MODEL_BASE_NONE;
+            if (pn_pnet_init(&net0, &pd, &m, dim, &why) != PN_OK) {
+                PN_CHECK(!"pn_pnet_init without the base");
+                continue;
+            }
+            for (i = 0; i < 40; ++i) {
+                const double r = i % 4 == 3 ? 1e-3 : 0.03;
+                double R[4][9], s0[3], sv[3], F0[9], F[9], h = pn_test_rng_range(&rng, 0, 1), T0[9];
+                double psi, psi0, P[9], H[81], P0[9], H0[9 * 9], B, gB[9], HB[81], B0, gB0[9], ref, cf = 0, dP[9], dH[81];
+                pn_pnet_point pt, pt0;
+                for (k = 0; k < 4; ++k) t_rand_rot(&rng, dim, R[k]);
+                for (k = 0; k < dim; ++k) {
+                    double e0 = pn_test_rng_range(&rng, -r, r);
+                    s0[k] = exp(e0);
+                    sv[k] = exp(e0 + pn_test_rng_range(&rng, -r, r));
+                }
+                t_adb(dim, R[0], s0, R[1], F0);
+                t_adb(dim, R[2], sv, R[3], F);
+                ++samples;
+                if (pn_pnet_prepare(&net, F0, h, &pt, NULL, T0) != PN_OK || pn_pnet_prepare(&net0, F0, h, &pt0, NULL, NULL) != PN_OK ||
+                    pn_pnet_energy(&net, &pt, F, &psi, P, H, 0) != PN_OK ||
+                    pn_pnet_energy(&net0, &pt0, F, &psi0, P0, H0, 0) != PN_OK ||
+                    pn_von_mises_energy(&mh, dim, F, h, &B, gB, HB, 0) != PN_OK ||
+                    pn_von_mises_energy(&mh, dim, F0, h, &B0, gB0, NULL, 0) != PN_OK) {
+                    ++fails;
+                    continue;
+                }
+                for (k = 0; k < n2; ++k) cf += gB0[k] * F[k];
+                ref = B - cf;
+                t_pn_worst(&worst_diff, fabs((psi - psi0) - ref) / (fabs(B) + fabs(cf) + 1e-300));
+                moved = fmax(moved, fabs(psi - psi0) / (fabs(psi0) + 1e-300));
+                for (k = 0; k < n2; ++k) dP[k] = P[k] - P0[k], gB[k] -= gB0[k];
+                for (k = 0; k < n4; ++k) dH[k] = H[k] - H0[k];
+                t_pn_worst(&worst_g, t_pn_rel(n2, dP, gB, t_pn_maxabs(n2, gB0)));
+                t_pn_worst(&worst_h, t_pn_rel(n4, dH, HB, 0));
+                if (pn_pnet_energy(&net, &pt, F0, NULL, P, NULL, 0) != PN_OK) ++fails;
+                t_pn_worst(&worst_exact, t_pn_rel(n2, P, T0, t_pn_maxabs(n2, T0) + t_pn_maxabs(n2, pt.C)));
+            }
+            for (i = 0; i < 4; ++i) t_lanes_block(pn__t, &net, dim, PN_MLP_LANES, &rng, i % 2 ? 1e-3 : 0.03, -1, worst_lanes);
+            for (i = 1; i <= PN_MLP_LANES; ++i) prep = fmax(prep, t_prepare_lanes(pn__t, &net, dim, i, -1, &rng));
+            { /* a base needs a von Mises model; an unknown base is malformed */
+                t_pn_model bad = tm;
+                bad.model.plastic = PN_PLASTIC_DRUCKER_PRAGER;
+                refused += pn_model_check(&bad.model, 0, &why) == PN_ERROR_FORMAT && why && strstr(why, "base");
+                bad.model.plastic = PN_PLASTIC_VON_MISES;
+                bad.model.base = 7;
+                refused += pn_model_check(&bad.model, 0, &why) == PN_ERROR_FORMAT;
+            }
+        }
+    PN_REPORT("%ld samples (2D, 3D; raw, scaled): Psi - Psi without the base vs B(F) - grad B(F0):F %.2e (the base "
+              "moves Psi by up to %.2f); exact at F0 %.2e; P %.2e, dP/dF %.2e; lanes psi %.1e, P %.1e, "
+              "dP/dF %.1e, prepare %.1e; %ld of 8 malformed bases refused; failed %ld",
+              samples, worst_diff, moved, worst_exact, worst_g, worst_h, worst_lanes[0], worst_lanes[1], worst_lanes[2],
+              prep, refused, fails);
+    PN_CHECK(fails == 0);
+    PN_CHECK(refused == 8);
+    PN_CHECK(moved > 1e-2);
+    PN_CHECK_LE(worst_diff, 1e-9);
+    PN_CHECK_LE(worst_exact, T_PN_EXACT_TOL);
+    PN_CHECK_LE(worst_g, 1e-12);
+    PN_CHECK_LE(worst_h, 1e-12);
+    PN_CHECK_LE(worst_lanes[1], 1e-4);
+    PN_CHECK_LE(worst_lanes[2], 1e-4);
+    PN_CHECK_LE(prep, 1e-4);
+}
+
 static const pn_test_case pn_tests_pnet[] = {
     {"pnet_mlp_eval", pnet_mlp_eval},
     {"pnet_fd", pnet_fd},
     {"pnet_energy_reference", pnet_energy_reference},
     {"pnet_scaled_encoding", pnet_scaled_encoding},
     {"pnet_conditioned", pnet_conditioned},
+    {"pnet_base_energy", pnet_base_energy},
     {"pnet_exact_at_F0", pnet_exact_at_F0},
     {"pnet_objectivity_isotropy", pnet_objectivity_isotropy},
     {"pnet_E_scaling", pnet_E_scaling},
