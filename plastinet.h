@@ -502,7 +502,11 @@ typedef enum pn_model_base {
     /* pn_von_mises_energy of the material with StVK-Hencky elasticity (same nu, yield and
        hardening), from the point's h: exact for StVK-Hencky, and within second order in the
        strain of any von Mises metal whose elasticity linearizes alike (Neo-Hookean) */
-    PN_MODEL_BASE_VON_MISES_HENCKY = 1
+    PN_MODEL_BASE_VON_MISES_HENCKY = 1,
+    /* pn_dp_energy of the material (StVK-Hencky + Drucker-Prager) with the yield stress frozen
+       at F0 (pn_dp_prepare): exact where tr e equals F0's, off by the friction lag elsewhere,
+       which is what the network learns */
+    PN_MODEL_BASE_DP_FROZEN = 2
 } pn_model_base;
 
 /* A trained model as a generated header in models/ describes it (see models/README.md). The
@@ -600,6 +604,7 @@ typedef struct pn_pnet_point {
     pn_real h;                       /* hardening state (the network sees it clamped to the
                                         model's range; T(F0) used it as given)            */
     pn_real C[9];                    /* linear correction (E-scaled grad N(F0) - T(F0))      */
+    pn_real base_tau_y;              /* PN_MODEL_BASE_DP_FROZEN: the yield stress at F0      */
 } pn_pnet_point;
 
 /* Bind a model to a material. The material must match the model's training material (models,
@@ -1845,7 +1850,9 @@ static pn_result pn__vm_rootfind(const pn_material *m, int d, const pn_real *s, 
         fp = -k23;
         if (dn > 0)
             for (i = 0; i < d; ++i) fp += dev[i] * dtau[i] / dn;
-        if (PN__FABS(f) <= 4 * PN__EPS * tauy0 || hi - lo <= 4 * PN__EPS * r) {
+        /* converged when f is down to its own rounding: the terms of tau are of size mu (and
+           the pressure), so a yield stress far below mu cannot be met to eps of itself */
+        if (PN__FABS(f) <= 8 * PN__EPS * (tauy0 + m->mu + PN__FABS(mean)) || hi - lo <= 4 * PN__EPS * r) {
             ok = 1;
             break;
         }
@@ -2861,7 +2868,10 @@ static int pn__model_params_ok(const pn_model *mo) {
             if (mo->param[j].kind == q->kind) return 0;
     }
     if (mo->base != PN_MODEL_BASE_NONE &&
-        (mo->base != PN_MODEL_BASE_VON_MISES_HENCKY || mo->kind != PN_MODEL_ENERGY || mo->plastic != PN_PLASTIC_VON_MISES))
+        (mo->kind != PN_MODEL_ENERGY ||
+         !((mo->base == PN_MODEL_BASE_VON_MISES_HENCKY && mo->plastic == PN_PLASTIC_VON_MISES) ||
+           (mo->base == PN_MODEL_BASE_DP_FROZEN && mo->plastic == PN_PLASTIC_DRUCKER_PRAGER &&
+            mo->elastic == PN_ELASTIC_STVK_HENCKY))))
         return 0;
     return mo->output == PN_MODEL_OUTPUT_LINEAR || mo->output == PN_MODEL_OUTPUT_SOFTPLUS;
 }
@@ -3303,14 +3313,18 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
     return PN_OK;
 }
 
-/* Add the model's base energy B(F; h) (pn_model.base) to e, g (level > 0) and H (level > 1). */
-static pn_result pn__pnet_base(const pn_pnet *net, const pn_real *F, pn_real h, int level, pn_real *e, pn_real *g,
-                               pn_real *H) {
+/* Add the model's base energy B(F; h) (pn_model.base) at a point to e, g (level > 0) and H
+   (level > 1). */
+static pn_result pn__pnet_base(const pn_pnet *net, const pn_pnet_point *pt, const pn_real *F, int level, pn_real *e,
+                               pn_real *g, pn_real *H) {
     int d = net->energy->dim, n = d * d, a;
     pn_real b, gb[9], Hb[81];
     pn_result r;
     if (net->energy->base == PN_MODEL_BASE_NONE) return PN_OK;
-    r = pn_von_mises_energy(&net->base, d, F, h, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
+    if (net->energy->base == PN_MODEL_BASE_DP_FROZEN)
+        r = pn_dp_energy(&net->base, d, F, pt->h, pt->base_tau_y, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
+    else
+        r = pn_von_mises_energy(&net->base, d, F, pt->h, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
     if (r != PN_OK) return r;
     *e += b;
     for (a = 0; level > 0 && a < n; ++a) g[a] += gb[a];
@@ -3340,8 +3354,12 @@ PN__DEF pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real
     p.h = h;
     pn__features_eval(d, F0, 1, &f);
     for (i = 0; i < f.nf; ++i) p.x0[i] = f.x[i];
+    if (net->energy->base == PN_MODEL_BASE_DP_FROZEN) {
+        r = pn_dp_prepare(&net->base, d, F0, h, &p.base_tau_y);
+        if (r != PN_OK) return r;
+    }
     r = pn__pnet_network(net, &p, d, &f, 1, &N, gN, NULL, NULL);
-    if (r == PN_OK) r = pn__pnet_base(net, F0, h, 1, &N, gN, NULL);
+    if (r == PN_OK) r = pn__pnet_base(net, &p, F0, 1, &N, gN, NULL);
     if (r != PN_OK) return r;
     for (i = 0; i < n; ++i) p.C[i] = gN[i] - T[i];
     if (!pn__all_finite(n, p.C)) return PN_ERROR_OVERFLOW;
@@ -3409,7 +3427,7 @@ static pn_result pn__pnet_finish(const pn_pnet *net, const pn_pnet_point *pt, co
     pn_real e;
     pn_result r;
     e = N;
-    r = pn__pnet_base(net, F, pt->h, level, &e, gN, HN);
+    r = pn__pnet_base(net, pt, F, level, &e, gN, HN);
     if (r != PN_OK) return r;
     for (a = 0; a < n; ++a) {
         pn_real df = F[a] - pt->F0[a];
@@ -3542,7 +3560,9 @@ PN__DEF pn_result pn_pnet_prepare_lanes(const pn_pnet *net, int n, const pn_real
             io[i].m = (pn_real)m[i];
             for (k = 0; k < nd; ++k) io[i].gm[k] = (pn_real)gm[k * L + i];
             status[i] = pn__pnet_network(net, &q[i], d, &f[i], 1, &N, gN, NULL, &io[i]);
-            if (status[i] == PN_OK) status[i] = pn__pnet_base(net, q[i].F0, q[i].h, 1, &N, gN, NULL);
+            if (status[i] == PN_OK && net->energy->base == PN_MODEL_BASE_DP_FROZEN)
+                status[i] = pn_dp_prepare(&net->base, d, q[i].F0, q[i].h, &q[i].base_tau_y);
+            if (status[i] == PN_OK) status[i] = pn__pnet_base(net, &q[i], q[i].F0, 1, &N, gN, NULL);
             for (k = 0; status[i] == PN_OK && k < dd; ++k) q[i].C[k] = gN[k] - T[i][k];
             if (status[i] == PN_OK && !pn__all_finite(dd, q[i].C)) status[i] = PN_ERROR_OVERFLOW;
             if (status[i] == PN_OK) pt[i] = q[i];

@@ -8,8 +8,9 @@
    0.1 m x 0.18 m, walls 0.01 m thick, squares of 2.5 mm in 2D, each four triangles around
    its centre (crossed: they do not lock under von Mises flow), cubes of 5 mm in 3D (six
    tetrahedra each; extruded 0.03 m); the side walls bowed out 0.5 mm at mid-height;
-   steel: E = 200 GPa, nu 0.3, the yield stress 0.003 E and hardening 0.01 E of the shipped
-   metal models, density 7850; the plate at 0.5 m/s until it has gone 40% of the frame's
+   steel: E = 200 GPa, nu 0.3, the yield stress 0.003 E and hardening 0.01 E of the single-
+   material metal models (--yield, --hardening: others, with exact, lagged, nh or
+   pnet_nh_any), density 7850; the plate at 0.5 m/s until it has gone 40% of the frame's
    height down; ground and plate with Coulomb friction 0.3; 25 frames per second.
    Writes DIR/frame_NNNN.png (--png, 2D: elements coloured by equivalent plastic strain, with a
    scale bar), DIR/frame_NNNN.vtu (--vtu: per-element plastic strain and von Mises stress, for
@@ -31,17 +32,22 @@ static int cmp3(const void *pa, const void *pb) {
 typedef struct frame_cli {
     int dim, implicit, frames_per_s, png, vtu, obj, pass, alternating;
     const char *energy, *out, *solver;
-    double dt, E, speed, wall, h, depth, crush, friction, newton_tol, regularizer;
+    double dt, E, speed, wall, h, depth, crush, friction, newton_tol, regularizer, yield, hardening;
 } frame_cli;
 
 static void usage(FILE *f) {
     fprintf(f, "usage: metal_frame [flags]   a steel frame crushed by a plate\n"
                "  --dim 2|3                 plane strain or the frame extruded [2]\n"
                "  --integrator explicit|implicit                     [implicit]\n"
-               "  --energy exact|pnet|lagged|pnet_nh|nh   implicit steps: exact StVK-Hencky +\n"
-               "                            von Mises, PlasticityNet, lagged; PlasticityNet\n"
-               "                            Neo-Hookean metal with its learned return mapping,\n"
-               "                            Neo-Hookean (lagged) with the root-find one [exact]\n"
+               "  --energy exact|pnet|lagged|pnet_nh|nh|pnet_nh_any   implicit steps: exact\n"
+               "                            StVK-Hencky + von Mises, PlasticityNet, lagged;\n"
+               "                            PlasticityNet Neo-Hookean metal with its learned\n"
+               "                            return mapping, Neo-Hookean (lagged) with the\n"
+               "                            root-find one, the conditioned PlasticityNet\n"
+               "                            Neo-Hookean metal (any --yield, --hardening in its\n"
+               "                            ranges) [exact]\n"
+               "  --yield R                 yield stress / E [3e-3]\n"
+               "  --hardening R             hardening modulus / E [1e-2]\n"
                "  --dt S                    implicit step [1e-2]; explicit: at most S, else\n"
                "                            half of pn_fem_stable_dt\n"
                "  --E PA                    Young's modulus [2e11]\n"
@@ -213,6 +219,7 @@ int main(int argc, char **argv) {
     memset(&o, 0, sizeof o);
     o.dim = 2, o.implicit = 1, o.energy = "exact", o.solver = "default", o.out = "build/metal_frame_frames", o.dt = 1e-2, o.E = 2e11;
     o.speed = 0.5, o.wall = 0.01, o.h = 0, o.depth = 0.03, o.crush = 0.4, o.friction = 0.3, o.frames_per_s = 25, o.pass = 1;
+    o.yield = 3e-3, o.hardening = 1e-2;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         double x;
@@ -251,6 +258,8 @@ int main(int argc, char **argv) {
             else if (!strcmp(a, "--passes")) o.pass = (int)x;
             else if (!strcmp(a, "--newton-tol")) o.newton_tol = x;
             else if (!strcmp(a, "--regularizer")) o.regularizer = x;
+            else if (!strcmp(a, "--yield")) o.yield = x;
+            else if (!strcmp(a, "--hardening")) o.hardening = x;
             else if (!strcmp(a, "--fps")) o.frames_per_s = (int)x;
             else {
                 fprintf(stderr, "metal_frame: unknown flag '%s' (--help lists them)\n", a);
@@ -264,12 +273,13 @@ int main(int argc, char **argv) {
     if (!o.h) o.h = fd.h;
     if ((o.dim != 2 && o.dim != 3) || !(o.dt > 0) || !(o.E > 0) || !(o.speed > 0) || !(o.crush > 0 && o.crush < 0.9) ||
         !(o.wall > 0 && 2 * o.wall < fd.width) || !(o.h > 0 && o.h <= o.wall) || !(o.depth > 0) || !(o.friction >= 0) ||
-        o.frames_per_s < 1 || o.pass < 1) {
+        o.frames_per_s < 1 || o.pass < 1 || !(o.yield > 0) || !(o.hardening >= 0)) {
         fprintf(stderr, "metal_frame: a flag is out of range (--help)\n");
         return 2;
     }
     fd.energy = energy, fd.E = o.E, fd.speed = o.speed, fd.wall = o.wall, fd.h = o.h, fd.depth = o.depth, fd.friction = o.friction;
     fd.regularizer = o.regularizer, fd.alternating = o.alternating;
+    fd.yield_ratio = o.yield, fd.hardening_ratio = o.hardening;
     if (!pn_frame_create(&fd, &m, &net, why, sizeof why)) {
         fprintf(stderr, "metal_frame: %s\n", why);
         return 1;

@@ -10,20 +10,25 @@
 #include "../models/pn_model_metal_nh_3d.h"
 #include "../models/pn_model_metal_nh_return_2d.h"
 #include "../models/pn_model_metal_nh_return_3d.h"
+#include "../models/pn_model_metal_nh_any_2d.h"
+#include "../models/pn_model_metal_nh_any_3d.h"
 
 /* the implicit energies: exact StVK-Hencky + von Mises, PlasticityNet, lagged; PlasticityNet
    Neo-Hookean metal with its learned return mapping, Neo-Hookean (lagged energy) with the
-   root-find return mapping */
-enum { PN_FRAME_EXACT = 0, PN_FRAME_PNET, PN_FRAME_LAGGED, PN_FRAME_PNET_NH, PN_FRAME_NH, PN_FRAME_ENERGIES };
-static const char *const pn_frame_energy_names[PN_FRAME_ENERGIES] = {"exact", "pnet", "lagged", "pnet_nh", "nh"};
+   root-find return mapping, and the conditioned Neo-Hookean metal model (any yield and
+   hardening in its ranges; the root-find return mapping) */
+enum { PN_FRAME_EXACT = 0, PN_FRAME_PNET, PN_FRAME_LAGGED, PN_FRAME_PNET_NH, PN_FRAME_NH, PN_FRAME_PNET_NH_ANY, PN_FRAME_ENERGIES };
+static const char *const pn_frame_energy_names[PN_FRAME_ENERGIES] = {"exact", "pnet", "lagged", "pnet_nh", "nh", "pnet_nh_any"};
 
 typedef struct pn_frame_desc {
     int dim, energy;             /* 2 or 3; PN_FRAME_*                                       */
     double width, height, wall;  /* the frame's bounding box and wall thickness (m) [0.1, 0.18, 0.01] */
     double depth;                /* 3D: extrusion [0.03]                                     */
     double h;                    /* element size [2.5e-3 in 2D, 5e-3 in 3D]                  */
-    double E, density;           /* [2e11 Pa, 7850 kg/m^3]; yield and hardening: the shipped
-                                    metal models' (0.003 E, 0.01 E)                        */
+    double E, density;           /* [2e11 Pa, 7850 kg/m^3]                                   */
+    double yield_ratio, hardening_ratio; /* sigma_Y0 / E and K / E [3e-3, 1e-2: the single-
+                                    material metal models'; others need pnet_nh_any or an
+                                    analytic energy]                                        */
     double speed, friction;      /* plate speed (m/s) [0.5]; Coulomb coefficient of ground and
                                     plate [0.3]                                            */
     double regularizer;          /* PlasticityNet's w, in the strain form (pn_pnet_desc:
@@ -42,6 +47,7 @@ static void pn_frame_default(pn_frame_desc *d, int dim) {
     d->dim = dim, d->energy = PN_FRAME_EXACT;
     d->width = 0.1, d->height = 0.18, d->wall = 0.01, d->depth = 0.03, d->h = dim == 3 ? 5e-3 : 2.5e-3;
     d->E = 2e11, d->density = 7850, d->speed = 0.5, d->friction = 0.3, d->imperfection = 5e-4;
+    d->yield_ratio = 3e-3, d->hardening_ratio = 1e-2;
 }
 
 /* the frame starts this far above the ground, the plate twice as far above it: beyond the
@@ -64,7 +70,8 @@ static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **out, pn_pnet *n
     int *el, ok = 0;
     size_t nn, ne, k;
     const pn_model *model, *ret = NULL;
-    int dim = d->dim, nh = d->energy == PN_FRAME_PNET_NH || d->energy == PN_FRAME_NH;
+    int dim = d->dim, nh = d->energy == PN_FRAME_PNET_NH || d->energy == PN_FRAME_NH || d->energy == PN_FRAME_PNET_NH_ANY;
+    pn_material_desc md;
     *out = NULL;
     memset(&g, 0, sizeof g); /* a grid of cells of size about h, without the frame's hole */
     g.dim = dim, g.crossed = !d->alternating;
@@ -92,9 +99,13 @@ static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **out, pn_pnet *n
     }
     model = nh ? (dim == 2 ? pn_model_metal_nh_2d() : pn_model_metal_nh_3d()) : (dim == 2 ? pn_model_metal_2d() : pn_model_metal_3d());
     if (d->energy == PN_FRAME_PNET_NH) ret = dim == 2 ? pn_model_metal_nh_return_2d() : pn_model_metal_nh_return_3d();
+    if (d->energy == PN_FRAME_PNET_NH_ANY) model = dim == 2 ? pn_model_metal_nh_any_2d() : pn_model_metal_nh_any_3d();
     memset(&grp, 0, sizeof grp);
-    if (pn_model_material(model, (pn_real)d->E, &grp.material, NULL) != PN_OK) {
-        snprintf(why, cap, "E %g Pa is out of range", d->E);
+    pn_model_material_desc(model, (pn_real)d->E, &md); /* the model's material at this yield and hardening */
+    md.yield_stress_pa = (pn_real)(d->yield_ratio * d->E);
+    md.hardening_modulus_pa = (pn_real)(d->hardening_ratio * d->E);
+    if (pn_material_init(&grp.material, &md, NULL) != PN_OK) {
+        snprintf(why, cap, "E %g Pa, yield ratio %g or hardening ratio %g is out of range", d->E, d->yield_ratio, d->hardening_ratio);
         goto done;
     }
     grp.density_kg_m3 = (pn_real)d->density;
@@ -102,7 +113,7 @@ static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **out, pn_pnet *n
     fd.dim = dim, fd.n_nodes = nn, fd.n_elements = ne, fd.rest_m = X, fd.elements = el, fd.groups = &grp, fd.n_groups = 1;
     fd.gravity[1] = (pn_real)-9.81;
     if (pn_fem_create(&fd, out, why, cap) != PN_OK) goto done;
-    if (d->energy == PN_FRAME_PNET || d->energy == PN_FRAME_PNET_NH) {
+    if (d->energy == PN_FRAME_PNET || d->energy == PN_FRAME_PNET_NH || d->energy == PN_FRAME_PNET_NH_ANY) {
         pn_pnet_desc pd;
         const char *w2 = NULL;
         memset(&pd, 0, sizeof pd);

@@ -762,6 +762,73 @@ PN_TEST(return_von_mises_neo_hookean) {
     pn_tr_run_case(pn__t, &c, 302);
 }
 
+/* Neo-Hookean von Mises with a yield stress far below mu (sigma_Y0 / E down to 1e-3, the range
+   of the conditioned metal models): the root find must stop at the rounding of its own
+   residual, whose terms are of size mu, not of size sigma_Y. The first F is one it once did
+   not converge on (nu 0.4, 1e-3 E, K 0, h 0.7); then random near-rotations with log stretches
+   from 1e-4 to 0.1 at the corners of the ranges. Every call succeeds and, where it flows,
+   |dev tau(Z)| = sqrt(2/3) (sigma_Y0 + K h_new) to 1e-10 of it. */
+PN_TEST(return_von_mises_small_yield) {
+    static const double nus[2] = {0.2, 0.4}, ys[2] = {1e-3, 1e-2}, ks[2] = {0, 0.05};
+    const double F1[4] = {-0.099748060892002666, -0.99389819270239921, 0.99656816310224705, -0.10683792589787294};
+    long calls = 0, fails = 0, plastic = 0;
+    double worst = 0;
+    pn_test_rng rng;
+    int dim, a, b, c, i, k;
+    rng.s = 4242;
+    for (dim = 2; dim <= 3; ++dim)
+        for (a = 0; a < 2; ++a)
+            for (b = 0; b < 2; ++b)
+                for (c = 0; c < 2; ++c) {
+                    pn_material_desc d;
+                    pn_material m;
+                    memset(&d, 0, sizeof d);
+                    d.elastic = PN_ELASTIC_NEO_HOOKEAN, d.plastic = PN_PLASTIC_VON_MISES, d.youngs_modulus_pa = 1;
+                    d.poisson_ratio = nus[a], d.yield_stress_pa = ys[b], d.hardening_modulus_pa = ks[c];
+                    if (pn_material_init(&m, &d, NULL) != PN_OK) {
+                        PN_CHECK(!"pn_material_init");
+                        continue;
+                    }
+                    for (i = 0; i < 1500; ++i) {
+                        double F[9], R1[9], R2[9], e[3], sv[3], Z[9], hn, h = pn_test_rng_range(&rng, 0, 1), mag;
+                        pn_real tau[9];
+                        double tr = 0, dev = 0;
+                        if (i == 0 && dim == 2) {
+                            memcpy(F, F1, sizeof F1);
+                            h = 0.70002116677622517;
+                        } else {
+                            t_rand_rot(&rng, dim, R1);
+                            t_rand_rot(&rng, dim, R2);
+                            mag = pow(10.0, pn_test_rng_range(&rng, -4, -1));
+                            for (k = 0; k < dim; ++k) e[k] = mag * pn_test_rng_range(&rng, -1, 1), sv[k] = exp(e[k]);
+                            t_adb(dim, R1, sv, R2, F);
+                        }
+                        ++calls;
+                        if (pn_return_map(&m, dim, F, h, Z, &hn, NULL) != PN_OK ||
+                            pn_kirchhoff_stress(&m, dim, Z, hn, tau) != PN_OK) {
+                            ++fails;
+                            continue;
+                        }
+                        if (hn == h) continue; /* inside: Z = F */
+                        ++plastic;
+                        for (k = 0; k < dim; ++k) tr += tau[k * dim + k] / dim;
+                        for (k = 0; k < dim * dim; ++k) {
+                            double v = tau[k] - (k % (dim + 1) == 0 ? tr : 0);
+                            dev += v * v;
+                        }
+                        {
+                            double ty = sqrt(2.0 / 3.0) * (ys[b] + ks[c] * hn);
+                            worst = fmax(worst, fabs(sqrt(dev) - ty) / ty);
+                        }
+                    }
+                }
+    PN_REPORT("%ld calls (2D, 3D; nu 0.2, 0.4; sigma_Y0 1e-3, 1e-2 E; K 0, 0.05 E), %ld plastic: |dev tau| against "
+              "sqrt(2/3) sigma_Y %.2e; failed %ld", calls, plastic, worst, fails);
+    PN_CHECK(fails == 0);
+    PN_CHECK(plastic > calls / 10);
+    PN_CHECK_LE(worst, 1e-10);
+}
+
 PN_TEST(return_cam_clay) {
     pn_tr_case c;
     pn_tr_cc(&c, "cam-clay phi=35 beta=0.3 xi=0.5", 35, 0.3, 0.5, 0);
@@ -1251,6 +1318,7 @@ static const pn_test_case pn_tests_return[] = {
     {"return_drucker_prager_volume_correction", return_drucker_prager_volume_correction},
     {"return_von_mises_stvk_hencky", return_von_mises_stvk_hencky},
     {"return_von_mises_neo_hookean", return_von_mises_neo_hookean},
+    {"return_von_mises_small_yield", return_von_mises_small_yield},
     {"return_cam_clay", return_cam_clay},
     {"return_cam_clay_large_shear_3d", return_cam_clay_large_shear_3d},
     {"return_snow_stomakhin", return_snow_stomakhin},
