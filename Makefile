@@ -36,7 +36,7 @@ build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
 # FEM: a steel frame crushed by a plate (build/metal_frame --help; --png --vtu --obj).
 build/metal_frame: examples/metal_frame.c examples/pn_frame.h $(EXAMPLE_DEPS) models/pn_model_metal_2d.h models/pn_model_metal_3d.h \
     models/pn_model_metal_nh_2d.h models/pn_model_metal_nh_3d.h models/pn_model_metal_nh_return_2d.h \
-    models/pn_model_metal_nh_return_3d.h
+    models/pn_model_metal_nh_return_3d.h models/pn_model_metal_nh_any_2d.h models/pn_model_metal_nh_any_3d.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/metal_frame.c $(LDLIBS) -o $@
 

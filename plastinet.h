@@ -502,11 +502,7 @@ typedef enum pn_model_base {
     /* pn_von_mises_energy of the material with StVK-Hencky elasticity (same nu, yield and
        hardening), from the point's h: exact for StVK-Hencky, and within second order in the
        strain of any von Mises metal whose elasticity linearizes alike (Neo-Hookean) */
-    PN_MODEL_BASE_VON_MISES_HENCKY = 1,
-    /* pn_dp_energy of the material (StVK-Hencky + Drucker-Prager) with the yield stress frozen
-       at F0 (pn_dp_prepare): exact where tr e equals F0's, off by the friction lag elsewhere,
-       which is what the network learns */
-    PN_MODEL_BASE_DP_FROZEN = 2
+    PN_MODEL_BASE_VON_MISES_HENCKY = 1
 } pn_model_base;
 
 /* A trained model as a generated header in models/ describes it (see models/README.md). The
@@ -604,7 +600,6 @@ typedef struct pn_pnet_point {
     pn_real h;                       /* hardening state (the network sees it clamped to the
                                         model's range; T(F0) used it as given)            */
     pn_real C[9];                    /* linear correction (E-scaled grad N(F0) - T(F0))      */
-    pn_real base_tau_y;              /* PN_MODEL_BASE_DP_FROZEN: the yield stress at F0      */
 } pn_pnet_point;
 
 /* Bind a model to a material. The material must match the model's training material (models,
@@ -2868,10 +2863,7 @@ static int pn__model_params_ok(const pn_model *mo) {
             if (mo->param[j].kind == q->kind) return 0;
     }
     if (mo->base != PN_MODEL_BASE_NONE &&
-        (mo->kind != PN_MODEL_ENERGY ||
-         !((mo->base == PN_MODEL_BASE_VON_MISES_HENCKY && mo->plastic == PN_PLASTIC_VON_MISES) ||
-           (mo->base == PN_MODEL_BASE_DP_FROZEN && mo->plastic == PN_PLASTIC_DRUCKER_PRAGER &&
-            mo->elastic == PN_ELASTIC_STVK_HENCKY))))
+        (mo->base != PN_MODEL_BASE_VON_MISES_HENCKY || mo->kind != PN_MODEL_ENERGY || mo->plastic != PN_PLASTIC_VON_MISES))
         return 0;
     return mo->output == PN_MODEL_OUTPUT_LINEAR || mo->output == PN_MODEL_OUTPUT_SOFTPLUS;
 }
@@ -3321,10 +3313,7 @@ static pn_result pn__pnet_base(const pn_pnet *net, const pn_pnet_point *pt, cons
     pn_real b, gb[9], Hb[81];
     pn_result r;
     if (net->energy->base == PN_MODEL_BASE_NONE) return PN_OK;
-    if (net->energy->base == PN_MODEL_BASE_DP_FROZEN)
-        r = pn_dp_energy(&net->base, d, F, pt->h, pt->base_tau_y, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
-    else
-        r = pn_von_mises_energy(&net->base, d, F, pt->h, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
+    r = pn_von_mises_energy(&net->base, d, F, pt->h, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
     if (r != PN_OK) return r;
     *e += b;
     for (a = 0; level > 0 && a < n; ++a) g[a] += gb[a];
@@ -3354,10 +3343,6 @@ PN__DEF pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real
     p.h = h;
     pn__features_eval(d, F0, 1, &f);
     for (i = 0; i < f.nf; ++i) p.x0[i] = f.x[i];
-    if (net->energy->base == PN_MODEL_BASE_DP_FROZEN) {
-        r = pn_dp_prepare(&net->base, d, F0, h, &p.base_tau_y);
-        if (r != PN_OK) return r;
-    }
     r = pn__pnet_network(net, &p, d, &f, 1, &N, gN, NULL, NULL);
     if (r == PN_OK) r = pn__pnet_base(net, &p, F0, 1, &N, gN, NULL);
     if (r != PN_OK) return r;
@@ -3560,8 +3545,6 @@ PN__DEF pn_result pn_pnet_prepare_lanes(const pn_pnet *net, int n, const pn_real
             io[i].m = (pn_real)m[i];
             for (k = 0; k < nd; ++k) io[i].gm[k] = (pn_real)gm[k * L + i];
             status[i] = pn__pnet_network(net, &q[i], d, &f[i], 1, &N, gN, NULL, &io[i]);
-            if (status[i] == PN_OK && net->energy->base == PN_MODEL_BASE_DP_FROZEN)
-                status[i] = pn_dp_prepare(&net->base, d, q[i].F0, q[i].h, &q[i].base_tau_y);
             if (status[i] == PN_OK) status[i] = pn__pnet_base(net, &q[i], q[i].F0, 1, &N, gN, NULL);
             for (k = 0; status[i] == PN_OK && k < dd; ++k) q[i].C[k] = gN[k] - T[i][k];
             if (status[i] == PN_OK && !pn__all_finite(dd, q[i].C)) status[i] = PN_ERROR_OVERFLOW;

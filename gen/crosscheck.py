@@ -224,25 +224,6 @@ def base_vm_hencky(mat, F, h):
     return kappa / 2 * tr * tr + mu * (r - g) ** 2 + tauy * g + beta / 2 * g * g
 
 
-def base_dp_frozen(mat, F, F0):
-    """B(F; F0) of PN_MODEL_BASE_DP_FROZEN: Drucker-Prager on StVK-Hencky with the cone's
-    radius frozen at F0 (plastinet.h pn_dp_energy; docs/method.md), from the singular values."""
-    d = F.shape[-1]
-    c = mat.cohesion_strain
-    kappa = mat.kappa(d)
-    mu = mat.mu
-    if torch.is_tensor(kappa):
-        kappa, mu = kappa.squeeze(-1), mu.squeeze(-1)
-    sin_phi = mat.sin_phi.squeeze(-1) if torch.is_tensor(mat.sin_phi) else mat.sin_phi
-    e = torch.log(torch.linalg.svdvals(F)) - c
-    tr = e.sum(-1)
-    r = torch.linalg.vector_norm(e - tr.unsqueeze(-1) / d, dim=-1)
-    tr0 = (torch.log(torch.linalg.svdvals(F0)) - c).sum(-1)
-    tauy = torch.clamp(-d * kappa * pt.dp_alpha(sin_phi, d) * tr0, min=0)
-    dev = torch.where(2 * mu * r <= tauy, mu * r * r, tauy * r - tauy * tauy / (4 * mu))
-    return kappa / 2 * torch.clamp(tr, max=0) ** 2 + d * kappa * c * tr + dev
-
-
 def check_energy(lib, models, i, m, mat, n, gen, h, point):
     """Psi and grad Psi of energy model m (at parameter point `point` if conditioned): C against torch"""
     d = m.dim
@@ -270,13 +251,12 @@ def check_energy(lib, models, i, m, mat, n, gen, h, point):
     Fg = F.clone().requires_grad_(True)
     N = m.energy_N(Fg, F0, hh, prm).squeeze(-1)
     CF = (C * Fg).sum((-1, -2))
-    if m.base:   # the base energy B(F; F0, h), in the gradient at F0 too
-        base = (lambda X: base_vm_hencky(mat, X, hh)) if m.base == 1 else (lambda X: base_dp_frozen(mat, X, F0))
+    if m.base == 1:   # the base energy B(F; h), in the gradient at F0 too
         F0g = F0.clone().requires_grad_(True)
-        (gB0,) = torch.autograd.grad(base(F0g).sum(), F0g)
+        (gB0,) = torch.autograd.grad(base_vm_hencky(mat, F0g, hh).sum(), F0g)
         C = C + gB0
         CF = (C * Fg).sum((-1, -2))
-        N = N + base(Fg)
+        N = N + base_vm_hencky(mat, Fg, hh)
     psi_t = N - CF
     (P_t,) = torch.autograd.grad(psi_t.sum(), Fg)
     psi_t = psi_t.detach()

@@ -126,10 +126,6 @@ def export(cfg, quality_path=None):
         banner += [
             "   On a base: N fits T - grad B, B the exact StVK-Hencky von Mises potential at the same",
             "   nu, yield and hardening (pn_von_mises_energy); plastinet.h adds B back (pn_model.base)."]
-    if cfg.get("base") == "dp_frozen":
-        banner += [
-            "   On a base: N fits T - grad B, B the Drucker-Prager energy with the yield stress frozen",
-            "   at F0 (pn_dp_energy, pn_dp_prepare); plastinet.h adds B back (pn_model.base)."]
     if cfg.get("return_map"):
         banner.append("   Target stresses from the learned return mapping %s (pn_model_%s.h)." % (cfg["return_map"], cfg["return_map"]))
     banner += [
@@ -186,8 +182,7 @@ def export(cfg, quality_path=None):
         "{" + ", ".join(["{%s, %s, %s}" % (pt.PARAMS[p[0]][1], g17(p[1]), g17(p[2])) for p in cfg.get("params", ())] +
                         ["{0, 0, 0}"] * (4 - len(cfg.get("params", ())))) + "}",
         "PN_MODEL_OUTPUT_SOFTPLUS" if cfg.get("output") == "softplus" else "PN_MODEL_OUTPUT_LINEAR",
-        {"von_mises_hencky": "PN_MODEL_BASE_VON_MISES_HENCKY", "dp_frozen": "PN_MODEL_BASE_DP_FROZEN"}.get(
-            cfg.get("base"), "PN_MODEL_BASE_NONE"),
+        "PN_MODEL_BASE_VON_MISES_HENCKY" if cfg.get("base") == "von_mises_hencky" else "PN_MODEL_BASE_NONE",
     ]
     out.append("PN__DEF const pn_model *pn_model_%s(void) {\n" % name)
     out.append("    static const pn_model m = {\n        " + ",\n        ".join(fields) + "};\n")

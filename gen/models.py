@@ -63,13 +63,11 @@ _add("metal_nh_3d", "metal_nh", 3, return_map="metal_nh_return_3d", encoding="sc
 # `make models` leaves it out, `make models MODEL=name` makes it.
 SAND_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 20.0, 45.0))
 _add("sand_any_2d", "sand", 2, encoding="scaled", params=SAND_RANGES, output="softplus")
-# 3D on a base: N fits T - grad B, B the Drucker-Prager energy with the cone frozen at F0
-# (pn_dp_energy). The network alone (no base) met every bar but one: at strains far below the
-# box its error at (nu 0.2, 45 deg) was 0.27-0.28 of the lagged energy's (bar 0.25), after
-# 20000 or 40000 iterations, with the parameters drawn denser at the range ends or compressed
-# states weighted 3x in the loss (docs/results.md)
-_add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000,
-     base="dp_frozen")
+# 3D: meets every bar but one: at strains far below the box its error at (nu 0.2, 45 deg) is
+# 0.26-0.28 of the lagged energy's (the tests' bar 0.25), after 20000 or 40000 iterations, with
+# the parameters drawn denser at the range ends, compressed states weighted 3x, or on the
+# frozen-yield DP energy as a base (docs/results.md): not shipped
+_add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000, ship=False)
 # snow: xi <= 3 keeps p0 = kappa sinh(xi 0.15) < kappa / 2 over h in [-0.15, 0] (the tip exists)
 SNOW_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 30.0, 50.0), ("beta", 0.1, 0.5), ("xi", 1.5, 3.0))
 _add("snow_any_2d", "snow", 2, params=SNOW_RANGES, output="softplus")

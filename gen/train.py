@@ -202,7 +202,7 @@ def energy_stats(cfg, mat, learned):
     x, x0 = pt.features(s), pt.features(s0)
     lo, hi = cfg["h"]
     t = pt.target_principal(mat, s, h, learned)
-    r = t - base_principal(cfg, mat, s, h, s0)   # what the network fits (t without a base)
+    r = t - base_principal(cfg, mat, s, h)   # what the network fits (t without a base)
     ps = cfg.get("params", ())   # parameters to [-1, 1]
     cond = {} if not ps else dict(
         mp=torch.tensor([(p[1] + p[2]) / 2 for p in ps], dtype=DT),
@@ -223,35 +223,17 @@ def energy_stats(cfg, mat, learned):
                 t_rms=torch.sqrt((t * t).sum(-1).mean()).reshape(1), **cond)
 
 
-def base_principal(cfg, mat, s, h, s0):
-    """The principal gradient of a model's analytic base energy B(F; F0, h) (0 without one),
-    F with singular values s, F0 with s0. Both bases are isotropic in F, so their gradients
-    are coaxial with F, as the network's is, and the residual T - grad B stays learnable.
-    "von_mises_hencky": the exact incremental potential of the StVK-Hencky von Mises return
-    (plastinet.h pn_von_mises_energy) at the material's nu, yield and hardening.
-    "dp_frozen": Drucker-Prager with the cone's radius frozen at F0 (pn_dp_energy),
-    dB/de_i = kappa (min(tr e, 0) + d c) + min(2 mu, tau_y / |e_hat|) e_hat_i,
-    tau_y = max(-d kappa alpha tr e0, 0), e = log s - c."""
-    base = cfg.get("base")
-    if base == "von_mises_hencky":
-        import copy
-        mh = copy.copy(mat)
-        mh.elastic = "stvk_hencky"
-        return pt.target_principal(mh, s, h)
-    if base == "dp_frozen":
-        d = s.shape[-1]
-        c = mat.cohesion_strain
-        kappa = mat.kappa(d)
-        e = torch.log(s) - c
-        tr = e.sum(-1, keepdim=True)
-        ehat = e - tr / d
-        r = torch.linalg.vector_norm(ehat, dim=-1, keepdim=True)
-        tr0 = (torch.log(s0) - c).sum(-1, keepdim=True)
-        tauy = torch.clamp(-d * kappa * pt.dp_alpha(mat.sin_phi, d) * tr0, min=0)
-        rs = torch.where(r > 0, r, torch.ones_like(r))
-        shear = torch.where(2 * mat.mu * r <= tauy, 2 * mat.mu * torch.ones_like(r), tauy / rs)
-        return (kappa * (torch.clamp(tr, max=0) + d * c) + shear * ehat) / s
-    return torch.zeros_like(s)
+def base_principal(cfg, mat, s, h):
+    """The principal gradient of a model's analytic base energy B(F; h) (0 without one):
+    "von_mises_hencky" is the exact incremental potential of the StVK-Hencky von Mises return
+    (plastinet.h pn_von_mises_energy) at the material's nu, yield and hardening. Its gradient
+    is coaxial with F, as the network's is, so the residual T - grad B stays learnable."""
+    if cfg.get("base") != "von_mises_hencky":
+        return torch.zeros_like(s)
+    import copy
+    mh = copy.copy(mat)
+    mh.elastic = "stvk_hencky"
+    return pt.target_principal(mh, s, h)
 
 
 def energy_error(model, mat, learned, s0, s, h, A, B, prm, create_graph=False):
@@ -261,8 +243,8 @@ def energy_error(model, mat, learned, s0, s, h, A, B, prm, create_graph=False):
     cfg = model.cfg
     with torch.no_grad():
         t_full = pt.target_principal(mat, s, h, learned)
-        t = t_full - base_principal(cfg, mat, s, h, s0)
-        t0 = pt.target_principal(mat, s0, h, learned) - base_principal(cfg, mat, s0, h, s0)
+        t = t_full - base_principal(cfg, mat, s, h)
+        t0 = pt.target_principal(mat, s0, h, learned) - base_principal(cfg, mat, s0, h)
     diff = model.grad_s(s, s0, h, prm, create_graph) - t
     c = model.grad_s(s0, s0, h, prm, create_graph) - t0
     cross = torch.einsum("bi,bij,bj,bji->b", diff, A, c, B)
