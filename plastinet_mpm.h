@@ -6983,6 +6983,70 @@ static pn_real pn__fem_pair_d2(int kind, int d, const pn_real *y, pn_real *g, pn
     return pn__fem_pair_eval(d, nv, y, c, nf, dC, gn, g, H);
 }
 
+/* The barrier w b(d) of a pair (kind as pn__fem_pair_d2, nv nodes at y) with the distance d
+   of its closest points into *dist; when d < dhat, w b(d) into *E and, by level, its gradient
+   g (level >= 1) and its Hessian H (level >= 2, PSD-projected) over the nv d coordinates, all
+   zero when d >= dhat. Returns 0 when d <= 0 (the primitives touch: no barrier exists), else
+   1. FEM self-contact and the MPM-FEM interface share it. */
+static int pn__pair_barrier(int kind, int d, int nv, const pn_real *y, pn_real dhat, pn_real w, int level, pn_real *E,
+                            pn_real *g, pn_real *H, pn_real *dist) {
+    pn_real sq, dd, bb, b1, b2, gs[12];
+    int n = nv * d, i, j;
+    sq = pn__fem_pair_d2(kind, d, y, level >= 1 ? gs : NULL, level >= 2 ? H : NULL);
+    dd = *dist = PN__SQRT(sq);
+    *E = 0;
+    for (i = 0; level >= 1 && i < n; ++i) g[i] = 0;
+    if (!(dd > 0)) return 0;
+    if (dd >= dhat) {
+        for (i = 0; level >= 2 && i < n * n; ++i) H[i] = 0;
+        return 1;
+    }
+    pn__fem_barrier(dd, dhat, &bb, &b1, &b2);
+    *E = w * bb;
+    for (i = 0; level >= 1 && i < n; ++i) g[i] = w * b1 * gs[i] / (2 * dd); /* grad b(d) = b' grad s / (2 d) */
+    if (level < 2) return 1;
+    for (i = 0; i < n; ++i) /* b'' grad d grad d^T + b' hess d, projected: PSD */
+        for (j = 0; j < n; ++j) {
+            pn_real gi = gs[i] / (2 * dd), gj = gs[j] / (2 * dd);
+            H[i * n + j] = w * (b2 * gi * gj + b1 * (H[i * n + j] / (2 * dd) - gs[i] * gs[j] / (4 * dd * dd * dd)));
+        }
+    pn_sym_project_psd(n, H);
+    return 1;
+}
+
+/* Additive CCD (Li, Kaufman and Jiang 2021) of a pair moving from y along dy (nv nodes, the
+   first na on one side): the largest t in [0, tmax] to which the pair can move without its
+   distance closing below a tenth of the starting one. Advance while the distance cannot have
+   closed, by 0.9 of the distance over the bound of the pair's relative motion (each side's
+   largest motion after the pair's mean translation). lower: a lower bound on the starting
+   distance (or 0), which returns tmax at once when the first advance would reach it. */
+static pn_real pn__pair_ccd(int kind, int d, int nv, int na, const pn_real *y, const pn_real *dy, pn_real lower,
+                            pn_real tmax) {
+    pn_real mean[3] = {0, 0, 0}, la = 0, lb = 0, lp, t = 0, d0 = 0, yt[12];
+    int i, j, it;
+    for (j = 0; j < nv; ++j)
+        for (i = 0; i < d; ++i) mean[i] += dy[j * d + i] / (pn_real)nv;
+    for (j = 0; j < nv; ++j) {
+        pn_real v2 = 0;
+        for (i = 0; i < d; ++i) v2 += (dy[j * d + i] - mean[i]) * (dy[j * d + i] - mean[i]);
+        if (j < na) la = PN__MAX(la, PN__SQRT(v2));
+        else lb = PN__MAX(lb, PN__SQRT(v2));
+    }
+    lp = la + lb;
+    if (!(lp > 0) || (pn_real)0.9 * lower / lp >= tmax) return tmax;
+    for (it = 0; it < 1000; ++it) {
+        pn_real dist, step;
+        for (i = 0; i < nv * d; ++i) yt[i] = y[i] + t * dy[i];
+        dist = PN__SQRT(pn__fem_pair_d2(kind, d, yt, NULL, NULL));
+        if (it == 0) d0 = dist;
+        else if (dist < (pn_real)0.1 * d0) break;
+        step = (pn_real)0.9 * dist / lp;
+        if (t + step >= tmax) return tmax;
+        t += step;
+    }
+    return t;
+}
+
 /* the box of grid item k (a target: 2D edge, 3D face; then a 3D edge) at x, swept along
    alpha dir when dir is given, grown by grow */
 static void pn__fem_item_box(const pn_fem_mesh *m, size_t k, const pn_real *x, const pn_real *dir, pn_real alpha,
@@ -7198,29 +7262,21 @@ static int pn__fem_self_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx
     pn__fem_self_ctx *cx = (pn__fem_self_ctx *)vctx;
     pn__fem *s = (pn__fem *)m->impl;
     int d = m->dim, n = pr->nv * d, i, j, full = 1;
-    pn_real y[12], g[12], H[144], sq, dist, bb, b1, b2, w = s->dt * s->dt * m->kappa;
+    pn_real y[12], g[12], H[144], dist, e;
     pn__fem_pair_y(m, pr, cx->x, NULL, 0, y);
-    sq = pn__fem_pair_d2(pr->kind, d, y, g, cx->mode >= 2 ? H : NULL);
-    dist = PN__SQRT(sq);
-    cx->dmin = PN__MIN(cx->dmin, dist);
-    if (!(dist > 0)) {
+    if (!pn__pair_barrier(pr->kind, d, pr->nv, y, m->dhat, s->dt * s->dt * m->kappa, cx->mode, &e, g, H, &dist)) {
+        cx->dmin = PN__MIN(cx->dmin, dist);
         m->error_node = (long)pr->n[0];
         cx->r = PN_ERROR_STEP_TOO_LARGE;
         return 1;
     }
+    cx->dmin = PN__MIN(cx->dmin, dist);
     if (dist >= m->dhat) return 0;
-    pn__fem_barrier(dist, m->dhat, &bb, &b1, &b2);
-    cx->E += w * bb;
-    if (cx->mode >= 1) /* grad b(d) = b' grad s / (2 d) */
+    cx->E += e;
+    if (cx->mode >= 1)
         for (i = 0; i < n; ++i)
-            if (PN__FEM_FREE(m, pr->n[i / d])) s->g[pr->n[i / d] * (size_t)d + (size_t)(i % d)] += w * b1 * g[i] / (2 * dist);
+            if (PN__FEM_FREE(m, pr->n[i / d])) s->g[pr->n[i / d] * (size_t)d + (size_t)(i % d)] += g[i];
     if (cx->mode < 2) return 0;
-    for (i = 0; i < n; ++i) /* b'' grad d grad d^T + b' hess d, projected: PSD */
-        for (j = 0; j < n; ++j) {
-            pn_real gi = g[i] / (2 * dist), gj = g[j] / (2 * dist);
-            H[i * n + j] = w * (b2 * gi * gj + b1 * (H[i * n + j] / (2 * dist) - g[i] * g[j] / (4 * dist * dist * dist)));
-        }
-    pn_sym_project_psd(n, H);
     for (i = 0; i < pr->nv; ++i)
         for (j = 0; j < i; ++j) full &= pn__fem_in_profile(m, pr->n[i], pr->n[j]);
     if (!full && s->n_off >= s->cap_off) { /* more pairs than ever before: twice the room */
@@ -7278,43 +7334,15 @@ typedef struct pn__fem_ccd_ctx {
     pn_real best;
 } pn__fem_ccd_ctx;
 
-/* additive CCD (Li, Kaufman and Jiang 2021) of one pair: advance while the distance cannot
-   have closed, by 0.9 of the distance over the bound of the pair's relative motion (each
-   side's largest motion after the pair's mean translation), and stop at a tenth of the
-   starting distance */
+/* one pair's CCD (pn__pair_ccd), the best step so far its limit */
 static int pn__fem_ccd_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx) {
     pn__fem_ccd_ctx *cx = (pn__fem_ccd_ctx *)vctx;
-    int d = m->dim, i, j, it;
-    pn_real mean[3] = {0, 0, 0}, la = 0, lb = 0, lp, t = 0, d0, y[12];
-    for (j = 0; j < pr->nv; ++j)
-        for (i = 0; i < d; ++i) mean[i] += cx->dir[pr->n[j] * (size_t)d + (size_t)i] / (pn_real)pr->nv;
-    for (j = 0; j < pr->nv; ++j) {
-        pn_real v2 = 0;
-        for (i = 0; i < d; ++i) {
-            pn_real u = cx->dir[pr->n[j] * (size_t)d + (size_t)i] - mean[i];
-            v2 += u * u;
-        }
-        if (j < pr->na) la = PN__MAX(la, PN__SQRT(v2));
-        else lb = PN__MAX(lb, PN__SQRT(v2));
-    }
-    lp = la + lb;
-    if (!(lp > 0)) return 0;
-    if ((pn_real)0.9 * pn__fem_pair_bound(m, pr, cx->x) / lp >= cx->best) return 0; /* its first advance reaches best */
+    int d = m->dim, i, j;
+    pn_real y[12], dy[12];
     pn__fem_pair_y(m, pr, cx->x, NULL, 0, y);
-    d0 = PN__SQRT(pn__fem_pair_d2(pr->kind, d, y, NULL, NULL));
-    for (it = 0; it < 1000; ++it) {
-        pn_real dist, step;
-        pn__fem_pair_y(m, pr, cx->x, cx->dir, t, y);
-        dist = PN__SQRT(pn__fem_pair_d2(pr->kind, d, y, NULL, NULL));
-        if (it > 0 && dist < (pn_real)0.1 * d0) break;
-        step = (pn_real)0.9 * dist / lp;
-        if (t + step >= cx->best) {
-            t = cx->best;
-            break;
-        }
-        t += step;
-    }
-    cx->best = PN__MIN(cx->best, t);
+    for (j = 0; j < pr->nv; ++j)
+        for (i = 0; i < d; ++i) dy[j * d + i] = cx->dir[pr->n[j] * (size_t)d + (size_t)i];
+    cx->best = pn__pair_ccd(pr->kind, d, pr->nv, pr->na, y, dy, pn__fem_pair_bound(m, pr, cx->x), cx->best);
     return 0;
 }
 

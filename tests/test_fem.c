@@ -769,6 +769,146 @@ PN_TEST(fem_pair_distance_fd) {
     }
 }
 
+/* The pair barrier and the pair CCD shared by self-contact and the MPM-FEM interface (a
+   particle against a boundary edge in 2D, a boundary triangle in 3D: point-edge and
+   point-triangle pairs).
+   (a) pn__pair_barrier: the gradient against central differences of its energy, the Hessian
+       against the nearest PSD matrix of the central differences of the gradient, on random
+       pairs within dhat (away from the kinks where the closest feature switches).
+   (b) pn__pair_ccd: a point and a primitive moving linearly, heading through it or grazing
+       it (passing at 1e-9 of the primitive's size): the step it returns is never later than
+       the first crossing found by sampling the path 20,000 times, and the pair is apart
+       there. */
+static double t_pair_side(int d, const pn_real *y) { /* signed side of the point against the primitive's line or plane */
+    double a[3], b[3], w[3], nrm[3];
+    int i;
+    if (d == 2) return (y[4] - y[2]) * (y[1] - y[3]) - (y[5] - y[3]) * (y[0] - y[2]);
+    for (i = 0; i < 3; ++i) w[i] = y[i] - y[3 + i];
+    for (i = 0; i < 3; ++i) a[i] = y[6 + i] - y[3 + i], b[i] = y[9 + i] - y[3 + i];
+    nrm[0] = a[1] * b[2] - a[2] * b[1], nrm[1] = a[2] * b[0] - a[0] * b[2], nrm[2] = a[0] * b[1] - a[1] * b[0];
+    return nrm[0] * w[0] + nrm[1] * w[1] + nrm[2] * w[2];
+}
+
+static int t_pair_over(int d, const pn_real *y) { /* does the point project inside the primitive? */
+    if (d == 2) {
+        double e0 = y[4] - y[2], e1 = y[5] - y[3], t = ((y[0] - y[2]) * e0 + (y[1] - y[3]) * e1) / (e0 * e0 + e1 * e1);
+        return t > 0 && t < 1;
+    }
+    {
+        double e0[3], e1[3], w[3], A00 = 0, A01 = 0, A11 = 0, b0 = 0, b1 = 0, det, u, v;
+        int i;
+        for (i = 0; i < 3; ++i) e0[i] = y[6 + i] - y[3 + i], e1[i] = y[9 + i] - y[3 + i], w[i] = y[i] - y[3 + i];
+        for (i = 0; i < 3; ++i) A00 += e0[i] * e0[i], A01 += e0[i] * e1[i], A11 += e1[i] * e1[i], b0 += w[i] * e0[i], b1 += w[i] * e1[i];
+        det = A00 * A11 - A01 * A01;
+        u = (A11 * b0 - A01 * b1) / det, v = (A00 * b1 - A01 * b0) / det;
+        return u > 0 && v > 0 && u + v < 1;
+    }
+}
+
+PN_TEST(fem_pair_barrier_ccd) {
+    unsigned long seed = 777;
+    int d;
+#define T_RND() (seed = seed * 6364136223846793005UL + 1442695040888963407UL, (double)(seed >> 11) / 9007199254740992.0 - 0.5)
+    for (d = 2; d <= 3; ++d) {
+        const int kind = d == 2 ? PN__FEM_PE : PN__FEM_PT, nv = d + 1, n = nv * d;
+        const pn_real dhat = (pn_real)1e-2;
+        double gerr = 0, herr = 0, ratio = 0;
+        int trial, tested = 0, late = 0, touched = 0, crossings = 0, grazes = 0;
+        for (trial = 0; trial < 600; ++trial) { /* (a) */
+            pn_real y[12], g[12], H[144], gp[12], gm[12], Hfd[144], Hs[144], Ht[144], E, Ep, Em, dist, w = (pn_real)3.7;
+            int i, j, kink = 0;
+            for (i = d; i < n; ++i) y[i] = (pn_real)(0.05 * T_RND());
+            for (i = 0; i < d; ++i) { /* the point near the primitive's centroid, lifted within dhat of its plane */
+                double cen = 0;
+                for (j = 1; j < nv; ++j) cen += y[j * d + i] / (nv - 1);
+                y[i] = (pn_real)(cen + 0.02 * T_RND());
+            }
+            if (!pn__pair_barrier(kind, d, nv, y, dhat, w, 2, &E, g, H, &dist) || dist >= dhat) continue;
+            for (i = 0; i < n; ++i) {
+                pn_real keep = y[i], h = (pn_real)1e-4 * PN__MIN(dist, dhat - dist), dd; /* b's scales: d, dhat - d */
+                y[i] = keep + h, (void)pn__pair_barrier(kind, d, nv, y, dhat, w, 1, &Ep, gp, Ht, &dd);
+                y[i] = keep - h, (void)pn__pair_barrier(kind, d, nv, y, dhat, w, 1, &Em, gm, Ht, &dd);
+                y[i] = keep;
+                for (j = 0; j < n; ++j) /* the one-sided differences disagree only across a kink */
+                    if (fabs(gp[j] - g[j] - (g[j] - gm[j])) > 1e-2 * (fabs(gp[j] - gm[j]) + 1e-9 * fabs(g[j]) + 1e-12)) kink = 1;
+                for (j = 0; j < n; ++j) Hfd[j * n + i] = (gp[j] - gm[j]) / (2 * h);
+                Hs[i] = (Ep - Em) / (2 * h); /* the gradient's differences, kept in Hs for a moment */
+            }
+            if (kink) continue;
+            ++tested;
+            {
+                double gmax = 0, hmax = 0;
+                for (i = 0; i < n; ++i) gmax = fmax(gmax, fabs(g[i]));
+                for (i = 0; i < n; ++i) gerr = fmax(gerr, fabs(Hs[i] - g[i]) / gmax);
+                for (i = 0; i < n; ++i)
+                    for (j = 0; j < n; ++j) Ht[i * n + j] = (Hfd[i * n + j] + Hfd[j * n + i]) / 2;
+                pn_sym_project_psd(n, Ht);
+                for (i = 0; i < n * n; ++i) hmax = fmax(hmax, fabs(Ht[i]));
+                for (i = 0; i < n * n; ++i) herr = fmax(herr, fabs(Ht[i] - H[i]) / hmax);
+            }
+        }
+        for (trial = 0; trial < 4000; ++trial) { /* (b) */
+            pn_real y[12], dy[12], yt[12], t;
+            double tc = 2, s0;
+            int i, j, graze = trial & 1;
+            for (i = d; i < n; ++i) y[i] = (pn_real)(0.05 * T_RND()), dy[i] = (pn_real)(0.01 * T_RND());
+            for (i = 0; i < d; ++i) {
+                double cen = 0, end = 0;
+                for (j = 1; j < nv; ++j) cen += y[j * d + i] / (nv - 1), end += (y[j * d + i] + dy[j * d + i]) / (nv - 1);
+                y[i] = (pn_real)(cen + 0.05 * T_RND());
+                /* heading through the primitive's moved centroid, or (grazing) past its first
+                   node at 1e-9 of its size, offset along a random direction */
+                dy[i] = (pn_real)((graze ? y[d + i] + dy[d + i] + 1e-9 * 0.05 * T_RND() : end + 0.01 * T_RND()) - y[i]);
+            }
+            s0 = t_pair_side(d, y);
+            {
+                pn_real E0, g0[12], H0[144], d0;
+                if (!pn__pair_barrier(kind, d, nv, y, dhat, 1, 0, &E0, g0, H0, &d0) || d0 < 1e-6) continue;
+            }
+            for (i = 1; i <= 20000; ++i) { /* the first crossing of the primitive's interior, over [0, 2]: */
+                double lo = 2.0 * (i - 1) / 20000, hi = 2.0 * i / 20000, sl; /* a root of the side (a polynomial */
+                int k, it;                                                 /* in time), the point over it there */
+                for (k = 0; k < n; ++k) yt[k] = (pn_real)(y[k] + lo * dy[k]);
+                sl = t_pair_side(d, yt);
+                for (k = 0; k < n; ++k) yt[k] = (pn_real)(y[k] + hi * dy[k]);
+                if (sl * t_pair_side(d, yt) > 0) continue;
+                for (it = 0; it < 60; ++it) {
+                    double mid = (lo + hi) / 2;
+                    for (k = 0; k < n; ++k) yt[k] = (pn_real)(y[k] + mid * dy[k]);
+                    if (t_pair_side(d, yt) * sl > 0) lo = mid;
+                    else hi = mid;
+                }
+                if (t_pair_over(d, yt)) {
+                    tc = lo;
+                    break;
+                }
+            }
+            (void)s0;
+            t = pn__pair_ccd(kind, d, nv, 1, y, dy, 0, 1);
+            for (j = 0; j < n; ++j) yt[j] = y[j] + t * dy[j];
+            {
+                pn_real E1, g1[12], H1[144], d1;
+                touched += !pn__pair_barrier(kind, d, nv, yt, dhat, 1, 0, &E1, g1, H1, &d1);
+            }
+            if (tc <= 1) crossings++, ratio += t / tc;
+            grazes += graze;
+            if (t > tc) late++;
+            PN_CHECK(t > 0 && t <= 1);
+        }
+        PN_REPORT("%s: barrier gradient %.2e, Hessian %.2e against the PSD part of central differences (%d pairs within "
+                  "dhat); CCD: %d crossings (mean step / crossing time %.2f), %d grazing paths, %d late, %d touching",
+                  d == 2 ? "point-edge" : "point-triangle", gerr, herr, tested, crossings, crossings ? ratio / crossings : 0,
+                  grazes, late, touched);
+        PN_CHECK(tested > 100);
+        PN_CHECK_LE(gerr, 1e-5);
+        PN_CHECK_LE(herr, 1e-4);
+        PN_CHECK(crossings > 500);
+        PN_CHECK(late == 0);
+        PN_CHECK(touched == 0);
+    }
+#undef T_RND
+}
+
 /* Self-contact: two elastic blocks of one mesh, one thrown at the other (no gravity). No
    boundary node ever reaches an edge of the other block (smallest distance > 0 at every
    step, and no node inside a triangle of the other block), momentum is kept (the
@@ -1342,6 +1482,7 @@ static const pn_test_case pn_tests_fem[] = {
     {"fem_pcg", fem_pcg},
     {"fem_friction_slide", fem_friction_slide},
     {"fem_pair_distance_fd", fem_pair_distance_fd},
+    {"fem_pair_barrier_ccd", fem_pair_barrier_ccd},
     {"fem_self_contact_3d", fem_self_contact_3d},
     {"fem_permanent_set", fem_permanent_set},
     {"fem_spin_release", fem_spin_release},
