@@ -351,7 +351,7 @@ int main(int argc, char **argv) {
                     "bounding-box diagonal, against the explicit reference of the same material at E = %g Pa. *x fair*: wall time "
                     "per simulated second over the fair explicit baseline's at 200 GPa%s.\n\n",
                 c.dim, c.yield, c.speed, c.T, FRAME_DT, c.soft_E,
-                best ? "" : " (no explicit step fraction stayed finite: no ratio)");
+                best ? "" : c.no_speed ? " (not measured: --no-speed)" : " (no explicit step fraction stayed finite: no ratio)");
         if (best)
             fprintf(md, "Fair explicit baseline at 200 GPa: %g of pn_fem_stable_dt at each step, timed over the first %g s (%ld "
                         "steps) and scaled to the whole run: %.4g wall s per simulated s.\n\n",

@@ -495,7 +495,10 @@ int main(int argc, char **argv) {
         fprintf(f, "Objectivity: max relative change of Psi / grad Psi under a rotation of F and F0.\n");
         fprintf(f, "Hessian: max |dP/dF - FD| / max |dP/dF| (target <= 1e-4). Costs in ns on this machine.\n");
         fprintf(f, "Small strains: the ratio to lagged with |e0| <= 1e-3 and |de| <= 1e-2, far below the box,\n");
-        fprintf(f, "where a simulation at a realistic E lives (a sand column at 1e7 Pa strains ~1e-4).\n\n");
+        fprintf(f, "where a simulation at a realistic E lives (a sand column at 1e7 Pa strains ~1e-4). A metal\n");
+        fprintf(f, "with a high yield stress stays nearly elastic there, where the lagged energy is exact: the\n");
+        fprintf(f, "ratio is then large and says how few pairs yield (tests/test_pnet.c holds the network's error\n");
+        fprintf(f, "to 1%% of |T| where the lagged energy's is below that).\n\n");
         fprintf(f, "## Energies\n\n");
         fprintf(f, "Least energy: min of Psi(F) - Psi(F0) per unit E with the regularizer on, F near F0 (the box)\n");
         fprintf(f, "and with log stretches anywhere in [-10, 3] (crushed far beyond the box); bounded models\n");

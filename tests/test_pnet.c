@@ -777,6 +777,21 @@ static void t_pn_cond_model(t_pn_model *tm, int dim, int scaled, pn_test_rng *rn
     t_pn_mlp_random(&mo->mlp, tm->buf, 3, size, PN_ACTIVATION_SILU, 0.5, rng);
 }
 
+/* F0 = R0 diag(s0) R1 and F = R2 diag(sv) R3 with log s0 uniform in [-r, r] and log sv within
+   r of them, the four rotations random (kept in R) */
+static void t_pn_near_pair(pn_test_rng *rng, int dim, double r, double R[4][9], double *s0, double *sv, double *F0,
+                           double *F) {
+    int k;
+    for (k = 0; k < 4; ++k) t_rand_rot(rng, dim, R[k]);
+    for (k = 0; k < dim; ++k) {
+        double e0 = pn_test_rng_range(rng, -r, r);
+        s0[k] = exp(e0);
+        sv[k] = exp(e0 + pn_test_rng_range(rng, -r, r));
+    }
+    t_adb(dim, R[0], s0, R[1], F0);
+    t_adb(dim, R[2], sv, R[3], F);
+}
+
 PN_TEST(pnet_conditioned) {
     double worst_psi = 0, worst_g = 0, worst_h = 0, worst_lanes[3] = {0, 0, 0}, worst_bound = HUGE_VAL, wired = 0;
     long fails = 0, samples = 0, refused = 0;
@@ -823,14 +838,7 @@ PN_TEST(pnet_conditioned) {
                 double R[4][9], s0[3], sv[3], F0[9], F[9], x0[3], x[3], S = 1, sq = 1, pw[3] = {1, 1, 1}, u[12], out;
                 double psi = 0, psi2 = 0, P[9], H[81], fd[81], cf = 0, cc = 0, ref, h = 0;
                 pn_pnet_point pt, pt2;
-                for (k = 0; k < 4; ++k) t_rand_rot(&rng, dim, R[k]);
-                for (k = 0; k < dim; ++k) {
-                    double e0 = pn_test_rng_range(&rng, -r, r);
-                    s0[k] = exp(e0);
-                    sv[k] = exp(e0 + pn_test_rng_range(&rng, -r, r));
-                }
-                t_adb(dim, R[0], s0, R[1], F0);
-                t_adb(dim, R[2], sv, R[3], F);
+                t_pn_near_pair(&rng, dim, r, R, s0, sv, F0, F);
                 ++samples;
                 if (pn_pnet_prepare(&net, F0, h, &pt, NULL, NULL) != PN_OK ||
                     pn_pnet_energy(&net, &pt, F, &psi, P, H, 0) != PN_OK ||
@@ -2101,14 +2109,7 @@ PN_TEST(pnet_base_energy) {
                 double R[4][9], s0[3], sv[3], F0[9], F[9], h = pn_test_rng_range(&rng, 0, 1), T0[9];
                 double psi, psi0, P[9], H[81], P0[9], H0[9 * 9], B, gB[9], HB[81], B0, gB0[9], ref, cf = 0, dP[9], dH[81];
                 pn_pnet_point pt, pt0;
-                for (k = 0; k < 4; ++k) t_rand_rot(&rng, dim, R[k]);
-                for (k = 0; k < dim; ++k) {
-                    double e0 = pn_test_rng_range(&rng, -r, r);
-                    s0[k] = exp(e0);
-                    sv[k] = exp(e0 + pn_test_rng_range(&rng, -r, r));
-                }
-                t_adb(dim, R[0], s0, R[1], F0);
-                t_adb(dim, R[2], sv, R[3], F);
+                t_pn_near_pair(&rng, dim, r, R, s0, sv, F0, F);
                 ++samples;
                 if (pn_pnet_prepare(&net, F0, h, &pt, NULL, T0) != PN_OK || pn_pnet_prepare(&net0, F0, h, &pt0, NULL, NULL) != PN_OK ||
                     pn_pnet_energy(&net, &pt, F, &psi, P, H, 0) != PN_OK ||
