@@ -1945,6 +1945,7 @@ static double t_prepare_lanes(pn_test_ctx *pn__t, const pn_pnet *net, int dim, i
     pn_result st[PN_MLP_LANES];
     int dd = dim * dim, i, k, same = 1;
     double worst = 0;
+    memset(F0, 0, sizeof F0), memset(h, 0, sizeof h); /* gcc -O1 cannot see that n >= 1 fills what the call reads */
     for (i = 0; i < n; ++i) {
         for (k = 0; k < dd; ++k) F0[i * dd + k] = (pn_real)((k % (dim + 1) == 0 ? 1 : 0) + pn_test_rng_range(rng, -0.05, 0.05));
         if (i == bad) for (k = 0; k < dim; ++k) F0[i * dd + k] = -F0[i * dd + k]; /* a row negated: det < 0 */
