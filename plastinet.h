@@ -3343,6 +3343,7 @@ PN__DEF pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real
     p.h = h;
     pn__features_eval(d, F0, 1, &f);
     for (i = 0; i < f.nf; ++i) p.x0[i] = f.x[i];
+    memset(gN, 0, sizeof gN); /* gcc cannot always see that the network fills the d^2 the base adds to */
     r = pn__pnet_network(net, &p, d, &f, 1, &N, gN, NULL, NULL);
     if (r == PN_OK) r = pn__pnet_base(net, &p, F0, 1, &N, gN, NULL);
     if (r != PN_OK) return r;
@@ -3544,6 +3545,7 @@ PN__DEF pn_result pn_pnet_prepare_lanes(const pn_pnet *net, int n, const pn_real
             io[i].mode = 2;
             io[i].m = (pn_real)m[i];
             for (k = 0; k < nd; ++k) io[i].gm[k] = (pn_real)gm[k * L + i];
+            memset(gN, 0, sizeof gN);
             status[i] = pn__pnet_network(net, &q[i], d, &f[i], 1, &N, gN, NULL, &io[i]);
             if (status[i] == PN_OK) status[i] = pn__pnet_base(net, &q[i], q[i].F0, 1, &N, gN, NULL);
             for (k = 0; status[i] == PN_OK && k < dd; ++k) q[i].C[k] = gN[k] - T[i][k];
