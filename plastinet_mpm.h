@@ -483,6 +483,11 @@ typedef struct pn_mpm_world {
                                     F^nT g (>>stress); 2: by cells, whose L makes F          */
     size_t mg_dense_n;           /* unknowns of the factored coarsest level (0: smoothed)      */
     pn_real *mg_dense;
+    /* >>couple: forces on particles xf_idx[0 .. xf_n) (N, dim each in xf) for the next
+       explicit step only (pn_coupled_step_explicit sets them and clears them after) */
+    const size_t *xf_idx;
+    const pn_real *xf;
+    size_t xf_n;
 } pn_mpm_world;
 
 /* Create a world (*out set on success). PN_ERROR_DIMENSION for a dim other than 2 or 3 (or
@@ -916,6 +921,91 @@ PN_API void pn_fem_mesh_data_free(pn_fem_mesh_data *d, const pn_allocator *al);
 /* Total elastic energy of the elements' Fe and kinetic energy of the nodes (J; per metre of
    thickness in 2D). PN_ERROR_INVERTED for an element the elastic energy is undefined at. */
 PN_API pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_real *kinetic_j);
+
+/* ======================================================================================
+   COUPLING: an MPM world and an FEM mesh stepped together (BFEMP, Li, Fang, Li and Jiang
+   2021). They meet through an IPC barrier between every particle and the mesh's boundary
+   (2D edges, 3D triangles), so they never interpenetrate: particle p's barrier is
+   kappa_p b(d), b(d) = -(d - dhat)^2 ln(d / dhat) below dhat, kappa_p = k a_p / dhat with
+   a_p = V_p^((dim - 1) / dim) the particle's share of a surface. In an implicit step d is
+   measured from where the step puts the particle, y_p = x_p + dt sum_i w_ip v_i (its APIC
+   update, BFEMP's grid-interpolated position), to the mesh at its new positions; in an
+   explicit step from the positions at the step's start. Friction at the interface is
+   Coulomb's, lagged and smoothed as IPC's (below friction_velocity_m_s it creeps).
+   Several bodies go into one mesh (their contact with each other is the mesh's own). The
+   coupled object borrows the world and the mesh: step them only through it while it
+   lives, and destroy it before them.
+   ====================================================================================== */
+typedef struct pn_coupled_desc {
+    pn_real contact_distance_m;  /* dhat [0: a quarter of the world's dx]                   */
+    pn_real contact_stiffness;   /* k (Pa) [0: 0.1 E, E the stiffest particle group's]      */
+    pn_real friction;            /* the Coulomb coefficient at the interface [0]            */
+    pn_real friction_velocity_m_s; /* IPC's epsilon_v [1e-3]                                */
+} pn_coupled_desc;
+
+typedef struct pn_coupled_implicit_desc {
+    pn_mpm_implicit_desc mpm;    /* fixed_point_iters, newton_max, newton_tol (the step stops
+                                    when max |dv| and max |dx| / dt over particles' nodes and
+                                    mesh nodes are below newton_tol dx / dt), cg_max,
+                                    cg_rel_tol (CG on the coupled system), contact_rounds,
+                                    linear_solver (the grid block's preconditioner),
+                                    max_halvings, pnet_double, trace: as for
+                                    pn_mpm_step_implicit; the energy formulation only       */
+    pn_fem_linear_solver fem_linear_solver; /* the mesh block's preconditioner: its exact
+                                    factor (Cholesky) or block IC (PCG) [DEFAULT]            */
+} pn_coupled_implicit_desc;
+
+typedef struct pn_coupled_stats {
+    int substeps, newton_iters, cg_iters, fixed_point_iters, line_search_failures, solves;
+    size_t pairs;                /* particle-boundary pairs within dhat at the step's end    */
+    pn_real min_distance_m;      /* the smallest particle-boundary distance the step met (its
+                                    line searches and its end; explicit: the end; > 0)      */
+    pn_real newton_residual;     /* max |dz| dt / dx at the last Newton iteration            */
+    size_t plastic_particles, plastic_elements;
+} pn_coupled_stats;
+
+typedef struct pn_coupled {
+    pn_mpm_world *mpm;
+    pn_fem_mesh *fem;
+    pn_real dhat, stiffness, friction, eps_v;
+    long error_particle, error_node; /* the culprit of the last failure, -1: none           */
+    char error[256];
+    void *impl;
+} pn_coupled;
+
+/* Couple world w and mesh m (the same dim). PN_ERROR_DIMENSION; PN_ERROR_INVALID_ARGUMENT for
+   a negative or non-finite field, or a particle inside the mesh or on its boundary (named);
+   PN_ERROR_OUT_OF_MEMORY. why (optional) says why. */
+PN_API pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_coupled_desc *desc, pn_coupled **out,
+                                   char *why, size_t why_cap);
+PN_API void pn_coupled_destroy(pn_coupled *c); /* the world and mesh stay */
+PN_API const char *pn_coupled_error(const pn_coupled *c);
+
+/* The explicit bound: the smaller of the world's and the mesh's, and sqrt(m / (kappa_p b''))
+   over the pairs within dhat (the barrier's spring, m the lighter side's mass). */
+PN_API pn_result pn_coupled_stable_dt(pn_coupled *c, pn_real *dt_s);
+
+/* One explicit step of both at dt_s: each first takes the barrier's and friction's forces
+   at the step's start (the world through its particles' momentum, the mesh on its nodes),
+   then steps as pn_mpm_step_explicit and pn_fem_step_explicit do. PN_ERROR_STEP_TOO_LARGE
+   if a particle would cross the boundary within the step (continuous collision detection);
+   on failure both are as they were. */
+PN_API pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt_s, pn_coupled_stats *stats);
+
+/* One implicit step of both: the grid velocities v and the mesh's positions x minimize
+       E_mpm(v) + E_fem(x) / dt^2 + sum kappa_p b(d(y_p(v), x)) + D(v, x)
+   (E_mpm as pn_mpm_step_implicit, E_fem as pn_fem_step_implicit over dt^2, D the lagged
+   interface friction) by one Newton iteration over both: CG on the whole Hessian,
+   preconditioned by each side's own solver, and a line search that starts at the largest
+   step continuous collision detection allows. Around it the fixed point on F0 of both
+   sides and the world's wall contact rounds. Refused: drives or loads on, moving mesh
+   obstacles, the stress formulation (PN_ERROR_UNSUPPORTED). A failed step is retried as
+   substeps; when none works both are as they were. */
+PN_API pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt_s, const pn_coupled_implicit_desc *desc,
+                                          pn_coupled_stats *stats);
+
+/* The smallest particle-boundary distance now (m; 1e30 when no particle is near the mesh). */
+PN_API pn_result pn_coupled_min_distance(pn_coupled *c, pn_real *dist_m);
 
 #ifdef __cplusplus
 }
@@ -4078,16 +4168,14 @@ static pn_result pn__mpm_value(void *ctx, const pn_real *v, pn_real *E) {
     return pn__mpm_objective(c->w, v, c->dt, 0, E);
 }
 
-/* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
-
-static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
-                                       pn_mpm_stats *st) {
-    int d = w->dim, i, pass, has_sep = 0, capped = 0; /* capped: the last linear solve stopped at cg_max */
+/* The start of an implicit step (the coupled one's too): bin, setup, particle to grid,
+   contact; v* = momentum / mass + dt g, separating contacts held where they approach, vsol
+   = v* with the holds and (friction) the first friction lag. Returns 1 when a node has a
+   separating contact. */
+static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
+    int d = w->dim, i, has_sep = 0;
     size_t k, nd;
-    pn_result r;
-    pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
-    pn__mpm_mark(w, st, -1);
-    pn__mpm_bin(w);
+    pn__mpm_mark(w, st, -1);    pn__mpm_bin(w);
     pn__mpm_implicit_setup(w);
     pn__mpm_p2g(w);
     pn__mpm_contact(w, w->time_s);
@@ -4119,6 +4207,18 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     memcpy(w->vsol, w->vstar, sizeof(pn_real) * nd);
     for (k = 0; k < w->n_act; ++k) pn__mpm_hold(w, k, w->vsol + k * (size_t)d);
     if (has_sep) pn__mpm_friction_start(w, w->vsol, dt);
+    return has_sep;
+}
+
+/* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
+static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
+                                       pn_mpm_stats *st) {
+    int d = w->dim, pass, has_sep, capped = 0; /* capped: the last linear solve stopped at cg_max */
+    size_t k, nd;
+    pn_result r;
+    pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
+    has_sep = pn__mpm_implicit_begin(w, dt, o, st);
+    nd = w->n_act * (size_t)d;
     for (pass = 0; pass < o->fixed_point_iters; ++pass) {
         pn_real fp_res = 0;
         int round;
@@ -5290,6 +5390,20 @@ static void pn__mpm_xloads(pn_mpm_world *w, pn_real dt) {
     }
 }
 
+/* >>couple: forces on particles (the interface's), as loads: f dt to the momentum of their nodes */
+static void pn__mpm_xforces(pn_mpm_world *w, pn_real dt) {
+    int d = w->dim, s, i, ns;
+    size_t k, node[27];
+    pn_real wt[27], pos[27][3];
+    for (k = 0; k < w->xf_n; ++k) {
+        size_t p = w->xf_idx[k];
+        if (!w->active[p]) continue;
+        ns = pn__mpm_xstencil(w, w->x + p * (size_t)d, node, wt, pos);
+        for (s = 0; s < ns; ++s)
+            for (i = 0; i < d; ++i) w->gdense[node[s] * 4 + 1 + (size_t)i] += wt[s] * w->xf[k * (size_t)d + (size_t)i] * dt;
+    }
+}
+
 /* drives: the nodes a driven particle touches take the rigid velocity at mid-step (the chord
    of a rotation to second order; the particles themselves land exactly, pn__mpm_xdrive_state) */
 static void pn__mpm_xdrive_grid(pn_mpm_world *w, pn_real dt) {
@@ -5744,6 +5858,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     w->rec_ok = 1;
     pn__mpm_xp2g(w, dt);
     if (w->n_loads) pn__mpm_xloads(w, dt);
+    if (w->xf_n) pn__mpm_xforces(w, dt);
     st.active_nodes = pn__mpm_xgrid(w, dt);
     if (w->n_drives) pn__mpm_xdrive_grid(w, dt);
     { /* G2P in index order (the particle arrays stream), retired particles copied, and the
@@ -5957,6 +6072,7 @@ typedef struct pn__fem {
     pn_real glo[3], gcs;         /* its origin and cell size                                 */
     long gn[3];                  /* cells per axis                                           */
     pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
+    const pn_real *fext;         /* >>couple: nodal forces for the next explicit step (or NULL) */
     pn_real *eP, *eH;            /* per element: P (dd) and dP/dF (dd^2)                     */
     pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
     pn_pnet_point *ppt;
@@ -8284,7 +8400,8 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     pn__fem_backup(m);
     f = s->xtry; /* forces */
     for (k = 0; k < m->n_nodes; ++k)
-        for (i = 0; i < d; ++i) f[k * (size_t)d + (size_t)i] = m->mass[k] * m->desc.gravity[i];
+        for (i = 0; i < d; ++i)
+            f[k * (size_t)d + (size_t)i] = m->mass[k] * m->desc.gravity[i] + (s->fext ? s->fext[k * (size_t)d + (size_t)i] : 0);
     PN__FEM_OMP_FOR /* each element's P on threads; the forces gathered below in element order */
     for (e = 0; e < m->n_elems; ++e) {
         pn_real Fe[9];
@@ -9209,6 +9326,1085 @@ fail:
 #undef PN__TG_FAIL
     return pn__fem_loaded(&d, ids, al, r == PN_OK ? PN_ERROR_FORMAT : r, out, why, cap);
 }
+
+/* ======================================================================================
+   >>couple: an MPM world and an FEM mesh in one step (BFEMP: Li, Fang, Li and Jiang 2021).
+   The interface is the IPC barrier of pn__pair_barrier between each particle and each
+   boundary target of the mesh (2D edges, 3D triangles), weight kappa_p = k a_p / dhat.
+   Implicit, in velocity units (the MPM step's E(v); the mesh's incremental potential over
+   dt^2 with x = x^n + dt u, so its Hessian in u is its Hessian in x, mass + dt^2 K):
+       E(v, u) = E_mpm(v) + E_fem(x^n + dt u) / dt^2 + sum kappa_p b(d(y_p, x)) + D
+   y_p = x_p^n + dt sum_i w_ip v_i is linear in v and x in u, so the pair's derivatives
+   follow by the chain rule (dy_p/dv_i = dt w_ip, dx_a/du_a = dt) and additive CCD
+   applies along a Newton direction as it does to the mesh alone. D is IPC's lagged
+   friction: mu lambda f0(|T r|), r = dt (sum w v - sum beta_a u_a) the relative tangential
+   motion at the lagged closest point (weights beta), lambda the lagged normal force.
+   ====================================================================================== */
+
+typedef struct pn__cpl {
+    size_t nv, nu, nz, zcap;     /* unknowns: grid velocities (n_act dim), mesh (nodes dim)  */
+    pn_real *z, *g, *dir, *zt, *r, *zz, *pp, *qq; /* iterate, gradient, direction, try, CG  */
+    pn_real *xf, *xd, *pa, *pb;  /* mesh positions, its direction in positions, row scratch */
+    pn_real *y, *yd;             /* per particle: y_p, and its motion along the direction   */
+    size_t *cp, *ck, nc, ccap;   /* candidate pairs: particle, boundary target               */
+    pn_real *ch;                 /* per candidate: the barrier's Hessian in y (PSD), or 0s  */
+    unsigned char *con;          /* the candidate is within dhat at the Hessian's iterate    */
+    size_t *fp, nf, fcap;        /* lagged friction pairs: particle, target nodes (3 each),  */
+    long *fnode;                 /* the weights beta (3), the normal (3), mu lambda, and the */
+    pn_real *fdat;               /* friction's Hessian in r (9): 19 reals each               */
+    pn_real *fx;                 /* explicit: the forces on the particles (dim each), mesh  */
+    size_t *fidx;
+    pn_real dt, dmin, kap_area;  /* kappa_p = kap_area a_p                                  */
+} pn__cpl;
+
+#define PN__CPL_FD 19
+
+static pn_result pn__cpl_fail(pn_coupled *c, pn_result r, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    pn__vmsg(c->error, sizeof c->error, fmt, ap);
+    va_end(ap);
+    return r;
+}
+
+/* particle p's stencil: compact node indices (into the implicit step's active nodes) and
+   weights */
+static int pn__cpl_stencil(const pn_mpm_world *w, size_t p, long *node, pn_real *wt) {
+    int s;
+    pn_real dpos[3];
+    for (s = 0; s < w->ns; ++s) {
+        node[s] = w->dof[w->pbase[p] + w->slot_off[s]];
+        wt[s] = pn__mpm_weight(w, p, w->slot[s], dpos);
+    }
+    return w->ns;
+}
+
+static pn_real pn__cpl_kappa(const pn_coupled *c, size_t p) {
+    const pn__cpl *k = (const pn__cpl *)c->impl;
+    int d = c->mpm->dim;
+    pn_real v = c->mpm->vol0[p];
+    return k->kap_area * (d == 2 ? PN__SQRT(v) : (pn_real)pow((double)v, 2.0 / 3));
+}
+
+/* grow an array of count items to at least need (doubling); 0 when out of memory */
+static int pn__cpl_grow(const pn_allocator *al, void **a, size_t have, size_t need, size_t size) {
+    void *b;
+    if (need <= have) return 1;
+    b = pn_alloc(al, need * size);
+    if (!b) return 0;
+    if (*a) memcpy(b, *a, have * size);
+    pn_free(al, *a);
+    *a = b;
+    return 1;
+}
+
+/* positions: the mesh at x^n + dt u (and dt du), the particles at y_p(v) (and dt sum w dv);
+   implicit == 0: the particles where they are, the mesh at its positions (dir: the motion
+   each made, given as positions already) */
+static void pn__cpl_positions(pn_coupled *c, int implicit, const pn_real *z, const pn_real *dz) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    int d = w->dim;
+    size_t nd = m->n_nodes * (size_t)d, i;
+    long lp;
+    if (!implicit) return;
+    for (i = 0; i < nd; ++i) {
+        k->xf[i] = m->x[i] + k->dt * z[k->nv + i];
+        if (dz) k->xd[i] = k->dt * dz[k->nv + i];
+    }
+    PN__OMP_FOR
+    for (lp = 0; lp < (long)w->n; ++lp) {
+        size_t p = (size_t)lp;
+        long node[27];
+        pn_real wt[27];
+        int s, a, ns;
+        if (!w->active[p]) continue;
+        ns = pn__cpl_stencil(w, p, node, wt);
+        for (a = 0; a < d; ++a) {
+            pn_real acc = 0, acd = 0;
+            for (s = 0; s < ns; ++s) {
+                acc += wt[s] * z[(size_t)node[s] * (size_t)d + (size_t)a];
+                if (dz) acd += wt[s] * dz[(size_t)node[s] * (size_t)d + (size_t)a];
+            }
+            k->y[p * (size_t)d + (size_t)a] = w->x[p * (size_t)d + (size_t)a] + k->dt * acc;
+            k->yd[p * (size_t)d + (size_t)a] = dz ? k->dt * acd : 0;
+        }
+    }
+}
+
+/* The candidate pairs: every active particle and boundary target whose boxes (the target's
+   grown by dhat; both swept along the direction when sweep) overlap, once each, in particle
+   order. The mesh's broad-phase grid over its targets finds them. */
+static pn_result pn__cpl_find(pn_coupled *c, int sweep) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn__fem *s = (pn__fem *)m->impl;
+    const pn_allocator *al = &m->desc.allocator;
+    int d = w->dim, i;
+    size_t p, it;
+    pn_real ghi[3];
+    long c0[3] = {0, 0, 0}, c1[3] = {0, 0, 0}, cc[3];
+    k->nc = 0;
+    pn__fem_grid_build(m, k->xf, sweep ? k->xd : NULL, 1, c->dhat);
+    for (i = 0; i < d; ++i) ghi[i] = s->glo[i] + s->gcs * (pn_real)s->gn[i];
+    for (p = 0; p < w->n; ++p) {
+        pn_real lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+        const pn_real *y = k->y + p * (size_t)d, *yd = k->yd + p * (size_t)d;
+        int out = 0;
+        if (!w->active[p]) continue;
+        for (i = 0; i < d; ++i) {
+            pn_real a = y[i], b = sweep ? y[i] + yd[i] : a;
+            lo[i] = PN__MIN(a, b), hi[i] = PN__MAX(a, b);
+            out |= hi[i] < s->glo[i] || lo[i] > ghi[i];
+        }
+        if (out) continue;
+        pn__fem_cells(s, d, lo, hi, c0, c1);
+        for (cc[2] = c0[2]; cc[2] <= c1[2]; ++cc[2])
+            for (cc[1] = c0[1]; cc[1] <= c1[1]; ++cc[1])
+                for (cc[0] = c0[0]; cc[0] <= c1[0]; ++cc[0])
+                    for (it = s->gstart[pn__fem_cell_at(s, cc)]; it < s->gstart[pn__fem_cell_at(s, cc) + 1]; ++it) {
+                        size_t t = s->gitem[it];
+                        if (t >= s->ntgt || !pn__fem_pair_here(s, d, lo, hi, s->ebox + 6 * t, s->ebox + 6 * t + 3, cc)) continue;
+                        if (k->nc == k->ccap) {
+                            size_t nc2 = 2 * k->ccap + 256, h = PN__FEM_PAIR_H(d);
+                            if (!pn__cpl_grow(al, (void **)&k->cp, k->ccap, nc2, sizeof(size_t)) ||
+                                !pn__cpl_grow(al, (void **)&k->ck, k->ccap, nc2, sizeof(size_t)) ||
+                                !pn__cpl_grow(al, (void **)&k->ch, k->ccap * h, nc2 * h, sizeof(pn_real)) ||
+                                !pn__cpl_grow(al, (void **)&k->con, k->ccap, nc2, 1))
+                                return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for %lu "
+                                                    "particle-boundary pairs", (unsigned long)nc2);
+                            k->ccap = nc2;
+                        }
+                        k->cp[k->nc] = p, k->ck[k->nc] = t, k->nc++;
+                    }
+    }
+    return PN_OK;
+}
+
+/* the target's nodes (d of them: a 2D edge's 2, a 3D triangle's 3) */
+static const int *pn__cpl_target(const pn_fem_mesh *m, size_t t) {
+    const pn__fem *s = (const pn__fem *)m->impl;
+    return m->dim == 2 ? s->bedge + 2 * t : s->bface + 3 * t;
+}
+
+/* candidate i's coordinates [y_p, x_a, x_b (, x_c)] at the current positions (and their
+   motion along the direction into dy when given) */
+static void pn__cpl_pair_y(const pn_coupled *c, size_t i, pn_real *yy, pn_real *dy) {
+    const pn__cpl *k = (const pn__cpl *)c->impl;
+    int d = c->mpm->dim, j, a;
+    const int *tn = pn__cpl_target(c->fem, k->ck[i]);
+    for (a = 0; a < d; ++a) {
+        yy[a] = k->y[k->cp[i] * (size_t)d + (size_t)a];
+        if (dy) dy[a] = k->yd[k->cp[i] * (size_t)d + (size_t)a];
+    }
+    for (j = 0; j < d; ++j)
+        for (a = 0; a < d; ++a) {
+            yy[d + j * d + a] = k->xf[(size_t)tn[j] * (size_t)d + (size_t)a];
+            if (dy) dy[d + j * d + a] = k->xd[(size_t)tn[j] * (size_t)d + (size_t)a];
+        }
+}
+
+/* The barrier over the candidates at the current positions: its energy into *E, the
+   smallest distance into k->dmin; level >= 1: its gradient in z into g (the chain rule:
+   dt w_ip to the grid nodes, dt to the mesh nodes; held mesh nodes take none); level >= 2:
+   each near pair's Hessian in y kept for CG, and its mesh-mesh part (times dt^2) added to
+   the mesh's matrix. 0 when a pair touches (no barrier there). */
+static int pn__cpl_barrier(pn_coupled *c, int level, pn_real *E) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn__fem *s = (pn__fem *)m->impl;
+    int d = w->dim, n = d * (d + 1), kind = d == 2 ? PN__FEM_PE : PN__FEM_PT, j, a, b, e, f;
+    size_t i, h = PN__FEM_PAIR_H(d);
+    pn_real dt = k->dt;
+    for (i = 0; i < k->nc; ++i) {
+        pn_real yy[12], gl[12], Eb, dist, *H = k->ch + i * h;
+        long node[27];
+        pn_real wt[27];
+        const int *tn = pn__cpl_target(m, k->ck[i]);
+        int ns;
+        if (level >= 2) k->con[i] = 0;
+        pn__cpl_pair_y(c, i, yy, NULL);
+        if (!pn__pair_barrier(kind, d, d + 1, yy, c->dhat, pn__cpl_kappa(c, k->cp[i]), level, &Eb, gl, H, &dist)) {
+            k->dmin = 0;
+            c->error_particle = (long)k->cp[i];
+            return 0;
+        }
+        k->dmin = PN__MIN(k->dmin, dist);
+        if (!(dist < c->dhat)) continue;
+        *E += Eb;
+        if (level < 1) continue;
+        ns = pn__cpl_stencil(w, k->cp[i], node, wt);
+        for (j = 0; j < ns; ++j)
+            for (a = 0; a < d; ++a) k->g[(size_t)node[j] * (size_t)d + (size_t)a] += dt * wt[j] * gl[a];
+        for (j = 0; j < d; ++j)
+            if (PN__FEM_FREE(m, (size_t)tn[j]))
+                for (a = 0; a < d; ++a) k->g[k->nv + (size_t)tn[j] * (size_t)d + (size_t)a] += dt * gl[d + j * d + a];
+        if (level < 2) continue;
+        k->con[i] = 1;
+        for (e = 0; e < d; ++e) /* the mesh-mesh block, lower half once (pn__fem_hadd orders it) */
+            for (a = 0; a < d; ++a)
+                for (f = 0; f <= e; ++f)
+                    for (b = 0; b < d; ++b) {
+                        int r = d + e * d + a, q = d + f * d + b;
+                        if (f == e && b > a) continue;
+                        if (!PN__FEM_FREE(m, (size_t)tn[e]) || !PN__FEM_FREE(m, (size_t)tn[f])) continue;
+                        pn__fem_hadd(s, pn__fem_row(m, (size_t)tn[e] * (size_t)d + (size_t)a),
+                                     pn__fem_row(m, (size_t)tn[f] * (size_t)d + (size_t)b), dt * dt * H[r * n + q]);
+                    }
+    }
+    return 1;
+}
+
+/* the closest point on target t (nodes X, d of them) to y: its weights beta and the unit
+   normal from it to y; returns the distance */
+static pn_real pn__cpl_closest(int d, const pn_real *y, const pn_real *X, pn_real *beta, pn_real *nrm) {
+    pn_real best = PN__FEM_FAR, cpt[3] = {0, 0, 0}, dist = 0;
+    int e, a, ne = d == 2 ? 1 : 3;
+    static const int ed[3][2] = {{0, 1}, {1, 2}, {2, 0}};
+    for (a = 0; a < 3; ++a) beta[a] = 0;
+    if (d == 3) { /* inside the triangle's projection */
+        pn_real e0[3], e1[3], wv[3], A00 = 0, A01 = 0, A11 = 0, b0 = 0, b1 = 0, det, u, v;
+        for (a = 0; a < 3; ++a) {
+            e0[a] = X[3 + a] - X[a], e1[a] = X[6 + a] - X[a], wv[a] = y[a] - X[a];
+            A00 += e0[a] * e0[a], A01 += e0[a] * e1[a], A11 += e1[a] * e1[a], b0 += wv[a] * e0[a], b1 += wv[a] * e1[a];
+        }
+        det = A00 * A11 - A01 * A01;
+        if (det > 0) {
+            u = (A11 * b0 - A01 * b1) / det, v = (A00 * b1 - A01 * b0) / det;
+            if (u >= 0 && v >= 0 && u + v <= 1) {
+                beta[0] = 1 - u - v, beta[1] = u, beta[2] = v, ne = 0;
+                for (a = 0; a < 3; ++a) cpt[a] = X[a] + u * e0[a] + v * e1[a];
+            }
+        }
+    }
+    for (e = 0; e < ne; ++e) { /* the edges */
+        const pn_real *p0 = X + ed[e][0] * d, *p1 = X + ed[e][1] * d;
+        pn_real l2 = 0, t = 0, q = 0, cp[3];
+        for (a = 0; a < d; ++a) l2 += (p1[a] - p0[a]) * (p1[a] - p0[a]), t += (y[a] - p0[a]) * (p1[a] - p0[a]);
+        t = l2 > 0 ? PN__MAX((pn_real)0, PN__MIN((pn_real)1, t / l2)) : 0;
+        for (a = 0; a < d; ++a) cp[a] = p0[a] + t * (p1[a] - p0[a]), q += (y[a] - cp[a]) * (y[a] - cp[a]);
+        if (q < best) {
+            best = q;
+            beta[0] = beta[1] = beta[2] = 0;
+            beta[ed[e][0]] = 1 - t, beta[ed[e][1]] = t;
+            memcpy(cpt, cp, sizeof cp);
+        }
+    }
+    for (a = 0; a < d; ++a) nrm[a] = y[a] - cpt[a], dist += nrm[a] * nrm[a];
+    dist = PN__SQRT(dist);
+    for (a = 0; a < d; ++a) nrm[a] = dist > 0 ? nrm[a] / dist : 0;
+    return dist;
+}
+
+/* Friction lagged at the current positions: for each candidate within dhat, the target
+   nodes, the closest point's weights, the normal and mu lambda (lambda = kappa_p |b'(d)|) */
+static pn_result pn__cpl_friction_lag(pn_coupled *c) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    const pn_allocator *al = &c->fem->desc.allocator;
+    int d = c->mpm->dim, j;
+    size_t i;
+    k->nf = 0;
+    if (!(c->friction > 0)) return PN_OK;
+    for (i = 0; i < k->nc; ++i) {
+        pn_real yy[12], beta[3], nrm[3], dist, bb, b1, b2, *fd;
+        const int *tn = pn__cpl_target(c->fem, k->ck[i]);
+        pn__cpl_pair_y(c, i, yy, NULL);
+        dist = pn__cpl_closest(d, yy, yy + d, beta, nrm);
+        if (!(dist > 0) || dist >= c->dhat) continue;
+        if (k->nf == k->fcap) {
+            size_t n2 = 2 * k->fcap + 64;
+            if (!pn__cpl_grow(al, (void **)&k->fp, k->fcap, n2, sizeof(size_t)) ||
+                !pn__cpl_grow(al, (void **)&k->fnode, 3 * k->fcap, 3 * n2, sizeof(long)) ||
+                !pn__cpl_grow(al, (void **)&k->fdat, PN__CPL_FD * k->fcap, PN__CPL_FD * n2, sizeof(pn_real)))
+                return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the friction pairs");
+            k->fcap = n2;
+        }
+        pn__fem_barrier(dist, c->dhat, &bb, &b1, &b2);
+        fd = k->fdat + PN__CPL_FD * k->nf;
+        memset(fd, 0, sizeof(pn_real) * PN__CPL_FD);
+        for (j = 0; j < 3; ++j) k->fnode[3 * k->nf + (size_t)j] = j < d ? tn[j] : -1, fd[j] = beta[j], fd[3 + j] = nrm[j];
+        fd[6] = c->friction * pn__cpl_kappa(c, k->cp[i]) * -b1;
+        k->fp[k->nf++] = k->cp[i];
+    }
+    return PN_OK;
+}
+
+/* the relative tangential motion of friction pair i at z: r = T dt (sum w v - sum beta u) */
+static void pn__cpl_fric_r(const pn_coupled *c, size_t i, const pn_real *z, pn_real *r) {
+    const pn__cpl *k = (const pn__cpl *)c->impl;
+    const pn_mpm_world *w = c->mpm;
+    const pn_real *fd = k->fdat + PN__CPL_FD * i;
+    int d = w->dim, a, j, ns;
+    long node[27];
+    pn_real wt[27], u[3] = {0, 0, 0}, un = 0;
+    ns = pn__cpl_stencil(w, k->fp[i], node, wt);
+    for (a = 0; a < d; ++a) {
+        for (j = 0; j < ns; ++j) u[a] += wt[j] * z[(size_t)node[j] * (size_t)d + (size_t)a];
+        for (j = 0; j < d; ++j)
+            if (PN__FEM_FREE(c->fem, (size_t)k->fnode[3 * i + (size_t)j]))
+                u[a] -= fd[j] * z[k->nv + (size_t)k->fnode[3 * i + (size_t)j] * (size_t)d + (size_t)a];
+        u[a] *= k->dt;
+        un += u[a] * fd[3 + a];
+    }
+    for (a = 0; a < d; ++a) r[a] = u[a] - un * fd[3 + a];
+}
+
+/* scatter a force-like vector q (in r's space) of friction pair i into out: dt w to the
+   grid nodes, -dt beta to the mesh nodes */
+static void pn__cpl_fric_scatter(const pn_coupled *c, size_t i, const pn_real *q, pn_real *out) {
+    const pn__cpl *k = (const pn__cpl *)c->impl;
+    const pn_mpm_world *w = c->mpm;
+    const pn_real *fd = k->fdat + PN__CPL_FD * i;
+    int d = w->dim, a, j, ns;
+    long node[27];
+    pn_real wt[27];
+    ns = pn__cpl_stencil(w, k->fp[i], node, wt);
+    for (a = 0; a < d; ++a) {
+        for (j = 0; j < ns; ++j) out[(size_t)node[j] * (size_t)d + (size_t)a] += k->dt * wt[j] * q[a];
+        for (j = 0; j < d; ++j)
+            if (PN__FEM_FREE(c->fem, (size_t)k->fnode[3 * i + (size_t)j]))
+                out[k->nv + (size_t)k->fnode[3 * i + (size_t)j] * (size_t)d + (size_t)a] -= k->dt * fd[j] * q[a];
+    }
+}
+
+/* IPC's smoothed friction over the lagged pairs: E += mu lambda f0(|r|), gradient, and each
+   pair's PSD Hessian in r (fdat + 9) */
+static void pn__cpl_friction(pn_coupled *c, const pn_real *z, int level, pn_real *E) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    int d = c->mpm->dim, a, b;
+    size_t i;
+    pn_real eps = c->eps_v * k->dt;
+    for (i = 0; i < k->nf; ++i) {
+        pn_real r[3], y = 0, f0, f1, f1p, q[3], *fd = k->fdat + PN__CPL_FD * i, coef = fd[6];
+        pn__cpl_fric_r(c, i, z, r);
+        for (a = 0; a < d; ++a) y += r[a] * r[a];
+        y = PN__SQRT(y);
+        if (y < eps) { /* f0(y) = -y^3 / (3 eps^2) + y^2 / eps + eps / 3, C1 at eps (IPC) */
+            f0 = -y * y * y / (3 * eps * eps) + y * y / eps + eps / 3;
+            f1 = -y * y / (eps * eps) + 2 * y / eps;
+            f1p = -2 * y / (eps * eps) + 2 / eps;
+        } else f0 = y, f1 = 1, f1p = 0;
+        *E += coef * f0;
+        if (level >= 1 && y > 0) {
+            for (a = 0; a < d; ++a) q[a] = coef * f1 * r[a] / y;
+            pn__cpl_fric_scatter(c, i, q, k->g);
+        }
+        if (level >= 2) /* f1' rr^T / y^2 + (f1 / y)(T - rr^T / y^2) on the tangent plane: PSD */
+            for (a = 0; a < d; ++a)
+                for (b = 0; b < d; ++b) {
+                    pn_real T = (a == b) - fd[3 + a] * fd[3 + b], uu = y > 0 ? r[a] * r[b] / (y * y) : 0;
+                    fd[9 + a * d + b] = coef * (y > 0 ? f1p * uu + f1 / y * (T - uu) : 2 / eps * T);
+                }
+    }
+}
+
+/* E(z) and by level its gradient (k->g) and Hessian data; positions at z must be set
+   (pn__cpl_positions). A failure of either side's energy or a touching pair: *E = +inf
+   (level 0, for the line search) or its error. */
+static pn_result pn__cpl_objective(pn_coupled *c, const pn_real *z, int level, pn_real *E_out) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn__fem *s = (pn__fem *)m->impl;
+    pn_real E1 = 0, E2 = 0, E = 0;
+    pn_result r;
+    size_t i;
+    r = pn__mpm_objective(w, z, k->dt, level, &E1);
+    if (r == PN_OK) r = pn__fem_objective(m, k->xf, level, &E2);
+    if (r == PN_OK && !pn__finite(E1)) r = PN_ERROR_INVERTED;
+    if (r != PN_OK) {
+        if (level) return r;
+        *E_out = (pn_real)HUGE_VAL;
+        return PN_OK;
+    }
+    if (level >= 1) {
+        memcpy(k->g, w->grad, sizeof(pn_real) * k->nv);
+        for (i = 0; i < k->nu; ++i) k->g[k->nv + i] = s->g[i] / k->dt;
+    }
+    E = E1 + E2 / (k->dt * k->dt);
+    if (!pn__cpl_barrier(c, level, &E)) {
+        if (level) return PN_ERROR_STEP_TOO_LARGE;
+        *E_out = (pn_real)HUGE_VAL;
+        return PN_OK;
+    }
+    pn__cpl_friction(c, z, level, &E);
+    if (level >= 1) /* the grid's reactions (wall contact, friction) see the interface too */
+        memcpy(w->grad, k->g, sizeof(pn_real) * k->nv);
+    *E_out = E;
+    return pn__finite(E) ? PN_OK : PN_ERROR_OVERFLOW;
+}
+
+static pn_result pn__cpl_value(void *ctx, const pn_real *z, pn_real *E) {
+    pn_coupled *c = (pn_coupled *)ctx;
+    pn__cpl_positions(c, 1, z, NULL);
+    return pn__cpl_objective(c, z, 0, E);
+}
+
+/* y = H x over the coupled unknowns: the grid's filtered Hessian, the mesh's matrix (with
+   the barrier's mesh-mesh blocks), the barrier's other blocks and friction through the
+   chain rule, the grid part filtered again (the filter is a projection) */
+static void pn__cpl_apply(void *ctx, const pn_real *x, pn_real *y) {
+    pn_coupled *c = (pn_coupled *)ctx;
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    int d = w->dim, n = d * (d + 1), a, b, j, ns;
+    size_t i, h = PN__FEM_PAIR_H(d);
+    pn__mpm_hess_vec(w, x, k->dt, y);
+    for (i = 0; i < k->nu; ++i) k->pa[pn__fem_row(m, i)] = x[k->nv + i];
+    pn__fem_cg_apply(m, k->pa, k->pb);
+    for (i = 0; i < k->nu; ++i) y[k->nv + i] = k->pb[pn__fem_row(m, i)];
+    for (i = 0; i < k->nc; ++i) {
+        const pn_real *H = k->ch + i * h;
+        const int *tn;
+        long node[27];
+        pn_real wt[27], l[12], o[12];
+        if (!k->con[i]) continue;
+        tn = pn__cpl_target(m, k->ck[i]);
+        ns = pn__cpl_stencil(w, k->cp[i], node, wt);
+        for (a = 0; a < d; ++a) {
+            l[a] = 0;
+            for (j = 0; j < ns; ++j) l[a] += k->dt * wt[j] * x[(size_t)node[j] * (size_t)d + (size_t)a];
+        }
+        for (j = 0; j < d; ++j)
+            for (a = 0; a < d; ++a)
+                l[d + j * d + a] = PN__FEM_FREE(m, (size_t)tn[j]) ? k->dt * x[k->nv + (size_t)tn[j] * (size_t)d + (size_t)a] : 0;
+        for (a = 0; a < n; ++a) { /* all but the mesh-mesh block, which the mesh's matrix holds */
+            o[a] = 0;
+            for (b = 0; b < n; ++b)
+                if (a < d || b < d) o[a] += H[a * n + b] * l[b];
+        }
+        for (j = 0; j < ns; ++j)
+            for (a = 0; a < d; ++a) y[(size_t)node[j] * (size_t)d + (size_t)a] += k->dt * wt[j] * o[a];
+        for (j = 0; j < d; ++j)
+            if (PN__FEM_FREE(m, (size_t)tn[j]))
+                for (a = 0; a < d; ++a) y[k->nv + (size_t)tn[j] * (size_t)d + (size_t)a] += k->dt * o[d + j * d + a];
+    }
+    for (i = 0; i < k->nf; ++i) {
+        const pn_real *Hr = k->fdat + PN__CPL_FD * i + 9;
+        pn_real r[3], q[3] = {0, 0, 0};
+        pn__cpl_fric_r(c, i, x, r);
+        for (a = 0; a < d; ++a)
+            for (b = 0; b < d; ++b) q[a] += Hr[a * d + b] * r[b];
+        pn__cpl_fric_scatter(c, i, q, y);
+    }
+    for (i = 0; i < w->n_act; ++i) pn__mpm_filter(w, i, y + i * (size_t)d);
+}
+
+/* z = B r: the grid's preconditioner on its block, the mesh's factor on its own */
+static void pn__cpl_precond(void *ctx, const pn_real *r, pn_real *z) {
+    pn_coupled *c = (pn_coupled *)ctx;
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_fem_mesh *m = c->fem;
+    size_t i;
+    pn__mpm_precondition(c->mpm, r, z);
+    for (i = 0; i < k->nu; ++i) k->pa[pn__fem_row(m, i)] = r[k->nv + i];
+    pn__fem_cg_precond(m, k->pa, k->pb);
+    for (i = 0; i < k->nu; ++i) z[k->nv + i] = k->pb[pn__fem_row(m, i)];
+}
+
+static pn_real pn__cpl_dot(void *ctx, size_t n, const pn_real *a, const pn_real *b) {
+    pn_coupled *c = (pn_coupled *)ctx;
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_real acc = pn__mpm_sum(c->mpm, k->nv, a, b), t = 0;
+    size_t i;
+    for (i = k->nv; i < n; ++i) t += a[i] * b[i];
+    return acc + t;
+}
+
+/* the largest step fraction in [0, 1] along dir (positions and their motion set, the
+   candidates found along it): the interface's additive CCD, the mesh's obstacles and its
+   own boundary */
+static pn_real pn__cpl_ccd(pn_coupled *c) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_fem_mesh *m = c->fem;
+    int d = m->dim, kind = d == 2 ? PN__FEM_PE : PN__FEM_PT;
+    size_t i;
+    pn_real a0 = pn__fem_self_ccd(m, k->xf, k->xd, pn__fem_ccd(m, k->xf, k->xd));
+    for (i = 0; i < k->nc; ++i) {
+        pn_real yy[12], dy[12];
+        pn__cpl_pair_y(c, i, yy, dy);
+        a0 = PN__MIN(a0, pn__pair_ccd(kind, d, d + 1, 1, yy, dy, 0, a0));
+    }
+    return a0;
+}
+
+/* Newton on E(v, u) from k->z (feasible) */
+static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, int fls, pn_coupled_stats *st,
+                                pn_real *res_out, int *capped_out) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn__fem *s = (pn__fem *)m->impl;
+    pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt, res = 0;
+    size_t i, nz = k->nz;
+    int it, capped = 0;
+    pn_result r;
+    pn__cg_ops op;
+    op.ctx = c, op.apply = pn__cpl_apply, op.precond = pn__cpl_precond, op.dot = pn__cpl_dot, op.curv = NULL;
+    pn__cpl_positions(c, 1, k->z, NULL);
+    if ((r = pn__cpl_find(c, 0)) != PN_OK) return r;
+    for (it = 0; it < o->newton_max; ++it) {
+        pn_real E0, E1, gd, a0, alpha;
+        k->dmin = PN__FEM_FAR;
+        pn__cpl_positions(c, 1, k->z, NULL);
+        r = pn__cpl_objective(c, k->z, 2, &E0);
+        if (r != PN_OK)
+            return pn__cpl_fail(c, r, "coupled implicit step of %g s: the energy at an accepted iterate failed (%s; "
+                                "particle %lu, element %ld)", (double)dt, pn_result_string(r),
+                                (unsigned long)w->error_particle, m->error_element);
+        st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
+        if (w->mg_on && (r = pn__mpm_mg_build(w, dt, 1, o->mg_levels)) != PN_OK)
+            return pn__cpl_fail(c, r, "coupled implicit step: out of memory for the grid's multigrid hierarchy");
+        if (!w->mg_on) pn__mpm_diagonal(w, dt);
+        if (s->sparse) {
+            if (!pn__fem_bfactor(s))
+                return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step: the mesh's matrix has no "
+                                    "incomplete factor");
+            s->coarse = !s->one_level && pn__fem_coarse_build(m, k->xf);
+            if (s->coarse) s->omega = pn__fem_smoother_damping(m);
+        } else {
+            memcpy(s->A, s->L, sizeof(pn_real) * s->rs[s->nu]); /* kept for CG's products */
+            if (!pn__sky_cholesky(s->fc, s->rs, s->L, s->nu))
+                return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step: the mesh's Hessian is not "
+                                    "positive definite");
+        }
+        for (i = 0; i < nz; ++i) k->r[i] = -k->g[i];
+        for (i = 0; i < w->n_act; ++i) pn__mpm_filter(w, i, k->r + i * (size_t)w->dim);
+        st->cg_iters += pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, o->cg_rel_tol, 0, &capped);
+        st->newton_iters++;
+        for (res = 0, gd = 0, i = 0; i < nz; ++i) res = PN__MAX(res, PN__FABS(k->dir[i])), gd += k->g[i] * k->dir[i];
+        if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / (w->desc.dx_m / dt));
+        if (!pn__finite(res))
+            return pn__cpl_fail(c, PN_ERROR_OVERFLOW, "coupled implicit step of %g s: the Newton direction is not finite",
+                                (double)dt);
+        if (res <= vscale && !capped) break;
+        pn__cpl_positions(c, 1, k->z, k->dir);
+        if ((r = pn__cpl_find(c, 1)) != PN_OK) return r;
+        a0 = pn__cpl_ccd(c);
+        alpha = a0 > 0 ? pn__armijo(pn__cpl_value, c, nz, k->z, k->dir, E0, gd, a0, k->zt, &E1) : 0;
+        if (alpha == 0) {
+            st->line_search_failures++;
+            break;
+        }
+        memcpy(k->z, k->zt, sizeof(pn_real) * nz);
+        st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
+    }
+    (void)fls;
+    *res_out = res / (w->desc.dx_m / dt);
+    *capped_out = capped;
+    return PN_OK;
+}
+
+/* the positions as they are (explicit steps, checks): particles at x, the mesh at x */
+static void pn__cpl_here(pn_coupled *c) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    size_t nd = c->fem->n_nodes * (size_t)c->fem->dim, np = c->mpm->n * (size_t)c->mpm->dim;
+    memcpy(k->y, c->mpm->x, sizeof(pn_real) * np);
+    memset(k->yd, 0, sizeof(pn_real) * np);
+    memcpy(k->xf, c->fem->x, sizeof(pn_real) * nd);
+    memset(k->xd, 0, sizeof(pn_real) * nd);
+}
+
+/* the smallest distance over the candidates at the current positions, and how many are
+   within dhat */
+static pn_real pn__cpl_closest_pair(pn_coupled *c, size_t *near) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    int d = c->mpm->dim;
+    size_t i;
+    pn_real best = PN__FEM_FAR;
+    if (near) *near = 0;
+    for (i = 0; i < k->nc; ++i) {
+        pn_real yy[12], dist;
+        pn__cpl_pair_y(c, i, yy, NULL);
+        dist = PN__SQRT(pn__fem_pair_d2(d == 2 ? PN__FEM_PE : PN__FEM_PT, d, yy, NULL, NULL));
+        if (dist < best) best = dist, c->error_particle = (long)k->cp[i];
+        if (near && dist < c->dhat) (*near)++;
+    }
+    return best;
+}
+
+PN__DEF pn_result pn_coupled_min_distance(pn_coupled *c, pn_real *dist_m) {
+    pn_result r;
+    if (!c || !dist_m) return PN_ERROR_INVALID_ARGUMENT;
+    pn__cpl_here(c);
+    if ((r = pn__cpl_find(c, 0)) != PN_OK) return r;
+    *dist_m = pn__cpl_closest_pair(c, NULL);
+    return PN_OK;
+}
+
+/* One coupled implicit step without fallback: both sides unchanged unless PN_OK (the
+   caller keeps and restores the mesh). */
+static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implicit_desc *od, pn_coupled_stats *st) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn__fem *s = (pn__fem *)m->impl;
+    const pn_mpm_implicit_desc *o = &od->mpm;
+    int d = w->dim, i, pass, has_sep, capped = 0;
+    size_t n = m->n_nodes, nd = n * (size_t)d, q, plastic = 0;
+    pn_real last_res = 0, vscale = o->newton_tol * w->desc.dx_m / dt, a, E;
+    pn_mpm_stats mst;
+    pn_result r;
+    pn__mpm_stats_clear(&mst, 0);
+    k->dt = dt;
+    /* the grid side as pn_mpm_step_implicit starts; the mesh's as pn_fem_step_implicit */
+    has_sep = pn__mpm_implicit_begin(w, dt, o, &mst);
+    k->nv = w->n_act * (size_t)d, k->nu = nd, k->nz = k->nv + nd;
+    s->dt = dt, s->t_end = m->time_s + dt, s->n_mov = 0, s->nu = nd;
+    pn__fem_setup(m);
+    for (q = 0; q < n; ++q) {
+        pn_real xn[3];
+        if (m->fixed[q]) pn__fem_driven(m, q, dt, xn);
+        for (i = 0; i < d; ++i) {
+            size_t e = q * (size_t)d + (size_t)i;
+            s->xt[e] = m->fixed[q] ? xn[i] : m->x[e] + dt * m->v[e] + dt * dt * m->desc.gravity[i];
+            k->zt[k->nv + e] = m->fixed[q] ? (xn[i] - m->x[e]) / dt : 0; /* the base: held where it is */
+            k->dir[k->nv + e] = (s->xt[e] - m->x[e]) / dt - k->zt[k->nv + e];
+        }
+    }
+    memcpy(s->xlag, m->x, sizeof(pn_real) * nd); /* the mesh's friction with its obstacles: at x^n */
+    /* start at [v*, x~] as far as it is free of crossings from the base [held at rest, x^n] */
+    memset(k->zt, 0, sizeof(pn_real) * k->nv);
+    for (q = 0; q < w->n_act; ++q) pn__mpm_hold(w, q, k->zt + q * (size_t)d);
+    for (q = 0; q < k->nv; ++q) k->dir[q] = w->vsol[q] - k->zt[q];
+    pn__cpl_positions(c, 1, k->zt, k->dir);
+    if ((r = pn__cpl_find(c, 1)) != PN_OK) return r;
+    a = pn__cpl_ccd(c);
+    for (q = 0; q < k->nz; ++q) k->z[q] = k->zt[q] + a * k->dir[q];
+    if (pn__fem_prepare(m, s->xt) != PN_OK || pn__cpl_value(c, k->z, &E) != PN_OK || !pn__finite(E))
+        memcpy(k->z, k->zt, sizeof(pn_real) * k->nz);
+    for (pass = 0; pass < o->fixed_point_iters; ++pass) {
+        pn_real fp = 0;
+        int round;
+        pn__cpl_positions(c, 1, k->z, NULL);
+        r = pn__mpm_prepare_pass(w, k->z, dt, pass == 0, &fp);
+        if (r == PN_OK) r = pn__fem_prepare(m, k->xf);
+        if (r != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: preparing the energies at F0 failed (%s)",
+                                            w->error[0] ? w->error : m->error);
+        st->fixed_point_iters++;
+        /* interface friction lagged at the step's start, then at each pass's solution */
+        if (pass == 0) {
+            memset(k->zt, 0, sizeof(pn_real) * k->nz);
+            pn__cpl_positions(c, 1, k->zt, NULL);
+        }
+        if ((r = pn__cpl_find(c, 0)) != PN_OK || (r = pn__cpl_friction_lag(c)) != PN_OK) return r;
+        for (round = 0; round < o->contact_rounds; ++round) {
+            memcpy(w->vsol, k->z, sizeof(pn_real) * k->nv);
+            if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->vsol);
+            memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
+            st->solves++;
+            if ((r = pn__cpl_newton(c, o, 0, st, &last_res, &capped)) != PN_OK) return r;
+            memcpy(w->vsol, k->z, sizeof(pn_real) * k->nv);
+            if (!has_sep || !pn__mpm_active_set(w, w->vsol, vscale)) break;
+            memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
+        }
+    }
+    st->newton_residual = PN__MAX(st->newton_residual, last_res);
+    if (capped)
+        return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: the last linear solve stopped at "
+                            "cg_max = %d short of cg_rel_tol %g: raise cg_max or take a smaller step", (double)dt, o->cg_max,
+                            (double)o->cg_rel_tol);
+    if (!(last_res <= 100 * o->newton_tol))
+        return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: Newton stopped at max |dz| dt / dx = "
+                            "%.3g (newton_tol %g): a smaller step converges", (double)dt, (double)last_res,
+                            (double)o->newton_tol);
+    r = pn__mpm_g2p(w, k->z, dt, &mst);
+    if (r != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: %s", w->error);
+    pn__cpl_positions(c, 1, k->z, NULL);
+    for (q = 0; q < nd; ++q) m->v[q] = (k->xf[q] - m->x[q]) / dt, m->x[q] = k->xf[q];
+    if ((r = pn__fem_return(m, &plastic)) != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: %s", m->error);
+    m->time_s += dt;
+    pn__mpm_friction_record(w, dt);
+    pn__mpm_commit(w, dt, &mst);
+    st->plastic_particles += mst.plastic;
+    st->plastic_elements += plastic;
+    return PN_OK;
+}
+
+/* the coupled solver's storage for the world's grid and the mesh: once */
+static pn_result pn__cpl_alloc(pn_coupled *c) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    const pn_allocator *al = &c->fem->desc.allocator;
+    int d = c->mpm->dim;
+    size_t nd = c->fem->n_nodes * (size_t)d, np = c->mpm->cap * (size_t)d, zc = c->mpm->nodes * (size_t)d + nd;
+    if (k->z) return PN_OK;
+    k->z = (pn_real *)pn_alloc(al, sizeof(pn_real) * (8 * zc + 4 * nd + 4 * np + 8));
+    k->fidx = (size_t *)pn_alloc(al, sizeof(size_t) * (c->mpm->cap + 1));
+    if (!k->z || !k->fidx) {
+        pn_free(al, k->z), pn_free(al, k->fidx);
+        k->z = NULL, k->fidx = NULL;
+        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the solver storage");
+    }
+    k->zcap = zc;
+    k->g = k->z + zc, k->dir = k->g + zc, k->zt = k->dir + zc, k->r = k->zt + zc, k->zz = k->r + zc, k->pp = k->zz + zc;
+    k->qq = k->pp + zc, k->xf = k->qq + zc, k->xd = k->xf + nd, k->pa = k->xd + nd, k->pb = k->pa + nd;
+    k->y = k->pb + nd, k->yd = k->y + np, k->fx = k->yd + np;
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_coupled_implicit_desc *desc,
+                                           pn_coupled_stats *stats) {
+    pn_coupled_implicit_desc od;
+    pn_mpm_implicit_desc *o = &od.mpm;
+    pn_coupled_stats st;
+    pn_mpm_world *w;
+    pn_fem_mesh *m;
+    pn_result r, first = PN_OK;
+    pn_real t0;
+    long steps0, fsteps0;
+    size_t left0;
+    int level, a;
+    char why[sizeof c->error];
+    if (!c) return PN_ERROR_INVALID_ARGUMENT;
+    w = c->mpm, m = c->fem;
+    c->error[0] = 0, c->error_particle = c->error_node = -1;
+    if (!pn__finite(dt) || !(dt > 0))
+        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_step_implicit: dt_s = %g must be finite and > 0",
+                            (double)dt);
+    memset(&od, 0, sizeof od);
+    if (desc) od = *desc;
+    for (a = 0; a < w->n_drives; ++a)
+        if (w->drives[a].on)
+            return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: drive %d is on (drives and loads "
+                                "work with explicit steps)", a);
+    for (a = 0; a < w->n_loads; ++a)
+        if (w->loads[a].on && w->loads[a].t_end > w->time_s)
+            return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: load %d is on (drives and loads "
+                                "work with explicit steps)", a);
+    for (a = 0; a < m->n_obstacles; ++a) {
+        const pn_real *u = m->obstacles[a].velocity_m_s;
+        if (u[0] != 0 || u[1] != 0 || u[2] != 0)
+            return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: the mesh's obstacle %d moves (only "
+                                "pn_fem_step_implicit moves obstacles)", a);
+    }
+    if (o->formulation != PN_MPM_FORMULATION_ENERGY)
+        return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: only the energy formulation couples");
+    if (!pn__finite(o->newton_tol) || o->newton_tol < 0 || !pn__finite(o->cg_rel_tol) || o->cg_rel_tol < 0 ||
+        o->linear_solver < PN_MPM_LINEAR_DEFAULT || o->linear_solver > PN_MPM_LINEAR_MULTIGRID || o->mg_levels < 0)
+        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: newton_tol %g and cg_rel_tol %g must "
+                            "be finite and >= 0, linear_solver %d a pn_mpm_linear_solver, mg_levels %d >= 0",
+                            (double)o->newton_tol, (double)o->cg_rel_tol, (int)o->linear_solver, o->mg_levels);
+    if (o->fixed_point_iters <= 0) o->fixed_point_iters = 1;
+    if (o->newton_max <= 0) o->newton_max = 50;
+    if (o->cg_max <= 0) o->cg_max = 1000;
+    if (!(o->newton_tol > 0)) o->newton_tol = (pn_real)1e-5;
+    if (!(o->cg_rel_tol > 0)) o->cg_rel_tol = (pn_real)1e-4;
+    if (o->contact_rounds <= 0) o->contact_rounds = 1;
+    if (o->mg_levels == 0) o->mg_levels = PN__MPM_MG_MAX;
+    if (o->max_halvings == 0) o->max_halvings = 3;
+    if (o->max_halvings > 10) o->max_halvings = 10;
+    if ((r = pn__mpm_check_state(w)) != PN_OK) return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", w->error);
+    if ((r = pn__mpm_alloc_implicit(w)) != PN_OK)
+        return pn__cpl_fail(c, r, "pn_coupled_step_implicit: out of memory for the world's solver storage");
+    if ((r = pn__fem_linear_setup(m, od.fem_linear_solver)) != PN_OK)
+        return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", m->error);
+    if ((r = pn__cpl_alloc(c)) != PN_OK) return r;
+    t0 = w->time_s, steps0 = w->steps, fsteps0 = m->steps, left0 = w->left_total;
+    pn__mpm_backup(w, 0);
+    pn__fem_backup(m);
+    why[0] = 0;
+    for (level = 0; level <= PN__MAX(o->max_halvings, 0); ++level) {
+        int sub, nsub = 1 << level;
+        memset(&st, 0, sizeof st);
+        st.min_distance_m = PN__FEM_FAR;
+        st.substeps = nsub;
+        for (sub = 0, r = PN_OK; sub < nsub && r == PN_OK; ++sub) r = pn__cpl_once(c, dt / (pn_real)nsub, &od, &st);
+        if (r == PN_OK) {
+            pn_real dmin;
+            w->time_s = t0 + dt, w->steps = steps0 + 1, m->steps = fsteps0 + 1;
+            pn__cpl_here(c);
+            if ((r = pn__cpl_find(c, 0)) != PN_OK) break;
+            dmin = pn__cpl_closest_pair(c, &st.pairs);
+            st.min_distance_m = PN__MIN(st.min_distance_m, dmin);
+            c->error[0] = 0, c->error_particle = -1;
+            if (stats) *stats = st;
+            return PN_OK;
+        }
+        if (level == 0) {
+            first = r;
+            memcpy(why, c->error[0] ? c->error : w->error[0] ? w->error : m->error, sizeof why);
+            if (stats) *stats = st;
+        }
+        pn__mpm_backup(w, 1);
+        pn__fem_restore(m);
+        w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
+    }
+    pn__mpm_backup(w, 1);
+    pn__fem_restore(m);
+    w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
+    memcpy(c->error, why, sizeof why);
+    if (o->max_halvings > 0) {
+        const char *tail = " [also as 2^max_halvings substeps]";
+        size_t len = strlen(c->error);
+        if (len + strlen(tail) < sizeof c->error) memcpy(c->error + len, tail, strlen(tail) + 1);
+    }
+    return first != PN_OK ? first : r;
+}
+
+/* the interface's forces at the positions as they are (explicit): the barrier's, and
+   Coulomb friction that at most stops the relative sliding within the step. Particle
+   forces into k->fx (dim per particle), the mesh's into k->pa (dim per node). */
+static void pn__cpl_forces(pn_coupled *c, pn_real dt) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    int d = w->dim, j, a, kind = d == 2 ? PN__FEM_PE : PN__FEM_PT;
+    size_t i, nd = m->n_nodes * (size_t)d;
+    memset(k->fx, 0, sizeof(pn_real) * w->n * (size_t)d);
+    memset(k->pa, 0, sizeof(pn_real) * nd);
+    for (i = 0; i < k->nc; ++i) {
+        size_t p = k->cp[i];
+        const int *tn = pn__cpl_target(m, k->ck[i]);
+        pn_real yy[12], gl[12], Eb, dist, kap = pn__cpl_kappa(c, p);
+        pn__cpl_pair_y(c, i, yy, NULL);
+        if (!pn__pair_barrier(kind, d, d + 1, yy, c->dhat, kap, 1, &Eb, gl, NULL, &dist) || dist >= c->dhat) continue;
+        for (a = 0; a < d; ++a) k->fx[p * (size_t)d + (size_t)a] -= gl[a];
+        for (j = 0; j < d; ++j)
+            for (a = 0; a < d; ++a) k->pa[(size_t)tn[j] * (size_t)d + (size_t)a] -= gl[d + j * d + a];
+        if (c->friction > 0) {
+            pn_real beta[3], nrm[3], vr[3], vn = 0, sp = 0, bb, b1, b2, f;
+            pn__cpl_closest(d, yy, yy + d, beta, nrm);
+            pn__fem_barrier(dist, c->dhat, &bb, &b1, &b2);
+            for (a = 0; a < d; ++a) {
+                vr[a] = w->v[p * (size_t)d + (size_t)a];
+                for (j = 0; j < d; ++j) vr[a] -= beta[j] * m->v[(size_t)tn[j] * (size_t)d + (size_t)a];
+                vn += vr[a] * nrm[a];
+            }
+            for (a = 0; a < d; ++a) vr[a] -= vn * nrm[a], sp += vr[a] * vr[a];
+            sp = PN__SQRT(sp);
+            if (!(sp > 0)) continue;
+            f = PN__MIN(c->friction * kap * -b1, w->mass[p] * sp / dt);
+            for (a = 0; a < d; ++a) {
+                k->fx[p * (size_t)d + (size_t)a] -= f * vr[a] / sp;
+                for (j = 0; j < d; ++j) k->pa[(size_t)tn[j] * (size_t)d + (size_t)a] += beta[j] * f * vr[a] / sp;
+            }
+        }
+    }
+}
+
+PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled_stats *stats) {
+    pn__cpl *k;
+    pn_mpm_world *w;
+    pn_fem_mesh *m;
+    pn__fem *s;
+    pn_mpm_stats mst;
+    pn_fem_stats fst;
+    pn_result r;
+    pn_real t0, *fc;
+    long steps0;
+    size_t left0, p, nf = 0, i, nd;
+    int d, a, kind;
+    if (!c) return PN_ERROR_INVALID_ARGUMENT;
+    k = (pn__cpl *)c->impl, w = c->mpm, m = c->fem, s = (pn__fem *)m->impl;
+    d = w->dim, nd = m->n_nodes * (size_t)d, kind = d == 2 ? PN__FEM_PE : PN__FEM_PT;
+    c->error[0] = 0, c->error_particle = c->error_node = -1;
+    if (!pn__finite(dt) || !(dt > 0))
+        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_step_explicit: dt_s = %g must be finite and > 0",
+                            (double)dt);
+    if ((r = pn__mpm_alloc_implicit(w)) != PN_OK || (r = pn__cpl_alloc(c)) != PN_OK)
+        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "pn_coupled_step_explicit: out of memory for the storage");
+    pn__cpl_here(c);
+    if ((r = pn__cpl_find(c, 0)) != PN_OK) return r;
+    pn__cpl_forces(c, dt);
+    fc = k->fx + w->n * (size_t)d; /* the loaded particles' forces, compact */
+    for (p = 0; p < w->n; ++p) {
+        const pn_real *f = k->fx + p * (size_t)d;
+        if (f[0] == 0 && f[1] == 0 && (d == 2 || f[2] == 0)) continue;
+        for (a = 0; a < d; ++a) fc[nf * (size_t)d + (size_t)a] = f[a];
+        k->fidx[nf++] = p;
+    }
+    t0 = w->time_s, steps0 = w->steps, left0 = w->left_total;
+    pn__mpm_backup(w, 0);
+    w->xf_idx = k->fidx, w->xf = fc, w->xf_n = nf;
+    r = pn_mpm_step_explicit(w, dt, &mst);
+    w->xf_idx = NULL, w->xf = NULL, w->xf_n = 0;
+    if (r != PN_OK) {
+        c->error_particle = (long)w->error_particle;
+        return pn__cpl_fail(c, r, "pn_coupled_step_explicit: %s", w->error);
+    }
+    s->fext = k->pa;
+    r = pn_fem_step_explicit(m, dt, &fst);
+    s->fext = NULL;
+    if (r == PN_OK) { /* no particle crossed the boundary within the step */
+        for (i = 0; i < nd; ++i) k->xf[i] = s->bx[i], k->xd[i] = m->x[i] - s->bx[i];
+        for (i = 0; i < w->n * (size_t)d; ++i) k->y[i] = w->bx[i], k->yd[i] = w->x[i] - w->bx[i];
+        if ((r = pn__cpl_find(c, 1)) != PN_OK) return r;
+        for (i = 0; i < k->nc; ++i) {
+            pn_real yy[12], dy[12];
+            pn__cpl_pair_y(c, i, yy, dy);
+            if (pn__pair_ccd(kind, d, d + 1, 1, yy, dy, 0, 1) < 1) {
+                c->error_particle = (long)k->cp[i];
+                r = pn__cpl_fail(c, PN_ERROR_STEP_TOO_LARGE, "pn_coupled_step_explicit: particle %lu would close on the "
+                                 "mesh's boundary in a step of %g s: take a smaller step (pn_coupled_stable_dt)",
+                                 (unsigned long)k->cp[i], (double)dt);
+                pn__fem_restore(m);
+                m->steps--;
+                break;
+            }
+        }
+    } else
+        r = pn__cpl_fail(c, r, "pn_coupled_step_explicit: %s", m->error);
+    if (r != PN_OK) {
+        pn__mpm_backup(w, 1);
+        w->time_s = t0, w->steps = steps0, w->left_total = left0, w->rec_ok = 0;
+        return r;
+    }
+    if (stats) {
+        memset(stats, 0, sizeof *stats);
+        stats->substeps = 1;
+        stats->plastic_particles = mst.plastic, stats->plastic_elements = fst.plastic;
+        pn__cpl_here(c);
+        if (pn__cpl_find(c, 0) == PN_OK) stats->min_distance_m = pn__cpl_closest_pair(c, &stats->pairs);
+    }
+    return PN_OK;
+}
+
+PN__DEF pn_result pn_coupled_stable_dt(pn_coupled *c, pn_real *dt_s) {
+    pn__cpl *k;
+    pn_real a, b, best;
+    pn_result r;
+    size_t i;
+    int d;
+    if (!c || !dt_s) return PN_ERROR_INVALID_ARGUMENT;
+    k = (pn__cpl *)c->impl, d = c->mpm->dim;
+    if ((r = pn_mpm_stable_dt(c->mpm, &a)) != PN_OK || (r = pn_fem_stable_dt(c->fem, &b)) != PN_OK) return r;
+    best = PN__MIN(a, b);
+    if ((r = pn__cpl_alloc(c)) != PN_OK) return r;
+    pn__cpl_here(c);
+    if ((r = pn__cpl_find(c, 0)) != PN_OK) return r;
+    for (i = 0; i < k->nc; ++i) { /* the barrier's spring on the lighter side */
+        pn_real yy[12], dist, bb, b1, b2, mass = c->mpm->mass[k->cp[i]];
+        const int *tn = pn__cpl_target(c->fem, k->ck[i]);
+        int j;
+        pn__cpl_pair_y(c, i, yy, NULL);
+        dist = PN__SQRT(pn__fem_pair_d2(d == 2 ? PN__FEM_PE : PN__FEM_PT, d, yy, NULL, NULL));
+        if (!(dist > 0) || dist >= c->dhat) continue;
+        pn__fem_barrier(dist, c->dhat, &bb, &b1, &b2);
+        for (j = 0; j < d; ++j) mass = PN__MIN(mass, c->fem->mass[tn[j]]);
+        best = PN__MIN(best, PN__SQRT(mass / (pn__cpl_kappa(c, k->cp[i]) * b2)));
+    }
+    *dt_s = best;
+    return PN_OK;
+}
+
+PN__DEF void pn_coupled_destroy(pn_coupled *c) {
+    pn__cpl *k;
+    const pn_allocator *al;
+    if (!c) return;
+    k = (pn__cpl *)c->impl, al = &c->fem->desc.allocator;
+    if (k) {
+        pn_free(al, k->z), pn_free(al, k->fidx), pn_free(al, k->cp), pn_free(al, k->ck), pn_free(al, k->ch);
+        pn_free(al, k->con), pn_free(al, k->fp), pn_free(al, k->fnode), pn_free(al, k->fdat);
+        pn_free(al, k);
+    }
+    pn_free(al, c);
+}
+
+PN__DEF const char *pn_coupled_error(const pn_coupled *c) { return c ? c->error : ""; }
+
+PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_coupled_desc *desc, pn_coupled **out,
+                                    char *why, size_t why_cap) {
+    pn_coupled_desc de;
+    pn_coupled *c;
+    pn__cpl *k;
+    const pn_allocator *al;
+    pn_real emax = 0, dist;
+    pn_result r;
+    int g, d;
+    size_t p, e;
+    if (why && why_cap) why[0] = 0;
+    if (!w || !m || !out) {
+        pn__fem_why(why, why_cap, "pn_coupled_create: the world, the mesh and out must not be NULL");
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    *out = NULL;
+    if (w->dim != m->dim) {
+        pn__fem_why(why, why_cap, "pn_coupled_create: the world is %dD, the mesh %dD", w->dim, m->dim);
+        return PN_ERROR_DIMENSION;
+    }
+    d = w->dim;
+    memset(&de, 0, sizeof de);
+    if (desc) de = *desc;
+    if (!pn__finite(de.contact_distance_m) || de.contact_distance_m < 0 || !pn__finite(de.contact_stiffness) ||
+        de.contact_stiffness < 0 || !pn__finite(de.friction) || de.friction < 0 || !pn__finite(de.friction_velocity_m_s) ||
+        de.friction_velocity_m_s < 0) {
+        pn__fem_why(why, why_cap, "pn_coupled_desc: contact_distance_m %g, contact_stiffness %g, friction %g and "
+                    "friction_velocity_m_s %g must be finite and >= 0 (0: the default)", (double)de.contact_distance_m,
+                    (double)de.contact_stiffness, (double)de.friction, (double)de.friction_velocity_m_s);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    for (g = 0; g < w->n_groups; ++g) emax = PN__MAX(emax, w->groups[g].material.E);
+    al = &m->desc.allocator;
+    c = (pn_coupled *)pn_alloc(al, sizeof *c);
+    k = (pn__cpl *)pn_alloc(al, sizeof *k);
+    if (!c || !k) {
+        pn_free(al, c), pn_free(al, k);
+        pn__fem_why(why, why_cap, "pn_coupled_create: out of memory");
+        return PN_ERROR_OUT_OF_MEMORY;
+    }
+    memset(c, 0, sizeof *c);
+    memset(k, 0, sizeof *k);
+    c->impl = k, c->mpm = w, c->fem = m;
+    c->dhat = de.contact_distance_m > 0 ? de.contact_distance_m : w->desc.dx_m / 4;
+    c->stiffness = de.contact_stiffness > 0 ? de.contact_stiffness : (pn_real)0.1 * (emax > 0 ? emax : 1);
+    c->friction = de.friction;
+    c->eps_v = de.friction_velocity_m_s > 0 ? de.friction_velocity_m_s : (pn_real)1e-3;
+    k->kap_area = c->stiffness / c->dhat;
+    c->error_particle = c->error_node = -1;
+    if ((r = pn__cpl_alloc(c)) != PN_OK) {
+        pn_coupled_destroy(c);
+        pn__fem_why(why, why_cap, "pn_coupled_create: out of memory");
+        return r;
+    }
+    /* no particle on the boundary or inside the mesh: the barrier keeps them apart only if
+       they start apart */
+    if ((r = pn_coupled_min_distance(c, &dist)) != PN_OK || !(dist > 0)) {
+        pn__fem_why(why, why_cap, "pn_coupled_create: particle %ld touches the mesh's boundary", c->error_particle);
+        pn_coupled_destroy(c);
+        return r != PN_OK ? r : PN_ERROR_INVALID_ARGUMENT;
+    }
+    for (e = 0; e < m->n_elems; ++e) {
+        pn_real Ds[9], Di[9], lo[3], hi[3];
+        const int *el = m->elem + e * (size_t)(d + 1);
+        int a, j;
+        pn__fem_ds(m, e, m->x, Ds);
+        if (pn_mat_inverse(d, Ds, Di) != PN_OK) continue;
+        for (a = 0; a < d; ++a) lo[a] = hi[a] = m->x[(size_t)el[0] * (size_t)d + (size_t)a];
+        for (j = 1; j <= d; ++j)
+            for (a = 0; a < d; ++a) {
+                pn_real x = m->x[(size_t)el[j] * (size_t)d + (size_t)a];
+                lo[a] = PN__MIN(lo[a], x), hi[a] = PN__MAX(hi[a], x);
+            }
+        for (p = 0; p < w->n; ++p) {
+            const pn_real *x = w->x + p * (size_t)d;
+            pn_real lam[3], sum = 0, rel[3];
+            int in = w->active[p];
+            for (a = 0; a < d && in; ++a) in = x[a] >= lo[a] && x[a] <= hi[a];
+            if (!in) continue;
+            for (a = 0; a < d; ++a) rel[a] = x[a] - m->x[(size_t)el[0] * (size_t)d + (size_t)a];
+            for (a = 0; a < d; ++a) { /* barycentric: Ds^-1 (x - x_0) */
+                lam[a] = 0;
+                for (j = 0; j < d; ++j) lam[a] += Di[a * d + j] * rel[j];
+                sum += lam[a];
+                in &= lam[a] >= 0;
+            }
+            if (in && sum <= 1) {
+                pn__fem_why(why, why_cap, "pn_coupled_create: particle %lu lies inside element %lu of the mesh",
+                            (unsigned long)p, (unsigned long)e);
+                pn_coupled_destroy(c);
+                return PN_ERROR_INVALID_ARGUMENT;
+            }
+        }
+    }
+    *out = c;
+    return PN_OK;
+}
+
+#undef PN__CPL_FD
 
 #undef PN__FEM_FREE
 #undef pn__fem_backup
