@@ -9833,15 +9833,15 @@ static pn_real pn__cpl_ccd(pn_coupled *c) {
 }
 
 /* Newton on E(v, u) from k->z (feasible) */
-static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, int fls, pn_coupled_stats *st,
-                                pn_real *res_out, int *capped_out) {
+static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn_coupled_stats *st, pn_real *res_out,
+                                int *capped_out) {
     pn__cpl *k = (pn__cpl *)c->impl;
     pn_mpm_world *w = c->mpm;
     pn_fem_mesh *m = c->fem;
     pn__fem *s = (pn__fem *)m->impl;
     pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt, res = 0;
     size_t i, nz = k->nz;
-    int it, capped = 0;
+    int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->mg_stale && w->steps % 16 != 0;
     pn_result r;
     pn__cg_ops op;
     op.ctx = c, op.apply = pn__cpl_apply, op.precond = pn__cpl_precond, op.dot = pn__cpl_dot, op.curv = NULL;
@@ -9857,7 +9857,8 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, in
                                 "particle %lu, element %ld)", (double)dt, pn_result_string(r),
                                 (unsigned long)w->error_particle, m->error_element);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
-        if (w->mg_on && (r = pn__mpm_mg_build(w, dt, 1, o->mg_levels)) != PN_OK)
+        fresh = it == 0 || o->mg_rebuild || stale; /* the grid's hierarchy lagged as its own step does */
+        if (w->mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
             return pn__cpl_fail(c, r, "coupled implicit step: out of memory for the grid's multigrid hierarchy");
         if (!w->mg_on) pn__mpm_diagonal(w, dt);
         if (s->sparse) {
@@ -9874,7 +9875,10 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, in
         }
         for (i = 0; i < nz; ++i) k->r[i] = -k->g[i];
         for (i = 0; i < w->n_act; ++i) pn__mpm_filter(w, i, k->r + i * (size_t)w->dim);
-        st->cg_iters += pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, o->cg_rel_tol, 0, &capped);
+        cg = pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, o->cg_rel_tol, 0, &capped);
+        st->cg_iters += cg;
+        if (fresh) cg_fresh = cg;
+        else w->mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
         st->newton_iters++;
         for (res = 0, gd = 0, i = 0; i < nz; ++i) res = PN__MAX(res, PN__FABS(k->dir[i])), gd += k->g[i] * k->dir[i];
         if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / (w->desc.dx_m / dt));
@@ -9893,9 +9897,21 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, in
         memcpy(k->z, k->zt, sizeof(pn_real) * nz);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
     }
-    (void)fls;
     *res_out = res / (w->desc.dx_m / dt);
     *capped_out = capped;
+    return PN_OK;
+}
+
+/* the mesh's positions and velocities finite (the world's checks its own) */
+static pn_result pn__cpl_check_mesh(pn_coupled *c, const char *who) {
+    const pn_fem_mesh *m = c->fem;
+    size_t k, nd = m->n_nodes * (size_t)m->dim;
+    for (k = 0; k < nd; ++k)
+        if (!pn__finite(m->x[k]) || !pn__finite(m->v[k])) {
+            c->error_node = (long)(k / (size_t)m->dim);
+            return pn__cpl_fail(c, PN_ERROR_NONFINITE, "%s: the mesh's node %ld has a non-finite position or velocity", who,
+                                c->error_node);
+        }
     return PN_OK;
 }
 
@@ -9997,7 +10013,7 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
             if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->vsol);
             memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
             st->solves++;
-            if ((r = pn__cpl_newton(c, o, 0, st, &last_res, &capped)) != PN_OK) return r;
+            if ((r = pn__cpl_newton(c, o, st, &last_res, &capped)) != PN_OK) return r;
             memcpy(w->vsol, k->z, sizeof(pn_real) * k->nv);
             if (!has_sep || !pn__mpm_active_set(w, w->vsol, vscale)) break;
             memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
@@ -10098,6 +10114,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     if (o->max_halvings == 0) o->max_halvings = 3;
     if (o->max_halvings > 10) o->max_halvings = 10;
     if ((r = pn__mpm_check_state(w)) != PN_OK) return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", w->error);
+    if ((r = pn__cpl_check_mesh(c, "pn_coupled_step_implicit")) != PN_OK) return r;
     if ((r = pn__mpm_alloc_implicit(w)) != PN_OK)
         return pn__cpl_fail(c, r, "pn_coupled_step_implicit: out of memory for the world's solver storage");
     if ((r = pn__fem_linear_setup(m, od.fem_linear_solver)) != PN_OK)
@@ -10207,6 +10224,8 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
                             (double)dt);
     if ((r = pn__mpm_alloc_implicit(w)) != PN_OK || (r = pn__cpl_alloc(c)) != PN_OK)
         return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "pn_coupled_step_explicit: out of memory for the storage");
+    if ((r = pn__mpm_check_state(w)) != PN_OK) return pn__cpl_fail(c, r, "pn_coupled_step_explicit: %s", w->error);
+    if ((r = pn__cpl_check_mesh(c, "pn_coupled_step_explicit")) != PN_OK) return r;
     pn__cpl_here(c);
     if ((r = pn__cpl_find(c, 0)) != PN_OK) return r;
     pn__cpl_forces(c, dt);

@@ -25,6 +25,7 @@
 #include "test_scene.c"   /* pn_tests_scene: fill helpers, stable dt, large steps, errors */
 #include "test_fem.c"     /* pn_tests_fem: FEM meshes, energies, contact, Newton        */
 #include "test_rom.c"     /* pn_tests_rom: reduced-order MPM (maps, projections, the step) */
+#include "test_couple.c"  /* pn_tests_couple: MPM-FEM coupling (momentum, rest, threads)  */
 
 #define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
@@ -40,6 +41,7 @@ int main(int argc, char **argv) {
     pn_test_run(pn_tests_scene, PN_COUNT(pn_tests_scene), filter, &passed, &failed);
     pn_test_run(pn_tests_fem, PN_COUNT(pn_tests_fem), filter, &passed, &failed);
     pn_test_run(pn_tests_rom, PN_COUNT(pn_tests_rom), filter, &passed, &failed);
+    pn_test_run(pn_tests_couple, PN_COUNT(pn_tests_couple), filter, &passed, &failed);
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }

@@ -1,0 +1,424 @@
+/* test_couple.c - MPM-FEM coupling (plastinet_mpm.h >>couple): momentum across the
+   interface, a body at rest on a sand bed, explicit against implicit, 1 and 2 threads, bad
+   input. The interface's own barrier and CCD are checked pair by pair in test_fem.c
+   (fem_pair_barrier_ccd). Included by test_main.c. */
+
+/* a sand box (StVK-Hencky + Drucker-Prager, E 1e6 Pa unless E_sand) and an elastic block
+   mesh (Neo-Hookean, E_block, 3000 kg/m^3) above or beside it, coupled */
+typedef struct t_cpl {
+    pn_mpm_world *w;
+    pn_fem_mesh *m;
+    pn_coupled *c;
+    pn_real *X;
+    int *el;
+    size_t nn, ne;
+} t_cpl;
+
+typedef struct t_cpl_scene {
+    int dim, res, cells[3];
+    double gy, sand_lo[3], sand_size[3], block_lo[3], block_size[3], block_v[3], E_sand, E_block, friction;
+    pn_mpm_boundary boundary;
+} t_cpl_scene;
+
+static void t_cpl_free(t_cpl *t) {
+    pn_coupled_destroy(t->c);
+    pn_fem_destroy(t->m);
+    pn_mpm_destroy(t->w);
+    free(t->X);
+    free(t->el);
+    memset(t, 0, sizeof *t);
+}
+
+static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
+    pn_mpm_desc wd;
+    pn_mpm_fill_desc f;
+    pn_material_desc md;
+    pn_material sand;
+    pn_fem_group fg;
+    pn_fem_desc fd;
+    pn_fem_grid g;
+    pn_coupled_desc cd;
+    const char *why = "";
+    char msg[256];
+    size_t n = 0, k;
+    int d = sc->dim, i;
+    memset(t, 0, sizeof *t);
+    memset(&wd, 0, sizeof wd);
+    wd.dim = d;
+    for (i = 0; i < d; ++i) wd.res[i] = sc->res;
+    wd.dx_m = (pn_real)(1.0 / sc->res);
+    wd.gravity[1] = (pn_real)sc->gy;
+    wd.boundary = sc->boundary;
+    wd.friction = (pn_real)0.5;
+    wd.wall_cells = 3;
+    memset(&f, 0, sizeof f);
+    f.shape = PN_MPM_FILL_BOX;
+    for (i = 0; i < d; ++i)
+        f.center_m[i] = (pn_real)(sc->sand_lo[i] + sc->sand_size[i] / 2), f.half_extent_m[i] = (pn_real)(sc->sand_size[i] / 2);
+    if (pn_mpm_fill_count(&wd, &f, &n, &why) != PN_OK) return 0;
+    wd.max_particles = n;
+    if (pn_mpm_create(&wd, &t->w, &why) != PN_OK) return 0;
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_STVK_HENCKY, md.plastic = PN_PLASTIC_DRUCKER_PRAGER;
+    md.youngs_modulus_pa = (pn_real)(sc->E_sand > 0 ? sc->E_sand : 1e6), md.poisson_ratio = (pn_real)0.3;
+    md.friction_angle_deg = 30;
+    if (pn_material_init(&sand, &md, &why) != PN_OK) return 0;
+    f.group = pn_mpm_add_group(t->w, &sand, 1600);
+    if (pn_mpm_fill(t->w, &f, NULL) != PN_OK) return 0;
+    memset(&g, 0, sizeof g);
+    g.dim = d;
+    for (i = 0; i < d; ++i) g.cells[i] = sc->cells[i], g.lo_m[i] = (pn_real)sc->block_lo[i], g.size_m[i] = (pn_real)sc->block_size[i];
+    if (pn_fem_grid_mesh(&g, NULL, NULL, &t->nn, &t->ne) != PN_OK) return 0;
+    t->X = (pn_real *)malloc(sizeof(pn_real) * t->nn * (size_t)d);
+    t->el = (int *)malloc(sizeof(int) * t->ne * (size_t)(d + 1));
+    if (!t->X || !t->el || pn_fem_grid_mesh(&g, t->X, t->el, &t->nn, &t->ne) != PN_OK) return 0;
+    memset(&fg, 0, sizeof fg);
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_NEO_HOOKEAN, md.youngs_modulus_pa = (pn_real)sc->E_block, md.poisson_ratio = (pn_real)0.3;
+    if (pn_material_init(&fg.material, &md, &why) != PN_OK) return 0;
+    fg.density_kg_m3 = 3000;
+    memset(&fd, 0, sizeof fd);
+    fd.dim = d, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el;
+    fd.groups = &fg, fd.n_groups = 1, fd.gravity[1] = (pn_real)sc->gy;
+    if (pn_fem_create(&fd, &t->m, msg, sizeof msg) != PN_OK) return 0;
+    for (k = 0; k < t->nn; ++k)
+        for (i = 0; i < d; ++i) t->m->v[k * (size_t)d + (size_t)i] = (pn_real)sc->block_v[i];
+    memset(&cd, 0, sizeof cd);
+    cd.friction = (pn_real)sc->friction;
+    if (pn_coupled_create(t->w, t->m, &cd, &t->c, msg, sizeof msg) != PN_OK) {
+        fprintf(stderr, "  t_cpl_make: %s\n", msg);
+        return 0;
+    }
+    return 1;
+}
+
+/* total momentum of the particles and the mesh's nodes along each axis */
+static void t_cpl_momentum(const t_cpl *t, double *p) {
+    int d = t->w->dim, i;
+    size_t k;
+    for (i = 0; i < 3; ++i) p[i] = 0;
+    for (k = 0; k < t->w->n; ++k)
+        for (i = 0; i < d; ++i) p[i] += (double)t->w->mass[k] * (double)t->w->v[k * (size_t)d + (size_t)i];
+    for (k = 0; k < t->nn; ++k)
+        for (i = 0; i < d; ++i) p[i] += (double)t->m->mass[k] * (double)t->m->v[k * (size_t)d + (size_t)i];
+}
+
+static double t_cpl_block_mean(const t_cpl *t, int axis, int vel) {
+    double s = 0;
+    size_t k;
+    for (k = 0; k < t->nn; ++k) s += (double)(vel ? t->m->v : t->m->x)[k * (size_t)t->w->dim + (size_t)axis];
+    return s / (double)t->nn;
+}
+
+/* a block thrown sideways into a floating sand box, no gravity, walls far: the barrier's and
+   friction's forces are equal and opposite, so the total momentum stays what it was (the
+   implicit step to its Newton tolerance) while the block's own changes */
+static t_cpl_scene t_cpl_collision(int dim) {
+    t_cpl_scene sc;
+    int i;
+    memset(&sc, 0, sizeof sc);
+    sc.dim = dim, sc.res = dim == 2 ? 32 : 16, sc.gy = 0, sc.E_block = 1e8, sc.friction = 0.3;
+    sc.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    for (i = 0; i < dim; ++i) {
+        sc.sand_lo[i] = 0.4, sc.sand_size[i] = 0.25;
+        sc.block_lo[i] = 0.45, sc.block_size[i] = 0.1, sc.cells[i] = 2;
+    }
+    sc.block_lo[0] = 0.4 - 0.1 - 0.02, sc.block_lo[1] = 0.5; /* left of the sand, off-centre: it spins too */
+    sc.block_v[0] = 2, sc.block_v[1] = -0.5;
+    return sc;
+}
+
+PN_TEST(couple_momentum) {
+    int dim, implicit;
+    for (dim = 2; dim <= 3; ++dim)
+        for (implicit = 0; implicit <= 1; ++implicit) {
+            t_cpl t;
+            t_cpl_scene sc = t_cpl_collision(dim);
+            double p0[3], p1[3], b0, b1, scale, err = 0, dmin = 1e30;
+            int s, nsteps = implicit ? 40 : 4000, i, contact = 0;
+            pn_coupled_implicit_desc od;
+            if (!t_cpl_make(&t, &sc)) {
+                PN_CHECK(0);
+                t_cpl_free(&t);
+                continue;
+            }
+            memset(&od, 0, sizeof od);
+            od.mpm.newton_tol = (pn_real)1e-9, od.mpm.cg_rel_tol = (pn_real)1e-10, od.mpm.cg_max = 5000;
+            t_cpl_momentum(&t, p0);
+            b0 = t_cpl_block_mean(&t, 0, 1);
+            scale = fabs(p0[0]) + fabs(p0[1]);
+            for (s = 0; s < nsteps; ++s) {
+                pn_coupled_stats st;
+                pn_result r = implicit ? pn_coupled_step_implicit(t.c, 1e-3, &od, &st) : pn_coupled_step_explicit(t.c, 1e-5, &st);
+                PN_CHECK(r == PN_OK);
+                if (r != PN_OK) {
+                    fprintf(stderr, "  %s\n", pn_coupled_error(t.c));
+                    break;
+                }
+                contact += st.pairs > 0;
+                if (st.pairs) dmin = PN__MIN(dmin, (double)st.min_distance_m);
+            }
+            t_cpl_momentum(&t, p1);
+            b1 = t_cpl_block_mean(&t, 0, 1);
+            for (i = 0; i < dim; ++i) err = PN__MAX(err, fabs(p1[i] - p0[i]) / scale);
+            PN_CHECK(contact > 0);
+            PN_CHECK(b1 < 0.8 * b0); /* the block was slowed: the coupling acted */
+            PN_CHECK(err <= (implicit ? 1e-6 : 1e-9));
+            PN_CHECK(dmin > 0);
+            PN_REPORT("%dD %s: block's x velocity %.3f -> %.3f m/s, total momentum changed by %.2g of it; %d steps in "
+                      "contact, smallest distance %.3g dhat", dim, implicit ? "implicit dt 1e-3" : "explicit dt 1e-5", b0, b1,
+                      err, contact, dmin / (double)t.c->dhat);
+            t_cpl_free(&t);
+        }
+}
+
+/* a block laid on a sand bed under gravity stays where it is. It starts at the gap where the
+   barrier carries its weight (the barrier's law solved for the weight shared by the top
+   particles under it), so nothing should move but the bed's own elastic settling under both
+   weights (1e-4 of its height): at rest, its drift a small fraction of dhat. */
+PN_TEST(couple_rest) {
+    int implicit;
+    for (implicit = 0; implicit <= 1; ++implicit) {
+        t_cpl t;
+        t_cpl_scene sc;
+        double dx = 1.0 / 32, ytop = 0, y0, y1, vmax = 0, lo = 0, hi = 1, gap, W, kap, dh = dx / 4;
+        int s, nsteps = implicit ? 200 : 5000, under = 0, it;
+        size_t k;
+        memset(&sc, 0, sizeof sc);
+        sc.dim = 2, sc.res = 32, sc.gy = -9.81, sc.E_sand = 1e7, sc.E_block = 1e9, sc.boundary = PN_MPM_BOUNDARY_SEPARATE;
+        sc.sand_lo[0] = 3 * dx, sc.sand_size[0] = 1 - 6 * dx, sc.sand_lo[1] = 3 * dx, sc.sand_size[1] = 0.25;
+        sc.block_lo[0] = 0.4, sc.block_size[0] = 0.2, sc.block_size[1] = 0.1, sc.cells[0] = 8, sc.cells[1] = 4;
+        sc.friction = 0.5;
+        ytop = 3 * dx + 0.25 - dx / 4; /* the top row of particles (2 per cell per axis) */
+        for (k = 0; k < 64; ++k) { /* the top row's particles under the block: x in [0.4, 0.6] */
+            double x = 3 * dx + dx / 4 + (double)k * dx / 2;
+            under += x >= 0.4 && x <= 0.6;
+        }
+        W = 3000 * 9.81 * 0.2 * 0.1; /* the block's weight (N per metre) */
+        kap = 0.1 * 1e7 * (dx / 2) / dh; /* kappa_p = k a_p / dhat, k = 0.1 E, a_p = V_p^(1/2) */
+        for (it = 0; it < 100; ++it) { /* kappa_p |b'(x dhat)| = W / under, by bisection on x */
+            double x = (lo + hi) / 2, d = x * dh, b1 = -2 * (d - dh) * log(d / dh) - (d - dh) * (d - dh) / d;
+            if (kap * -b1 > W / under) lo = x;
+            else hi = x;
+        }
+        gap = (lo + hi) / 2 * dh;
+        sc.block_lo[1] = ytop + gap;
+        if (!t_cpl_make(&t, &sc)) {
+            PN_CHECK(0);
+            t_cpl_free(&t);
+            continue;
+        }
+        y0 = t_cpl_block_mean(&t, 1, 0);
+        for (s = 0; s < nsteps; ++s) {
+            pn_coupled_stats st;
+            pn_result r = implicit ? pn_coupled_step_implicit(t.c, 1e-3, NULL, &st) : pn_coupled_step_explicit(t.c, 1e-5, &st);
+            PN_CHECK(r == PN_OK && st.min_distance_m > 0);
+            if (r != PN_OK) {
+                fprintf(stderr, "  %s\n", pn_coupled_error(t.c));
+                break;
+            }
+            vmax = PN__MAX(vmax, fabs(t_cpl_block_mean(&t, 1, 1)));
+        }
+        y1 = t_cpl_block_mean(&t, 1, 0);
+        PN_CHECK(fabs(y1 - y0) < 0.1 * dh);
+        PN_CHECK(vmax < 0.05);
+        PN_REPORT("%s: resting %.3f dhat above the bed, over %.2f s the block moved %.3g dhat, largest speed %.3g m/s (free "
+                  "fall: %.2f m/s)", implicit ? "implicit dt 1e-3" : "explicit dt 1e-5", gap / dh,
+                  nsteps * (implicit ? 1e-3 : 1e-5), (y1 - y0) / dh, vmax, 9.81 * nsteps * (implicit ? 1e-3 : 1e-5));
+        t_cpl_free(&t);
+    }
+}
+
+/* a block dropped onto a sand bed, explicit at 1e-5 s against implicit at 1e-5 s (Newton
+   to 1e-8), 1e-4 s and 1e-3 s: both integrators discretize the same interface and the
+   same MPM, so at the same step they agree to the solver's tolerance, and implicit Euler's
+   O(dt) error shrinks with its step */
+PN_TEST(couple_explicit_implicit) {
+    t_cpl_scene sc;
+    double dx = 1.0 / 32, T = 0.03, err[4] = {0, 0, 0, 0}, perr[4] = {0, 0, 0, 0}, *yb[4], *xp = NULL;
+    static const double dts[4] = {1e-5, 1e-5, 1e-4, 1e-3};
+    int run, n_out = 6;
+    size_t np = 0;
+    memset(&sc, 0, sizeof sc);
+    sc.dim = 2, sc.res = 32, sc.gy = -9.81, sc.E_sand = 1e7, sc.E_block = 1e9, sc.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    sc.sand_lo[0] = 3 * dx, sc.sand_size[0] = 1 - 6 * dx, sc.sand_lo[1] = 3 * dx, sc.sand_size[1] = 0.25;
+    sc.block_lo[0] = 0.4, sc.block_size[0] = 0.2, sc.block_size[1] = 0.1, sc.cells[0] = 8, sc.cells[1] = 4;
+    sc.block_lo[1] = 3 * dx + 0.25 + dx / 2, sc.block_v[1] = -1.5, sc.friction = 0.5;
+    for (run = 0; run < 4; ++run) yb[run] = (double *)calloc((size_t)n_out, sizeof(double));
+    for (run = 0; run < 4; ++run) {
+        t_cpl t;
+        int s, nsteps = (int)(T / dts[run] + 0.5), every = nsteps / n_out;
+        size_t k;
+        pn_coupled_implicit_desc od;
+        memset(&od, 0, sizeof od);
+        if (run == 1) od.mpm.newton_tol = (pn_real)1e-8;
+        if (!t_cpl_make(&t, &sc)) {
+            PN_CHECK(0);
+            t_cpl_free(&t);
+            continue;
+        }
+        for (s = 0; s < nsteps; ++s) {
+            pn_result r = run ? pn_coupled_step_implicit(t.c, dts[run], &od, NULL) : pn_coupled_step_explicit(t.c, dts[run], NULL);
+            PN_CHECK(r == PN_OK);
+            if (r != PN_OK) {
+                fprintf(stderr, "  %s\n", pn_coupled_error(t.c));
+                break;
+            }
+            if ((s + 1) % every == 0 && (s + 1) / every <= n_out) yb[run][(s + 1) / every - 1] = t_cpl_block_mean(&t, 1, 0);
+        }
+        if (run == 0) {
+            np = t.w->n;
+            xp = (double *)malloc(sizeof(double) * np * 2);
+            for (k = 0; k < 2 * np; ++k) xp[k] = (double)t.w->x[k];
+        } else {
+            for (s = 0; s < n_out; ++s) err[run] = PN__MAX(err[run], fabs(yb[run][s] - yb[0][s]));
+            for (k = 0; k < np; ++k)
+                perr[run] += sqrt(pow((double)t.w->x[2 * k] - xp[2 * k], 2) + pow((double)t.w->x[2 * k + 1] - xp[2 * k + 1], 2)) / (double)np;
+        }
+        t_cpl_free(&t);
+    }
+    PN_CHECK(err[1] < 0.02 * dx && perr[1] < 0.01 * dx); /* the same step: the same answer */
+    PN_CHECK(err[2] < err[3] && perr[2] < perr[3]);     /* larger steps: further off */
+    PN_REPORT("the block's height over %.2f s against explicit at 1e-5 s, implicit at 1e-5 s: within %.3g dx, 1e-4 s: %.3g "
+              "dx, 1e-3 s: %.3g dx; the particles' mean distance at the end %.3g, %.3g, %.3g dx", T, err[1] / dx,
+              err[2] / dx, err[3] / dx, perr[1] / dx, perr[2] / dx, perr[3] / dx);
+    for (run = 0; run < 4; ++run) free(yb[run]);
+    free(xp);
+}
+
+/* the collision scene stepped on 1 and 2 threads: the same bits (explicit and implicit) */
+PN_TEST(couple_threads_identical) {
+#ifdef _OPENMP
+    int implicit, t, dim;
+    for (dim = 2; dim <= 3; ++dim)
+        for (implicit = 0; implicit <= 1; ++implicit) {
+            pn_real *keep = NULL;
+            size_t bytes = 0, fbytes = 0;
+            int same = 0;
+            for (t = 1; t <= 2; ++t) {
+                t_cpl c;
+                t_cpl_scene sc = t_cpl_collision(dim);
+                int s;
+                if (!t_cpl_make(&c, &sc)) {
+                    PN_CHECK(0);
+                    t_cpl_free(&c);
+                    break;
+                }
+                c.w->desc.parallel_min_particles = 1; /* this small world on 2 threads too */
+                omp_set_num_threads(t);
+                for (s = 0; s < (implicit ? 30 : 3000); ++s) {
+                    pn_result r = implicit ? pn_coupled_step_implicit(c.c, 1e-3, NULL, NULL) : pn_coupled_step_explicit(c.c, 1e-5, NULL);
+                    PN_CHECK(r == PN_OK);
+                    if (r != PN_OK) break;
+                }
+                bytes = sizeof(pn_real) * c.w->n * (size_t)dim, fbytes = sizeof(pn_real) * c.nn * (size_t)dim;
+                if (t == 1) {
+                    keep = (pn_real *)malloc(2 * bytes + fbytes);
+                    memcpy(keep, c.w->x, bytes), memcpy((char *)keep + bytes, c.w->v, bytes);
+                    memcpy((char *)keep + 2 * bytes, c.m->x, fbytes);
+                } else {
+                    same = memcmp(keep, c.w->x, bytes) == 0 && memcmp((char *)keep + bytes, c.w->v, bytes) == 0 &&
+                           memcmp((char *)keep + 2 * bytes, c.m->x, fbytes) == 0;
+                    PN_CHECK(same);
+                    PN_REPORT("%dD %s: particles and mesh on 1 and 2 threads %s", dim, implicit ? "implicit" : "explicit",
+                              same ? "bitwise identical" : "DIFFER");
+                }
+                t_cpl_free(&c);
+            }
+            free(keep);
+            omp_set_num_threads(2);
+        }
+#else
+    PN_CHECK(1); /* one thread only: nothing to compare */
+#endif
+}
+
+/* bad input: refused with a message naming the culprit, and a failed step leaves both as
+   they were */
+PN_TEST(couple_bad_input) {
+    t_cpl t;
+    t_cpl_scene sc = t_cpl_collision(2);
+    pn_coupled *c2 = NULL;
+    pn_coupled_desc cd;
+    char why[256];
+    pn_real *keep;
+    size_t bytes, fbytes;
+    if (!t_cpl_make(&t, &sc)) {
+        PN_CHECK(0);
+        t_cpl_free(&t);
+        return;
+    }
+    memset(&cd, 0, sizeof cd);
+    cd.friction = (pn_real)NAN;
+    PN_CHECK(pn_coupled_create(t.w, t.m, &cd, &c2, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && !c2 &&
+             strstr(why, "friction"));
+    cd.friction = 0, cd.contact_distance_m = -1;
+    PN_CHECK(pn_coupled_create(t.w, t.m, &cd, &c2, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && !c2 &&
+             strstr(why, "contact_distance_m"));
+    PN_CHECK(pn_coupled_step_implicit(t.c, (pn_real)NAN, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT &&
+             strstr(pn_coupled_error(t.c), "dt_s"));
+    PN_CHECK(pn_coupled_step_explicit(t.c, -1, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    { /* the stress formulation does not couple */
+        pn_coupled_implicit_desc od;
+        memset(&od, 0, sizeof od);
+        od.mpm.formulation = PN_MPM_FORMULATION_STRESS;
+        PN_CHECK(pn_coupled_step_implicit(t.c, 1e-3, &od, NULL) == PN_ERROR_UNSUPPORTED);
+    }
+    /* a step so large the block would pass through the sand: explicit refuses it (CCD), and
+       both are unchanged, bit for bit */
+    bytes = sizeof(pn_real) * t.w->n * 2, fbytes = sizeof(pn_real) * t.nn * 2;
+    keep = (pn_real *)malloc(2 * bytes + 2 * fbytes);
+    memcpy(keep, t.w->x, bytes), memcpy((char *)keep + bytes, t.w->v, bytes);
+    memcpy((char *)keep + 2 * bytes, t.m->x, fbytes), memcpy((char *)keep + 2 * bytes + fbytes, t.m->v, fbytes);
+    {
+        size_t k;
+        for (k = 0; k < t.nn; ++k) t.m->v[2 * k] = 400; /* 4 m in a 1e-2 s step */
+        memcpy((char *)keep + 2 * bytes + fbytes, t.m->v, fbytes);
+    }
+    PN_CHECK(pn_coupled_step_explicit(t.c, 1e-2, NULL) != PN_OK);
+    PN_CHECK(memcmp(keep, t.w->x, bytes) == 0 && memcmp((char *)keep + bytes, t.w->v, bytes) == 0);
+    PN_CHECK(memcmp((char *)keep + 2 * bytes, t.m->x, fbytes) == 0 && memcmp((char *)keep + 2 * bytes + fbytes, t.m->v, fbytes) == 0);
+    PN_CHECK(pn_coupled_error(t.c)[0] != 0);
+    PN_REPORT("explicit step through the sand refused: %s", pn_coupled_error(t.c));
+    /* a NaN velocity is refused, naming the node; both unchanged */
+    t.m->v[3] = (pn_real)NAN;
+    memcpy((char *)keep + 2 * bytes + fbytes, t.m->v, fbytes);
+    PN_CHECK(pn_coupled_step_implicit(t.c, 1e-3, NULL, NULL) == PN_ERROR_NONFINITE &&
+             strstr(pn_coupled_error(t.c), "node 1"));
+    PN_CHECK(pn_coupled_step_explicit(t.c, 1e-5, NULL) == PN_ERROR_NONFINITE);
+    PN_CHECK(memcmp(keep, t.w->x, bytes) == 0 && memcmp((char *)keep + bytes, t.w->v, bytes) == 0);
+    PN_CHECK(memcmp((char *)keep + 2 * bytes, t.m->x, fbytes) == 0 && memcmp((char *)keep + 2 * bytes + fbytes, t.m->v, fbytes) == 0);
+    PN_REPORT("a NaN mesh velocity refused: %s", pn_coupled_error(t.c));
+    free(keep);
+    pn_coupled_destroy(t.c);
+    t.c = NULL;
+    { /* a particle inside the mesh, and meshes of another dimension */
+        size_t k;
+        pn_real x0[2];
+        memcpy(x0, t.w->x, sizeof x0);
+        for (k = 0; k < 2; ++k) t.w->x[k] = t.m->x[k] + (pn_real)0.01; /* inside the block's first element */
+        PN_CHECK(pn_coupled_create(t.w, t.m, NULL, &c2, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && !c2 &&
+                 strstr(why, "particle 0"));
+        PN_REPORT("a particle in the block: %s", why);
+        memcpy(t.w->x, x0, sizeof x0);
+    }
+    {
+        t_cpl t3;
+        t_cpl_scene s3 = t_cpl_collision(3);
+        if (t_cpl_make(&t3, &s3)) {
+            PN_CHECK(pn_coupled_create(t.w, t3.m, NULL, &c2, why, sizeof why) == PN_ERROR_DIMENSION && !c2);
+            PN_REPORT("a 2D world with a 3D mesh: %s", why);
+        } else
+            PN_CHECK(0);
+        t_cpl_free(&t3);
+    }
+    t_cpl_free(&t);
+}
+
+static const pn_test_case pn_tests_couple[] = {
+    {"couple_bad_input", couple_bad_input},
+    {"couple_threads_identical", couple_threads_identical},
+    {"couple_explicit_implicit", couple_explicit_implicit},
+    {"couple_rest", couple_rest},
+    {"couple_momentum", couple_momentum},
+};
