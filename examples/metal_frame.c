@@ -21,13 +21,6 @@
 #include "pn_frame.h"
 
 /* order of sorted vertex triples (qsort) */
-static int cmp3(const void *pa, const void *pb) {
-    const int *a = (const int *)pa, *b = (const int *)pb;
-    int i;
-    for (i = 0; i < 3; ++i)
-        if (a[i] != b[i]) return a[i] < b[i] ? -1 : 1;
-    return 0;
-}
 
 typedef struct frame_cli {
     int dim, implicit, frames_per_s, png, vtu, obj, pass, alternating;
@@ -91,75 +84,19 @@ static double mises(const pn_fem_mesh *m, size_t e) {
     return sqrt(1.5 * s2);
 }
 
-static int write_vtu(const char *path, const pn_fem_mesh *m) {
-    FILE *f = fopen(path, "w");
-    int d = m->dim, dp = d + 1, a;
-    size_t k, e;
+/* VTU with the elements' plastic strain and von Mises stress */
+static int write_frame_vtu(const char *path, const pn_fem_mesh *m) {
+    double *f = (double *)malloc(sizeof(double) * 2 * (m->n_elems ? m->n_elems : 1));
+    const char *names[2] = {"plastic_strain", "von_mises_stress_pa"};
+    const double *fields[2];
+    size_t e;
+    int ok;
     if (!f) return 0;
-    fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
-               "<UnstructuredGrid><Piece NumberOfPoints=\"%lu\" NumberOfCells=\"%lu\">\n<Points><DataArray type=\"Float64\" "
-               "NumberOfComponents=\"3\" format=\"ascii\">\n",
-            (unsigned long)m->n_nodes, (unsigned long)m->n_elems);
-    for (k = 0; k < m->n_nodes; ++k)
-        fprintf(f, "%.9g %.9g %.9g\n", (double)m->x[k * (size_t)d], (double)m->x[k * (size_t)d + 1], d == 3 ? (double)m->x[k * 3 + 2] : 0.0);
-    fprintf(f, "</DataArray></Points>\n<Cells><DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-    for (e = 0; e < m->n_elems; ++e) {
-        for (a = 0; a < dp; ++a) fprintf(f, "%d ", m->elem[e * (size_t)dp + (size_t)a]);
-        fputc('\n', f);
-    }
-    fprintf(f, "</DataArray><DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for (e = 0; e < m->n_elems; ++e) fprintf(f, "%lu\n", (unsigned long)((e + 1) * (size_t)dp));
-    fprintf(f, "</DataArray><DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for (e = 0; e < m->n_elems; ++e) fprintf(f, "%d\n", d == 2 ? 5 : 10); /* VTK_TRIANGLE, VTK_TETRA */
-    fprintf(f, "</DataArray></Cells>\n<CellData Scalars=\"plastic_strain\"><DataArray type=\"Float64\" "
-               "Name=\"plastic_strain\" format=\"ascii\">\n");
-    for (e = 0; e < m->n_elems; ++e) fprintf(f, "%.6g\n", plastic_strain(m, e));
-    fprintf(f, "</DataArray><DataArray type=\"Float64\" Name=\"von_mises_stress_pa\" format=\"ascii\">\n");
-    for (e = 0; e < m->n_elems; ++e) fprintf(f, "%.6g\n", mises(m, e));
-    fprintf(f, "</DataArray></CellData>\n</Piece></UnstructuredGrid></VTKFile>\n");
-    return fclose(f) == 0;
-}
-
-/* the surface: faces of one tetrahedron only (3D), as OBJ; 2D: the triangles themselves */
-static int write_obj(const char *path, const pn_fem_mesh *m) {
-    FILE *f = fopen(path, "w");
-    static const int face[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}}; /* outward for det > 0 */
-    int d = m->dim;
-    size_t k, e, nf;
-    int *keys;
-    if (!f) return 0;
-    for (k = 0; k < m->n_nodes; ++k)
-        fprintf(f, "v %.9g %.9g %.9g\n", (double)m->x[k * (size_t)d], (double)m->x[k * (size_t)d + 1], d == 3 ? (double)m->x[k * 3 + 2] : 0.0);
-    if (d == 2) {
-        for (e = 0; e < m->n_elems; ++e) fprintf(f, "f %d %d %d\n", m->elem[3 * e] + 1, m->elem[3 * e + 1] + 1, m->elem[3 * e + 2] + 1);
-        return fclose(f) == 0;
-    }
-    nf = 4 * m->n_elems; /* sorted keys: a face is on the surface when it occurs once */
-    keys = (int *)malloc(sizeof(int) * 4 * nf);
-    if (!keys) {
-        fclose(f);
-        return 0;
-    }
-    for (e = 0; e < m->n_elems; ++e)
-        for (k = 0; k < 4; ++k) {
-            int *q = keys + 4 * (4 * e + k), a, b, t;
-            for (a = 0; a < 3; ++a) q[a] = m->elem[4 * e + (size_t)face[k][a]];
-            for (a = 0; a < 3; ++a) /* sort the three for the comparison */
-                for (b = a + 1; b < 3; ++b)
-                    if (q[b] < q[a]) t = q[a], q[a] = q[b], q[b] = t;
-            q[3] = (int)(4 * e + k);
-        }
-    qsort(keys, nf, sizeof(int) * 4, cmp3);
-    for (k = 0; k < nf; ++k) {
-        int *q = keys + 4 * k, same = (k > 0 && !cmp3(q, q - 4)) || (k + 1 < nf && !cmp3(q, q + 4));
-        if (!same) {
-            size_t ee = (size_t)q[3] / 4, ff = (size_t)q[3] % 4;
-            fprintf(f, "f %d %d %d\n", m->elem[4 * ee + (size_t)face[ff][0]] + 1, m->elem[4 * ee + (size_t)face[ff][1]] + 1,
-                    m->elem[4 * ee + (size_t)face[ff][2]] + 1);
-        }
-    }
-    free(keys);
-    return fclose(f) == 0;
+    for (e = 0; e < m->n_elems; ++e) f[e] = plastic_strain(m, e), f[m->n_elems + e] = mises(m, e);
+    fields[0] = f, fields[1] = f + m->n_elems;
+    ok = pn_ex_write_vtu(path, m, 2, names, fields);
+    free(f);
+    return ok;
 }
 
 /* 2D picture: the elements coloured by plastic strain (0 .. 0.2), ground, plate, a 2 cm bar */
@@ -314,11 +251,11 @@ int main(int argc, char **argv) {
         }
         if (o.vtu) {
             snprintf(path, sizeof path, "%s/frame_%04d.vtu", o.out, f);
-            if (!write_vtu(path, m)) fprintf(stderr, "\nmetal_frame: cannot write %s\n", path);
+            if (!write_frame_vtu(path, m)) fprintf(stderr, "\nmetal_frame: cannot write %s\n", path);
         }
         if (o.obj) {
             snprintf(path, sizeof path, "%s/frame_%04d.obj", o.out, f);
-            if (!write_obj(path, m)) fprintf(stderr, "\nmetal_frame: cannot write %s\n", path);
+            if (!pn_ex_write_mesh_obj(path, m)) fprintf(stderr, "\nmetal_frame: cannot write %s\n", path);
         }
     }
     fprintf(stderr, "\n");

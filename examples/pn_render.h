@@ -1178,6 +1178,10 @@ typedef struct pn_render_desc {
     const char *title;             /* optional caption top-left, NULL: none                    */
     const pn_render_shape *shapes; /* colliders to draw, n_shapes of them                      */
     int n_shapes;
+    const double *tri_xy;          /* 2D: solid triangles drawn over the particles (an FEM body),
+                                      x0 y0 x1 y1 x2 y2 each, in tri_rgb with their edges      */
+    size_t n_tris;
+    unsigned char tri_rgb[3];
 } pn_render_desc;
 
 /* The colour map of the field, t in [0, 1]: sand beige at rest through ochre and brick red to
@@ -1960,6 +1964,23 @@ PN_RENDER_UNUSED static int pn_render_particles(const pn_render_desc *d, size_t 
                     for (c = 0; c < 3; ++c) cv.rgb[3 * q + (size_t)c] = (unsigned char)pn_render__clamp(
                                                  cv.rgb[3 * q + (size_t)c] * 0.7 + col[c] * 0.3 + 0.5, 0, 255);
                 }
+        }
+    }
+    /* ---- 2D: solid triangles (a body's mesh), then their edges ---- */
+    for (p = 0; dim == 2 && d->tri_xy && p < d->n_tris; ++p) {
+        const double *t = d->tri_xy + 6 * p;
+        double tx[3], ty[3];
+        for (k = 0; k < 3; ++k) tx[k] = v.ox + v.k * t[2 * k], ty[k] = v.oy - v.k * t[2 * k + 1];
+        if (!pn_render__finite(tx[0] + tx[1] + tx[2] + ty[0] + ty[1] + ty[2])) continue;
+        pn_canvas_triangle(&cv, tx, ty, d->tri_rgb[0], d->tri_rgb[1], d->tri_rgb[2], 1);
+    }
+    for (p = 0; dim == 2 && d->tri_xy && p < d->n_tris; ++p) {
+        const double *t = d->tri_xy + 6 * p;
+        for (k = 0; k < 3; ++k) {
+            int e = (k + 1) % 3;
+            double xa = v.ox + v.k * t[2 * k], ya = v.oy - v.k * t[2 * k + 1], xb = v.ox + v.k * t[2 * e], yb = v.oy - v.k * t[2 * e + 1];
+            if (pn_render__finite(xa + ya + xb + yb))
+                pn_canvas_line(&cv, xa, ya, xb, yb, 0.6 * ss, d->tri_rgb[0] * 3 / 4, d->tri_rgb[1] * 3 / 4, d->tri_rgb[2] * 3 / 4, 0.6);
         }
     }
     /* ---- down-sample into rgb ---- */
