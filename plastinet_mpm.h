@@ -940,7 +940,10 @@ typedef struct pn_coupled_desc {
     pn_real contact_distance_m;  /* dhat [0: a quarter of the world's dx]                   */
     pn_real contact_stiffness;   /* k (Pa) [0: 0.1 E, E the stiffest particle group's]      */
     pn_real friction;            /* the Coulomb coefficient at the interface [0]            */
-    pn_real friction_velocity_m_s; /* IPC's epsilon_v [1e-3]                                */
+    pn_real friction_velocity_m_s; /* IPC's epsilon_v: below this sliding speed friction is
+                                    smoothed (a stick creeps at most that fast) [1e-2: the
+                                    drop scene's Newton took 12 iterations a step at 1e-3,
+                                    5 at 1e-2 (docs/results.md)]                            */
 } pn_coupled_desc;
 
 typedef struct pn_coupled_implicit_desc {
@@ -10371,7 +10374,7 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
     c->dhat = de.contact_distance_m > 0 ? de.contact_distance_m : w->desc.dx_m / 4;
     c->stiffness = de.contact_stiffness > 0 ? de.contact_stiffness : (pn_real)0.1 * (emax > 0 ? emax : 1);
     c->friction = de.friction;
-    c->eps_v = de.friction_velocity_m_s > 0 ? de.friction_velocity_m_s : (pn_real)1e-3;
+    c->eps_v = de.friction_velocity_m_s > 0 ? de.friction_velocity_m_s : (pn_real)1e-2;
     k->kap_area = c->stiffness / c->dhat;
     c->error_particle = c->error_node = -1;
     if ((r = pn__cpl_alloc(c)) != PN_OK) {

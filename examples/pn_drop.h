@@ -35,7 +35,7 @@ typedef struct pn_drop {
     double diag;                 /* the block's rest bounding-box diagonal (m)               */
 } pn_drop;
 
-static void pn_drop_default(pn_drop_desc *d, int dim) {
+PN_EX_UNUSED static void pn_drop_default(pn_drop_desc *d, int dim) {
     memset(d, 0, sizeof *d);
     d->dim = dim, d->res = dim == 2 ? 128 : 32, d->energy = PN_DROP_PNET;
     d->domain_m = dim == 2 ? 1 : 0.5, d->bed_m = dim == 2 ? 0.25 : 0.12;
@@ -45,7 +45,7 @@ static void pn_drop_default(pn_drop_desc *d, int dim) {
     d->tilt_deg = 20, d->v0[0] = 0.5, d->v0[1] = -2, d->friction = 0.5;
 }
 
-static void pn_drop_free(pn_drop *s) {
+PN_EX_UNUSED static void pn_drop_free(pn_drop *s) {
     pn_coupled_destroy(s->c);
     pn_fem_destroy(s->m);
     pn_mpm_destroy(s->w);
@@ -56,7 +56,7 @@ static void pn_drop_free(pn_drop *s) {
 
 /* the world (a bed over the whole floor), the block's mesh and their coupling; 0 and why on
    failure (nothing left allocated) */
-static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *why, size_t cap) {
+PN_EX_UNUSED static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *why, size_t cap) {
     int dim = d->dim, i;
     double dx = d->domain_m / d->res, fl = PN_EX_WALL_CELLS * dx, a = d->tilt_deg * 3.14159265358979 / 180, lowest = 1e30;
     double ctr[3], gap = d->gap_m > 0 ? d->gap_m : dx / 2;
@@ -171,7 +171,7 @@ static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *why, size_t c
 
 /* the 2D picture's triangles: the mesh at its positions, 6 reals each, into tri (room for
    n_elems) */
-static void pn_drop_triangles(const pn_fem_mesh *m, double *tri) {
+PN_EX_UNUSED static void pn_drop_triangles(const pn_fem_mesh *m, double *tri) {
     size_t e;
     int a;
     for (e = 0; e < m->n_elems; ++e)
