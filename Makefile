@@ -6,13 +6,13 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-fem bench-explicit bench-deposit bench-rom rom-data clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-fem bench-coupling bench-explicit bench-deposit bench-rom rom-data clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
 all: examples
 
-examples: build/material_point build/sand_column build/snowball build/materials build/game_loop build/metal_frame build/rom_poke build/rom_tower
+examples: build/material_point build/sand_column build/snowball build/materials build/game_loop build/metal_frame build/drop_on_sand build/rom_poke build/rom_tower
 
 build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
@@ -39,6 +39,12 @@ build/metal_frame: examples/metal_frame.c examples/pn_frame.h $(EXAMPLE_DEPS) mo
     models/pn_model_metal_nh_return_3d.h models/pn_model_metal_nh_any_2d.h models/pn_model_metal_nh_any_3d.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/metal_frame.c $(LDLIBS) -o $@
+
+# MPM-FEM coupling: a stiff block (E 1e9 Pa) dropped onto a sand bed, one implicit solve for
+# both (build/drop_on_sand --help; --png --apng, --ply --vtu --obj).
+build/drop_on_sand: examples/drop_on_sand.c examples/pn_drop.h $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) examples/drop_on_sand.c $(LDLIBS) -o $@
 
 # A snowball thrown at a frictional floor (build/snowball --help; --png --out DIR for frames).
 build/snowball: examples/snowball.c $(EXAMPLE_DEPS)
@@ -95,6 +101,18 @@ bench-fem: build/bench_fem build/bench_fem_linear
 	build/bench_fem --dim 3 --out build $(BENCH_FEM_FLAGS)
 	build/bench_fem_linear --out build $(BENCH_FEM_LINEAR_FLAGS)
 	@cat build/bench_fem_2d.md build/bench_fem_3d.md build/bench_fem_linear.md
+
+# MPM-FEM coupling: the block dropped on sand, the explicit reference and the fair explicit
+# baseline against implicit at 1e-3 and 1e-2 s (bench/bench_coupling.c; 2D then 3D, about an
+# hour; BENCH_COUPLING_FLAGS=--quick for a smoke test; the references are kept in build/ref_cache).
+bench-coupling: build/bench_coupling
+	build/bench_coupling --dim 2 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)
+	build/bench_coupling --dim 3 --T 0.1 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)
+	@cat build/bench_coupling_2d.md build/bench_coupling_3d.md
+
+build/bench_coupling: bench/bench_coupling.c examples/pn_drop.h $(EXAMPLE_DEPS)
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/bench_coupling.c $(LDLIBS) -o $@
 
 build/bench_fem: bench/bench_fem.c examples/pn_frame.h $(EXAMPLE_DEPS)
 	@mkdir -p build

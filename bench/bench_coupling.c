@@ -19,7 +19,7 @@
    diagonal, the smallest particle-block distance over the run, wall seconds per simulated
    second (the steps only) and the ratio to the fair baseline.
    Writes DIR/bench_coupling_Nd.csv and .md; progress on stderr. --quick: coarse (res 64 in
-   2D), short (T 0.05 s), for a smoke test. --ref-cache DIR: keep the reference's frames in
+   2D, 16 in 3D), short (T 0.05 s), for a smoke test. --ref-cache DIR: keep the reference's frames in
    DIR and read them on a rerun with the same scene. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
@@ -218,7 +218,7 @@ int main(int argc, char **argv) {
             return 2;
         }
     }
-    if (c.quick) c.T = 0.05, c.window = 0.01, c.res = c.res ? c.res : (c.dim == 2 ? 64 : 24);
+    if (c.quick) c.T = 0.05, c.window = 0.01, c.res = c.res ? c.res : (c.dim == 2 ? 64 : 16);
     if ((c.dim != 2 && c.dim != 3) || !(c.T >= FRAME_DT) || c.T > FRAME_DT * MAX_FRAMES || !(c.window > 0)) {
         fprintf(stderr, "bench_coupling: --dim 2|3, FRAME_DT <= --T <= %g, --window > 0\n", FRAME_DT * MAX_FRAMES);
         return 2;

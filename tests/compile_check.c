@@ -282,6 +282,34 @@ static void smoke_fem(int d) {
         CHECK(pn_fem_spin_nodes(m, 1, &fix, centre, spin) == PN_OK && pn_fem_release_nodes(m, 1, &fix) == PN_OK);
     }
     CHECK(pn_fem_energy(m, &el_j, &kin_j) == PN_OK && kin_j > 0);
+    { /* coupled to a world of sand below it */
+        pn_mpm_desc wd;
+        pn_mpm_world *w = NULL;
+        pn_mpm_fill_desc f;
+        pn_material sand;
+        pn_coupled *cp = NULL;
+        pn_coupled_stats cs;
+        pn_real cdt = 0, dist = 0;
+        int i;
+        memset(&wd, 0, sizeof wd);
+        wd.dim = d, wd.dx_m = (pn_real)0.02, wd.max_particles = 4096, wd.gravity[1] = (pn_real)-9.81;
+        for (i = 0; i < d; ++i) wd.res[i] = 16, wd.origin_m[i] = (pn_real)-0.16;
+        CHECK(pn_mpm_create(&wd, &w, NULL) == PN_OK);
+        md.plastic = PN_PLASTIC_DRUCKER_PRAGER, md.elastic = PN_ELASTIC_STVK_HENCKY;
+        CHECK(pn_material_init(&sand, &md, NULL) == PN_OK);
+        memset(&f, 0, sizeof f);
+        f.shape = PN_MPM_FILL_BOX, f.group = pn_mpm_add_group(w, &sand, 1600);
+        for (i = 0; i < d; ++i) f.center_m[i] = (pn_real)0.05, f.half_extent_m[i] = (pn_real)0.05;
+        f.center_m[1] = (pn_real)-0.05, f.half_extent_m[1] = (pn_real)0.04;
+        CHECK(w && pn_mpm_fill(w, &f, NULL) == PN_OK);
+        CHECK(pn_coupled_create(w, m, NULL, &cp, why, sizeof why) == PN_OK);
+        CHECK(pn_coupled_stable_dt(cp, &cdt) == PN_OK && cdt > 0);
+        CHECK(pn_coupled_step_explicit(cp, cdt / 2, &cs) == PN_OK);
+        CHECK(pn_coupled_step_implicit(cp, (pn_real)1e-3, NULL, &cs) == PN_OK && pn_coupled_error(cp)[0] == 0);
+        CHECK(pn_coupled_min_distance(cp, &dist) == PN_OK && dist > 0);
+        pn_coupled_destroy(cp);
+        pn_mpm_destroy(w);
+    }
     pn_fem_destroy(m);
     { /* the loaders */
         static const char msh[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n"
