@@ -18,7 +18,18 @@ typedef struct t_cpl_scene {
     int dim, res, cells[3];
     double gy, sand_lo[3], sand_size[3], block_lo[3], block_size[3], block_v[3], E_sand, E_block, friction;
     pn_mpm_boundary boundary;
+    pn_allocator allocator;      /* the world's and the mesh's (zero: malloc)               */
 } t_cpl_scene;
+
+/* an allocator that counts its calls */
+static void *t_cpl_alloc(size_t n, void *user) {
+    ++*(long *)user;
+    return malloc(n);
+}
+static void t_cpl_release(void *p, void *user) {
+    (void)user;
+    free(p);
+}
 
 static void t_cpl_free(t_cpl *t) {
     pn_coupled_destroy(t->c);
@@ -51,6 +62,7 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     wd.boundary = sc->boundary;
     wd.friction = (pn_real)0.5;
     wd.wall_cells = 3;
+    wd.allocator = sc->allocator;
     memset(&f, 0, sizeof f);
     f.shape = PN_MPM_FILL_BOX;
     for (i = 0; i < d; ++i)
@@ -79,7 +91,7 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     fg.density_kg_m3 = 3000;
     memset(&fd, 0, sizeof fd);
     fd.dim = d, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el;
-    fd.groups = &fg, fd.n_groups = 1, fd.gravity[1] = (pn_real)sc->gy;
+    fd.groups = &fg, fd.n_groups = 1, fd.gravity[1] = (pn_real)sc->gy, fd.allocator = sc->allocator;
     if (pn_fem_create(&fd, &t->m, msg, sizeof msg) != PN_OK) return 0;
     for (k = 0; k < t->nn; ++k)
         for (i = 0; i < d; ++i) t->m->v[k * (size_t)d + (size_t)i] = (pn_real)sc->block_v[i];
@@ -183,8 +195,10 @@ PN_TEST(couple_rest) {
         t_cpl_scene sc;
         double dx = 1.0 / 32, ytop = 0, y0, y1, vmax = 0, lo = 0, hi = 1, gap, W, kap, dh = dx / 4;
         int s, nsteps = implicit ? 200 : 5000, under = 0, it;
+        long allocs = 0, warm = 0;
         size_t k;
         memset(&sc, 0, sizeof sc);
+        sc.allocator.alloc = t_cpl_alloc, sc.allocator.free = t_cpl_release, sc.allocator.user = &allocs;
         sc.dim = 2, sc.res = 32, sc.gy = -9.81, sc.E_sand = 1e7, sc.E_block = 1e9, sc.boundary = PN_MPM_BOUNDARY_SEPARATE;
         sc.sand_lo[0] = 3 * dx, sc.sand_size[0] = 1 - 6 * dx, sc.sand_lo[1] = 3 * dx, sc.sand_size[1] = 0.25;
         sc.block_lo[0] = 0.4, sc.block_size[0] = 0.2, sc.block_size[1] = 0.1, sc.cells[0] = 8, sc.cells[1] = 4;
@@ -218,13 +232,16 @@ PN_TEST(couple_rest) {
                 break;
             }
             vmax = PN__MAX(vmax, fabs(t_cpl_block_mean(&t, 1, 1)));
+            if (s == nsteps / 2 - 1) warm = allocs;
         }
         y1 = t_cpl_block_mean(&t, 1, 0);
         PN_CHECK(fabs(y1 - y0) < 0.1 * dh);
+        PN_CHECK(allocs == warm && warm > 0); /* no allocation in a step once warm */
         PN_CHECK(vmax < 0.05);
         PN_REPORT("%s: resting %.3f dhat above the bed, over %.2f s the block moved %.3g dhat, largest speed %.3g m/s (free "
-                  "fall: %.2f m/s)", implicit ? "implicit dt 1e-3" : "explicit dt 1e-5", gap / dh,
-                  nsteps * (implicit ? 1e-3 : 1e-5), (y1 - y0) / dh, vmax, 9.81 * nsteps * (implicit ? 1e-3 : 1e-5));
+                  "fall: %.2f m/s); %ld allocations in the second half's %d steps", implicit ? "implicit dt 1e-3" : "explicit dt 1e-5",
+                  gap / dh, nsteps * (implicit ? 1e-3 : 1e-5), (y1 - y0) / dh, vmax, 9.81 * nsteps * (implicit ? 1e-3 : 1e-5),
+                  allocs - warm, nsteps - nsteps / 2);
         t_cpl_free(&t);
     }
 }
