@@ -103,11 +103,11 @@ bench-fem: build/bench_fem build/bench_fem_linear
 	@cat build/bench_fem_2d.md build/bench_fem_3d.md build/bench_fem_linear.md
 
 # MPM-FEM coupling: the block dropped on sand, the explicit reference and the fair explicit
-# baseline against implicit at 1e-3 and 1e-2 s (bench/bench_coupling.c; 2D then 3D, about an
-# hour; BENCH_COUPLING_FLAGS=--quick for a smoke test; the references are kept in build/ref_cache).
+# baseline against implicit at 1e-3 and 1e-2 s (bench/bench_coupling.c; 2D then 3D, about 1.5
+# hours; BENCH_COUPLING_FLAGS=--quick for a smoke test; the references are kept in build/ref_cache).
 bench-coupling: build/bench_coupling
 	build/bench_coupling --dim 2 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)
-	build/bench_coupling --dim 3 --T 0.1 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)
+	build/bench_coupling --dim 3 --res 24 --T 0.05 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)
 	@cat build/bench_coupling_2d.md build/bench_coupling_3d.md
 
 build/bench_coupling: bench/bench_coupling.c examples/pn_drop.h $(EXAMPLE_DEPS)
