@@ -249,7 +249,7 @@ test-web: web
 	$(PY) tests/web_test.py
 
 # ---- the README's pictures (docs/images): animated previews the examples write -----------------
-pictures: build/sand_column build/snowball build/materials
+pictures: build/sand_column build/snowball build/materials build/drop_on_sand
 	build/sand_column --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/sand_2d --quiet
 	build/sand_column --dim 3 --res 32 --jitter --integrator explicit --dt 1e-4 --apng --frames 15 --fps 15 --out build/pictures/sand_3d --quiet
 	build/snowball --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/snow_2d --quiet
@@ -259,5 +259,7 @@ pictures: build/sand_column build/snowball build/materials
 	build/materials --apng --out build/pictures/materials --quiet
 	cp build/pictures/snow_2d/preview.png docs/images/snowball_2d.png
 	cp build/pictures/materials/preview.png docs/images/materials_2d.png
+	build/drop_on_sand --png --frames 4 --out build/pictures/drop >/dev/null
+	cp build/pictures/drop/frame_0004.png docs/images/drop_on_sand_2d.png
 	@if [ -f build/web_test/after.png ]; then cp build/web_test/after.png docs/images/web_demo.png; \
 	else echo "docs/images/web_demo.png: run make test-web first for the browser screenshot"; fi

@@ -4719,6 +4719,16 @@ static void pn__mpm_backup(pn_mpm_world *w, int restore) {
 #undef PN__MPM_COPY
 }
 
+/* the first drive (*load = 0) or load (*load = 1) acting now, or -1: implicit steps refuse them */
+static int pn__mpm_drive_on(const pn_mpm_world *w, int *load) {
+    int a;
+    for (*load = 0, a = 0; a < w->n_drives; ++a)
+        if (w->drives[a].on) return a;
+    for (*load = 1, a = 0; a < w->n_loads; ++a)
+        if (w->loads[a].on && w->loads[a].t_end > w->time_s) return a;
+    return -1;
+}
+
 PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *desc,
                                        pn_mpm_stats *stats) {
     pn_mpm_implicit_desc o;
@@ -4731,15 +4741,10 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (!pn__finite(dt) || !(dt > 0))
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_implicit: dt_s = %g must be finite and > 0", (double)dt);
     {
-        int a;
-        for (a = 0; a < w->n_drives; ++a)
-            if (w->drives[a].on)
-                return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_step_implicit: drive %d is on: drives and loads work "
-                                    "with explicit steps (pn_mpm_step_explicit)", a);
-        for (a = 0; a < w->n_loads; ++a)
-            if (w->loads[a].on && w->loads[a].t_end > w->time_s)
-                return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_step_implicit: load %d is on: drives and loads work "
-                                    "with explicit steps (pn_mpm_step_explicit)", a);
+        int load, a = pn__mpm_drive_on(w, &load);
+        if (a >= 0)
+            return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_step_implicit: %s %d is on: drives and loads work with "
+                                "explicit steps (pn_mpm_step_explicit)", load ? "load" : "drive", a);
     }
     memset(&o, 0, sizeof o);
     if (desc) o = *desc;
@@ -9355,8 +9360,9 @@ typedef struct pn__cpl {
     size_t *fp, nf, fcap;        /* lagged friction pairs: particle, target nodes (3 each),  */
     long *fnode;                 /* the weights beta (3), the normal (3), mu lambda, and the */
     pn_real *fdat;               /* friction's Hessian in r (9): 19 reals each               */
-    pn_real *fx;                 /* explicit: the forces on the particles (dim each), mesh  */
-    size_t *fidx;
+    pn_real *fx;                 /* explicit: the particles' forces (dim each), then those of
+                                    the particles that have one, compact                    */
+    size_t *fidx;                /* explicit: the particles that have one                   */
     pn_real dt, dmin, kap_area;  /* kappa_p = kap_area a_p                                  */
 } pn__cpl;
 
@@ -10076,7 +10082,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     pn_real t0;
     long steps0, fsteps0;
     size_t left0;
-    int level, a;
+    int level, a, load;
     char why[sizeof c->error];
     if (!c) return PN_ERROR_INVALID_ARGUMENT;
     w = c->mpm, m = c->fem;
@@ -10086,14 +10092,9 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
                             (double)dt);
     memset(&od, 0, sizeof od);
     if (desc) od = *desc;
-    for (a = 0; a < w->n_drives; ++a)
-        if (w->drives[a].on)
-            return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: drive %d is on (drives and loads "
-                                "work with explicit steps)", a);
-    for (a = 0; a < w->n_loads; ++a)
-        if (w->loads[a].on && w->loads[a].t_end > w->time_s)
-            return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: load %d is on (drives and loads "
-                                "work with explicit steps)", a);
+    if ((a = pn__mpm_drive_on(w, &load)) >= 0)
+        return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: %s %d is on (drives and loads work with "
+                            "explicit steps)", load ? "load" : "drive", a);
     for (a = 0; a < m->n_obstacles; ++a) {
         const pn_real *u = m->obstacles[a].velocity_m_s;
         if (u[0] != 0 || u[1] != 0 || u[2] != 0)
