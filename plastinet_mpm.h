@@ -40,6 +40,9 @@
                  explicit and implicit (Newton; skyline Cholesky in RCM order, or PCG with a
                  block incomplete Cholesky on large meshes; CCD-filtered
                  line search, moving obstacles by augmented Lagrangian) steps
+     >>couple    an MPM world and an FEM mesh in one step (pn_coupled): a barrier between
+                 the particles and the mesh's boundary, one Newton over grid velocities and
+                 mesh positions (implicit), or both explicit at the coupled step bound
 
    QUICK START (README.md has it as a complete program)
        pn_mpm_desc wd;  pn_mpm_fill_desc f;  pn_mpm_world *w;  pn_material sand;  size_t n;
@@ -6347,6 +6350,7 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     if (!s) return PN_ERROR_OUT_OF_MEMORY;
     memset(s, 0, sizeof *s);
     m->impl = s;
+    s->hflags = PN_EVAL_PROJECT_PSD; /* every evaluation but Newton's whole-Hessian tries */
     s->perm = (size_t *)pn_alloc(al, sizeof(size_t) * 2 * n);
     s->fc = (size_t *)pn_alloc(al, sizeof(size_t) * (2 * nu + 1));
     s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (11 * PN__FEM_ALIGN(nu)));
@@ -9979,7 +9983,7 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     /* the grid side as pn_mpm_step_implicit starts; the mesh's as pn_fem_step_implicit */
     has_sep = pn__mpm_implicit_begin(w, dt, o, &mst);
     k->nv = w->n_act * (size_t)d, k->nu = nd, k->nz = k->nv + nd;
-    s->dt = dt, s->t_end = m->time_s + dt, s->n_mov = 0, s->nu = nd;
+    s->dt = dt, s->t_end = m->time_s + dt, s->n_mov = 0, s->nu = nd, s->hflags = PN_EVAL_PROJECT_PSD;
     pn__fem_setup(m);
     for (q = 0; q < n; ++q) {
         pn_real xn[3];

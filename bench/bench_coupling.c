@@ -279,7 +279,10 @@ int main(int argc, char **argv) {
         char why[256];
         scene(&c, PN_DROP_LAGGED, &dd);
         if (!pn_drop_create(&dd, &s, why, sizeof why)) return 1;
-        fprintf(md, "### Block on sand, %dD (`build/bench_coupling --dim %d`%s)\n\n", c.dim, c.dim, c.quick ? " --quick" : "");
+        char flags[96] = "";
+        if (c.res) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --res %d", c.res);
+        if (c.T != 0.25) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --T %g", c.T);
+        fprintf(md, "### Block on sand, %dD (`build/bench_coupling --dim %d%s`)\n\n", c.dim, c.dim, c.quick ? " --quick" : flags);
         fprintf(md, "%lu particles (res %d), the block %lu nodes / %lu elements, E %.3g Pa; %.3g s simulated, frames every "
                     "%.3g s; dhat %.3g m. Scores against the explicit reference at half the coupled step bound. Fair baseline: "
                     "explicit at %g x the bound over the first %.3g s.\n\n",
