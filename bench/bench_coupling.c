@@ -1,8 +1,8 @@
 /* bench_coupling: the MPM-FEM coupling (plastinet_mpm.h >>couple) on the drop scene of
    examples/pn_drop.h: a tilted block (E 1e9 Pa) dropped onto a sand bed.
    Build: cc -std=c99 -O2 bench/bench_coupling.c -lm -o bench_coupling   (or: make bench-coupling)
-   Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--out DIR] [--ref-cache DIR] [--no-check]
-                         [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--window S] [--quick]
+   Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--tilt DEG] [--out DIR] [--ref-cache DIR]
+                         [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--window S] [--quick]
    In one run:
    1. the explicit reference: pn_coupled_step_explicit at half the coupled step bound
       (pn_coupled_stable_dt) of each step, to T (0.25 s), recording at every frame (every
@@ -40,7 +40,7 @@ typedef struct run {
 typedef struct cfg {
     int dim, res, quick, no_check;
     unsigned energies, dts;
-    double T, window;
+    double T, window, tilt;      /* tilt: the block's (degrees; < -90: the scene's default) */
     const char *out, *ref_cache;
 } cfg;
 
@@ -57,6 +57,7 @@ static void scene(const cfg *c, int energy, pn_drop_desc *d) {
     pn_drop_default(d, c->dim);
     d->energy = energy;
     if (c->res) d->res = c->res;
+    if (c->tilt >= -90) d->tilt_deg = c->tilt;
 }
 
 /* one run to time `until` (the frames at every FRAME_DT recorded into rec, or scored against
@@ -142,8 +143,8 @@ static void run_one(const cfg *c, run *r, frames *rec, const frames *ref, double
 }
 
 static int cache_path(const cfg *c, char *path, size_t cap) {
-    return snprintf(path, cap, "%s/coupling_ref_%dd_res%d_T%g.bin", c->ref_cache, c->dim, c->res ? c->res : (c->dim == 2 ? 128 : 32),
-                    c->T) < (int)cap;
+    return snprintf(path, cap, "%s/coupling_ref_%dd_res%d_T%g_tilt%g.bin", c->ref_cache, c->dim,
+                    c->res ? c->res : (c->dim == 2 ? 128 : 32), c->T, c->tilt >= -90 ? c->tilt : 20) < (int)cap;
 }
 
 static int cache_read(const cfg *c, frames *fr, run *r) {
@@ -197,7 +198,7 @@ int main(int argc, char **argv) {
     FILE *csv, *md;
     memset(&c, 0, sizeof c);
     memset(&fr, 0, sizeof fr);
-    c.dim = 2, c.T = 0.25, c.window = 0.02, c.out = "build", c.energies = 7, c.dts = 3;
+    c.dim = 2, c.T = 0.25, c.window = 0.02, c.out = "build", c.energies = 7, c.dts = 3, c.tilt = -1000;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) c.quick = 1;
@@ -209,6 +210,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--T")) c.T = atof(v), ++k;
         else if (!strcmp(a, "--res")) c.res = atoi(v), ++k;
         else if (!strcmp(a, "--window")) c.window = atof(v), ++k;
+        else if (!strcmp(a, "--tilt")) c.tilt = atof(v), ++k;
         else if (!strcmp(a, "--out")) c.out = v, ++k;
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
         else if (!strcmp(a, "--energies")) c.energies = parse_list(v, pn_drop_energy_names, PN_DROP_ENERGIES, NULL), ++k;
@@ -282,6 +284,7 @@ int main(int argc, char **argv) {
         char flags[96] = "";
         if (c.res) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --res %d", c.res);
         if (c.T != 0.25) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --T %g", c.T);
+        if (c.tilt >= -90) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --tilt %g", c.tilt);
         fprintf(md, "### Block on sand, %dD (`build/bench_coupling --dim %d%s`)\n\n", c.dim, c.dim, c.quick ? " --quick" : flags);
         fprintf(md, "%lu particles (res %d), the block %lu nodes / %lu elements, E %.3g Pa; %.3g s simulated, frames every "
                     "%.3g s; dhat %.3g m. Scores against the explicit reference at half the coupled step bound. Fair baseline: "
