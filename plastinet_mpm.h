@@ -944,9 +944,9 @@ typedef struct pn_coupled_desc {
     pn_real contact_stiffness;   /* k (Pa) [0: 0.1 E, E the stiffest particle group's]      */
     pn_real friction;            /* the Coulomb coefficient at the interface [0]            */
     pn_real friction_velocity_m_s; /* IPC's epsilon_v: below this sliding speed friction is
-                                    smoothed (a stick creeps at most that fast) [1e-2: the
-                                    drop scene's Newton took 12 iterations a step at 1e-3,
-                                    5 at 1e-2 (docs/results.md)]                            */
+                                    smoothed (a stick creeps at most that fast) [1e-2: on
+                                    the drop scene Newton took 10-16 iterations a step at
+                                    1e-3, 5-9 at 1e-2 (docs/results.md)]                    */
 } pn_coupled_desc;
 
 typedef struct pn_coupled_implicit_desc {
