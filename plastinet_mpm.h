@@ -285,6 +285,15 @@ typedef struct pn_mpm_implicit_desc {
                                     builds its own (tried again every 16 steps); 1: at every
                                     Newton iteration [0]                                    */
     pn_mpm_formulation formulation; /* [PN_MPM_FORMULATION_ENERGY]                          */
+    pn_real pnet_reuse_tol;      /* PlasticityNet in lanes: while a particle's F stays within
+                                    this (largest entry of the change) of where its network
+                                    last gave a Hessian, its energy, stress and Hessian come
+                                    from the second-order Taylor model there (stress error
+                                    of order tol^2 E), and while its F0 moves less than this
+                                    its prepared point is kept, so material at rest costs no
+                                    network evaluation (docs/method.md, "Reusing the
+                                    network") [0: 1e-5, the strain Newton's own tolerance
+                                    leaves; < 0: off]                                       */
     int sweeps_max;              /* STRESS: Gauss-Seidel sweeps per step (per phase of
                                     PN_MPM_STRESS_CELLS_THEN_PARTICLES); a step that has not
                                     converged by then fails (PN_ERROR_NOT_CONVERGED, then
@@ -480,6 +489,13 @@ typedef struct pn_mpm_world {
     int mg_max, mg_levels, mg_on; /* levels the grid allows, built, in use this step         */
     int mg_current;              /* the finest level is this Newton iteration's Hessian     */
     int pnet_lanes;              /* implicit: PlasticityNet in float lanes this step         */
+    pn_real reuse_tol;           /* implicit: pn_mpm_implicit_desc.pnet_reuse_tol this step
+                                    (0: off)                                                */
+    /* >>implicit, PlasticityNet's Taylor models: where the network was last evaluated with
+       its Hessian (tF), its energy density, P and unprojected dP/dF there, all at the
+       point ppt; tok: the model is valid (cleared when the point is prepared anew) */
+    pn_real *tF, *tpsi, *tP, *tH;
+    unsigned char *tok;
     int mg_stale;                /* a lagged hierarchy cost too many CG iterations lately    */
     double clock_last;           /* pn_mpm_desc.clock_s at the last stage mark                */
     int stress_on;               /* this implicit step is FORMULATION_STRESS: pq holds g, not
@@ -1233,7 +1249,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(pq) X(pb) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(tF) X(tpsi) X(tP) X(tH) X(tok) X(pq) X(pb) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
     X(lnode) X(blnode) X(lval) X(blval) X(bmark) X(bact) X(rowcount) X(gdense) X(gdense0) X(ppay) X(spay) X(prow) X(srow)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -2945,6 +2961,7 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     }
     return PN_ERROR_OUT_OF_MEMORY;
 }
+
 #undef PN__MPM_A
 
 PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
@@ -2958,6 +2975,7 @@ PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy 
                             g, w->n_groups);
     r = pn__group_set_energy(&w->groups[g], g, w->dim, energy, net, msg, sizeof msg);
     if (r != PN_OK) return pn__mpm_fail(w, r, "pn_mpm_group_set_energy: %s", msg);
+    if (w->tok) memset(w->tok, 0, w->cap); /* the Taylor models belong to the old network */
     return PN_OK;
 }
 
@@ -2992,6 +3010,34 @@ static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, 
     int dd = w->dim * w->dim;
     return pn__group_psi(&w->groups[w->group[p]], w->dim, F, w->h[p], w->pG + p * (size_t)dd, w->phG[p], &w->ppt[p],
                          w->pty[p], psi, P, H, PN_EVAL_PROJECT_PSD);
+}
+
+/* The Taylor models' storage (pn_mpm_implicit_desc.pnet_reuse_tol), once a step needs it:
+   a PlasticityNet group and reuse on. */
+#define PN__MPM_A(f, count, type) w->f = (type *)pn__mpm_alloc(desc, count, sizeof(type), &fail)
+static pn_result pn__mpm_alloc_reuse(pn_mpm_world *w) {
+    const pn_mpm_desc *desc = &w->desc;
+    size_t cap = w->cap;
+    int d = w->dim, dd = d * d, fail = 0, g, any = 0;
+    for (g = 0; g < w->n_groups; ++g) any |= pn__mpm_energy_of(&w->groups[g]) == PN_MPM_ENERGY_PNET;
+    if (w->tok || !any || !(w->reuse_tol > 0)) return PN_OK;
+    PN__MPM_A(tF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(tpsi, cap, pn_real);
+    PN__MPM_A(tP, cap * (size_t)dd, pn_real);
+    PN__MPM_A(tH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(tok, cap, unsigned char);
+    if (!fail) return PN_OK;
+    pn_free(&desc->allocator, w->tF), pn_free(&desc->allocator, w->tpsi), pn_free(&desc->allocator, w->tP);
+    pn_free(&desc->allocator, w->tH), pn_free(&desc->allocator, w->tok);
+    w->tF = w->tpsi = w->tP = w->tH = NULL, w->tok = NULL;
+    return PN_ERROR_OUT_OF_MEMORY;
+}
+#undef PN__MPM_A
+
+/* reuse_tol of a step from its desc, and the Taylor models' storage if it needs it */
+static pn_result pn__mpm_reuse_on(pn_mpm_world *w, const pn_mpm_implicit_desc *o) {
+    w->reuse_tol = o->pnet_double || o->pnet_reuse_tol < 0 ? 0 : o->pnet_reuse_tol > 0 ? o->pnet_reuse_tol : (pn_real)1e-5;
+    return pn__mpm_alloc_reuse(w);
 }
 
 /* Per implicit step, after >>bin, by sorted index j (particle p = order[j]): q_js =
@@ -3096,13 +3142,33 @@ static void pn__mpm_gather_pmat(const pn_mpm_world *w, size_t k, pn_real *out) {
     else pn__mpm_gather3(w, k, out);
 }
 
+/* PlasticityNet's energy density and P at F from particle p's Taylor model (>>implicit: tF,
+   tpsi, tP, tH) when F is within reuse_tol of tF: psi + P:dF + dF:H:dF / 2 and P + H dF,
+   dF = F - tF (P optional); 0 when F is too far. The model's error is of order |dF|^3 in
+   the energy and |dF|^2 in P. */
+static int pn__mpm_taylor(const pn_mpm_world *w, size_t p, const pn_real *F, pn_real *psi, pn_real *P) {
+    int dd = w->dim * w->dim, a, b;
+    const pn_real *F0 = w->tF + p * (size_t)dd, *P0 = w->tP + p * (size_t)dd, *H = w->tH + p * (size_t)(dd * dd);
+    pn_real dF[9], e = 0;
+    for (a = 0; a < dd; ++a)
+        if (!(PN__FABS(dF[a] = F[a] - F0[a]) <= w->reuse_tol)) return 0;
+    for (a = 0; a < dd; ++a) {
+        pn_real hd = 0;
+        for (b = 0; b < dd; ++b) hd += H[a * dd + b] * dF[b];
+        e += dF[a] * (P0[a] + hd / 2);
+        if (P) P[a] = P0[a] + hd;
+    }
+    *psi = w->tpsi[p] + e;
+    return 1;
+}
+
 /* E(v); with_derivs: also the gradient (w->grad) and each particle's P, and with_derivs == 2
    each particle's PSD dP/dF for the Hessian. A failed
    particle evaluation (an inverted F, say) gives *E = +inf without derivatives, else its
    error (w->error_particle says which). */
 static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt, int with_derivs,
                                    pn_real *E) {
-    int d = w->dim, dd = d * d;
+    int d = w->dim, dd = d * d, reuse = w->tok && w->reuse_tol > 0;
     long l, nblk = (long)((w->n + PN_MLP_LANES - 1) / PN_MLP_LANES);
     pn_result r;
     PN__OMP_FOR
@@ -3118,6 +3184,10 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
             w->pstat[p] = 0;
             if (!w->active[p]) continue;
             pn__mpm_push(w, p, v, dt, w->F + p * (size_t)dd, F);
+            if (reuse && w->tok[p] && pn__mpm_taylor(w, p, F, &psi, with_derivs ? P : NULL)) {
+                w->pscal[p] = w->vol0[p] * psi; /* pH keeps the PSD dP/dF at tF */
+                continue;
+            }
             if (w->pnet_lanes && pn__mpm_energy_of(&w->groups[w->group[p]]) == PN_MPM_ENERGY_PNET &&
                 (gl < 0 || gl == w->group[p])) { /* one network per block's lanes */
                 gl = w->group[p];
@@ -3131,16 +3201,25 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
             w->pscal[p] = w->vol0[p] * psi;
         }
         if (nl) {
+            int keep = reuse && with_derivs > 1; /* a new Taylor model: dP/dF unprojected, then projected here */
             pn_pnet_energy_lanes(&w->groups[gl].pnet, nl, ptl, Fl, psil, with_derivs ? Pl : NULL,
-                                 with_derivs > 1 ? Hl : NULL, PN_EVAL_PROJECT_PSD, stl);
+                                 with_derivs > 1 ? Hl : NULL, keep ? 0u : (unsigned)PN_EVAL_PROJECT_PSD, stl);
             for (k = 0; k < nl; ++k) {
-                p = lp[k];
+                pn_real *H = w->pH + (p = lp[k]) * (size_t)(dd * dd);
+                if (stl[k] == PN_OK && with_derivs > 1) {
+                    memcpy(H, Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
+                    if (keep) stl[k] = pn_sym_project_psd(dd, H);
+                }
                 w->pstat[p] = (int)stl[k];
                 if (stl[k] != PN_OK) continue;
                 w->pscal[p] = w->vol0[p] * psil[k];
                 if (with_derivs) memcpy(w->pP + p * (size_t)dd, Pl + k * dd, sizeof(pn_real) * (size_t)dd);
-                if (with_derivs > 1)
-                    memcpy(w->pH + p * (size_t)(dd * dd), Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
+                if (keep) {
+                    w->tok[p] = 1, w->tpsi[p] = psil[k];
+                    memcpy(w->tF + p * (size_t)dd, Fl + k * dd, sizeof(pn_real) * (size_t)dd);
+                    memcpy(w->tP + p * (size_t)dd, Pl + k * dd, sizeof(pn_real) * (size_t)dd);
+                    memcpy(w->tH + p * (size_t)(dd * dd), Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
+                }
             }
         }
         for (p = p0; with_derivs && p < p1; ++p) /* pmat (by sorted index) = V dt P */
@@ -3858,6 +3937,13 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
             w->pscal[q] = diff;
             memcpy(old, F0, sizeof(pn_real) * (size_t)dd);
             en = pn__mpm_energy_of(g);
+            if (en == PN_MPM_ENERGY_PNET && w->tok && w->tok[q]) { /* keep a point F0 has not left */
+                const pn_pnet_point *pt = &w->ppt[q];
+                int keep = w->reuse_tol > 0 && pt->h == w->h[q];
+                for (i = 0; keep && i < dd; ++i) keep = PN__FABS(F0[i] - pt->F0[i]) <= w->reuse_tol;
+                if (keep) continue;
+                w->tok[q] = 0;
+            }
             if (en == PN_MPM_ENERGY_PNET && w->pnet_lanes && (gl < 0 || gl == w->group[q])) {
                 gl = w->group[q]; /* one network per block's lanes */
                 lp[nl] = q;
@@ -4631,6 +4717,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     size_t k, j, np, total = 0, cstart[28];
     pn_real *v = w->vsol, *r = w->grad, mref = 0;
     pn_result rr;
+    if (w->tok) memset(w->tok, 0, w->cap); /* pH becomes scratch here: no Taylor model survives */
     if (cells && !w->pb) {
         int fail = 0;
         w->pb = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(ns * d), sizeof(pn_real), &fail);
@@ -4772,9 +4859,9 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
                             "pn_mpm_formulation, or sweep_tol %g is not finite and >= 0", (int)o.formulation,
                             (double)o.sweep_tol);
-    if (!pn__finite(o.energy_rise_tol))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: energy_rise_tol %g is not finite",
-                            (double)o.energy_rise_tol);
+    if (!pn__finite(o.energy_rise_tol) || !pn__finite(o.pnet_reuse_tol))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: energy_rise_tol %g or pnet_reuse_tol %g "
+                            "is not finite", (double)o.energy_rise_tol, (double)o.pnet_reuse_tol);
     if (!pn__finite(o.cell_relax) || !(o.cell_relax == 0 || (o.cell_relax >= 1 && o.cell_relax < 2)) ||
         o.stress_unknowns < PN_MPM_STRESS_PARTICLES || o.stress_unknowns > PN_MPM_STRESS_CELLS_THEN_PARTICLES)
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: cell_relax %g is not 0 (the "
@@ -4801,6 +4888,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     r = pn__mpm_check_state(w);
     if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
+    if (r == PN_OK) r = pn__mpm_reuse_on(w, &o);
     if (r != PN_OK) return pn__mpm_fail(w, r, "pn_mpm_step_implicit: out of memory for the solver storage");
     if (pn_mpm_stable_dt(w, &cfl) == PN_OK) cfl = dt / cfl;
     else cfl = -1;
@@ -10108,9 +10196,11 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     if (o->formulation != PN_MPM_FORMULATION_ENERGY)
         return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: only the energy formulation couples");
     if (!pn__finite(o->newton_tol) || o->newton_tol < 0 || !pn__finite(o->cg_rel_tol) || o->cg_rel_tol < 0 ||
+        !pn__finite(o->pnet_reuse_tol) ||
         o->linear_solver < PN_MPM_LINEAR_DEFAULT || o->linear_solver > PN_MPM_LINEAR_MULTIGRID || o->mg_levels < 0)
         return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: newton_tol %g and cg_rel_tol %g must "
-                            "be finite and >= 0, linear_solver %d a pn_mpm_linear_solver, mg_levels %d >= 0",
+                            "be finite and >= 0, pnet_reuse_tol finite, linear_solver %d a pn_mpm_linear_solver, "
+                            "mg_levels %d >= 0",
                             (double)o->newton_tol, (double)o->cg_rel_tol, (int)o->linear_solver, o->mg_levels);
     if (o->fixed_point_iters <= 0) o->fixed_point_iters = 1;
     if (o->newton_max <= 0) o->newton_max = 50;
@@ -10123,7 +10213,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     if (o->max_halvings > 10) o->max_halvings = 10;
     if ((r = pn__mpm_check_state(w)) != PN_OK) return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", w->error);
     if ((r = pn__cpl_check_mesh(c, "pn_coupled_step_implicit")) != PN_OK) return r;
-    if ((r = pn__mpm_alloc_implicit(w)) != PN_OK)
+    if ((r = pn__mpm_alloc_implicit(w)) != PN_OK || (r = pn__mpm_reuse_on(w, o)) != PN_OK)
         return pn__cpl_fail(c, r, "pn_coupled_step_implicit: out of memory for the world's solver storage");
     if ((r = pn__fem_linear_setup(m, od.fem_linear_solver)) != PN_OK)
         return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", m->error);
