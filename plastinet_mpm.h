@@ -2961,7 +2961,6 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     }
     return PN_ERROR_OUT_OF_MEMORY;
 }
-
 #undef PN__MPM_A
 
 PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
