@@ -975,6 +975,12 @@ typedef struct pn_coupled_implicit_desc {
                                     pn_mpm_step_implicit; the energy formulation only       */
     pn_fem_linear_solver fem_linear_solver; /* the mesh block's preconditioner: its exact
                                     factor (Cholesky) or block IC (PCG) [DEFAULT]            */
+    pn_real theta;               /* the theta method: the forces taken at theta of the way
+                                    from the step's start to its end (all of them: both
+                                    sides' elasticity, the interface). 1: backward Euler,
+                                    which damps (a block's rebound off elastic sand); 0.5:
+                                    the trapezoidal rule, second order and without that
+                                    damping; in [0.5, 1] [0: 1]                             */
 } pn_coupled_implicit_desc;
 
 typedef struct pn_coupled_stats {
@@ -2560,9 +2566,11 @@ static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_r
 
 /* Grid to particles into scratch: APIC v, C (with filter_time_s > 0, AFLIP: v = v_PIC +
    (1 - s)(v_p - sum_i w_ip v_i^n), v_i^n the transfer's own velocity); x += dt v_PIC;
-   F = F^n + dt sum v q^T, as the implicit energy saw it; then the return mapping. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid
+   F = F^n + dt sum v q^T, as the implicit energy saw it; then the return mapping. gvel
+   (optional; the coupled theta method): the grid's end-of-step velocities for v and C, the
+   motion (x, F) from gv_all. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid
    (retired) | 0x400 moved past the advection limit | 0x800 left where outflow is not allowed. */
-static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt, pn_mpm_stats *st) {
+static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_real *gvel, pn_real dt, pn_mpm_stats *st) {
     int d = w->dim, dd = d * d;
     long lp;
     size_t p;
@@ -2574,7 +2582,7 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
     for (lp = 0; lp < (long)w->n; ++lp) {
         size_t q = (size_t)lp;
         const pn_mpm_group *g = &w->groups[w->group[q]];
-        pn_real nv[3] = {0, 0, 0}, ov[3] = {0, 0, 0}, nC[9] = {0}, Fn[9], Z[9], hn;
+        pn_real nv[3] = {0, 0, 0}, nm[3] = {0, 0, 0}, ov[3] = {0, 0, 0}, nC[9] = {0}, Fn[9], Z[9], hn;
         pn_real *xp = w->x + q * (size_t)d;
         int i, j, s, stat;
         w->sactive[q] = w->active[q];
@@ -2589,10 +2597,11 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
         }
         for (s = 0; s < w->ns; ++s) {
             size_t node = (size_t)w->dof[w->pbase[q] + w->slot_off[s]] * (size_t)d;
-            const pn_real *gv = gv_all + node;
+            const pn_real *gv = (gvel ? gvel : gv_all) + node;
             pn_real dpos[3], wt = pn__mpm_weight(w, q, w->slot[s], dpos);
             for (i = 0; i < d; ++i) {
                 nv[i] += wt * gv[i];
+                nm[i] += wt * gv_all[node + (size_t)i];
                 if (flip > 0) ov[i] += wt * w->grid_v0[node + (size_t)i];
                 for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * wt * gv[i] * dpos[j];
             }
@@ -2633,8 +2642,8 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, pn_real dt,
         if (hn != w->h[q] || memcmp(Z, Fn, sizeof(pn_real) * (size_t)dd) != 0) stat |= 0x100;
         for (i = 0; i < d; ++i) {
             w->sv[q * (size_t)d + (size_t)i] = nv[i] + flip * (w->v[q * (size_t)d + (size_t)i] - ov[i]);
-            w->sx[q * (size_t)d + (size_t)i] = xp[i] + dt * nv[i];
-            if (!(PN__FABS(nv[i]) <= reach)) stat |= 0x400; /* more than the limit along an axis */
+            w->sx[q * (size_t)d + (size_t)i] = xp[i] + dt * nm[i];
+            if (!(PN__FABS(nm[i]) <= reach)) stat |= 0x400; /* more than the limit along an axis */
         }
         memcpy(w->sC + q * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);
         memcpy(w->sF + q * (size_t)dd, Z, sizeof(pn_real) * (size_t)dd);
@@ -4392,7 +4401,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                             (double)dt, (double)last_res, (double)o->newton_tol, o->newton_max, st->line_search_failures);
     if (o->measure_force_error) pn__mpm_force_error(w, w->vsol, dt, st);
     pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
-    r = pn__mpm_g2p(w, w->vsol, dt, st);
+    r = pn__mpm_g2p(w, w->vsol, NULL, dt, st);
     if (r == PN_OK) r = pn__mpm_energy_guard(w, o, dt, st);
     pn__mpm_mark(w, st, PN_MPM_STAGE_G2P);
     if (r != PN_OK) return r;
@@ -4776,7 +4785,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     }
     pn__mpm_mark(w, st, PN_MPM_STAGE_SWEEPS);
     w->stress_on = cells && !cascade ? 2 : 1;
-    rr = pn__mpm_g2p(w, v, dt, st);
+    rr = pn__mpm_g2p(w, v, NULL, dt, st);
     w->stress_on = 0;
     if (rr == PN_OK) rr = pn__mpm_energy_guard(w, o, dt, st);
     pn__mpm_mark(w, st, PN_MPM_STAGE_G2P);
@@ -9454,6 +9463,11 @@ typedef struct pn__cpl {
     pn_real *fx;                 /* explicit: the particles' forces (dim each), then those of
                                     the particles that have one, compact                    */
     size_t *fidx;                /* explicit: the particles that have one                   */
+    pn_real *vn, *g0, *m0;       /* theta < 1: the unknowns' velocities at the step's start,
+                                    the potentials' gradient there, the grid's and the
+                                    mesh's masses                                           */
+    pn_real theta, lin;          /* this step's theta; the start gradient's weight in E:
+                                    (1 - theta) / theta (0: backward Euler)                 */
     pn_real dt, dmin, kap_area;  /* kappa_p = kap_area a_p                                  */
 } pn__cpl;
 
@@ -9831,6 +9845,11 @@ static pn_result pn__cpl_objective(pn_coupled *c, const pn_real *z, int level, p
         return PN_OK;
     }
     pn__cpl_friction(c, z, level, &E);
+    if (k->lin != 0) /* theta < 1: the start's forces, (1 - theta) / theta g0 . z */
+        for (i = 0; i < k->nz; ++i) {
+            E += k->lin * k->g0[i] * z[i];
+            if (level >= 1) k->g[i] += k->lin * k->g0[i];
+        }
     if (level >= 1) /* the grid's reactions (wall contact, friction) see the interface too */
         memcpy(w->grad, k->g, sizeof(pn_real) * k->nv);
     *E_out = E;
@@ -10052,47 +10071,16 @@ PN__DEF pn_result pn_coupled_min_distance(pn_coupled *c, pn_real *dist_m) {
     return PN_OK;
 }
 
-/* One coupled implicit step without fallback: both sides unchanged unless PN_OK (the
-   caller keeps and restores the mesh). */
-static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implicit_desc *od, pn_coupled_stats *st) {
+/* The fixed-point passes and contact rounds of a coupled step, each a Newton solve from
+   k->z; *last_res and *capped as Newton left them. */
+static pn_result pn__cpl_passes(pn_coupled *c, const pn_mpm_implicit_desc *o, int has_sep, pn_coupled_stats *st,
+                                pn_real *last_res, int *capped) {
     pn__cpl *k = (pn__cpl *)c->impl;
     pn_mpm_world *w = c->mpm;
     pn_fem_mesh *m = c->fem;
-    pn__fem *s = (pn__fem *)m->impl;
-    const pn_mpm_implicit_desc *o = &od->mpm;
-    int d = w->dim, i, pass, has_sep, capped = 0;
-    size_t n = m->n_nodes, nd = n * (size_t)d, q, plastic = 0;
-    pn_real last_res = 0, vscale = o->newton_tol * w->desc.dx_m / dt, a, E;
-    pn_mpm_stats mst;
+    pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt;
+    int pass;
     pn_result r;
-    pn__mpm_stats_clear(&mst, 0);
-    k->dt = dt;
-    /* the grid side as pn_mpm_step_implicit starts; the mesh's as pn_fem_step_implicit */
-    has_sep = pn__mpm_implicit_begin(w, dt, o, &mst);
-    k->nv = w->n_act * (size_t)d, k->nu = nd, k->nz = k->nv + nd;
-    s->dt = dt, s->t_end = m->time_s + dt, s->n_mov = 0, s->nu = nd, s->hflags = PN_EVAL_PROJECT_PSD;
-    pn__fem_setup(m);
-    for (q = 0; q < n; ++q) {
-        pn_real xn[3];
-        if (m->fixed[q]) pn__fem_driven(m, q, dt, xn);
-        for (i = 0; i < d; ++i) {
-            size_t e = q * (size_t)d + (size_t)i;
-            s->xt[e] = m->fixed[q] ? xn[i] : m->x[e] + dt * m->v[e] + dt * dt * m->desc.gravity[i];
-            k->zt[k->nv + e] = m->fixed[q] ? (xn[i] - m->x[e]) / dt : 0; /* the base: held where it is */
-            k->dir[k->nv + e] = (s->xt[e] - m->x[e]) / dt - k->zt[k->nv + e];
-        }
-    }
-    memcpy(s->xlag, m->x, sizeof(pn_real) * nd); /* the mesh's friction with its obstacles: at x^n */
-    /* start at [v*, x~] as far as it is free of crossings from the base [held at rest, x^n] */
-    memset(k->zt, 0, sizeof(pn_real) * k->nv);
-    for (q = 0; q < w->n_act; ++q) pn__mpm_hold(w, q, k->zt + q * (size_t)d);
-    for (q = 0; q < k->nv; ++q) k->dir[q] = w->vsol[q] - k->zt[q];
-    pn__cpl_positions(c, 1, k->zt, k->dir);
-    if ((r = pn__cpl_find(c, 1)) != PN_OK) return r;
-    a = pn__cpl_ccd(c);
-    for (q = 0; q < k->nz; ++q) k->z[q] = k->zt[q] + a * k->dir[q];
-    if (pn__fem_prepare(m, s->xt) != PN_OK || pn__cpl_value(c, k->z, &E) != PN_OK || !pn__finite(E))
-        memcpy(k->z, k->zt, sizeof(pn_real) * k->nz);
     for (pass = 0; pass < o->fixed_point_iters; ++pass) {
         pn_real fp = 0;
         int round;
@@ -10113,12 +10101,132 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
             if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->vsol);
             memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
             st->solves++;
-            if ((r = pn__cpl_newton(c, o, st, &last_res, &capped)) != PN_OK) return r;
+            if ((r = pn__cpl_newton(c, o, st, last_res, capped)) != PN_OK) return r;
             memcpy(w->vsol, k->z, sizeof(pn_real) * k->nv);
             if (!has_sep || !pn__mpm_active_set(w, w->vsol, vscale)) break;
             memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
         }
     }
+    return PN_OK;
+}
+
+/* theta < 1: both sides' masses times s (the theta method's objective, divided by theta^2,
+   weighs the inertia by 1 / theta^2 against the potentials) */
+static void pn__cpl_mass_scale(pn_coupled *c, pn_real s) {
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    size_t q;
+    for (q = 0; q < w->n_act; ++q) w->grid_m[q] *= s;
+    for (q = 0; q < m->n_nodes; ++q) m->mass[q] *= s;
+}
+
+/* theta < 1: the potentials' gradient at the step's start (z = 0: the particles at x^n, the
+   mesh at x^n), the energies prepared there, into k->g0: the start's forces times -dt. The
+   walls' sliding friction is left out (it is a force of the solve's own). */
+static pn_result pn__cpl_start_forces(pn_coupled *c) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn_real fp = 0, E = 0;
+    size_t q;
+    int d = w->dim, i;
+    pn_result r;
+    memset(k->zt, 0, sizeof(pn_real) * k->nz);
+    pn__cpl_positions(c, 1, k->zt, NULL);
+    r = pn__mpm_prepare_pass(w, k->zt, k->dt, 1, &fp);
+    if (r == PN_OK) r = pn__fem_prepare(m, k->xf);
+    if (r == PN_OK) r = pn__cpl_find(c, 0);
+    if (r != PN_OK) return r;
+    k->nf = 0, k->lin = 0;
+    pn__cpl_mass_scale(c, 0);
+    r = pn__cpl_objective(c, k->zt, 1, &E);
+    if (r != PN_OK) return r;
+    memcpy(k->g0, k->g, sizeof(pn_real) * k->nz);
+    for (q = 0; q < w->n_act; ++q)
+        if (w->clam[q] > 0 && !(w->chold[q] & PN__MPM_STICK))
+            for (i = 0; i < d; ++i) k->g0[q * (size_t)d + (size_t)i] -= w->cmu[q] * w->clam[q] * w->ctan[q * 3 + (size_t)i];
+    return PN_OK;
+}
+
+/* One coupled implicit step without fallback: both sides unchanged unless PN_OK (the
+   caller keeps and restores the mesh). Backward Euler, or the theta method: with u the
+   mean velocity over the step (x^{n+1} = x^n + dt u, F^{n+1} = (I + dt grad u) F^n) and
+   v^{n+1} = (u - (1 - theta) v^n) / theta, momentum M (v^{n+1} - v^n) = dt ((1 - theta) f^n
+   + theta f^{n+1}) makes u the minimiser of |u - u~|^2_M / (2 theta^2) + Phi(u) + (1 - theta)
+   / theta grad Phi(0) . u, u~ = v^n + theta dt g, Phi every potential (the two sides'
+   elasticity, the barrier, friction). */
+static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implicit_desc *od, pn_coupled_stats *st) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn__fem *s = (pn__fem *)m->impl;
+    const pn_mpm_implicit_desc *o = &od->mpm;
+    pn_real th = od->theta;
+    int d = w->dim, i, has_sep, capped = 0;
+    size_t n = m->n_nodes, nd = n * (size_t)d, q, plastic = 0;
+    pn_real last_res = 0, a, E, *gm0 = k->m0, *mm0 = k->m0 + k->zcap - n;
+    pn_mpm_stats mst;
+    pn_result r;
+    pn__mpm_stats_clear(&mst, 0);
+    k->dt = dt, k->theta = th, k->lin = 0;
+    /* the grid side as pn_mpm_step_implicit starts; the mesh's as pn_fem_step_implicit */
+    has_sep = pn__mpm_implicit_begin(w, dt, o, &mst);
+    k->nv = w->n_act * (size_t)d, k->nu = nd, k->nz = k->nv + nd;
+    s->dt = dt, s->t_end = m->time_s + dt, s->n_mov = 0, s->nu = nd, s->hflags = PN_EVAL_PROJECT_PSD;
+    pn__fem_setup(m);
+    if (th < 1) { /* v^n, and the target u~ = v^n + theta dt g */
+        for (q = 0; q < k->nv; ++q) {
+            pn_real gq = w->desc.gravity[q % (size_t)d];
+            k->vn[q] = w->grid_m[q / (size_t)d] > 0 ? w->vstar[q] - dt * gq : 0;
+            w->vstar[q] -= (1 - th) * dt * gq;
+        }
+        memcpy(k->vn + k->nv, m->v, sizeof(pn_real) * nd);
+    }
+    for (q = 0; q < n; ++q) {
+        pn_real xn[3];
+        if (m->fixed[q]) pn__fem_driven(m, q, dt, xn);
+        for (i = 0; i < d; ++i) {
+            size_t e = q * (size_t)d + (size_t)i;
+            s->xt[e] = m->fixed[q] ? xn[i] : m->x[e] + dt * m->v[e] + th * dt * dt * m->desc.gravity[i];
+            k->zt[k->nv + e] = m->fixed[q] ? (xn[i] - m->x[e]) / dt : 0; /* the base: held where it is */
+            k->dir[k->nv + e] = (s->xt[e] - m->x[e]) / dt - k->zt[k->nv + e];
+        }
+    }
+    memcpy(s->xlag, m->x, sizeof(pn_real) * nd); /* the mesh's friction with its obstacles: at x^n */
+    if (th < 1) {
+        /* the start's forces; the masses kept and scaled */
+        memcpy(gm0, w->grid_m, sizeof(pn_real) * w->n_act);
+        memcpy(mm0, m->mass, sizeof(pn_real) * n);
+        r = pn__cpl_start_forces(c);
+        for (q = 0; q < w->n_act; ++q) w->grid_m[q] = gm0[q] / (th * th);
+        for (q = 0; q < n; ++q) m->mass[q] = mm0[q] / (th * th);
+        if (r != PN_OK) {
+            memcpy(m->mass, mm0, sizeof(pn_real) * n);
+            return pn__cpl_fail(c, r, "coupled implicit step: the forces at the step's start failed (%s)",
+                                w->error[0] ? w->error : m->error);
+        }
+        k->lin = (1 - th) / th;
+        /* the start iterate's direction, as above, with the new targets */
+        for (q = 0; q < nd; ++q) k->dir[k->nv + q] = (s->xt[q] - m->x[q]) / dt - k->zt[k->nv + q];
+    }
+    /* start at [v*, x~] as far as it is free of crossings from the base [held at rest, x^n] */
+    memset(k->zt, 0, sizeof(pn_real) * k->nv);
+    for (q = 0; q < w->n_act; ++q) pn__mpm_hold(w, q, k->zt + q * (size_t)d);
+    for (q = 0; q < k->nv; ++q) k->dir[q] = w->vsol[q] - k->zt[q];
+    pn__cpl_positions(c, 1, k->zt, k->dir);
+    r = pn__cpl_find(c, 1);
+    if (r == PN_OK) {
+        a = pn__cpl_ccd(c);
+        for (q = 0; q < k->nz; ++q) k->z[q] = k->zt[q] + a * k->dir[q];
+        if (pn__fem_prepare(m, s->xt) != PN_OK || pn__cpl_value(c, k->z, &E) != PN_OK || !pn__finite(E))
+            memcpy(k->z, k->zt, sizeof(pn_real) * k->nz);
+        r = pn__cpl_passes(c, o, has_sep, st, &last_res, &capped);
+    }
+    if (th < 1) { /* the masses back (the mesh's are its state) */
+        memcpy(m->mass, mm0, sizeof(pn_real) * n);
+        memcpy(w->grid_m, gm0, sizeof(pn_real) * w->n_act);
+    }
+    if (r != PN_OK) return r;
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
     if (capped)
         return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: the last linear solve stopped at "
@@ -10128,10 +10236,22 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
         return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: Newton stopped at max |dz| dt / dx = "
                             "%.3g (newton_tol %g): a smaller step converges", (double)dt, (double)last_res,
                             (double)o->newton_tol);
-    r = pn__mpm_g2p(w, k->z, dt, &mst);
+    if (th < 1) /* the grid's end velocities; held components keep their held values */
+        for (q = 0; q < w->n_act; ++q) {
+            for (i = 0; i < d; ++i) {
+                size_t e = q * (size_t)d + (size_t)i;
+                k->zt[e] = (k->z[e] - (1 - th) * k->vn[e]) / th;
+            }
+            pn__mpm_hold(w, q, k->zt + q * (size_t)d);
+        }
+    r = pn__mpm_g2p(w, k->z, th < 1 ? k->zt : NULL, dt, &mst);
     if (r != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: %s", w->error);
     pn__cpl_positions(c, 1, k->z, NULL);
-    for (q = 0; q < nd; ++q) m->v[q] = (k->xf[q] - m->x[q]) / dt, m->x[q] = k->xf[q];
+    for (q = 0; q < nd; ++q) {
+        pn_real u = (k->xf[q] - m->x[q]) / dt;
+        m->v[q] = th < 1 && !m->fixed[q / (size_t)d] ? (u - (1 - th) * k->vn[k->nv + q]) / th : u;
+        m->x[q] = k->xf[q];
+    }
     if ((r = pn__fem_return(m, &plastic)) != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: %s", m->error);
     m->time_s += dt;
     pn__mpm_friction_record(w, dt);
@@ -10148,7 +10268,7 @@ static pn_result pn__cpl_alloc(pn_coupled *c) {
     int d = c->mpm->dim;
     size_t nd = c->fem->n_nodes * (size_t)d, np = c->mpm->cap * (size_t)d, zc = c->mpm->nodes * (size_t)d + nd;
     if (k->z) return PN_OK;
-    k->z = (pn_real *)pn_alloc(al, sizeof(pn_real) * (8 * zc + 4 * nd + 4 * np + 8));
+    k->z = (pn_real *)pn_alloc(al, sizeof(pn_real) * (11 * zc + 4 * nd + 4 * np + 8));
     k->fidx = (size_t *)pn_alloc(al, sizeof(size_t) * (c->mpm->cap + 1));
     if (!k->z || !k->fidx) {
         pn_free(al, k->z), pn_free(al, k->fidx);
@@ -10158,7 +10278,8 @@ static pn_result pn__cpl_alloc(pn_coupled *c) {
     k->zcap = zc;
     k->g = k->z + zc, k->dir = k->g + zc, k->zt = k->dir + zc, k->r = k->zt + zc, k->zz = k->r + zc, k->pp = k->zz + zc;
     k->qq = k->pp + zc, k->xf = k->qq + zc, k->xd = k->xf + nd, k->pa = k->xd + nd, k->pb = k->pa + nd;
-    k->y = k->pb + nd, k->yd = k->y + np, k->fx = k->yd + np;
+    k->y = k->pb + nd, k->yd = k->y + np, k->fx = k->yd + np, k->vn = k->fx + 2 * np, k->g0 = k->vn + zc;
+    k->m0 = k->g0 + zc;
     return PN_OK;
 }
 
@@ -10201,6 +10322,10 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
                             "be finite and >= 0, pnet_reuse_tol finite, linear_solver %d a pn_mpm_linear_solver, "
                             "mg_levels %d >= 0",
                             (double)o->newton_tol, (double)o->cg_rel_tol, (int)o->linear_solver, o->mg_levels);
+    if (od.theta == 0) od.theta = 1;
+    if (!(od.theta >= (pn_real)0.5 && od.theta <= 1))
+        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: theta %g is not in [0.5, 1] (0: 1, "
+                            "backward Euler)", (double)od.theta);
     if (o->fixed_point_iters <= 0) o->fixed_point_iters = 1;
     if (o->newton_max <= 0) o->newton_max = 50;
     if (o->cg_max <= 0) o->cg_max = 1000;

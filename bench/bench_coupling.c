@@ -1,8 +1,8 @@
 /* bench_coupling: the MPM-FEM coupling (plastinet_mpm.h >>couple) on the drop scene of
    examples/pn_drop.h: a tilted block (E 1e9 Pa) dropped onto a sand bed.
    Build: cc -std=c99 -O2 bench/bench_coupling.c -lm -o bench_coupling   (or: make bench-coupling)
-   Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--tilt DEG] [--out DIR] [--ref-cache DIR]
-                         [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--window S] [--quick]
+   Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--tilt DEG] [--friction MU] [--out DIR] [--ref-cache DIR]
+                         [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--theta T] [--window S] [--quick]
    In one run:
    1. the explicit reference: pn_coupled_step_explicit at half the coupled step bound
       (pn_coupled_stable_dt) of each step, to T (0.25 s), recording at every frame (every
@@ -13,7 +13,10 @@
       first --window seconds (0.02 s, through the impact) without failing, timed over that
       window and scaled to a simulated second;
    3. implicit at dt 1e-3 and 1e-2 s with the sand's learned energy (pnet) and the analytic
-      alternatives (dp: frozen-yield Drucker-Prager, lagged), each to T.
+      alternatives (dp: frozen-yield Drucker-Prager, lagged), each to T: backward Euler, and
+      at 1e-3 s also the theta method (--theta, 0.5: the trapezoidal rule; 1: no such rows).
+      At 1e-2 s the trapezoidal rule lets the block bounce off the sand (docs/results.md).
+   --friction MU: the block-sand friction coefficient (the scene's 0.5).
    Scores against the reference, at the frames: the mean and smallest min/max mass IoU of the
    sand (docs/validation.md), the mean error of the block's nodes over its bounding-box
    diagonal, the smallest particle-block distance over the run, wall seconds per simulated
@@ -32,6 +35,7 @@ typedef struct run {
     const char *role;            /* reference, ref_check, fair_explicit, implicit             */
     int energy, implicit, ok;
     double dt, mult;             /* implicit step, or the explicit step's multiple of the bound */
+    double theta;                /* implicit: the theta method's (1: backward Euler)          */
     double iou_mean, iou_min, body_err, dmin, wall, sim, newton, cg;
     long steps;
     char why[160];
@@ -41,6 +45,9 @@ typedef struct cfg {
     int dim, res, quick, no_check;
     unsigned energies, dts;
     double T, window, tilt;      /* tilt: the block's (degrees; < -90: the scene's default) */
+    double theta;                /* the extra implicit runs' theta method, at dt 1e-3 s only
+                                    (1: none)                                               */
+    double friction;             /* block-sand Coulomb coefficient (< 0: the scene's 0.5)     */
     const char *out, *ref_cache;
 } cfg;
 
@@ -58,6 +65,7 @@ static void scene(const cfg *c, int energy, pn_drop_desc *d) {
     d->energy = energy;
     if (c->res) d->res = c->res;
     if (c->tilt >= -90) d->tilt_deg = c->tilt;
+    if (c->friction >= 0) d->friction = c->friction;
 }
 
 /* one run to time `until` (the frames at every FRAME_DT recorded into rec, or scored against
@@ -99,7 +107,12 @@ static void run_one(const cfg *c, run *r, frames *rec, const frames *ref, double
             }
             if (h > t_end - (double)s.w->time_s) h = t_end - (double)s.w->time_s;
             t0 = pn_ex_seconds();
-            e = r->implicit ? pn_coupled_step_implicit(s.c, (pn_real)h, NULL, &st) : pn_coupled_step_explicit(s.c, (pn_real)h, &st);
+            if (r->implicit) {
+                pn_coupled_implicit_desc id;
+                memset(&id, 0, sizeof id);
+                id.theta = (pn_real)r->theta;
+                e = pn_coupled_step_implicit(s.c, (pn_real)h, &id, &st);
+            } else e = pn_coupled_step_explicit(s.c, (pn_real)h, &st);
             r->wall += pn_ex_seconds() - t0;
             if (e != PN_OK) {
                 r->ok = 0;
@@ -143,8 +156,10 @@ static void run_one(const cfg *c, run *r, frames *rec, const frames *ref, double
 }
 
 static int cache_path(const cfg *c, char *path, size_t cap) {
-    return snprintf(path, cap, "%s/coupling_ref_%dd_res%d_T%g_tilt%g.bin", c->ref_cache, c->dim,
-                    c->res ? c->res : (c->dim == 2 ? 128 : 32), c->T, c->tilt >= -90 ? c->tilt : 20) < (int)cap;
+    char mu[32] = "";
+    if (c->friction >= 0) snprintf(mu, sizeof mu, "_mu%g", c->friction);
+    return snprintf(path, cap, "%s/coupling_ref_%dd_res%d_T%g_tilt%g%s.bin", c->ref_cache, c->dim,
+                    c->res ? c->res : (c->dim == 2 ? 128 : 32), c->T, c->tilt >= -90 ? c->tilt : 20, mu) < (int)cap;
 }
 
 static int cache_read(const cfg *c, frames *fr, run *r) {
@@ -198,7 +213,7 @@ int main(int argc, char **argv) {
     FILE *csv, *md;
     memset(&c, 0, sizeof c);
     memset(&fr, 0, sizeof fr);
-    c.dim = 2, c.T = 0.25, c.window = 0.02, c.out = "build", c.energies = 7, c.dts = 3, c.tilt = -1000;
+    c.dim = 2, c.T = 0.25, c.window = 0.02, c.out = "build", c.energies = 7, c.dts = 3, c.tilt = -1000, c.theta = 0.5, c.friction = -1;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) c.quick = 1;
@@ -211,6 +226,8 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--res")) c.res = atoi(v), ++k;
         else if (!strcmp(a, "--window")) c.window = atof(v), ++k;
         else if (!strcmp(a, "--tilt")) c.tilt = atof(v), ++k;
+        else if (!strcmp(a, "--theta")) c.theta = atof(v), ++k;
+        else if (!strcmp(a, "--friction")) c.friction = atof(v), ++k;
         else if (!strcmp(a, "--out")) c.out = v, ++k;
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
         else if (!strcmp(a, "--energies")) c.energies = parse_list(v, pn_drop_energy_names, PN_DROP_ENERGIES, NULL), ++k;
@@ -258,14 +275,15 @@ int main(int argc, char **argv) {
         }
         fprintf(stderr, "  %g x the bound fails: %s\n", mults[k], r->why);
     }
-    /* 3. implicit */
-    for (i = 0; i < 2; ++i)
+    /* 3. implicit: backward Euler at both steps, the theta method at 1e-3 s */
+    for (i = 0; i < 3; ++i)
         for (j = 0; j < PN_DROP_ENERGIES; ++j) {
             run *r;
-            if (!(c.dts >> i & 1) || !(c.energies >> j & 1)) continue;
+            int di = i < 2 ? i : 0;
+            if (!(c.dts >> di & 1) || !(c.energies >> j & 1) || (i == 2 && !(c.theta < 1))) continue;
             r = &runs[nr++];
             memset(r, 0, sizeof *r);
-            r->role = "implicit", r->implicit = 1, r->energy = j, r->dt = implicit_dts[i];
+            r->role = "implicit", r->implicit = 1, r->energy = j, r->dt = implicit_dts[di], r->theta = i < 2 ? 1 : c.theta;
             run_one(&c, r, NULL, &fr, c.T);
         }
     /* tables */
@@ -293,7 +311,7 @@ int main(int argc, char **argv) {
                 FRAME_DT, (double)s.c->dhat, nr > 1 ? runs[c.no_check ? 1 : 2].mult : 0, c.window);
         pn_drop_free(&s);
     }
-    fprintf(csv, "role,integrator,energy,dt_or_bound_multiple,ok,iou_mean,iou_min,body_error,min_distance_m,wall_s,simulated_s,"
+    fprintf(csv, "role,integrator,energy,dt_or_bound_multiple,theta,ok,iou_mean,iou_min,body_error,min_distance_m,wall_s,simulated_s,"
                  "wall_per_simulated_s,ratio_to_fair,steps,newton_per_step,cg_per_step,note\n");
     fprintf(md, "| run | step | sand IoU mean (min) | block error | smallest distance (m) | wall s / sim. s | x fair explicit | "
                 "Newton / CG per step |\n|---|---|---|---|---|---|---|---|\n");
@@ -301,11 +319,12 @@ int main(int argc, char **argv) {
         const run *r = &runs[k];
         double per = r->sim > 0 ? r->wall / r->sim : 0;
         char step[64];
-        if (r->implicit) snprintf(step, sizeof step, "dt %g s", r->dt);
+        if (r->implicit && r->theta < 1) snprintf(step, sizeof step, "dt %g s, theta %g", r->dt, r->theta);
+        else if (r->implicit) snprintf(step, sizeof step, "dt %g s", r->dt);
         else snprintf(step, sizeof step, "%g x bound", r->mult);
-        fprintf(csv, "%s,%s,%s,%g,%d,%.4f,%.4f,%.5f,%.4g,%.3f,%.4f,%.3f,%.4f,%ld,%.2f,%.1f,\"%s\"\n", r->role,
+        fprintf(csv, "%s,%s,%s,%g,%g,%d,%.4f,%.4f,%.5f,%.4g,%.3f,%.4f,%.3f,%.4f,%ld,%.2f,%.1f,\"%s\"\n", r->role,
                 r->implicit ? "implicit" : "explicit", r->implicit ? pn_drop_energy_names[r->energy] : "", r->implicit ? r->dt : r->mult,
-                r->ok, r->iou_mean, r->iou_min, r->body_err, r->dmin, r->wall, r->sim, per, fair > 0 ? per / fair : 0, r->steps,
+                r->implicit ? r->theta : 0, r->ok, r->iou_mean, r->iou_min, r->body_err, r->dmin, r->wall, r->sim, per, fair > 0 ? per / fair : 0, r->steps,
                 r->steps ? r->newton / r->steps : 0, r->steps ? r->cg / r->steps : 0, r->why);
         if (!r->ok) {
             fprintf(md, "| %s %s | %s | failed: %s | | | | | |\n", r->role, r->implicit ? pn_drop_energy_names[r->energy] : "", step, r->why);

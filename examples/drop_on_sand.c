@@ -20,6 +20,8 @@ static void usage(FILE *f) {
                "  --integrator implicit|explicit   [implicit]\n"
                "  --energy pnet|dp|lagged   the sand's implicit energy [pnet]\n"
                "  --dt S                    implicit step [1e-3]; explicit: [0.9 x pn_coupled_stable_dt]\n"
+               "  --theta T                 implicit: the theta method, 1 backward Euler, 0.5 the\n"
+               "                            trapezoidal rule (less damping, for steps near 1e-3) [1]\n"
                "  --frames N --fps F        [30 frames at 60 per second]\n"
                "  --res N                   grid cells per axis [2D 128, 3D 32]\n"
                "  --E PA                    the block's Young's modulus [1e9]\n"
@@ -51,7 +53,7 @@ static void block_pose(const pn_drop *s, double *c, double *tilt) {
 int main(int argc, char **argv) {
     const char *prog = "drop_on_sand", *out = "build/drop_on_sand_frames", *energy = "pnet";
     int dim = 2, implicit = 1, frames = 30, fps = 60, png = 0, apng = 0, ply = 0, vtu = 0, obj = 0, k, f, e;
-    double dt = 0, res = 0, E = 0, speed = 2, tilt = 20, friction = 0.5, wall_s = 0, dmin = 1e300, deepest = 0, c[3], ang, surf;
+    double dt = 0, res = 0, E = 0, speed = 2, tilt = 20, friction = 0.5, theta = 1, wall_s = 0, dmin = 1e300, deepest = 0, c[3], ang, surf;
     long steps = 0, newton = 0, cg = 0, substeps = 0;
     pn_drop_desc dd;
     pn_drop s;
@@ -95,6 +97,7 @@ int main(int argc, char **argv) {
             else if (!strcmp(a, "--speed")) speed = x;
             else if (!strcmp(a, "--tilt")) tilt = x;
             else if (!strcmp(a, "--friction")) friction = x;
+            else if (!strcmp(a, "--theta")) theta = x;
             else {
                 fprintf(stderr, "%s: unknown flag '%s' (--help lists them)\n", prog, a);
                 return 2;
@@ -103,7 +106,7 @@ int main(int argc, char **argv) {
     }
     if ((e = pn_ex_choice(prog, "--energy", energy, pn_drop_energy_names, PN_DROP_ENERGIES)) < 0) return 2;
     if ((dim != 2 && dim != 3) || dt < 0 || frames < 1 || fps < 1 || (res != 0 && (res < 16 || res > 1024)) || E < 0 ||
-        !(speed >= 0) || !(friction >= 0) || !(fabs(tilt) <= 90)) {
+        !(speed >= 0) || !(friction >= 0) || !(fabs(tilt) <= 90) || !(theta >= 0.5 && theta <= 1)) {
         fprintf(stderr, "%s: a flag is out of range (--help)\n", prog);
         return 2;
     }
@@ -149,7 +152,12 @@ int main(int argc, char **argv) {
                 h = 0.9 * (double)sdt;
             }
             if (h > t_end - (double)s.w->time_s) h = t_end - (double)s.w->time_s;
-            r = implicit ? pn_coupled_step_implicit(s.c, (pn_real)h, NULL, &st) : pn_coupled_step_explicit(s.c, (pn_real)h, &st);
+            if (implicit) {
+                pn_coupled_implicit_desc id;
+                memset(&id, 0, sizeof id);
+                id.theta = (pn_real)theta;
+                r = pn_coupled_step_implicit(s.c, (pn_real)h, &id, &st);
+            } else r = pn_coupled_step_explicit(s.c, (pn_real)h, &st);
             wall_s += pn_ex_seconds() - t0;
             if (r != PN_OK) {
                 fprintf(stderr, "\n%s: step %ld at t = %g s: %s\n", prog, steps, (double)s.w->time_s, pn_coupled_error(s.c));

@@ -141,9 +141,10 @@ static t_cpl_scene t_cpl_collision(int dim) {
 }
 
 PN_TEST(couple_momentum) {
-    int dim, implicit;
+    int dim, implicit; /* 0: explicit; 1: implicit, backward Euler; 2: the trapezoidal rule */
+    static const char *const names[3] = {"explicit dt 1e-5", "implicit dt 1e-3", "implicit dt 1e-3, theta 0.5"};
     for (dim = 2; dim <= 3; ++dim)
-        for (implicit = 0; implicit <= 1; ++implicit) {
+        for (implicit = 0; implicit <= 2; ++implicit) {
             t_cpl t;
             t_cpl_scene sc = t_cpl_collision(dim);
             double p0[3], p1[3], b0, b1, scale, err = 0, dmin = 1e30;
@@ -156,6 +157,7 @@ PN_TEST(couple_momentum) {
             }
             memset(&od, 0, sizeof od);
             od.mpm.newton_tol = (pn_real)1e-9, od.mpm.cg_rel_tol = (pn_real)1e-10, od.mpm.cg_max = 5000;
+            od.theta = (pn_real)(implicit == 2 ? 0.5 : 0);
             t_cpl_momentum(&t, p0);
             b0 = t_cpl_block_mean(&t, 0, 1);
             scale = fabs(p0[0]) + fabs(p0[1]);
@@ -178,7 +180,7 @@ PN_TEST(couple_momentum) {
             PN_CHECK(err <= (implicit ? 1e-6 : 1e-9));
             PN_CHECK(dmin > 0);
             PN_REPORT("%dD %s: block's x velocity %.3f -> %.3f m/s, total momentum changed by %.2g of it; %d steps in "
-                      "contact, smallest distance %.3g dhat", dim, implicit ? "implicit dt 1e-3" : "explicit dt 1e-5", b0, b1,
+                      "contact, smallest distance %.3g dhat", dim, names[implicit], b0, b1,
                       err, contact, dmin / (double)t.c->dhat);
             t_cpl_free(&t);
         }
@@ -249,11 +251,12 @@ PN_TEST(couple_rest) {
 /* a block dropped onto a sand bed, explicit at 1e-5 s against implicit at 1e-5 s (Newton
    to 1e-8), 1e-4 s and 1e-3 s: both integrators discretize the same interface and the
    same MPM, so at the same step they agree to the solver's tolerance, and implicit Euler's
-   O(dt) error shrinks with its step */
+   O(dt) error shrinks with its step; the trapezoidal rule (theta 0.5), which does not damp
+   the rebound, is closer at 1e-3 s */
 PN_TEST(couple_explicit_implicit) {
     t_cpl_scene sc;
-    double dx = 1.0 / 32, T = 0.02, err[4] = {0, 0, 0, 0}, perr[4] = {0, 0, 0, 0}, *yb[4], *xp = NULL;
-    static const double dts[4] = {1e-5, 1e-5, 1e-4, 1e-3};
+    double dx = 1.0 / 32, T = 0.02, err[6] = {0, 0, 0, 0, 0, 0}, perr[6] = {0, 0, 0, 0, 0, 0}, *yb[6], *xp = NULL;
+    static const double dts[6] = {1e-5, 1e-5, 1e-4, 1e-3, 1e-4, 1e-3};
     int run, n_out = 4;
     size_t np = 0;
     memset(&sc, 0, sizeof sc);
@@ -261,14 +264,15 @@ PN_TEST(couple_explicit_implicit) {
     sc.sand_lo[0] = 3 * dx, sc.sand_size[0] = 1 - 6 * dx, sc.sand_lo[1] = 3 * dx, sc.sand_size[1] = 0.25;
     sc.block_lo[0] = 0.4, sc.block_size[0] = 0.2, sc.block_size[1] = 0.1, sc.cells[0] = 8, sc.cells[1] = 4;
     sc.block_lo[1] = 3 * dx + 0.25 + 0.3 * dx, sc.block_v[1] = -1.5, sc.friction = 0.5; /* just beyond dhat */
-    for (run = 0; run < 4; ++run) yb[run] = (double *)calloc((size_t)n_out, sizeof(double));
-    for (run = 0; run < 4; ++run) {
+    for (run = 0; run < 6; ++run) yb[run] = (double *)calloc((size_t)n_out, sizeof(double));
+    for (run = 0; run < 6; ++run) {
         t_cpl t;
         int s, nsteps = (int)(T / dts[run] + 0.5), every = nsteps / n_out;
         size_t k;
         pn_coupled_implicit_desc od;
         memset(&od, 0, sizeof od);
         if (run == 1) od.mpm.newton_tol = (pn_real)1e-8;
+        if (run >= 4) od.theta = (pn_real)0.5; /* the trapezoidal rule */
         if (!t_cpl_make(&t, &sc)) {
             PN_CHECK(0);
             t_cpl_free(&t);
@@ -296,14 +300,18 @@ PN_TEST(couple_explicit_implicit) {
     }
     PN_CHECK(err[1] < 0.02 * dx && perr[1] < 0.01 * dx); /* the same step: the same answer */
     PN_CHECK(err[2] < err[3] && perr[2] < perr[3]);     /* larger steps: further off */
+    PN_CHECK(err[5] < err[3] && perr[5] < perr[3]);     /* the trapezoidal rule: closer at 1e-3 s */
     PN_REPORT("the block's height over %.2f s against explicit at 1e-5 s, implicit at 1e-5 s: within %.3g dx, 1e-4 s: %.3g "
-              "dx, 1e-3 s: %.3g dx; the particles' mean distance at the end %.3g, %.3g, %.3g dx", T, err[1] / dx,
-              err[2] / dx, err[3] / dx, perr[1] / dx, perr[2] / dx, perr[3] / dx);
-    for (run = 0; run < 4; ++run) free(yb[run]);
+              "dx, 1e-3 s: %.3g dx; the particles' mean distance at the end %.3g, %.3g, %.3g dx; the trapezoidal rule "
+              "(theta 0.5) at 1e-4 s: %.3g dx (particles %.3g), 1e-3 s: %.3g dx (%.3g)", T, err[1] / dx,
+              err[2] / dx, err[3] / dx, perr[1] / dx, perr[2] / dx, perr[3] / dx, err[4] / dx, perr[4] / dx, err[5] / dx,
+              perr[5] / dx);
+    for (run = 0; run < 6; ++run) free(yb[run]);
     free(xp);
 }
 
-/* the collision scene stepped on 1 and 2 threads: the same bits (explicit and implicit) */
+/* the collision scene stepped on 1 and 2 threads: the same bits (explicit, implicit with
+   every other step the trapezoidal rule) */
 PN_TEST(couple_threads_identical) {
 #ifdef _OPENMP
     int implicit, t, dim;
@@ -327,7 +335,11 @@ PN_TEST(couple_threads_identical) {
                 omp_set_num_threads(t);
                 for (s = 0; s < (implicit ? 8 : 600); ++s) {
                     pn_coupled_stats cs;
-                    pn_result r = implicit ? pn_coupled_step_implicit(c.c, 1e-3, NULL, &cs) : pn_coupled_step_explicit(c.c, 1e-5, &cs);
+                    pn_coupled_implicit_desc od;
+                    pn_result r;
+                    memset(&od, 0, sizeof od);
+                    od.theta = (pn_real)(s % 2 ? 0.5 : 1);
+                    r = implicit ? pn_coupled_step_implicit(c.c, 1e-3, &od, &cs) : pn_coupled_step_explicit(c.c, 1e-5, &cs);
                     PN_CHECK(r == PN_OK);
                     if (r != PN_OK) break;
                     contact += cs.pairs > 0;
@@ -379,11 +391,16 @@ PN_TEST(couple_bad_input) {
     PN_CHECK(pn_coupled_step_implicit(t.c, (pn_real)NAN, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT &&
              strstr(pn_coupled_error(t.c), "dt_s"));
     PN_CHECK(pn_coupled_step_explicit(t.c, -1, NULL) == PN_ERROR_INVALID_ARGUMENT);
-    { /* the stress formulation does not couple */
+    { /* the stress formulation does not couple; theta outside [0.5, 1] */
         pn_coupled_implicit_desc od;
         memset(&od, 0, sizeof od);
         od.mpm.formulation = PN_MPM_FORMULATION_STRESS;
         PN_CHECK(pn_coupled_step_implicit(t.c, 1e-3, &od, NULL) == PN_ERROR_UNSUPPORTED);
+        od.mpm.formulation = PN_MPM_FORMULATION_ENERGY, od.theta = (pn_real)0.3;
+        PN_CHECK(pn_coupled_step_implicit(t.c, 1e-3, &od, NULL) == PN_ERROR_INVALID_ARGUMENT &&
+                 strstr(pn_coupled_error(t.c), "theta"));
+        od.theta = (pn_real)NAN;
+        PN_CHECK(pn_coupled_step_implicit(t.c, 1e-3, &od, NULL) == PN_ERROR_INVALID_ARGUMENT);
     }
     /* a step so large the block would pass through the sand: explicit refuses it (CCD), and
        both are unchanged, bit for bit */
