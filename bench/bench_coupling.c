@@ -155,6 +155,8 @@ static void run_one(const cfg *c, run *r, frames *rec, const frames *ref, double
     pn_drop_free(&s);
 }
 
+#define CACHE_TAG (0x504e4300ul + (unsigned long)sizeof(run)) /* "PNC" and the record's size */
+
 static int cache_path(const cfg *c, char *path, size_t cap) {
     char mu[32] = "";
     if (c->friction >= 0) snprintf(mu, sizeof mu, "_mu%g", c->friction);
@@ -166,8 +168,11 @@ static int cache_read(const cfg *c, frames *fr, run *r) {
     char path[1024];
     FILE *f;
     int ok;
+    unsigned long tag = 0;
     if (!c->ref_cache || !cache_path(c, path, sizeof path) || !(f = fopen(path, "rb"))) return 0;
-    ok = fread(&fr->n, sizeof fr->n, 1, f) == 1 && fread(&fr->nf, sizeof fr->nf, 1, f) == 1 &&
+    /* the run record is this program's struct: a file from a build with another one is
+       recomputed */
+    ok = fread(&tag, sizeof tag, 1, f) == 1 && tag == CACHE_TAG && fread(&fr->n, sizeof fr->n, 1, f) == 1 && fread(&fr->nf, sizeof fr->nf, 1, f) == 1 &&
          fread(&fr->nx, sizeof fr->nx, 1, f) == 1 && fread(r, sizeof *r, 1, f) == 1 && fr->n > 0 && fr->n <= MAX_FRAMES;
     if (ok) {
         fr->field = (double *)malloc(sizeof(double) * fr->nf * (size_t)fr->n);
@@ -184,7 +189,9 @@ static int cache_read(const cfg *c, frames *fr, run *r) {
 static void cache_write(const cfg *c, const frames *fr, const run *r) {
     char path[1024];
     FILE *f;
+    unsigned long tag = CACHE_TAG;
     if (!c->ref_cache || !pn_ex_mkdirs(c->ref_cache) || !cache_path(c, path, sizeof path) || !(f = fopen(path, "wb"))) return;
+    fwrite(&tag, sizeof tag, 1, f);
     fwrite(&fr->n, sizeof fr->n, 1, f), fwrite(&fr->nf, sizeof fr->nf, 1, f), fwrite(&fr->nx, sizeof fr->nx, 1, f);
     fwrite(r, sizeof *r, 1, f);
     fwrite(fr->field, sizeof(double) * fr->nf, (size_t)fr->n, f);
