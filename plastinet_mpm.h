@@ -386,6 +386,7 @@ typedef struct pn__mpm_load {
 } pn__mpm_load;
 
 /* >>multigrid: one grid level of the implicit Hessian (internal) */
+#define PN__MPM_EXPLICIT_MAX 4 /* explicit steps beyond this many times the wave-speed bound are refused */
 #define PN__MPM_MG_MAX 8     /* most grid levels                                               */
 #define PN__MPM_MG_DENSE 192 /* the coarsest level is factored (Cholesky) up to these unknowns */
 #define PN__MPM_MG_MIN 4096  /* PN_MPM_LINEAR_DEFAULT: multigrid from this many unknowns (the
@@ -496,6 +497,12 @@ typedef struct pn_mpm_world {
        point ppt; tok: the model is valid (cleared when the point is prepared anew) */
     pn_real *tF, *tpsi, *tP, *tH;
     unsigned char *tok;
+    /* >>implicit, the models as the call found them (pn__mpm_touch): a failed call puts them
+       back, so what it tried leaves no trace in later steps. jst: 0 untouched this call, 1
+       saved without a model, 2 saved with one (jF, jpsi, jP, jH, jpH, jppt) */
+    pn_real *jF, *jpsi, *jP, *jH, *jpH;
+    pn_pnet_point *jppt;
+    unsigned char *jst;
     int mg_stale;                /* a lagged hierarchy cost too many CG iterations lately    */
     double clock_last;           /* pn_mpm_desc.clock_s at the last stage mark                */
     int stress_on;               /* this implicit step is FORMULATION_STRESS: pq holds g, not
@@ -687,7 +694,10 @@ PN_API pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, c
                                       const pn_real *C, const pn_real *F, pn_real time_s);
 
 /* One explicit step of dt_s seconds (symplectic Euler, APIC or AFLIP, return mapping after the F
-   update). On failure the world is unchanged and w->error_particle names the culprit. */
+   update). On failure the world is unchanged and w->error_particle names the culprit. A step
+   more than 4x the wave-speed bound (pn_mpm_stable_dt with the material at rest) is refused
+   at once with PN_ERROR_STEP_TOO_LARGE; a particle whose x was written by hand into NaN or
+   beyond the grid, with PN_ERROR_NONFINITE or PN_ERROR_OUTSIDE_DOMAIN. */
 PN_API pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt_s, pn_mpm_stats *stats);
 
 /* Choose the energy group g's particles use in implicit steps. PN_MPM_ENERGY_PNET needs net
@@ -791,7 +801,8 @@ typedef struct pn_fem_implicit_desc {
     int newton_max;              /* Newton iterations per minimization [100]                */
     pn_real newton_tol;          /* stop when max |dx| < newton_tol l dt-free: l the mean
                                     rest edge length [1e-5]                                 */
-    int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [5]       */
+    int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [5; < 0:
+                                    none]                                                   */
     pn_fem_linear_solver linear_solver; /* [PN_FEM_LINEAR_DEFAULT]                          */
     pn_real cg_rel_tol;          /* PCG: the relative residual of each Newton solve [1e-6]  */
     int cg_max;                  /* PCG: iterations per Newton solve [5000]                 */
@@ -1255,7 +1266,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
     X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
     X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(tF) X(tpsi) X(tP) X(tH) X(tok) X(pq) X(pb) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
+    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(tF) X(tpsi) X(tP) X(tH) X(tok) X(jF) X(jpsi) X(jP) X(jH) X(jpH) X(jppt) X(jst) X(pq) X(pb) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
     X(lnode) X(blnode) X(lval) X(blval) X(bmark) X(bact) X(rowcount) X(gdense) X(gdense0) X(ppay) X(spay) X(prow) X(srow)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -2328,6 +2339,17 @@ static pn_real pn__mpm_pwave(const pn_material *m, pn_real h, pn_real J) {
     return K;
 }
 
+/* The bound of pn_mpm_stable_dt with every material at rest: never below it (the particles'
+   speeds and compression only lower it), and O(groups) where pn_mpm_stable_dt is O(n). 0
+   without groups. */
+static pn_real pn__mpm_rest_dt(const pn_mpm_world *w) {
+    pn_real worst = 0;
+    int g;
+    for (g = 0; g < w->n_groups; ++g)
+        worst = PN__MAX(worst, PN__SQRT(pn__mpm_pwave(&w->groups[g].material, 0, 1) / w->groups[g].density_kg_m3));
+    return worst > 0 ? (pn_real)0.9 * w->desc.dx_m / worst : 0;
+}
+
 PN__DEF pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s) {
     int d, g;
     size_t p;
@@ -3034,13 +3056,63 @@ static pn_result pn__mpm_alloc_reuse(pn_mpm_world *w) {
     PN__MPM_A(tP, cap * (size_t)dd, pn_real);
     PN__MPM_A(tH, cap * (size_t)(dd * dd), pn_real);
     PN__MPM_A(tok, cap, unsigned char);
+    PN__MPM_A(jF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(jpsi, cap, pn_real);
+    PN__MPM_A(jP, cap * (size_t)dd, pn_real);
+    PN__MPM_A(jH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(jpH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(jppt, cap, pn_pnet_point);
+    PN__MPM_A(jst, cap, unsigned char);
     if (!fail) return PN_OK;
-    pn_free(&desc->allocator, w->tF), pn_free(&desc->allocator, w->tpsi), pn_free(&desc->allocator, w->tP);
-    pn_free(&desc->allocator, w->tH), pn_free(&desc->allocator, w->tok);
-    w->tF = w->tpsi = w->tP = w->tH = NULL, w->tok = NULL;
+    {
+        void *all[] = {w->tF, w->tpsi, w->tP, w->tH, w->tok, w->jF, w->jpsi, w->jP, w->jH, w->jpH, w->jppt, w->jst};
+        size_t i;
+        for (i = 0; i < sizeof all / sizeof all[0]; ++i) pn_free(&desc->allocator, all[i]);
+    }
+    w->tF = w->tpsi = w->tP = w->tH = w->jF = w->jpsi = w->jP = w->jH = w->jpH = NULL;
+    w->tok = w->jst = NULL, w->jppt = NULL;
     return PN_ERROR_OUT_OF_MEMORY;
 }
 #undef PN__MPM_A
+
+/* Before a call's first change to particle p's Taylor model (a new model, its point prepared
+   anew, pH taken as scratch), the model as the call found it, with the PSD dP/dF in pH and
+   the point ppt it belongs to */
+static void pn__mpm_touch(pn_mpm_world *w, size_t p) {
+    size_t dd = (size_t)(w->dim * w->dim);
+    if (w->jst[p]) return;
+    w->jst[p] = (unsigned char)(1 + (w->tok[p] != 0));
+    if (!w->tok[p]) return;
+    memcpy(w->jF + p * dd, w->tF + p * dd, sizeof(pn_real) * dd);
+    memcpy(w->jP + p * dd, w->tP + p * dd, sizeof(pn_real) * dd);
+    memcpy(w->jH + p * dd * dd, w->tH + p * dd * dd, sizeof(pn_real) * dd * dd);
+    memcpy(w->jpH + p * dd * dd, w->pH + p * dd * dd, sizeof(pn_real) * dd * dd);
+    w->jpsi[p] = w->tpsi[p];
+    w->jppt[p] = w->ppt[p];
+}
+
+/* a call starts: nothing saved yet */
+static void pn__mpm_journal_begin(pn_mpm_world *w) {
+    if (w->jst) memset(w->jst, 0, w->n);
+}
+
+/* a failed call (or attempt): every model it changed back as the call found it */
+static void pn__mpm_journal_undo(pn_mpm_world *w) {
+    size_t p, dd = (size_t)(w->dim * w->dim);
+    if (!w->jst) return;
+    for (p = 0; p < w->n; ++p) {
+        if (w->jst[p] == 2) {
+            memcpy(w->tF + p * dd, w->jF + p * dd, sizeof(pn_real) * dd);
+            memcpy(w->tP + p * dd, w->jP + p * dd, sizeof(pn_real) * dd);
+            memcpy(w->tH + p * dd * dd, w->jH + p * dd * dd, sizeof(pn_real) * dd * dd);
+            memcpy(w->pH + p * dd * dd, w->jpH + p * dd * dd, sizeof(pn_real) * dd * dd);
+            w->tpsi[p] = w->jpsi[p];
+            w->ppt[p] = w->jppt[p];
+        }
+        if (w->jst[p]) w->tok[p] = (unsigned char)(w->jst[p] == 2);
+        w->jst[p] = 0;
+    }
+}
 
 /* reuse_tol of a step from its desc, and the Taylor models' storage if it needs it */
 static pn_result pn__mpm_reuse_on(pn_mpm_world *w, const pn_mpm_implicit_desc *o) {
@@ -3214,6 +3286,7 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
                                  with_derivs > 1 ? Hl : NULL, keep ? 0u : (unsigned)PN_EVAL_PROJECT_PSD, stl);
             for (k = 0; k < nl; ++k) {
                 pn_real *H = w->pH + (p = lp[k]) * (size_t)(dd * dd);
+                if (keep) pn__mpm_touch(w, p); /* before pH and the model change */
                 if (stl[k] == PN_OK && with_derivs > 1) {
                     memcpy(H, Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
                     if (keep) stl[k] = pn_sym_project_psd(dd, H);
@@ -3950,6 +4023,7 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
                 int keep = w->reuse_tol > 0 && pt->h == w->h[q];
                 for (i = 0; keep && i < dd; ++i) keep = PN__FABS(F0[i] - pt->F0[i]) <= w->reuse_tol;
                 if (keep) continue;
+                pn__mpm_touch(w, q);
                 w->tok[q] = 0;
             }
             if (en == PN_MPM_ENERGY_PNET && w->pnet_lanes && (gl < 0 || gl == w->group[q])) {
@@ -4703,6 +4777,7 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
         if (!pn__finite(res))
             return pn__mpm_fail(w, PN_ERROR_OVERFLOW, "implicit step of %g s (stress formulation): the velocities "
                                 "overflowed", (double)dt);
+        if (res == 0) break; /* nothing moved: converged (material in free flight) */
         if (sweep > 1 && res <= vscale) {
             pn_real rho = prev > 0 && prev2 > 0 ? PN__MAX(res / prev, prev / prev2) : 1;
             if (rho < 1 && res * rho <= vscale * (1 - rho)) break;
@@ -4725,7 +4800,9 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     size_t k, j, np, total = 0, cstart[28];
     pn_real *v = w->vsol, *r = w->grad, mref = 0;
     pn_result rr;
-    if (w->tok) memset(w->tok, 0, w->cap); /* pH becomes scratch here: no Taylor model survives */
+    if (w->tok) /* pH becomes scratch here: no Taylor model survives */
+        for (k = 0; k < w->n; ++k)
+            if (w->tok[k]) pn__mpm_touch(w, k), w->tok[k] = 0;
     if (cells && !w->pb) {
         int fail = 0;
         w->pb = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(ns * d), sizeof(pn_real), &fail);
@@ -4833,7 +4910,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     pn_mpm_stats st;
     pn_result r, first;
     pn_real cfl; /* the explicit bound, then dt over it */
-    int level;
+    int level, stale0, rec0;
     PN_ASSERT(w);
     w->error[0] = 0;
     if (!pn__finite(dt) || !(dt > 0))
@@ -4901,12 +4978,16 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (pn_mpm_stable_dt(w, &cfl) == PN_OK) cfl = dt / cfl;
     else cfl = -1;
     pn__mpm_stats_clear(&st, o.measure_force_error);
+    pn__mpm_journal_begin(w);
+    stale0 = w->mg_stale, rec0 = w->rec_ok; /* what a failed call must also leave as it was */
     first = pn__mpm_once(w, dt, &o, &st);
     st.dt_over_cfl = cfl;
     if (first == PN_OK) {
         if (stats) *stats = st;
         return PN_OK;
     }
+    pn__mpm_journal_undo(w);
+    w->mg_stale = stale0, w->rec_ok = rec0;
     /* fallback: the same step as 2, 4, ... substeps; the world is restored if none works,
        and the stats are the first attempt's (how it failed: cg_capped, line searches) */
     {
@@ -4938,6 +5019,8 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                 return PN_OK;
             }
             pn__mpm_backup(w, 1);
+            pn__mpm_journal_undo(w);
+            w->mg_stale = stale0, w->rec_ok = rec0;
             w->time_s = t0;
             w->steps = steps0;
             w->left_total = left0;
@@ -5944,6 +6027,40 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
     return pn__mpm_first_error(w, dt);
 }
 
+/* The records of the last explicit step serve the next, but x is a public array: a particle
+   written by hand since (NaN, outside the grid, another row of nodes) would make P2G write
+   out of bounds. Each active particle's x is checked against the grid and its row of axis 0
+   (prow) taken again: one pass over x, branch-free. */
+static pn_result pn__mpm_xcheck(pn_mpm_world *w) {
+    int d = w->dim, i, bad = 0;
+    long lp;
+#if defined(_OPENMP)
+#pragma omp parallel for schedule(static) reduction(| : bad) if (w->n >= w->desc.parallel_min_particles)
+#endif
+    for (lp = 0; lp < (long)w->n; ++lp) {
+        const pn_real *x = w->x + (size_t)lp * (size_t)d;
+        int in = 1, k;
+        for (k = 0; k < d; ++k) in &= x[k] >= w->grid_lo[k] && x[k] <= w->grid_hi[k]; /* also NaN */
+        in |= !w->active[lp];
+        bad |= !in;
+        w->prow[lp] = in ? pn__mpm_row_of(w, x) : 0;
+    }
+    if (!bad) return PN_OK;
+    for (lp = 0; lp < (long)w->n; ++lp) {
+        const pn_real *x = w->x + (size_t)lp * (size_t)d;
+        if (!w->active[lp] || pn__mpm_in_grid(w, x)) continue;
+        w->error_particle = (size_t)lp;
+        for (i = 0; i < d && pn__finite(x[i]); ++i) {
+        }
+        if (i < d)
+            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by hand?)",
+                                (unsigned long)lp);
+        return pn__mpm_fail(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by hand?)",
+                            (unsigned long)lp);
+    }
+    return PN_OK;
+}
+
 PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *stats) {
     int d, dd;
     long l;
@@ -5955,6 +6072,14 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     w->error[0] = 0;
     if (!pn__finite(dt) || !(dt > 0))
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_explicit: dt_s = %g must be finite and > 0", (double)dt);
+    { /* far beyond the wave-speed bound no explicit step is stable (the largest found stable
+         is below 2x pn_mpm_stable_dt: tests/test_scene.c): refused before anything is spent */
+        pn_real rest = pn__mpm_rest_dt(w), sdt;
+        if (rest > 0 && dt > PN__MPM_EXPLICIT_MAX * rest)
+            return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_mpm_step_explicit: dt_s = %g s is more than %dx the stable "
+                                "step (pn_mpm_stable_dt: %g s here; pn_mpm_advance takes stable steps)", (double)dt,
+                                PN__MPM_EXPLICIT_MAX, pn_mpm_stable_dt(w, &sdt) == PN_OK ? (double)sdt : (double)rest);
+    }
     d = w->dim;
     dd = d * d;
     tf = w->desc.filter_time_s;
@@ -5962,6 +6087,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     reach = w->desc.advection_limit * w->desc.dx_m / dt; /* the fastest honest speed */
     pn__mpm_stats_clear(&st, 0);
     if (!w->rec_ok && (r = pn__mpm_xrecords(w, dt)) != PN_OK) return r;
+    if (w->rec_ok && (r = pn__mpm_xcheck(w)) != PN_OK) return r;
     w->rec_ok = 1;
     pn__mpm_xp2g(w, dt);
     if (w->n_loads) pn__mpm_xloads(w, dt);
@@ -8491,6 +8617,25 @@ static pn_result pn__fem_check_dt(pn_fem_mesh *m, pn_real dt, const char *who) {
     return PN_OK;
 }
 
+/* the first node whose position or velocity (public arrays a caller may write) is NaN or
+   infinite, or -1 */
+static long pn__fem_nonfinite_node(const pn_fem_mesh *m) {
+    size_t k, nd = m->n_nodes * (size_t)m->dim;
+    for (k = 0; k < nd; ++k)
+        if (!pn__finite(m->x[k]) || !pn__finite(m->v[k])) return (long)(k / (size_t)m->dim);
+    return -1;
+}
+
+/* a step's checks: dt, and a state every step can start from (x, v finite) */
+static pn_result pn__fem_check_step(pn_fem_mesh *m, pn_real dt, const char *who) {
+    pn_result r = pn__fem_check_dt(m, dt, who);
+    if (r != PN_OK) return r;
+    if ((m->error_node = pn__fem_nonfinite_node(m)) >= 0)
+        return pn__fem_fail(m, PN_ERROR_NONFINITE, "%s: node %ld has a NaN or infinite position or velocity (was it "
+                            "written by hand?)", who, m->error_node);
+    return PN_OK;
+}
+
 PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats *stats) {
     pn__fem *s;
     int d, dp, a, i, j, o;
@@ -8500,7 +8645,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     if (!m) return PN_ERROR_INVALID_ARGUMENT;
     m->error[0] = 0;
     m->error_element = m->error_node = -1;
-    if ((r = pn__fem_check_dt(m, dt, "pn_fem_step_explicit")) != PN_OK) return r;
+    if ((r = pn__fem_check_step(m, dt, "pn_fem_step_explicit")) != PN_OK) return r;
     s = (pn__fem *)m->impl;
     d = m->dim, dp = d + 1;
     if (stats) memset(stats, 0, sizeof *stats);
@@ -8993,18 +9138,22 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
     if (!m) return PN_ERROR_INVALID_ARGUMENT;
     m->error[0] = 0;
     m->error_element = m->error_node = -1;
-    if ((r = pn__fem_check_dt(m, dt, "pn_fem_step_implicit")) != PN_OK) return r;
+    if ((r = pn__fem_check_step(m, dt, "pn_fem_step_implicit")) != PN_OK) return r;
     memset(&o, 0, sizeof o);
     if (desc) o = *desc;
+    /* zero means the default; NaN, infinite or negative is refused, never replaced */
+    if (o.fixed_point_iters < 0 || o.newton_max < 0 || o.cg_max < 0)
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_implicit_desc: fixed_point_iters %d, newton_max %d and "
+                            "cg_max %d must be >= 0 (0: the default)", o.fixed_point_iters, o.newton_max, o.cg_max);
+    if (!pn__finite(o.newton_tol) || o.newton_tol < 0 || !pn__finite(o.cg_rel_tol) || o.cg_rel_tol < 0)
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_implicit_desc: newton_tol %g and cg_rel_tol %g must be "
+                            "finite and >= 0 (0: the default)", (double)o.newton_tol, (double)o.cg_rel_tol);
     if (!o.fixed_point_iters) o.fixed_point_iters = 1;
     if (!o.newton_max) o.newton_max = 100;
     if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
     if (!o.max_halvings) o.max_halvings = 5;
     if (!(o.cg_rel_tol > 0)) o.cg_rel_tol = (pn_real)1e-6;
     if (!o.cg_max) o.cg_max = 5000;
-    if (o.fixed_point_iters < 0 || o.newton_max < 0 || !pn__finite(o.newton_tol) || o.cg_max < 0 || !pn__finite(o.cg_rel_tol))
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: fixed_point_iters, newton_max, newton_tol, "
-                            "cg_max and cg_rel_tol must be positive");
     if ((r = pn__fem_linear_setup(m, o.linear_solver)) != PN_OK) return r;
     pn__fem_backup(m);
     for (level = 0; level <= (o.max_halvings < 0 ? 0 : o.max_halvings); ++level) {
@@ -10023,14 +10172,9 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
 
 /* the mesh's positions and velocities finite (the world's checks its own) */
 static pn_result pn__cpl_check_mesh(pn_coupled *c, const char *who) {
-    const pn_fem_mesh *m = c->fem;
-    size_t k, nd = m->n_nodes * (size_t)m->dim;
-    for (k = 0; k < nd; ++k)
-        if (!pn__finite(m->x[k]) || !pn__finite(m->v[k])) {
-            c->error_node = (long)(k / (size_t)m->dim);
-            return pn__cpl_fail(c, PN_ERROR_NONFINITE, "%s: the mesh's node %ld has a non-finite position or velocity", who,
-                                c->error_node);
-        }
+    if ((c->error_node = pn__fem_nonfinite_node(c->fem)) >= 0)
+        return pn__cpl_fail(c, PN_ERROR_NONFINITE, "%s: the mesh's node %ld has a non-finite position or velocity", who,
+                            c->error_node);
     return PN_OK;
 }
 
@@ -10294,7 +10438,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     pn_real t0;
     long steps0, fsteps0;
     size_t left0;
-    int level, a, load;
+    int level, a, load, stale0, rec0;
     char why[sizeof c->error];
     if (!c) return PN_ERROR_INVALID_ARGUMENT;
     w = c->mpm, m = c->fem;
@@ -10343,7 +10487,9 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
         return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", m->error);
     if ((r = pn__cpl_alloc(c)) != PN_OK) return r;
     t0 = w->time_s, steps0 = w->steps, fsteps0 = m->steps, left0 = w->left_total;
+    stale0 = w->mg_stale, rec0 = w->rec_ok;
     pn__mpm_backup(w, 0);
+    pn__mpm_journal_begin(w);
     pn__fem_backup(m);
     why[0] = 0;
     for (level = 0; level <= PN__MAX(o->max_halvings, 0); ++level) {
@@ -10369,12 +10515,16 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
             if (stats) *stats = st;
         }
         pn__mpm_backup(w, 1);
+        pn__mpm_journal_undo(w);
         pn__fem_restore(m);
         w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
+        w->mg_stale = stale0, w->rec_ok = rec0;
     }
-    pn__mpm_backup(w, 1);
+    pn__mpm_backup(w, 1); /* (again, after a break: a step that succeeded but failed a check) */
+    pn__mpm_journal_undo(w);
     pn__fem_restore(m);
     w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
+    w->mg_stale = stale0, w->rec_ok = rec0;
     memcpy(c->error, why, sizeof why);
     if (o->max_halvings > 0) {
         const char *tail = " [also as 2^max_halvings substeps]";
@@ -10436,7 +10586,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
     pn_real t0, *fc;
     long steps0;
     size_t left0, p, nf = 0, i, nd;
-    int d, a, kind;
+    int d, a, kind, rec0;
     if (!c) return PN_ERROR_INVALID_ARGUMENT;
     k = (pn__cpl *)c->impl, w = c->mpm, m = c->fem, s = (pn__fem *)m->impl;
     d = w->dim, nd = m->n_nodes * (size_t)d, kind = d == 2 ? PN__FEM_PE : PN__FEM_PT;
@@ -10458,7 +10608,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
         for (a = 0; a < d; ++a) fc[nf * (size_t)d + (size_t)a] = f[a];
         k->fidx[nf++] = p;
     }
-    t0 = w->time_s, steps0 = w->steps, left0 = w->left_total;
+    t0 = w->time_s, steps0 = w->steps, left0 = w->left_total, rec0 = w->rec_ok;
     pn__mpm_backup(w, 0);
     w->xf_idx = k->fidx, w->xf = fc, w->xf_n = nf;
     r = pn_mpm_step_explicit(w, dt, &mst);
@@ -10489,9 +10639,12 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
         }
     } else
         r = pn__cpl_fail(c, r, "pn_coupled_step_explicit: %s", m->error);
-    if (r != PN_OK) {
+    if (r != PN_OK) { /* the world back as it was, with the P2G records the step swapped out */
+        pn_real *t = w->ppay;
+        int *row = w->prow;
         pn__mpm_backup(w, 1);
-        w->time_s = t0, w->steps = steps0, w->left_total = left0, w->rec_ok = 0;
+        w->ppay = w->spay, w->spay = t, w->prow = w->srow, w->srow = row;
+        w->time_s = t0, w->steps = steps0, w->left_total = left0, w->rec_ok = rec0;
         return r;
     }
     if (stats) {
@@ -10577,6 +10730,15 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
                     "friction_velocity_m_s %g must be finite and >= 0 (0: the default)", (double)de.contact_distance_m,
                     (double)de.contact_stiffness, (double)de.friction, (double)de.friction_velocity_m_s);
         return PN_ERROR_INVALID_ARGUMENT;
+    }
+    for (e = 0; e < m->n_nodes * (size_t)d; ++e) { /* the mesh within the walls, where the particles are */
+        int a = (int)(e % (size_t)d);
+        if (!(m->x[e] >= w->wall_lo[a] && m->x[e] <= w->wall_hi[a])) {
+            pn__fem_why(why, why_cap, "pn_coupled_create: the mesh's node %lu is at %g m on axis %d, outside the world's "
+                        "walls [%g, %g] m", (unsigned long)(e / (size_t)d), (double)m->x[e], a, (double)w->wall_lo[a],
+                        (double)w->wall_hi[a]);
+            return pn__finite(m->x[e]) ? PN_ERROR_OUTSIDE_DOMAIN : PN_ERROR_NONFINITE;
+        }
     }
     for (g = 0; g < w->n_groups; ++g) emax = PN__MAX(emax, w->groups[g].material.E);
     al = &m->desc.allocator;

@@ -1008,6 +1008,119 @@ PN_TEST(mpm_implicit_fallback) {
     pn_mpm_destroy(b);
 }
 
+/* ---- a failed implicit step leaves nothing behind -------------------------------------- */
+
+/* a world for the twin test: sand (Drucker-Prager) on a frictional floor, the group's
+   implicit energy en (PlasticityNet from the shipped models). rest 0: a block (E 1e6 Pa)
+   thrown at the floor; rest 1: a stiff layer (E 1e8 Pa) resting on it, where F moves less
+   than PlasticityNet's reuse tolerance per step, so its Taylor models live across steps. */
+static pn_mpm_world *t_twin_world(int dim, int rest, pn_mpm_energy en, pn_pnet *net) {
+    int res = dim == 2 ? 32 : 10, g;
+    double E = rest ? 1e8 : 1e6;
+    pn_mpm_world *w = t_mpm_world(dim, res, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+    double lo[3] = {0.35, 3.0 / res, 0.35}, sz[3] = {0.3, 0.3, 0.3}, v[3] = {0.3, -1, 0.2}, v0[3] = {0, 0, 0};
+    if (!w) return NULL;
+    if (rest) lo[0] = lo[2] = 3.0 / res, sz[0] = sz[2] = 1 - 6.0 / res, sz[1] = 2.0 / res;
+    w->desc.friction = 0.5;
+    g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, E);
+#ifdef PN_TEST_HAVE_MODELS
+    if (en == PN_MPM_ENERGY_PNET) {
+        pn_material m;
+        pn_pnet_desc nd;
+        const pn_model *model = dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
+        memset(&nd, 0, sizeof nd);
+        nd.energy = model;
+        if (pn_model_material(model, E, &m, NULL) != PN_OK || pn_pnet_init(net, &nd, &m, dim, NULL) != PN_OK) g = -1;
+        else w->groups[g].material = m;
+    }
+#else
+    (void)net;
+#endif
+    if (g < 0 || pn_mpm_group_set_energy(w, g, en, en == PN_MPM_ENERGY_PNET ? net : NULL) != PN_OK ||
+        t_mpm_block(w, g, lo, sz, rest ? v0 : v) == 0) {
+        pn_mpm_destroy(w);
+        return NULL;
+    }
+    return w;
+}
+
+/* every state a later step reads: the particles, time and step count */
+static int t_twin_same(const pn_mpm_world *a, const pn_mpm_world *b) {
+    size_t n = a->n, d = (size_t)a->dim;
+    return a->n == b->n && a->time_s == b->time_s && a->steps == b->steps &&
+           memcmp(a->x, b->x, sizeof(pn_real) * n * d) == 0 && memcmp(a->v, b->v, sizeof(pn_real) * n * d) == 0 &&
+           memcmp(a->C, b->C, sizeof(pn_real) * n * d * d) == 0 && memcmp(a->F, b->F, sizeof(pn_real) * n * d * d) == 0 &&
+           memcmp(a->h, b->h, sizeof(pn_real) * n) == 0 && memcmp(a->active, b->active, n) == 0;
+}
+
+/* Twin worlds: one tries a step that fails, the other never does; the failure returns an
+   error and leaves the visible state as it was, and the next good steps of both agree to
+   the bit (four steps: a model left behind would be used in the first). For every implicit energy (PlasticityNet with and without its Taylor models), the
+   stress formulation, Jacobi and multigrid, 2D and 3D, moving and resting sand, and three
+   ways to fail: Newton capped (a first attempt that fails), the Newton budget spent over the
+   substeps (every fallback level fails), and a step of 1e3 s (moving: the advection limit)
+   or a linear solve capped at one CG iteration (resting). */
+PN_TEST(mpm_failed_step_no_trace) {
+    static const pn_mpm_energy ens[6] = {PN_MPM_ENERGY_ELASTIC, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP, PN_MPM_ENERGY_PNET,
+                                         PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_DEFAULT};
+    static const char *names[6] = {"elastic", "lagged", "dp", "pnet", "pnet (no reuse)", "stress"};
+    int dim, e, rest, mode, cases = 0, failed_ok = 0, twins_ok = 0;
+    for (dim = 2; dim <= 3; ++dim)
+        for (e = 0; e < 6; ++e)
+            for (rest = 0; rest < 2; ++rest)
+                for (mode = 0; mode < 3; ++mode) {
+                    pn_pnet net[2];
+                    pn_mpm_world *a, *b;
+                    pn_mpm_implicit_desc good, bad;
+                    pn_real dt_bad = mode == 2 && !rest ? (pn_real)1e3 : (pn_real)2e-2;
+                    int k, same_before, same_after = 1;
+                    pn_result r;
+#ifndef PN_TEST_HAVE_MODELS
+                    if (ens[e] == PN_MPM_ENERGY_PNET) continue;
+#endif
+                    if (e == 5 && mode == 2 && rest) continue; /* no CG in the stress formulation */
+                    if (mode == 1 && !rest) continue;             /* the substeps' path: resting sand */
+                    a = t_twin_world(dim, rest, ens[e], &net[0]);
+                    b = t_twin_world(dim, rest, ens[e], &net[1]);
+                    PN_CHECK(a && b);
+                    if (!a || !b) {
+                        pn_mpm_destroy(a), pn_mpm_destroy(b);
+                        continue;
+                    }
+                    memset(&good, 0, sizeof good);
+                    if (e == 4) good.pnet_reuse_tol = -1;
+                    if (e == 5) good.formulation = PN_MPM_FORMULATION_STRESS;
+                    if (dim == 3 && rest) good.linear_solver = PN_MPM_LINEAR_MULTIGRID;
+                    bad = good;
+                    bad.newton_tol = (pn_real)1e-9, bad.sweeps_max = 2;
+                    if (mode == 0) bad.newton_max = 1, bad.max_halvings = -1;
+                    if (mode == 1) bad.newton_max = 1, bad.max_halvings = 2, bad.newton_budget = 2;
+                    if (mode == 2 && rest) bad.cg_max = 1, bad.max_halvings = -1;
+                    for (k = 0; k < 3; ++k) {
+                        PN_CHECK(pn_mpm_step_implicit(a, 1e-3, &good, NULL) == PN_OK);
+                        PN_CHECK(pn_mpm_step_implicit(b, 1e-3, &good, NULL) == PN_OK);
+                    }
+                    r = pn_mpm_step_implicit(a, dt_bad, &bad, NULL);
+                    cases++;
+                    failed_ok += r != PN_OK;
+                    same_before = t_twin_same(a, b);
+                    for (k = 0; k < 4; ++k) {
+                        pn_result ra = pn_mpm_step_implicit(a, 1e-3, &good, NULL), rb = pn_mpm_step_implicit(b, 1e-3, &good, NULL);
+                        PN_CHECK(ra == PN_OK && rb == PN_OK);
+                    }
+                    same_after = t_twin_same(a, b);
+                    twins_ok += same_after;
+                    if (r == PN_OK || !same_before || !same_after) {
+                        fprintf(stderr, "  %dD %s, %s, failure %d (dt %g): the step returned %s; state %s after it, %s four "
+                                "steps later\n", dim, names[e], rest ? "resting" : "moving", mode, (double)dt_bad,
+                                pn_result_string(r), same_before ? "same" : "DIFFERENT", same_after ? "same" : "DIFFERENT");
+                        PN_CHECK(0);
+                    }
+                    pn_mpm_destroy(a), pn_mpm_destroy(b);
+                }
+    PN_REPORT("%d failed steps of %d refused; twins identical four steps later in %d", failed_ok, cases, twins_ok);
+}
+
 /* trace of the implicit solve: the incremental potential at each Newton iterate */
 typedef struct t_mpm_trace {
     int solve, calls, rises, solves;
@@ -2244,6 +2357,7 @@ static const pn_test_case pn_tests_mpm[] = {
     {"mpm_sliding_block_friction", mpm_sliding_block_friction},
     {"mpm_colliders", mpm_colliders},
     {"mpm_implicit_fallback", mpm_implicit_fallback},
+    {"mpm_failed_step_no_trace", mpm_failed_step_no_trace},
     {"mpm_line_search_descends", mpm_line_search_descends},
     {"mpm_newton_forcing", mpm_newton_forcing},
     {"mpm_cg_capped", mpm_cg_capped},

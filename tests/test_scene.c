@@ -742,6 +742,146 @@ PN_TEST(scene_errors_name_the_culprit) {
     pn_mpm_destroy(w);
 }
 
+/* a snapshot of every particle array a step reads (to see that a refused step changed nothing) */
+typedef struct t_sc_snap {
+    size_t n, bytes;
+    unsigned char *buf;
+} t_sc_snap;
+
+static void t_sc_snap_take(t_sc_snap *s, const pn_mpm_world *w) {
+    size_t d = (size_t)w->dim, n = w->n, off = 0;
+    s->n = n;
+    s->bytes = sizeof(pn_real) * n * (2 * d + 2 * d * d + 1) + n + sizeof w->time_s + sizeof w->steps;
+    s->buf = (unsigned char *)malloc(s->bytes);
+    if (!s->buf) return;
+#define T_SC_PUT(ptr, size) memcpy(s->buf + off, ptr, size), off += size
+    T_SC_PUT(w->x, sizeof(pn_real) * n * d);
+    T_SC_PUT(w->v, sizeof(pn_real) * n * d);
+    T_SC_PUT(w->C, sizeof(pn_real) * n * d * d);
+    T_SC_PUT(w->F, sizeof(pn_real) * n * d * d);
+    T_SC_PUT(w->h, sizeof(pn_real) * n);
+    T_SC_PUT(w->active, n);
+    T_SC_PUT(&w->time_s, sizeof w->time_s);
+    T_SC_PUT(&w->steps, sizeof w->steps);
+#undef T_SC_PUT
+}
+
+/* the world as the snapshot holds it (frees the snapshot) */
+static int t_sc_snap_same(t_sc_snap *s, const pn_mpm_world *w) {
+    t_sc_snap now;
+    int same;
+    t_sc_snap_take(&now, w);
+    same = s->buf && now.buf && s->n == w->n && memcmp(s->buf, now.buf, s->bytes) == 0;
+    free(now.buf);
+    free(s->buf);
+    s->buf = NULL;
+    return same;
+}
+
+/* The explicit step keeps its P2G records from one step to the next; a particle whose x a
+   caller wrote in between is checked, not read out of bounds: NaN (PN_ERROR_NONFINITE), beyond
+   the grid (PN_ERROR_OUTSIDE_DOMAIN), both naming the particle, the world unchanged; moved to
+   another row of nodes by hand, it is stepped where it now is (its mass lands there). 2D, 3D. */
+PN_TEST(scene_explicit_hand_written_x) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_mpm_world *w = t_sc_world(dim, dim == 2 ? 32 : 16, dim == 2 ? 1.0 / 32 : 1.0 / 16, NULL, -9.81, 20000);
+        pn_mpm_fill_desc f;
+        pn_real dt, keep[3];
+        t_sc_snap snap;
+        int i, k, bad;
+        size_t p = 7;
+        PN_CHECK(w != NULL);
+        if (!w) continue;
+        memset(&f, 0, sizeof f);
+        f.group = t_sc_group(w, 0);
+        for (i = 0; i < dim; ++i) f.center_m[i] = 0.5, f.half_extent_m[i] = 0.15;
+        PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_OK && w->n > p);
+        PN_CHECK(pn_mpm_stable_dt(w, &dt) == PN_OK);
+        for (k = 0; k < 3; ++k) PN_CHECK(pn_mpm_step_explicit(w, dt, NULL) == PN_OK);
+        memcpy(keep, w->x + p * (size_t)dim, sizeof(pn_real) * (size_t)dim);
+        for (bad = 0; bad < 3; ++bad) {
+            pn_result r;
+            w->x[p * (size_t)dim + 1] = bad == 0 ? (pn_real)NAN : bad == 1 ? (pn_real)HUGE_VAL : (pn_real)-5;
+            t_sc_snap_take(&snap, w);
+            r = pn_mpm_step_explicit(w, dt, NULL);
+            PN_CHECK(r == (bad < 2 ? PN_ERROR_NONFINITE : PN_ERROR_OUTSIDE_DOMAIN));
+            PN_CHECK(w->error_particle == p && strstr(pn_mpm_error(w), "particle 7") != NULL);
+            PN_CHECK(t_sc_snap_same(&snap, w));
+        }
+        /* moved by hand 0.2 m along axis 0 (several rows of nodes): stepped from there */
+        memcpy(w->x + p * (size_t)dim, keep, sizeof(pn_real) * (size_t)dim);
+        w->x[p * (size_t)dim] = keep[0] + (pn_real)0.2;
+        PN_CHECK(pn_mpm_step_explicit(w, dt, NULL) == PN_OK);
+        PN_CHECK(fabs(w->x[p * (size_t)dim] - (keep[0] + 0.2)) < 0.01);
+        pn_mpm_destroy(w);
+    }
+}
+
+/* An explicit step far beyond the wave-speed bound (10 s, 1e3 s; over 4x pn_mpm_stable_dt)
+   is refused with PN_ERROR_STEP_TOO_LARGE naming the bound, the world unchanged; steps up to
+   the largest stable one (below 2x: scene_stable_dt) are not refused by it. */
+PN_TEST(scene_explicit_step_too_large) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_mpm_world *w = t_sc_world(dim, dim == 2 ? 32 : 16, dim == 2 ? 1.0 / 32 : 1.0 / 16, NULL, -9.81, 20000);
+        pn_mpm_fill_desc f;
+        pn_real dt, big[3];
+        t_sc_snap snap;
+        int i;
+        PN_CHECK(w != NULL);
+        if (!w) continue;
+        memset(&f, 0, sizeof f);
+        f.group = t_sc_group(w, 3); /* metal, E 1e9 */
+        for (i = 0; i < dim; ++i) f.center_m[i] = 0.5, f.half_extent_m[i] = 0.1;
+        PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_OK);
+        PN_CHECK(pn_mpm_stable_dt(w, &dt) == PN_OK);
+        big[0] = 10, big[1] = 1e3, big[2] = 5 * dt;
+        for (i = 0; i < 3; ++i) {
+            t_sc_snap_take(&snap, w);
+            PN_CHECK(pn_mpm_step_explicit(w, big[i], NULL) == PN_ERROR_STEP_TOO_LARGE);
+            PN_CHECK(strstr(pn_mpm_error(w), "pn_mpm_stable_dt") != NULL);
+            PN_CHECK(t_sc_snap_same(&snap, w));
+        }
+        PN_CHECK(pn_mpm_step_explicit(w, 2 * dt, NULL) == PN_OK);
+        PN_CHECK(pn_mpm_step_explicit(w, dt, NULL) == PN_OK);
+        pn_mpm_destroy(w);
+    }
+}
+
+/* The stress formulation on material in free flight: the sweeps change nothing, which is
+   convergence (it used to run to sweeps_max and fail); the block falls as g t^2 / 2. */
+PN_TEST(scene_stress_free_flight) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_mpm_world *w = t_sc_world(dim, dim == 2 ? 32 : 16, dim == 2 ? 1.0 / 32 : 1.0 / 16, NULL, -9.81, 20000);
+        pn_mpm_fill_desc f;
+        pn_mpm_implicit_desc id;
+        double y0 = 0, y1 = 0;
+        size_t p;
+        int i, k;
+        PN_CHECK(w != NULL);
+        if (!w) continue;
+        memset(&f, 0, sizeof f);
+        f.group = t_sc_group(w, 0);
+        for (i = 0; i < dim; ++i) f.center_m[i] = 0.5, f.half_extent_m[i] = 0.1;
+        f.center_m[1] = 0.6;
+        PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_OK);
+        memset(&id, 0, sizeof id);
+        id.formulation = PN_MPM_FORMULATION_STRESS;
+        for (p = 0; p < w->n; ++p) y0 += w->x[p * (size_t)dim + 1] / (double)w->n;
+        for (k = 0; k < 5; ++k) {
+            pn_result r = pn_mpm_step_implicit(w, 1e-3, &id, NULL);
+            PN_CHECK(r == PN_OK);
+            if (r != PN_OK) fprintf(stderr, "  %s\n", pn_mpm_error(w));
+        }
+        for (p = 0; p < w->n; ++p) y1 += w->x[p * (size_t)dim + 1] / (double)w->n;
+        /* implicit Euler: v_k = -g k dt, x drops g dt^2 (1 + .. + 5) = 15 g dt^2 */
+        PN_CHECK(fabs((y0 - y1) - 15 * 9.81 * 1e-6) < 1e-9);
+        pn_mpm_destroy(w);
+    }
+}
+
 static const pn_test_case pn_tests_scene[] = {
     {"scene_fill_box", scene_fill_box},
     {"scene_fill_volume", scene_fill_volume},
@@ -754,4 +894,7 @@ static const pn_test_case pn_tests_scene[] = {
     {"scene_origin", scene_origin},
     {"scene_advance", scene_advance},
     {"scene_errors_name_the_culprit", scene_errors_name_the_culprit},
+    {"scene_explicit_hand_written_x", scene_explicit_hand_written_x},
+    {"scene_explicit_step_too_large", scene_explicit_step_too_large},
+    {"scene_stress_free_flight", scene_stress_free_flight},
 };
