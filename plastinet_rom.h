@@ -44,6 +44,8 @@
    scene needs (doubling), after which a step allocates nothing.
    ERRORS: every call that fails returns its pn_result, leaves the world as it was, and
    pn_rom_error(w) says why, naming the argument, point or model field at fault.
+   STEP SIZE: the explicit step refuses dt above pn_rom_stable_dt (PN_ERROR_STEP_TOO_LARGE);
+   models are format 2 (PN_ROM_FORMAT_VERSION: array lengths; gen/upgrade_rom_format.py).
    THREADS: with -fopenmp the map evaluations (the bulk of a step) run on threads, each
    point into its own slot; sums over points run in point order on one thread, so the bits
    do not depend on the thread count.
@@ -240,7 +242,7 @@ PN_API pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, d
    be finite (the step too large for the scene), PN_ERROR_NOT_CONVERGED when the projection
    fails; the world is unchanged then. The explicit step (PN_ROM_EXPLICIT) refuses dt_s above
    pn_rom_stable_dt with PN_ERROR_STEP_TOO_LARGE; the implicit ones refuse a step whose free
-   flight (x_n + dt v_n + dt^2 g) would carry material beyond PN__ROM_MAX_FLIGHT body sizes,
+   flight (x_n + dt v_n + dt^2 g) would carry material beyond 1e4 body sizes,
    where the incremental potential is all rounding (PN_ERROR_STEP_TOO_LARGE too). */
 PN_API pn_result pn_rom_step(pn_rom_world *w, double dt_s, pn_rom_stats *stats);
 
