@@ -44,6 +44,8 @@
    scene needs (doubling), after which a step allocates nothing.
    ERRORS: every call that fails returns its pn_result, leaves the world as it was, and
    pn_rom_error(w) says why, naming the argument, point or model field at fault.
+   STEP SIZE: the explicit step refuses dt above pn_rom_stable_dt (PN_ERROR_STEP_TOO_LARGE);
+   models are format 2 (PN_ROM_FORMAT_VERSION: array lengths; gen/upgrade_rom_format.py).
    THREADS: with -fopenmp the map evaluations (the bulk of a step) run on threads, each
    point into its own slot; sums over points run in point order on one thread, so the bits
    do not depend on the thread count.
@@ -59,12 +61,19 @@
 extern "C" {
 #endif
 
-#define PN_ROM_FORMAT_VERSION 1
+/* Layout version of pn_rom_model (gen/rom_export.py writes it; another version is refused with
+   PN_ERROR_FORMAT). Version 2 added the lengths of the model's arrays (width_count ..
+   occupied_count), checked against the sizes they must have; gen/upgrade_rom_format.py
+   converts version-1 headers. */
+#define PN_ROM_FORMAT_VERSION 2
 #define PN_ROM_MAX_LATENT 32   /* d_hat                                                      */
 #define PN_ROM_MAX_WIDTH 64    /* a hidden layer of g                                        */
 #define PN_ROM_MAX_LAYERS 8    /* linear layers of g                                         */
 #define PN_ROM_MAX_DRIVES 8
 #define PN_ROM_MAX_LOADS 16
+#define PN_ROM_MAX_REFINE 64   /* pn_rom_desc.refine: 64^3 lattice points per occupancy cell    */
+#define PN_ROM_MAX_CELLS 4096  /* occupancy cells per axis of a model's reference domain       */
+#define PN_ROM_MAX_POINTS ((size_t)1 << 26) /* a world's points (67 million)                  */
 
 /* g's activation: the kind of map */
 enum {
@@ -95,6 +104,14 @@ typedef struct pn_rom_model {
     double dx_m;                   /* its MPM grid, particles per cell per axis,             */
     int per_axis;                  /* and snapshot interval                                  */
     double frame_dt_s;
+    /* format 2: the lengths of the arrays above, each checked against the size it must have,
+       so a model whose arrays are shorter than its sizes is refused instead of read past
+       (weight and bias themselves hold n_layers pointers) */
+    int width_count;               /* entries of width: n_layers + 1                         */
+    int weight_count[PN_ROM_MAX_LAYERS]; /* entries of weight[l]: width[l+1] x width[l]       */
+    int bias_count[PN_ROM_MAX_LAYERS];   /* entries of bias[l]: width[l+1]                    */
+    int latent_rest_count, latent_std_count; /* latent each (0 with a NULL array)           */
+    size_t occupied_count;         /* bytes of occupied: cells[0] x cells[1] x cells[2]      */
 } pn_rom_model;
 
 /* Checks a model (format, sizes, finite weights); PN_ERROR_FORMAT / PN_ERROR_DIMENSION /
@@ -113,7 +130,8 @@ PN_API pn_result pn_rom_eval(const pn_rom_model *m, const double *xhat, size_t n
 
 /* Points of the reference domain: the occupied cells of the model, each sampled refine^dim
    times on a cell-centred lattice (refine 1: the training resolution). Writes up to cap points
-   (dim doubles each; X may be NULL to count) and returns the count. */
+   (dim doubles each; X may be NULL to count) and returns the count, counted in closed form
+   (occupied cells x refine^dim; SIZE_MAX if that does not fit in a size_t). */
 PN_API size_t pn_rom_lattice(const pn_rom_model *m, int refine, double *X, size_t cap);
 
 /* Is X (dim doubles) material, by the model's occupancy cells? */
@@ -143,7 +161,7 @@ typedef struct pn_rom_desc {
     const pn_rom_model *model;
     const double *points;          /* the body's reference points (dim each), copied        */
     size_t n_points;               /* (NULL: the model's lattice at `refine`)                */
-    int refine;                    /* [1]                                                    */
+    int refine;                    /* [1] .. PN_ROM_MAX_REFINE                               */
     double point_volume_m3;        /* with points: each point's volume [(cell_m/refine)^d]   */
     double dx_m;                   /* the full-space grid [model dx_m]                       */
     double youngs_pa, poisson, density_kg_m3; /* fixed corotated [the model's]               */
@@ -222,8 +240,22 @@ PN_API pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, d
 
 /* One reduced step of dt seconds (Algorithm 2). PN_ERROR_NONFINITE when the state would not
    be finite (the step too large for the scene), PN_ERROR_NOT_CONVERGED when the projection
-   fails; the world is unchanged then. */
+   fails; the world is unchanged then. The explicit step (PN_ROM_EXPLICIT) refuses dt_s above
+   pn_rom_stable_dt with PN_ERROR_STEP_TOO_LARGE; the implicit ones refuse a step whose free
+   flight (x_n + dt v_n + dt^2 g) would carry material beyond 1e4 body sizes,
+   where the incremental potential is all rounding (PN_ERROR_STEP_TOO_LARGE too). */
 PN_API pn_result pn_rom_step(pn_rom_world *w, double dt_s, pn_rom_stats *stats);
+
+/* The largest explicit step (s) the current state allows, as pn_mpm_stable_dt:
+       dt = PN_ROM_CFL dx / (c + |v|max),   c = sqrt((lambda + 2 mu) / rho),
+   dx the full-space grid (pn_rom_desc.dx_m), lambda, mu, rho the world's material, |v|max the
+   largest speed G vhat at up to 256 of the world's points (evenly strided). The factor, twice
+   MPM's 0.9, is measured (docs/rom.md, "Step size"): on the cylinder every scheme (EL, EN, LL,
+   LN) ran stable at 1.5 times this bound and the nonlinear projections blew up at twice it,
+   the linear ones at three times. The implicit integrators are not bound by it. */
+#define PN_ROM_CFL 1.8
+#define PN__ROM_MAX_FLIGHT 1e4 /* implicit steps: free flight per step, in body sizes          */
+PN_API pn_result pn_rom_stable_dt(const pn_rom_world *w, double *dt_s);
 
 /* Reconstruction for drawing, from the current latent, in float: positions (and F, d x d,
    optional) of the world's points first .. first + n - 1, or of any reference points X. */
@@ -316,6 +348,7 @@ struct pn_rom_world {
     double *cX, *cm, *cV, *cvel;   /* centroid (dim), mass, volume, last velocity (dim)      */
     double *cxp, *cvp, *cv0;       /* position and velocity a step earlier (BDF2); v_n       */
     double h_prev;                 /* the last implicit step                                 */
+    double size_m;                 /* the diagonal of the points' bounding box (at least dx_m) */
     int *cdrv;                     /* the cell's drive (-1)                                   */
     unsigned *cload;               /* its loads (bit k: load k)                               */
     double *cx, *cx0, *cF, *cG, *cJ, *cFt, *ctgt, *cw; /* x, x_n, F, G, dF/dxhat (d^2 x K), FD scratch,
@@ -377,68 +410,149 @@ static int pn__rom_all_finite(size_t n, const double *a) {
     return s == 0;
 }
 
+#define PN__ROM_MAX_OCCUPANCY (1ull << 28) /* cells of a model's occupancy grid in all */
+
+/* the model's name for messages */
+static const char *pn__rom_name(const pn_rom_model *m) { return m->name ? m->name : "?"; }
+
+/* the occupancy grid, the normalisation and the training material of any model */
+static pn_result pn__rom_model_common(const pn_rom_model *m, char *why, size_t cap) {
+    int i, d = m->dim;
+    const char *nm = pn__rom_name(m);
+    unsigned long long cells = 1;
+    for (i = 0; i < d; ++i)
+        if (!pn__rom_finite(m->in_lo[i]) || !pn__rom_finite(m->in_hi[i]) || !(m->in_hi[i] > m->in_lo[i]) ||
+            !pn__rom_finite(m->out_mean[i]) || !pn__rom_finite(m->out_std[i]) || !(m->out_std[i] > 0)) {
+            pn__rom_msg(why, cap, "model %s: in_lo/in_hi or out_mean/out_std[%d] invalid (need finite, in_hi > in_lo, out_std > 0)",
+                        nm, i);
+            return PN_ERROR_FORMAT;
+        }
+    if (!pn__rom_finite(m->youngs_pa) || m->youngs_pa < 0 || !pn__rom_finite(m->density_kg_m3) || m->density_kg_m3 < 0 ||
+        !pn__rom_finite(m->poisson) || !(m->poisson > -1 && m->poisson < 0.5) || !pn__rom_finite(m->dx_m) || m->dx_m < 0 ||
+        !pn__rom_finite(m->frame_dt_s) || m->frame_dt_s < 0 || m->per_axis < 0) {
+        pn__rom_msg(why, cap, "model %s: youngs_pa %g, poisson %g, density_kg_m3 %g, dx_m %g, per_axis %d or frame_dt_s %g "
+                    "is not finite or out of range", nm, m->youngs_pa, m->poisson, m->density_kg_m3, m->dx_m, m->per_axis,
+                    m->frame_dt_s);
+        return PN_ERROR_FORMAT;
+    }
+    if (m->cells[0] == 0 && m->cells[1] == 0 && m->cells[2] == 0) { /* no reference domain */
+        if (m->occupied || m->occupied_count) {
+            pn__rom_msg(why, cap, "model %s: occupied is set (occupied_count %lu) but cells is 0 x 0 x 0", nm,
+                        (unsigned long)m->occupied_count);
+            return PN_ERROR_FORMAT;
+        }
+        return PN_OK;
+    }
+    for (i = 0; i < 3; ++i)
+        if (m->cells[i] < 1 || m->cells[i] > (i < d ? PN_ROM_MAX_CELLS : 1)) {
+            pn__rom_msg(why, cap, "model %s: cells[%d] = %d outside 1 .. %d", nm, i, m->cells[i], i < d ? PN_ROM_MAX_CELLS : 1);
+            return PN_ERROR_DIMENSION;
+        }
+    for (i = 0; i < 3; ++i) cells *= (unsigned long long)m->cells[i];
+    if (cells > PN__ROM_MAX_OCCUPANCY) {
+        pn__rom_msg(why, cap, "model %s: cells %d x %d x %d: more than %llu occupancy cells", nm, m->cells[0], m->cells[1],
+                    m->cells[2], PN__ROM_MAX_OCCUPANCY);
+        return PN_ERROR_DIMENSION;
+    }
+    if (!m->occupied || (unsigned long long)m->occupied_count != cells) {
+        pn__rom_msg(why, cap, "model %s: occupied_count = %lu, but cells %d x %d x %d needs %llu bytes%s", nm,
+                    (unsigned long)m->occupied_count, m->cells[0], m->cells[1], m->cells[2], cells,
+                    m->occupied ? "" : " (occupied is NULL)");
+        return PN_ERROR_FORMAT;
+    }
+    if (!pn__rom_finite(m->cell_m) || !(m->cell_m > 0) || !pn__rom_all_finite((size_t)d, m->origin_m)) {
+        pn__rom_msg(why, cap, "model %s: cell_m = %g must be finite and > 0, origin_m finite", nm, m->cell_m);
+        return PN_ERROR_FORMAT;
+    }
+    for (i = 0; i < d; ++i) /* the domain's far corner within the range of the grid keys */
+        if (!(fabs(m->origin_m[i]) + m->cell_m * m->cells[i] < 1e6)) {
+            pn__rom_msg(why, cap, "model %s: origin_m[%d] + cells x cell_m is beyond 1e6 m", nm, i);
+            return PN_ERROR_FORMAT;
+        }
+    return PN_OK;
+}
+
 PN__DEF pn_result pn_rom_model_check(const pn_rom_model *m, char *why, size_t cap) {
-    int l, i, d;
+    int l, i, d, K;
+    const char *nm;
+    pn_result r;
     if (!m) {
         pn__rom_msg(why, cap, "model is NULL");
         return PN_ERROR_INVALID_ARGUMENT;
     }
+    nm = pn__rom_name(m);
     if (m->format_version != PN_ROM_FORMAT_VERSION) {
-        pn__rom_msg(why, cap, "model %s: format_version %d, this plastinet_rom.h reads %d (regenerate it)",
-                    m->name ? m->name : "?", m->format_version, PN_ROM_FORMAT_VERSION);
+        pn__rom_msg(why, cap, "model %s: format_version %d, this plastinet_rom.h reads %d (regenerate it, or convert it with "
+                    "gen/upgrade_rom_format.py)", nm, m->format_version, PN_ROM_FORMAT_VERSION);
         return PN_ERROR_FORMAT;
     }
-    d = m->dim;
+    d = m->dim, K = m->latent;
     if (d != 2 && d != 3) {
-        pn__rom_msg(why, cap, "model %s: dim %d is not 2 or 3", m->name ? m->name : "?", d);
+        pn__rom_msg(why, cap, "model %s: dim %d is not 2 or 3", nm, d);
         return PN_ERROR_DIMENSION;
     }
-    if (m->activation == PN_ROM_AFFINE) {
-        if (m->latent != d + d * d) {
-            pn__rom_msg(why, cap, "affine model: latent %d must be dim + dim^2 = %d", m->latent, d + d * d);
-            return PN_ERROR_DIMENSION;
-        }
-        return PN_OK;
-    }
-    if (m->activation != PN_ROM_ELU) {
-        pn__rom_msg(why, cap, "model %s: activation %d is not PN_ROM_ELU or PN_ROM_AFFINE", m->name ? m->name : "?",
-                    m->activation);
+    if (m->activation != PN_ROM_ELU && m->activation != PN_ROM_AFFINE) {
+        pn__rom_msg(why, cap, "model %s: activation %d is not PN_ROM_ELU or PN_ROM_AFFINE", nm, m->activation);
         return PN_ERROR_FORMAT;
     }
-    if (m->latent < 1 || m->latent > PN_ROM_MAX_LATENT || m->n_layers < 2 || m->n_layers > PN_ROM_MAX_LAYERS || !m->width ||
-        !m->weight || !m->bias) {
-        pn__rom_msg(why, cap, "model %s: latent %d (1 .. %d) or n_layers %d (2 .. %d) out of range, or no weights",
-                    m->name ? m->name : "?", m->latent, PN_ROM_MAX_LATENT, m->n_layers, PN_ROM_MAX_LAYERS);
+    if (m->activation == PN_ROM_AFFINE ? K != d + d * d : K < 1 || K > PN_ROM_MAX_LATENT) {
+        pn__rom_msg(why, cap, "model %s: latent %d must be %s", nm, K,
+                    m->activation == PN_ROM_AFFINE ? "dim + dim^2 (affine)" : "1 .. PN_ROM_MAX_LATENT = 32");
         return PN_ERROR_DIMENSION;
     }
-    if (m->width[0] != d + m->latent || m->width[m->n_layers] != d) {
-        pn__rom_msg(why, cap, "model %s: width[0] = %d must be dim + latent = %d and width[%d] = %d must be dim",
-                    m->name ? m->name : "?", m->width[0], d + m->latent, m->n_layers, m->width[m->n_layers]);
+    if ((m->latent_rest ? m->latent_rest_count != K : m->latent_rest_count != 0) ||
+        (m->latent_std ? m->latent_std_count != K : m->latent_std_count != 0)) {
+        pn__rom_msg(why, cap, "model %s: latent_rest_count %d and latent_std_count %d must be latent = %d (0 for a NULL array)",
+                    nm, m->latent_rest_count, m->latent_std_count, K);
+        return PN_ERROR_FORMAT;
+    }
+    if ((m->latent_rest && !pn__rom_all_finite((size_t)K, m->latent_rest)) ||
+        (m->latent_std && !pn__rom_all_finite((size_t)K, m->latent_std))) {
+        pn__rom_msg(why, cap, "model %s: latent_rest or latent_std is not finite", nm);
+        return PN_ERROR_FORMAT;
+    }
+    if (m->latent_std)
+        for (i = 0; i < K; ++i)
+            if (m->latent_std[i] < 0) {
+                pn__rom_msg(why, cap, "model %s: latent_std[%d] = %g < 0", nm, i, m->latent_std[i]);
+                return PN_ERROR_FORMAT;
+            }
+    if ((r = pn__rom_model_common(m, why, cap)) != PN_OK) return r;
+    if (m->activation == PN_ROM_AFFINE) return PN_OK;
+    if (m->n_layers < 2 || m->n_layers > PN_ROM_MAX_LAYERS || !m->width || !m->weight || !m->bias) {
+        pn__rom_msg(why, cap, "model %s: n_layers %d outside 2 .. %d, or width, weight or bias is NULL", nm, m->n_layers,
+                    PN_ROM_MAX_LAYERS);
+        return PN_ERROR_DIMENSION;
+    }
+    if (m->width_count != m->n_layers + 1) {
+        pn__rom_msg(why, cap, "model %s: width_count = %d, but n_layers %d needs %d widths", nm, m->width_count, m->n_layers,
+                    m->n_layers + 1);
+        return PN_ERROR_FORMAT;
+    }
+    if (m->width[0] != d + K || m->width[m->n_layers] != d) {
+        pn__rom_msg(why, cap, "model %s: width[0] = %d must be dim + latent = %d and width[%d] = %d must be dim", nm, m->width[0],
+                    d + K, m->n_layers, m->width[m->n_layers]);
         return PN_ERROR_DIMENSION;
     }
     for (l = 1; l < m->n_layers; ++l)
         if (m->width[l] < 1 || m->width[l] > PN_ROM_MAX_WIDTH) {
-            pn__rom_msg(why, cap, "model %s: width[%d] = %d outside 1 .. %d", m->name ? m->name : "?", l, m->width[l],
-                        PN_ROM_MAX_WIDTH);
+            pn__rom_msg(why, cap, "model %s: width[%d] = %d outside 1 .. %d", nm, l, m->width[l], PN_ROM_MAX_WIDTH);
             return PN_ERROR_DIMENSION;
         }
-    for (l = 0; l < m->n_layers; ++l)
-        if (!m->weight[l] || !m->bias[l] || !pn__rom_all_finite((size_t)m->width[l] * (size_t)m->width[l + 1], m->weight[l]) ||
-            !pn__rom_all_finite((size_t)m->width[l + 1], m->bias[l])) {
-            pn__rom_msg(why, cap, "model %s: layer %d has missing or non-finite weights", m->name ? m->name : "?", l);
-            return PN_ERROR_NONFINITE;
+    for (l = 0; l < PN_ROM_MAX_LAYERS; ++l) {
+        int wc = l < m->n_layers ? m->width[l] * m->width[l + 1] : 0, bc = l < m->n_layers ? m->width[l + 1] : 0;
+        if (m->weight_count[l] != wc || m->bias_count[l] != bc) {
+            pn__rom_msg(why, cap, "model %s: weight_count[%d] = %d and bias_count[%d] = %d, but the widths need %d and %d", nm, l,
+                        m->weight_count[l], l, m->bias_count[l], wc, bc);
+            return PN_ERROR_FORMAT;
         }
-    for (i = 0; i < d; ++i)
-        if (!pn__rom_finite(m->in_lo[i]) || !pn__rom_finite(m->in_hi[i]) || !(m->in_hi[i] > m->in_lo[i]) ||
-            !pn__rom_finite(m->out_mean[i]) || !pn__rom_finite(m->out_std[i]) || !(m->out_std[i] > 0)) {
-            pn__rom_msg(why, cap, "model %s: in_lo/in_hi or out_mean/out_std[%d] invalid (need in_hi > in_lo, out_std > 0)",
-                        m->name ? m->name : "?", i);
-            return PN_ERROR_INVALID_ARGUMENT;
-        }
-    if (m->cells[0] > 0 && (!m->occupied || !(m->cell_m > 0) || m->cells[1] < 1 || m->cells[2] < 1)) {
-        pn__rom_msg(why, cap, "model %s: an occupancy grid needs occupied, cell_m > 0 and cells >= 1", m->name ? m->name : "?");
-        return PN_ERROR_INVALID_ARGUMENT;
     }
+    for (l = 0; l < m->n_layers; ++l)
+        if (!m->weight[l] || !m->bias[l] || !pn__rom_all_finite((size_t)m->weight_count[l], m->weight[l]) ||
+            !pn__rom_all_finite((size_t)m->bias_count[l], m->bias[l])) {
+            pn__rom_msg(why, cap, "model %s: layer %d has missing or non-finite weights (weight[%d], bias[%d])", nm, l, l, l);
+            return PN_ERROR_FORMAT;
+        }
     return PN_OK;
 }
 
@@ -467,25 +581,30 @@ PN__DEF int pn_rom_inside(const pn_rom_model *m, const double *X) {
     return m->occupied[((size_t)c[0] * (size_t)m->cells[1] + (size_t)c[1]) * (size_t)m->cells[2] + (size_t)c[2]] != 0;
 }
 
+/* a x b, or SIZE_MAX when it would not fit in a size_t */
+static size_t pn__rom_mul(size_t a, size_t b) { return a && b > (size_t)-1 / a ? (size_t)-1 : a * b; }
+
 PN__DEF size_t pn_rom_lattice(const pn_rom_model *m, int refine, double *X, size_t cap) {
-    size_t n = 0;
+    size_t n = 0, per = 1, occ = 0;
     long c[3], k[3];
     int d = m->dim, r = refine > 1 ? refine : 1, i;
     double h = m->cell_m / r;
     if (m->cells[0] <= 0) return 0;
+    for (i = 0; i < d; ++i) per = pn__rom_mul(per, (size_t)r);
     for (c[0] = 0; c[0] < m->cells[0]; ++c[0])
         for (c[1] = 0; c[1] < m->cells[1]; ++c[1])
             for (c[2] = 0; c[2] < (d == 3 ? m->cells[2] : 1); ++c[2]) {
                 if (!m->occupied[((size_t)c[0] * (size_t)m->cells[1] + (size_t)c[1]) * (size_t)m->cells[2] + (size_t)c[2]])
                     continue;
+                occ++;
+                if (!X || n >= cap) continue; /* counted in closed form below */
                 for (k[0] = 0; k[0] < r; ++k[0])
                     for (k[1] = 0; k[1] < r; ++k[1])
-                        for (k[2] = 0; k[2] < (d == 3 ? r : 1); ++k[2], ++n)
-                            if (X && n < cap)
-                                for (i = 0; i < d; ++i)
-                                    X[n * (size_t)d + (size_t)i] = m->origin_m[i] + (double)c[i] * m->cell_m + ((double)k[i] + 0.5) * h;
+                        for (k[2] = 0; k[2] < (d == 3 ? r : 1) && n < cap; ++k[2], ++n)
+                            for (i = 0; i < d; ++i)
+                                X[n * (size_t)d + (size_t)i] = m->origin_m[i] + (double)c[i] * m->cell_m + ((double)k[i] + 0.5) * h;
             }
-    return n;
+    return pn__rom_mul(occ, per);
 }
 
 /* ======================================================================================
@@ -734,11 +853,18 @@ static pn_result pn__rom_fail(pn_rom_world *w, pn_result r, const char *fmt, ...
     return r;
 }
 
+/* the const calls' failure message: the world's error text is the one thing they write */
+#define PN__ROM_CFAIL(w, r, ...) pn__rom_fail((pn_rom_world *)(w), r, __VA_ARGS__)
+
 PN__DEF const char *pn_rom_error(const pn_rom_world *w) { return w ? w->error : "no world"; }
 
 static void *pn__rom_alloc(const pn_rom_world *w, size_t count, size_t size, int *fail) {
     void *p;
     if (*fail) return NULL;
+    if (size && count > ((size_t)-1 - 1) / size) { /* count x size would wrap */
+        *fail = 1;
+        return NULL;
+    }
     p = pn_alloc(&w->desc.allocator, count * size + 1);
     if (!p) *fail = 1;
     else memset(p, 0, count * size + 1);
@@ -804,38 +930,68 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
         pn__rom_msg(why, cap, "pn_rom_desc.allocator: set both alloc and free, or neither");
         return PN_ERROR_INVALID_ARGUMENT;
     }
-    if (d.refine <= 0) d.refine = 1;
-    if (!(d.dx_m > 0)) d.dx_m = m->dx_m;
-    if (!(d.youngs_pa > 0)) d.youngs_pa = m->youngs_pa;
-    if (!(d.poisson != 0)) d.poisson = m->poisson;
-    if (!(d.density_kg_m3 > 0)) d.density_kg_m3 = m->density_kg_m3;
-    if (d.samples == 0) d.samples = 50;
-    if (d.boundary_samples <= 0) d.boundary_samples = 5;
-    if (d.quad_per_axis <= 0) d.quad_per_axis = 2;
-    if (d.seed == 0) d.seed = 1;
-    if (d.gn_max <= 0) d.gn_max = 10;
-    if (d.parallel_min <= 0) d.parallel_min = 256;
-    if (d.cubature_m == 0) d.cubature_m = 2 * d.dx_m;
-    if (d.newton_max <= 0) d.newton_max = 20;
-    if (d.newton_tol == 0) d.newton_tol = 1e-3;
-    if (d.drive_weight == 0) d.drive_weight = 100;
-    bad = !pn__rom_finite(d.dx_m) || !(d.dx_m > 0) ? "dx_m (and the model's dx_m) must be > 0"
+    /* every numeric field: zero means the default; NaN, infinity, negative or out of range
+       is refused, naming the field (as pn_mpm_create) */
+    bad = !pn__rom_finite(d.dx_m) || d.dx_m < 0 ? "dx_m must be finite and >= 0 (0: the model's)"
+          : !pn__rom_finite(d.youngs_pa) || d.youngs_pa < 0 ? "youngs_pa must be finite and >= 0 (0: the model's)"
+          : !pn__rom_finite(d.poisson) ? "poisson must be finite (0: the model's)"
+          : !pn__rom_finite(d.density_kg_m3) || d.density_kg_m3 < 0 ? "density_kg_m3 must be finite and >= 0 (0: the model's)"
+          : !pn__rom_finite(d.point_volume_m3) || d.point_volume_m3 < 0 ? "point_volume_m3 must be finite and >= 0"
           : !pn__rom_all_finite(3, d.gravity) ? "gravity is not finite"
-          : d.quadrature != PN_ROM_EULERIAN && d.quadrature != PN_ROM_LAGRANGIAN ? "quadrature is not a pn_rom_quadrature"
-          : d.projection != PN_ROM_LINEAR && d.projection != PN_ROM_NONLINEAR ? "projection is not a pn_rom_projection"
-          : d.transfer != PN_ROM_APIC && d.transfer != PN_ROM_PIC ? "transfer is not a pn_rom_transfer"
-          : (int)d.integrator < PN_ROM_EXPLICIT || (int)d.integrator > PN_ROM_MIDPOINT ? "integrator is not a pn_rom_integrator"
-          : !pn__rom_finite(d.cubature_m) || !(d.cubature_m > 0) ? "cubature_m must be > 0 (0: 2 dx_m)"
-          : !pn__rom_finite(d.drive_weight) || !(d.drive_weight > 0) ? "drive_weight must be > 0 (0: 100)"
-          : !pn__rom_finite(d.newton_tol) || !(d.newton_tol > 0) ? "newton_tol must be > 0 (0: 1e-3)"
-          : d.quad_per_axis > 8 ? "quad_per_axis is more than 8"
-          : d.points && (d.n_points == 0 || !pn__rom_all_finite(d.n_points * (size_t)dim, d.points)) ? "points: none, or not finite"
-          : !d.points && m->cells[0] <= 0 ? "points is NULL and the model has no reference domain to fill"
-          : d.points && d.point_volume_m3 < 0 ? "point_volume_m3 < 0"
+          : d.boundary_samples < 0 ? "boundary_samples must be >= 0 (0: 5)"
+          : d.quad_per_axis < 0 || d.quad_per_axis > 8 ? "quad_per_axis must be 0 .. 8 (0: 2)"
+          : d.gn_max < 0 || d.gn_max > 1000 ? "gn_max must be 0 .. 1000 (0: 10)"
+          : d.parallel_min < 0 ? "parallel_min must be >= 0 (0: 256)"
+          : !pn__rom_finite(d.cubature_m) || d.cubature_m < 0 ? "cubature_m must be finite and >= 0 (0: 2 dx_m)"
+          : d.newton_max < 0 || d.newton_max > 1000 ? "newton_max must be 0 .. 1000 (0: 20)"
+          : !pn__rom_finite(d.newton_tol) || d.newton_tol < 0 ? "newton_tol must be finite and >= 0 (0: 1e-3)"
+          : !pn__rom_finite(d.drive_weight) || d.drive_weight < 0 ? "drive_weight must be finite and >= 0 (0: 100)"
+          : !d.points && d.n_points ? "n_points is set but points is NULL"
           : NULL;
     if (bad) {
         pn__rom_msg(why, cap, "pn_rom_desc.%s", bad);
         return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if (d.refine < 0 || d.refine > PN_ROM_MAX_REFINE) {
+        pn__rom_msg(why, cap, "pn_rom_desc.refine = %d must be 0 .. PN_ROM_MAX_REFINE = %d (0: 1)", d.refine, PN_ROM_MAX_REFINE);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    if (d.refine == 0) d.refine = 1;
+    if (d.dx_m == 0) d.dx_m = m->dx_m;
+    if (d.youngs_pa == 0) d.youngs_pa = m->youngs_pa;
+    if (d.poisson == 0) d.poisson = m->poisson;
+    if (d.density_kg_m3 == 0) d.density_kg_m3 = m->density_kg_m3;
+    if (d.samples == 0) d.samples = 50;
+    if (d.boundary_samples == 0) d.boundary_samples = 5;
+    if (d.quad_per_axis == 0) d.quad_per_axis = 2;
+    if (d.seed == 0) d.seed = 1;
+    if (d.gn_max == 0) d.gn_max = 10;
+    if (d.parallel_min == 0) d.parallel_min = 256;
+    if (d.cubature_m == 0) d.cubature_m = 2 * d.dx_m;
+    if (d.newton_max == 0) d.newton_max = 20;
+    if (d.newton_tol == 0) d.newton_tol = 1e-3;
+    if (d.drive_weight == 0) d.drive_weight = 100;
+    bad = !(d.dx_m > 0) ? "dx_m (and the model's dx_m) must be > 0"
+          : !(d.youngs_pa > 0) ? "youngs_pa (and the model's youngs_pa) must be > 0"
+          : !(d.density_kg_m3 > 0) ? "density_kg_m3 (and the model's density_kg_m3) must be > 0"
+          : d.quadrature != PN_ROM_EULERIAN && d.quadrature != PN_ROM_LAGRANGIAN ? "quadrature is not a pn_rom_quadrature"
+          : d.projection != PN_ROM_LINEAR && d.projection != PN_ROM_NONLINEAR ? "projection is not a pn_rom_projection"
+          : d.transfer != PN_ROM_APIC && d.transfer != PN_ROM_PIC ? "transfer is not a pn_rom_transfer"
+          : (int)d.integrator < PN_ROM_EXPLICIT || (int)d.integrator > PN_ROM_MIDPOINT ? "integrator is not a pn_rom_integrator"
+          : d.points && (d.n_points == 0 || d.n_points > PN_ROM_MAX_POINTS) ? "points: n_points must be 1 .. PN_ROM_MAX_POINTS"
+          : d.points && !pn__rom_all_finite(d.n_points * (size_t)dim, d.points) ? "points are not all finite"
+          : !d.points && m->cells[0] <= 0 ? "points is NULL and the model has no reference domain to fill"
+          : NULL;
+    if (bad) {
+        pn__rom_msg(why, cap, "pn_rom_desc.%s", bad);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
+    n = d.points ? d.n_points : pn_rom_lattice(m, d.refine, NULL, 0);
+    if (n > PN_ROM_MAX_POINTS) { /* counted in closed form: nothing allocated yet */
+        pn__rom_msg(why, cap, "pn_rom_desc.refine = %d: the model's lattice has %.4g points, more than PN_ROM_MAX_POINTS = %lu "
+                    "(draw finer lattices with pn_rom_lattice and pn_rom_map instead)", d.refine, (double)n,
+                    (unsigned long)PN_ROM_MAX_POINTS);
+        return PN_ERROR_CAPACITY;
     }
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_FIXED_COROTATED;
@@ -856,7 +1012,6 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
         pn_rom_destroy(w);
         return PN_ERROR_INVALID_PARAMETER;
     }
-    n = d.points ? d.n_points : pn_rom_lattice(m, d.refine, NULL, 0);
     w->n = n;
     w->X = (double *)pn__rom_alloc(w, n * (size_t)dim, sizeof(double), &fail);
     w->mass = (double *)pn__rom_alloc(w, n, sizeof(double), &fail);
@@ -895,6 +1050,14 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
             return PN_ERROR_INVALID_ARGUMENT;
         }
         for (p = 0; p < n; ++p) w->vol[p] = v, w->mass[p] = v * d.density_kg_m3, w->perm[p] = p;
+    }
+    { /* the body's size: the diagonal of its reference points' box */
+        double lo[3], hi[3], s2 = 0;
+        for (i = 0; i < dim; ++i) lo[i] = hi[i] = w->X[i];
+        for (p = 0; p < n; ++p)
+            for (i = 0; i < dim; ++i) lo[i] = fmin(lo[i], w->X[p * (size_t)dim + (size_t)i]), hi[i] = fmax(hi[i], w->X[p * (size_t)dim + (size_t)i]);
+        for (i = 0; i < dim; ++i) s2 += (hi[i] - lo[i]) * (hi[i] - lo[i]);
+        w->size_m = fmax(sqrt(s2), d.dx_m);
     }
     for (i = 0; i < 3; ++i) {
         w->xs[i] = 2 / (m->in_hi[i] - m->in_lo[i]);
@@ -1032,6 +1195,7 @@ PN__DEF pn_result pn_rom_set_latent(pn_rom_world *w, const double *xhat, const d
 static int pn__rom_grow(pn_rom_world *w, void **a, size_t have, size_t n, size_t size) {
     void *b;
     if (n <= have && *a) return 1;
+    if (size && n > ((size_t)-1 - 1) / size) return 0;
     b = pn_alloc(&w->desc.allocator, n * size + 1);
     if (!b) return 0;
     memset(b, 0, n * size + 1);
@@ -1550,6 +1714,47 @@ static void pn__rom_driven(const pn_rom_world *w, int a, const double *X, double
 
 static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *st);
 
+/* the material's P-wave speed sqrt((lambda + 2 mu) / rho) at rest */
+static double pn__rom_wave_speed(const pn_rom_world *w) {
+    return sqrt(((double)w->material.lambda + 2 * (double)w->material.mu) / w->desc.density_kg_m3);
+}
+
+/* the largest speed G vhat at up to 256 of the world's points, evenly strided (no allocation) */
+static double pn__rom_vmax(const pn_rom_world *w) {
+    enum { PTS = 256, B = 16 };
+    int d = w->dim, K = w->latent, i, j;
+    size_t stride = w->n > PTS ? w->n / PTS : 1, p = 0;
+    double vmax = 0;
+    while (p < w->n) { /* G vhat at every stride-th point, B at a time */
+        double X[3 * B], G[3 * PN_ROM_MAX_LATENT * B];
+        size_t nb = 0, b;
+        for (; nb < B && p < w->n; ++nb, p += stride) memcpy(X + nb * (size_t)d, w->X + p * (size_t)d, sizeof(double) * (size_t)d);
+        pn__rom_map(w, w->xhat, nb, X, NULL, NULL, G);
+        for (b = 0; b < nb; ++b) {
+            double v2 = 0;
+            for (i = 0; i < d; ++i) {
+                double v = 0;
+                for (j = 0; j < K; ++j) v += G[b * (size_t)(d * K) + (size_t)(i * K + j)] * w->vhat[j];
+                v2 += v * v;
+            }
+            vmax = v2 == v2 ? fmax(vmax, sqrt(v2)) : HUGE_VAL;
+        }
+    }
+    return vmax;
+}
+
+PN__DEF pn_result pn_rom_stable_dt(const pn_rom_world *w, double *dt_s) {
+    double vmax, c = pn__rom_wave_speed(w), dt;
+    if (!dt_s) return PN__ROM_CFAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_stable_dt: dt_s is NULL");
+    vmax = pn__rom_vmax(w);
+    dt = PN_ROM_CFL * w->desc.dx_m / (c + vmax);
+    if (!pn__rom_finite(dt) || !(dt > 0))
+        return PN__ROM_CFAIL(w, PN_ERROR_NONFINITE, "pn_rom_stable_dt: the wave speed %g m/s or the body's speed %g m/s is not "
+                             "finite", c, vmax);
+    *dt_s = dt;
+    return PN_OK;
+}
+
 PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     int d = w->dim, K = w->latent, i, j, a;
     size_t ns, nq = 0, nn, q, s, failed = 0, dd = (size_t)(d * d), dK = (size_t)(d * K);
@@ -1565,6 +1770,14 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
         r = pn__rom_step_implicit(w, dt, &st);
         if (r == PN_OK && stats) *stats = st;
         return r;
+    }
+    { /* the explicit step's bound, before anything is touched */
+        double bound = 0;
+        if ((r = pn_rom_stable_dt(w, &bound)) != PN_OK) return r;
+        if (dt > bound)
+            return pn__rom_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_rom_step: dt_s = %g s is above the explicit bound pn_rom_stable_dt "
+                                "= %g s (grid dx_m %g m, wave speed %g m/s): take %.0f substeps, or an implicit integrator",
+                                dt, bound, w->desc.dx_m, pn__rom_wave_speed(w), ceil(dt / bound));
     }
     for (i = 0; i < d; ++i) g[i] = w->desc.gravity[i];
     /* 1. samples and their kinematics at the current latent */
@@ -1981,6 +2194,25 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
     double z[PN_ROM_MAX_LATENT], grad[PN_ROM_MAX_LATENT], H[PN_ROM_MAX_LATENT * PN_ROM_MAX_LATENT], E = 0, g[3] = {0, 0, 0};
     double t = w->time_s, l2 = w->desc.cubature_m * w->desc.cubature_m, E_pa = w->desc.youngs_pa, beta, tau, td;
     pn_result r;
+    { /* the free flight x_n + h v_n + h^2 (g + loads), before anything is touched: beyond
+         PN__ROM_MAX_FLIGHT body sizes no learned map follows it, and far beyond it the
+         incremental potential is rounding (its inertia target swamps every position) */
+        double acc = 0, v = pn__rom_vmax(w), flight;
+        for (i = 0; i < d; ++i) acc += w->desc.gravity[i] * w->desc.gravity[i];
+        acc = sqrt(acc);
+        for (a = 0; a < w->n_loads; ++a)
+            if (w->loads[a].on) {
+                double l2 = 0;
+                for (i = 0; i < d; ++i) l2 += w->loads[a].acc[i] * w->loads[a].acc[i];
+                acc += sqrt(l2);
+            }
+        flight = h * v + h * h * acc;
+        if (!(flight <= PN__ROM_MAX_FLIGHT * w->size_m))
+            return pn__rom_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_rom_step: dt_s = %g s would carry free material %.3g m in one step "
+                                "(speed %.3g m/s, acceleration %.3g m/s^2), more than %g times the body's size %.3g m: take "
+                                "steps of at most %.3g s", h, flight, v, acc, PN__ROM_MAX_FLIGHT, w->size_m,
+                                v > 0 || acc > 0 ? 2 * PN__ROM_MAX_FLIGHT * w->size_m / (v + sqrt(v * v + 4 * acc * PN__ROM_MAX_FLIGHT * w->size_m)) : h);
+    }
     if (w->cub_dirty && (r = pn__rom_cubature(w)) != PN_OK) return pn__rom_fail(w, r, "pn_rom_step: out of memory (cubature)");
     C = w->n_c;
     if (mode == PN_ROM_BDF2 && (w->cvel_ok < 2 || h != w->h_prev)) mode = PN_ROM_IMPLICIT; /* BDF2 starts as backward Euler */
@@ -2196,13 +2428,20 @@ static void pn__rom_render(const pn_rom_world *w, size_t n, const float *Xf, con
 }
 
 PN__DEF pn_result pn_rom_positions(const pn_rom_world *w, size_t first, size_t n, float *x, float *F) {
-    if (!x || first > w->n || n > w->n - first) return PN_ERROR_INVALID_ARGUMENT;
+    if (!x || first > w->n || n > w->n - first)
+        return PN__ROM_CFAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_positions: x is NULL, or points %lu .. +%lu beyond the "
+                             "world's %lu", (unsigned long)first, (unsigned long)n, (unsigned long)w->n);
     pn__rom_render(w, n, NULL, w->X + first * (size_t)w->dim, x, F);
     return PN_OK;
 }
 
 PN__DEF pn_result pn_rom_map(const pn_rom_world *w, size_t n, const float *X, float *x, float *F) {
-    if (!X || !x) return PN_ERROR_INVALID_ARGUMENT;
+    size_t p;
+    if (!X || !x) return PN__ROM_CFAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_map: X or x is NULL");
+    for (p = 0; p < n * (size_t)w->dim; ++p)
+        if (!pn__rom_finite((double)X[p]))
+            return PN__ROM_CFAIL(w, PN_ERROR_NONFINITE, "pn_rom_map: reference point %lu (X[%lu]) is not finite",
+                                 (unsigned long)(p / (size_t)w->dim), (unsigned long)p);
     pn__rom_render(w, n, X, NULL, x, F);
     return PN_OK;
 }

@@ -415,17 +415,20 @@ PN_RS_UNUSED static int pn_rs_rom_events(pn_rom_world *w, const pn_rs_instance *
 #ifdef PN_RENDER_H
 /* A picture of n reduced-order points x (z up in the scenes, y up in the renderer) coloured by
    their displacement from X, times scale (the legend's unit: 100 for cm, 1000 for mm), in the
-   box lo .. hi (scene coordinates), written to path as PNG. 1 on success. */
-PN_RS_UNUSED static int pn_rs_draw(const char *path, size_t n, const float *x, const double *X, double spacing, double t,
-                                   const double *lo, const double *hi, double floor_z, const char *field, double scale,
-                                   double field_hi, const char *title) {
+   box lo .. hi (scene coordinates), written to path as PNG (pn_rs_draw) or into an RGB buffer
+   (pn_rs_render). 1 on success. */
+#define PN_RS_DRAW_W 960
+#define PN_RS_DRAW_H 540
+/* the same picture into rgb (PN_RS_DRAW_W x PN_RS_DRAW_H x 3), e.g. for an animated PNG */
+PN_RS_UNUSED static int pn_rs_render(unsigned char *rgb, size_t n, const float *x, const double *X, double spacing, double t,
+                                     const double *lo, const double *hi, double floor_z, const char *field, double scale,
+                                     double field_hi, const char *title) {
     pn_render_desc d;
     pn_real *xr = (pn_real *)malloc(sizeof(pn_real) * 3 * n), *disp = (pn_real *)malloc(sizeof(pn_real) * n);
-    unsigned char *rgb = (unsigned char *)malloc(960 * 540 * 3);
     size_t p;
     int ok;
     if (!xr || !disp || !rgb) {
-        free(xr), free(disp), free(rgb);
+        free(xr), free(disp);
         return 0;
     }
     for (p = 0; p < n; ++p) {
@@ -442,8 +445,18 @@ PN_RS_UNUSED static int pn_rs_draw(const char *path, size_t n, const float *x, c
     d.field_name = field, d.field_lo = 0, d.field_hi = field_hi;
     d.time_s = t, d.scale_bar = 1;
     d.title = title;
-    ok = pn_render_particles(&d, n, xr, disp, NULL, rgb) && pn_png_write(path, 960, 540, rgb);
-    free(xr), free(disp), free(rgb);
+    ok = pn_render_particles(&d, n, xr, disp, NULL, rgb);
+    free(xr), free(disp);
+    return ok;
+}
+
+PN_RS_UNUSED static int pn_rs_draw(const char *path, size_t n, const float *x, const double *X, double spacing, double t,
+                                   const double *lo, const double *hi, double floor_z, const char *field, double scale,
+                                   double field_hi, const char *title) {
+    unsigned char *rgb = (unsigned char *)malloc(PN_RS_DRAW_W * PN_RS_DRAW_H * 3);
+    int ok = rgb && pn_rs_render(rgb, n, x, X, spacing, t, lo, hi, floor_z, field, scale, field_hi, title) &&
+             pn_png_write(path, PN_RS_DRAW_W, PN_RS_DRAW_H, rgb);
+    free(rgb);
     return ok;
 }
 #endif

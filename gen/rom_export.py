@@ -30,7 +30,7 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 import rom_train as rt  # noqa: E402
 
-FORMAT_VERSION = 1          # PN_ROM_FORMAT_VERSION
+FORMAT_VERSION = 2          # PN_ROM_FORMAT_VERSION
 TRAIN_EVAL_POINTS = 4096    # training instances with more points: measured on the encoder subset
 CHUNK = 65536               # points per evaluation call
 
@@ -282,13 +282,15 @@ def export(a):
     o.append("#ifdef __cplusplus\n}\n#endif\n#endif /* PN_ROM_MODEL_%s_H */\n\n" % up)
     o.append("#if defined(PLASTINET_IMPLEMENTATION) && !defined(PN_ROM_MODEL_%s_IMPLEMENTATION_DONE)\n" % up)
     o.append("#define PN_ROM_MODEL_%s_IMPLEMENTATION_DONE\n" % up)
-    wn, bn = [], []
+    wn, bn, wcount, bcount = [], [], [], []
     for i, layer in enumerate(lin):
         w = layer.weight.detach().double().reshape(-1).tolist()
         b = layer.bias.detach().double().reshape(-1).tolist()
         o.append(array("double", "%s_w%d" % (pre, i), w, g17, 4))
         o.append(array("double", "%s_b%d" % (pre, i), b, g17, 4))
         wn.append("%s_w%d" % (pre, i))
+        wcount.append(len(w))
+        bcount.append(len(b))
         bn.append("%s_b%d" % (pre, i))
     o.append(array("int", pre + "_width", widths, str, 16))
     o.append("static const double *const %s_weight[%d] = {%s};\n" % (pre, len(wn), ", ".join(wn)))
@@ -307,6 +309,11 @@ def export(a):
         "{%s}" % ", ".join(g17(v) for v in origin), "{%s}" % ", ".join("%d" % v for v in cells), pre + "_occupied",
         g17(m["youngs_pa"]), g17(m["poisson"]), g17(m["density_kg_m3"]), g17(m["dx_m"]), "%d" % int(m["per_axis"]),
         g17(frame_dt),
+        # format 2: the arrays' lengths (plastinet_rom.h checks each against the sizes)
+        "%d" % len(widths),
+        "{%s}" % ", ".join(str(v) for v in wcount + [0] * (8 - len(wcount))),
+        "{%s}" % ", ".join(str(v) for v in bcount + [0] * (8 - len(bcount))),
+        "%d" % len(lat_rest.tolist()), "%d" % len(lat_std.tolist()), "%d" % len(occ.tolist()),
     ]
     o.append("static const pn_rom_model %s_model = {\n    %s};\n" % (pre, ",\n    ".join(fields)))
     o.append("PN__DEF const pn_rom_model *pn_rom_model_%s(void) { return &%s_model; }\n" % (ident, pre))

@@ -49,6 +49,8 @@ static void t_rom_random_model(t_rom_net *t, int d, int K, unsigned long long se
     t->m.activation = PN_ROM_ELU;
     for (i = 0; i < 3; ++i) t->m.in_lo[i] = 0.02, t->m.in_hi[i] = 0.06, t->m.out_mean[i] = 0.04, t->m.out_std[i] = 0.02;
     t->m.latent_rest = t->rest, t->m.latent_std = t->sd;
+    t->m.latent_rest_count = t->m.latent_std_count = K, t->m.width_count = 5;
+    for (l = 0; l < 4; ++l) t->m.weight_count[l] = t->width[l] * t->width[l + 1], t->m.bias_count[l] = t->width[l + 1];
     t->m.youngs_pa = 1e4, t->m.poisson = 0.3, t->m.density_kg_m3 = 1000, t->m.dx_m = 0.004, t->m.per_axis = 2;
     t->m.frame_dt_s = 1.0 / 144;
 }
@@ -391,8 +393,8 @@ static void rom_bad_input(pn_test_ctx *pn__t) {
     PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_DIMENSION);
     PN_CHECK(strstr(why, "width") != NULL);
     t.m.dim = 3;
-    t.W[1][5] = NAN;
-    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_NONFINITE);
+    t.W[1][5] = NAN; /* a malformed model: PN_ERROR_FORMAT, as pn_model_check */
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_FORMAT);
     PN_CHECK(strstr(why, "layer 1") != NULL);
     t.W[1][5] = 0.1;
     desc.quadrature = (pn_rom_quadrature)7;
@@ -660,6 +662,386 @@ static void rom_embed(pn_test_ctx *pn__t) {
     }
 }
 
+
+/* ---- issue 42: hardening ------------------------------------------------------------------ */
+
+/* Everything in a world that a later call reads, serialized into buf (NULL: the size): the
+   struct (its error text left out) and every state array it points to (points, masses,
+   sampling permutation, float weights, drives' point lists, the implicit cubature with its
+   velocity history, the Eulerian inverse-map cache). Step scratch is rewritten before it is
+   read and is left out. */
+static void t_rom_put(unsigned char *buf, size_t *len, const void *ptr, size_t bytes) {
+    if (!ptr) return;
+    if (buf && bytes) memcpy(buf + *len, ptr, bytes);
+    *len += bytes;
+}
+
+static size_t t_rom_state(const pn_rom_world *w, unsigned char *buf) {
+    size_t len = 0, d = (size_t)w->dim;
+    int a;
+    pn_rom_world c = *w;
+    memset(c.error, 0, sizeof c.error);
+    t_rom_put(buf, &len, &c, sizeof c);
+    t_rom_put(buf, &len, w->X, w->n * d * sizeof(double));
+    t_rom_put(buf, &len, w->mass, w->n * sizeof(double));
+    t_rom_put(buf, &len, w->vol, w->n * sizeof(double));
+    t_rom_put(buf, &len, w->perm, w->n * sizeof(size_t));
+    t_rom_put(buf, &len, w->px, w->n * d * sizeof(double));
+    t_rom_put(buf, &len, w->wf, w->wf_off[w->model.activation == PN_ROM_ELU ? w->model.n_layers : 0] * sizeof(float));
+    for (a = 0; a < w->n_drives; ++a) t_rom_put(buf, &len, w->drives[a].pts, w->drives[a].n_pts * sizeof(size_t));
+    t_rom_put(buf, &len, w->cX, w->n_c * d * sizeof(double));
+    t_rom_put(buf, &len, w->cm, w->n_c * sizeof(double));
+    t_rom_put(buf, &len, w->cV, w->n_c * sizeof(double));
+    t_rom_put(buf, &len, w->cvel, w->n_c * d * sizeof(double));
+    t_rom_put(buf, &len, w->cxp, w->n_c * d * sizeof(double));
+    t_rom_put(buf, &len, w->cvp, w->n_c * d * sizeof(double));
+    t_rom_put(buf, &len, w->cv0, w->n_c * d * sizeof(double));
+    t_rom_put(buf, &len, w->cdrv, w->n_c * sizeof(int));
+    t_rom_put(buf, &len, w->cload, w->n_c * sizeof(unsigned));
+    t_rom_put(buf, &len, w->xcX, w->n_xc * d * sizeof(double));
+    t_rom_put(buf, &len, w->xc.key, w->xc.cap * sizeof(unsigned long long));
+    t_rom_put(buf, &len, w->xc.val, w->xc.cap * sizeof(long));
+    t_rom_put(buf, &len, w->xc.used, w->xc.n_used * sizeof(size_t));
+    return len;
+}
+
+/* a serialized copy of w's state (free it) */
+static unsigned char *t_rom_keep(const pn_rom_world *w, size_t *len) {
+    unsigned char *b;
+    *len = t_rom_state(w, NULL);
+    b = (unsigned char *)malloc(*len);
+    if (b) t_rom_state(w, b);
+    return b;
+}
+
+/* w's state is bit for bit the copy kept */
+static int t_rom_same(const pn_rom_world *w, const unsigned char *kept, size_t len) {
+    unsigned char *now;
+    size_t n;
+    int same;
+    if (!kept) return 0;
+    now = t_rom_keep(w, &n);
+    same = now && n == len && memcmp(now, kept, len) == 0;
+    free(now);
+    return same;
+}
+
+/* the test model with an occupancy grid of cells c^3 (cell h from 0.02 m): occupied where
+   (i + j + k) % 3 != 0, or everywhere if full; returns the occupied count, counted here */
+static size_t t_rom_occupy(t_rom_net *t, unsigned char *occ, int c, double h, int full) {
+    int i, j, k;
+    size_t n = 0;
+    for (i = 0; i < c; ++i)
+        for (j = 0; j < c; ++j)
+            for (k = 0; k < c; ++k) {
+                unsigned char o = (unsigned char)(full || (i + j + k) % 3 != 0);
+                occ[(i * c + j) * c + k] = o;
+                n += o;
+            }
+    t->m.cells[0] = t->m.cells[1] = t->m.cells[2] = c;
+    t->m.cell_m = h;
+    t->m.origin_m[0] = t->m.origin_m[1] = t->m.origin_m[2] = 0.02;
+    t->m.occupied = occ, t->m.occupied_count = (size_t)(c * c * c);
+    return n;
+}
+
+/* pn_rom_desc.refine: counted in closed form (refine 2000 used to count 1.6e13 points one at a
+   time), refused above PN_ROM_MAX_REFINE and when the lattice would exceed PN_ROM_MAX_POINTS,
+   naming refine; the lattice's first points where the cell-centred lattice puts them. */
+static void rom_refine_bound(pn_test_ctx *pn__t) {
+    t_rom_net t;
+    unsigned char occ[8 * 8 * 8];
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    char why[256];
+    double X[3 * 10];
+    size_t occupied, n;
+    int i;
+    t_rom_random_model(&t, 3, 4, 1, 0.3);
+    occupied = t_rom_occupy(&t, occ, 4, 0.01, 0);
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_OK);
+    PN_CHECK(pn_rom_lattice(&t.m, 1, NULL, 0) == occupied);
+    n = pn_rom_lattice(&t.m, 3, X, 10);
+    PN_CHECK(n == occupied * 27);
+    /* the first occupied cell is (0, 0, 1): its 27 points at 0.02 + (c + (k + 1/2) / 3) 0.01 */
+    for (i = 0; i < 10; ++i) {
+        PN_CHECK_NEAR(X[3 * i + 0], 0.02 + (0 + (i / 9 + 0.5) / 3) * 0.01, 1e-15);
+        PN_CHECK_NEAR(X[3 * i + 1], 0.02 + (0 + (i / 3 % 3 + 0.5) / 3) * 0.01, 1e-15);
+        PN_CHECK_NEAR(X[3 * i + 2], 0.02 + (1 + (i % 3 + 0.5) / 3) * 0.01, 1e-15);
+    }
+    if (sizeof(size_t) >= 8) PN_CHECK(pn_rom_lattice(&t.m, 2000, NULL, 0) == occupied * (size_t)8000000000ull);
+    PN_CHECK(pn_rom_lattice(&t.m, 1 << 30, NULL, 0) == (size_t)-1); /* (2^30)^3 does not fit */
+    memset(&desc, 0, sizeof desc);
+    desc.model = &t.m, desc.refine = 2000;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && w == NULL);
+    PN_CHECK(strstr(why, "refine = 2000") != NULL && strstr(why, "PN_ROM_MAX_REFINE") != NULL);
+    PN_REPORT("refine 2000: %s", why);
+    desc.refine = -3;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && strstr(why, "refine = -3") != NULL);
+    desc.refine = 2;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_OK && w && w->n == occupied * 8);
+    pn_rom_destroy(w), w = NULL;
+    /* 512 occupied cells at refine 64: 1.3e8 points, above PN_ROM_MAX_POINTS (6.7e7) */
+    occupied = t_rom_occupy(&t, occ, 8, 0.005, 1);
+    desc.refine = 64;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_CAPACITY && w == NULL);
+    PN_CHECK(strstr(why, "refine = 64") != NULL && strstr(why, "PN_ROM_MAX_POINTS") != NULL);
+    PN_REPORT("%lu cells at refine 64: %s", (unsigned long)occupied, why);
+}
+
+/* The explicit step's bound: pn_rom_stable_dt is 1.8 dx / (c + |v|), c the P-wave speed
+   written out here from E, nu, rho; on an affine body released from a stretch (every point
+   sampled, Lagrangian quadrature) 400 steps at half the bound stay finite with the total energy
+   (kinetic + fixed corotated elastic, summed here from the affine state) bounded: within 25 %
+   of the start, and not growing from the first 100 steps to the last 100; 20 times the bound, and the issue's 10 s, are refused naming the bound with the world
+   bit for bit as it was. The implicit step refuses 1e30 s of gravity (free flight of 1e60 m)
+   the same way, held or not, and still takes a frame. */
+static void rom_stable_dt(pn_test_ctx *pn__t) {
+    const double E = 1e4, nu = 0.3, rho = 1000, dx = 1.0 / 64, h = dx / 2;
+    const double lam = E * nu / ((1 + nu) * (1 - 2 * nu)), mu = E / (2 * (1 + nu)), c = sqrt((lam + 2 * mu) / rho);
+    double lo[3] = {0.3, 0.35, 0}, X[2 * 400], lat[6] = {0, 0, 0.04, 0, 0, -0.03}, vl[6] = {1, 0, 0, 0, 0, 0};
+    double bound = 0, E0 = 0, Emax = 0, Emin = HUGE_VAL, Ekmax = 0, Efirst = 0, Elast = 0;
+    int nb[3] = {20, 16, 1}, s, i;
+    size_t n = t_rom_box(2, lo, nb, h, X), p, len;
+    pn_rom_model am;
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    pn_material mat;
+    pn_material_desc md;
+    unsigned char *kept;
+    memset(&md, 0, sizeof md);
+    md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = E, md.poisson_ratio = nu;
+    PN_CHECK(pn_material_init(&mat, &md, NULL) == PN_OK);
+    pn_rom_affine_model(2, &am);
+    memset(&desc, 0, sizeof desc);
+    desc.model = &am, desc.points = X, desc.n_points = n, desc.point_volume_m3 = h * h, desc.dx_m = dx;
+    desc.youngs_pa = E, desc.poisson = nu, desc.density_kg_m3 = rho, desc.samples = -1;
+    desc.quadrature = PN_ROM_LAGRANGIAN;
+    PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+    if (!w) return;
+    PN_CHECK(pn_rom_stable_dt(w, &bound) == PN_OK);
+    PN_CHECK_NEAR(bound, 1.8 * dx / c, 1e-12 * bound);
+    PN_CHECK(pn_rom_set_latent(w, lat, vl) == PN_OK); /* moving at 1 m/s: the bound shrinks */
+    PN_CHECK(pn_rom_stable_dt(w, &bound) == PN_OK);
+    PN_CHECK_NEAR(bound, 1.8 * dx / (c + 1), 1e-12 * bound);
+    PN_CHECK(pn_rom_set_latent(w, lat, NULL) == PN_OK);
+    PN_CHECK(pn_rom_stable_dt(w, &bound) == PN_OK);
+    for (s = 0; s <= 400; ++s) {
+        const double *b = w->xhat, *vb = w->vhat; /* x = X + b + A X: F = 1 + A, v = vb + vA X */
+        pn_real F[4], psi = 0;
+        double Ek = 0, Et;
+        for (i = 0; i < 4; ++i) F[i] = (pn_real)((i == 0 || i == 3) + b[2 + i]);
+        pn_elastic_energy(&mat, 2, F, 0, &psi, NULL, NULL, 0);
+        for (p = 0; p < n; ++p) {
+            const double *Xp = X + 2 * p;
+            double v0 = vb[0] + vb[2] * Xp[0] + vb[3] * Xp[1], v1 = vb[1] + vb[4] * Xp[0] + vb[5] * Xp[1];
+            Ek += 0.5 * rho * h * h * (v0 * v0 + v1 * v1);
+        }
+        Et = Ek + (double)n * h * h * (double)psi;
+        if (s == 0) E0 = Et;
+        Emax = fmax(Emax, Et), Emin = fmin(Emin, Et), Ekmax = fmax(Ekmax, Ek);
+        if (s < 100) Efirst = fmax(Efirst, Et);
+        if (s > 300) Elast = fmax(Elast, Et);
+        if (s == 400) break;
+        if (pn_rom_step(w, 0.5 * bound, NULL) != PN_OK) {
+            PN_CHECK(!"a step at half the bound failed");
+            break;
+        }
+    }
+    PN_REPORT("bound %.4g s (1.8 dx / c, c = %.3f m/s); 400 steps at half of it: total energy %.4g J at the start, %.4g .. "
+              "%.4g J, kinetic up to %.3g J; largest in steps 0-99 %.4g J, in 301-400 %.4g J", bound, c, E0, Emin, Emax, Ekmax,
+              Efirst, Elast);
+    PN_CHECK(pn__rom_all_finite(6, w->xhat) && pn__rom_all_finite(6, w->vhat));
+    /* symplectic Euler's energy swings by about omega dt / 2 (here ~10 %) but must not grow */
+    PN_CHECK_LE(Emax, 1.25 * E0);
+    PN_CHECK_LE(Elast, 1.05 * Efirst);
+    PN_CHECK(Emin > 0.5 * E0 && Ekmax > 0.2 * E0); /* it moved, and did not lose the energy either */
+    kept = t_rom_keep(w, &len);
+    PN_CHECK(pn_rom_step(w, 20 * bound, NULL) == PN_ERROR_STEP_TOO_LARGE);
+    PN_CHECK(strstr(pn_rom_error(w), "pn_rom_stable_dt") != NULL);
+    PN_REPORT("20 x the bound: %s", pn_rom_error(w));
+    PN_CHECK(pn_rom_step(w, 10, NULL) == PN_ERROR_STEP_TOO_LARGE);
+    PN_CHECK(pn_rom_step(w, 1e30, NULL) == PN_ERROR_STEP_TOO_LARGE);
+    PN_CHECK(t_rom_same(w, kept, len));
+    free(kept);
+    PN_CHECK(pn_rom_stable_dt(w, &bound) == PN_OK && pn_rom_step(w, bound, NULL) == PN_OK); /* at the bound: taken */
+    pn_rom_destroy(w), w = NULL;
+    { /* BDF2 under gravity: 1e30 s refused (free and held), a frame taken */
+        t_rom_net t;
+        double B[3 * 512], lo3[3] = {0.02, 0.02, 0.02};
+        int nb3[3] = {8, 8, 8}, held;
+        size_t n3 = t_rom_box(3, lo3, nb3, 0.005, B);
+        t_rom_random_model(&t, 3, 4, 1, 0.3);
+        for (held = 0; held <= 1; ++held) {
+            pn_rom_region base;
+            memset(&desc, 0, sizeof desc);
+            desc.model = &t.m, desc.points = B, desc.n_points = n3, desc.point_volume_m3 = 1.25e-7;
+            desc.integrator = PN_ROM_BDF2, desc.gravity[2] = -9.81, desc.cubature_m = 0.01;
+            PN_CHECK(pn_rom_create(&desc, &w, NULL, 0) == PN_OK);
+            if (!w) return;
+            memset(&base, 0, sizeof base);
+            base.hi[0] = base.hi[1] = 1, base.hi[2] = 0.026;
+            if (held) PN_CHECK(pn_rom_drive(w, &base, NULL, NULL, NULL, NULL) == PN_OK);
+            PN_CHECK(pn_rom_step(w, 1.0 / 60, NULL) == PN_OK);
+            PN_CHECK(pn_rom_step(w, 1.0 / 60, NULL) == PN_OK);
+            kept = t_rom_keep(w, &len);
+            PN_CHECK(pn_rom_step(w, 1e30, NULL) == PN_ERROR_STEP_TOO_LARGE);
+            PN_CHECK(strstr(pn_rom_error(w), "dt_s = 1e+30") != NULL && strstr(pn_rom_error(w), "body's size") != NULL);
+            if (held) PN_REPORT("BDF2, held, 1e30 s: %s", pn_rom_error(w));
+            PN_CHECK(t_rom_same(w, kept, len));
+            free(kept);
+            PN_CHECK(pn_rom_step(w, 1.0 / 60, NULL) == PN_OK);
+            pn_rom_destroy(w), w = NULL;
+        }
+    }
+}
+
+/* pn_rom_model carries its arrays' lengths (format 2): every disagreement between a length
+   and the sizes, an occupancy grid of absurd or overflowing size, and non-finite values are
+   refused naming the field (under the sanitizers: without reading past an array) */
+static void rom_model_counts(pn_test_ctx *pn__t) {
+    t_rom_net t;
+    unsigned char occ[16];
+    char why[256];
+    pn_rom_model am;
+    int i;
+    t_rom_random_model(&t, 3, 4, 1, 0.3);
+    memset(occ, 1, sizeof occ);
+    t.m.cells[0] = 2, t.m.cells[1] = 2, t.m.cells[2] = 4, t.m.cell_m = 0.01, t.m.occupied = occ, t.m.occupied_count = 16;
+    t.m.origin_m[0] = t.m.origin_m[1] = t.m.origin_m[2] = 0.02;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_OK);
+    t.width[1] = 16; /* wider than the weight arrays hold: the counts say so */
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "weight_count[0] = 84") != NULL);
+    t.width[1] = 12;
+    t.m.width_count = 4;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "width_count = 4") != NULL);
+    t.m.width_count = 5;
+    t.m.bias_count[2] = 11;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "bias_count[2] = 11") != NULL);
+    t.m.bias_count[2] = 12;
+    t.m.weight_count[5] = 3; /* a length past n_layers */
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "weight_count[5]") != NULL);
+    t.m.weight_count[5] = 0;
+    t.m.latent_std_count = 3;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "latent_std_count") != NULL);
+    t.m.latent_std_count = 4;
+    t.sd[2] = NAN;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "latent_std") != NULL);
+    t.sd[2] = 1;
+    t.b[3][1] = INFINITY;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "layer 3") != NULL);
+    t.b[3][1] = 0;
+    t.m.in_hi[1] = NAN;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "in_lo/in_hi") != NULL);
+    t.m.in_hi[1] = 0.06;
+    t.m.youngs_pa = NAN;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "youngs_pa") != NULL);
+    t.m.youngs_pa = 1e4;
+    /* the issue's: 2^20 cells per axis over a 16-byte occupancy array */
+    t.m.cells[0] = t.m.cells[1] = t.m.cells[2] = 1 << 20;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_DIMENSION && strstr(why, "cells[0] = 1048576") != NULL);
+    PN_REPORT("2^20 cells per axis: %s", why);
+    t.m.cells[0] = t.m.cells[1] = t.m.cells[2] = 4096; /* each axis allowed, the product (2^36) is not */
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_DIMENSION && strstr(why, "occupancy cells") != NULL);
+    t.m.cells[0] = 2, t.m.cells[1] = 2, t.m.cells[2] = 4;
+    t.m.occupied_count = 15;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "occupied_count = 15") != NULL);
+    t.m.occupied_count = 16, t.m.cells[1] = -2;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_DIMENSION && strstr(why, "cells[1] = -2") != NULL);
+    t.m.cells[1] = 2, t.m.cell_m = -0.01;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_ERROR_FORMAT && strstr(why, "cell_m") != NULL);
+    t.m.cell_m = 0.01;
+    PN_CHECK(pn_rom_model_check(&t.m, why, sizeof why) == PN_OK);
+    /* an affine model is checked as well (its domain used to pass unchecked) */
+    pn_rom_affine_model(3, &am);
+    PN_CHECK(pn_rom_model_check(&am, why, sizeof why) == PN_OK);
+    am.cells[0] = am.cells[1] = am.cells[2] = 1 << 20, am.occupied = occ, am.occupied_count = 16, am.cell_m = 0.01;
+    PN_CHECK(pn_rom_model_check(&am, why, sizeof why) == PN_ERROR_DIMENSION);
+#ifdef PN_TEST_HAVE_ROM_MODELS
+    for (i = 0; i < PN_ROM_MODEL_COUNT; ++i) { /* the converted headers: lengths as the sizes give them */
+        const pn_rom_model *m = pn_rom_models_all[i]();
+        int l, ok = m->format_version == 2 && m->width_count == m->n_layers + 1;
+        for (l = 0; l < m->n_layers; ++l) ok &= m->weight_count[l] == m->width[l] * m->width[l + 1] && m->bias_count[l] == m->width[l + 1];
+        ok &= m->occupied_count == (size_t)m->cells[0] * (size_t)m->cells[1] * (size_t)m->cells[2];
+        ok &= m->latent_rest_count == m->latent && m->latent_std_count == m->latent;
+        PN_CHECK(ok && pn_rom_model_check(m, why, sizeof why) == PN_OK);
+    }
+#else
+    (void)i;
+#endif
+}
+
+/* NaN, infinite, negative or out-of-range description fields are refused naming the field
+   (zero still means the default); pn_rom_map refuses a NaN or infinite reference point and
+   writes nothing */
+static void rom_desc_nan(pn_test_ctx *pn__t) {
+    static const char *const field[] = {"youngs_pa", "dx_m", "refine", "poisson", "density_kg_m3", "youngs_pa",
+                                        "dx_m", "point_volume_m3", "gravity", "boundary_samples", "quad_per_axis",
+                                        "gn_max", "parallel_min", "cubature_m", "newton_max", "newton_tol",
+                                        "drive_weight", "density_kg_m3", "n_points", "newton_tol", "gn_max"};
+    t_rom_net t;
+    pn_rom_desc desc;
+    pn_rom_world *w = NULL;
+    char why[256];
+    double X[3 * 64], lo[3] = {0.02, 0.02, 0.02};
+    int nb[3] = {4, 4, 4}, k;
+    size_t n = t_rom_box(3, lo, nb, 0.005, X), len;
+    float Xf[3 * 4], xf[3 * 4];
+    unsigned char *kept;
+    t_rom_random_model(&t, 3, 4, 1, 0.3);
+    for (k = 0; k < (int)(sizeof field / sizeof field[0]); ++k) {
+        memset(&desc, 0, sizeof desc);
+        desc.model = &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.25e-7;
+        switch (k) {
+        case 0: desc.youngs_pa = NAN; break;
+        case 1: desc.dx_m = -1; break;
+        case 2: desc.refine = -3; break;
+        case 3: desc.poisson = NAN; break;
+        case 4: desc.density_kg_m3 = -1000; break;
+        case 5: desc.youngs_pa = INFINITY; break;
+        case 6: desc.dx_m = NAN; break;
+        case 7: desc.point_volume_m3 = NAN; break;
+        case 8: desc.gravity[2] = INFINITY; break;
+        case 9: desc.boundary_samples = -1; break;
+        case 10: desc.quad_per_axis = -2; break;
+        case 11: desc.gn_max = -1; break;
+        case 12: desc.parallel_min = -5; break;
+        case 13: desc.cubature_m = NAN; break;
+        case 14: desc.newton_max = -1; break;
+        case 15: desc.newton_tol = -1e-3; break;
+        case 16: desc.drive_weight = -INFINITY; break;
+        case 17: desc.density_kg_m3 = NAN; break;
+        case 18: desc.points = NULL; break; /* n_points without points */
+        case 19: desc.newton_tol = NAN; break;
+        default: desc.gn_max = 1 << 30; break; /* a hang per step */
+        }
+        PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && w == NULL);
+        if (!strstr(why, field[k])) {
+            PN_CHECK(!"the message names the field");
+            fprintf(stderr, "    case %d (%s): %s\n", k, field[k], why);
+        }
+    }
+    memset(&desc, 0, sizeof desc); /* zeros: the defaults */
+    desc.model = &t.m, desc.points = X, desc.n_points = n, desc.point_volume_m3 = 1.25e-7;
+    PN_CHECK(pn_rom_create(&desc, &w, why, sizeof why) == PN_OK);
+    if (!w) return;
+    PN_CHECK(w->desc.youngs_pa == t.m.youngs_pa && w->desc.dx_m == t.m.dx_m && w->desc.refine == 1);
+    for (k = 0; k < 12; ++k) Xf[k] = 0.03f, xf[k] = -7.0f;
+    kept = t_rom_keep(w, &len);
+    Xf[7] = NAN; /* point 2, axis 1 */
+    PN_CHECK(pn_rom_map(w, 4, Xf, xf, NULL) == PN_ERROR_NONFINITE);
+    PN_CHECK(strstr(pn_rom_error(w), "reference point 2") != NULL);
+    Xf[7] = 0.03f, Xf[11] = INFINITY;
+    PN_CHECK(pn_rom_map(w, 4, Xf, xf, NULL) == PN_ERROR_NONFINITE);
+    for (k = 0; k < 12; ++k) PN_CHECK(xf[k] == -7.0f);
+    PN_CHECK(pn_rom_positions(w, n - 1, 2, xf, NULL) == PN_ERROR_INVALID_ARGUMENT && strstr(pn_rom_error(w), "beyond") != NULL);
+    PN_CHECK(t_rom_same(w, kept, len));
+    free(kept);
+    Xf[11] = 0.03f;
+    PN_CHECK(pn_rom_map(w, 4, Xf, xf, NULL) == PN_OK && xf[0] != -7.0f);
+    pn_rom_destroy(w);
+}
+
 #ifdef PN_TEST_HAVE_ROM_MODELS
 /* The shipped cylinder model against the full-order explicit MPM of plastinet_mpm.h on a
    test instance (g = 9.38 m/s^2, never trained on), both from rest for 6 frames (0.042 s,
@@ -808,6 +1190,10 @@ static const pn_test_case pn_tests_rom[] = {
     {"rom_implicit_dilation", rom_implicit_dilation},
     {"rom_implicit_gradient", rom_implicit_gradient},
     {"rom_embed", rom_embed},
+    {"rom_refine_bound", rom_refine_bound},
+    {"rom_stable_dt", rom_stable_dt},
+    {"rom_model_counts", rom_model_counts},
+    {"rom_desc_nan", rom_desc_nan},
 #ifdef PN_TEST_HAVE_ROM_MODELS
     {"rom_cylinder_vs_mpm", rom_cylinder_vs_mpm},
     {"rom_drive_as_mpm", rom_drive_as_mpm},
