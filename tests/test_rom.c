@@ -865,6 +865,8 @@ static void rom_stable_dt(pn_test_ctx *pn__t) {
     PN_CHECK(t_rom_same(w, kept, len));
     free(kept);
     PN_CHECK(pn_rom_stable_dt(w, &bound) == PN_OK && pn_rom_step(w, bound, NULL) == PN_OK); /* at the bound: taken */
+    PN_CHECK(pn_rom_stable_dt(w, &bound) == PN_OK && pn_rom_step(w, 1.49 * bound, NULL) == PN_OK); /* measured stable */
+    PN_CHECK(pn_rom_stable_dt(w, &bound) == PN_OK && pn_rom_step(w, 1.51 * bound, NULL) == PN_ERROR_STEP_TOO_LARGE);
     pn_rom_destroy(w), w = NULL;
     { /* BDF2 under gravity: 1e30 s refused (free and held), a frame taken */
         t_rom_net t;
