@@ -7076,6 +7076,79 @@ static pn_real pn__fem_obstacle_sd(const pn_mpm_collider *c, int d, pn_real t, c
     }
 }
 
+/* Do the interiors of the axis-aligned box [lo, hi] and the simplex P (d + 1 points) meet?
+   Separating axes: the box's faces, the simplex's faces and, in 3D, each simplex edge
+   crossed with each box axis; touching is not meeting. */
+static int pn__fem_box_meets_simplex(int d, const pn_real *lo, const pn_real *hi, const pn_real *P) {
+    pn_real axes[3 + 4 + 18][3], c[3], h[3]; /* box faces, simplex faces, edge crossings */
+    int na = 0, a, i, j, k;
+    for (i = 0; i < d; ++i) c[i] = (lo[i] + hi[i]) / 2, h[i] = (hi[i] - lo[i]) / 2;
+    for (i = 0; i < d; ++i) {
+        for (k = 0; k < 3; ++k) axes[na][k] = 0;
+        axes[na++][i] = 1;
+    }
+    if (d == 2)
+        for (i = 0; i < 3; ++i) { /* edge normals */
+            const pn_real *p = P + 2 * i, *q = P + 2 * ((i + 1) % 3);
+            axes[na][0] = q[1] - p[1], axes[na][1] = p[0] - q[0], axes[na++][2] = 0;
+        }
+    else {
+        for (i = 0; i < 4; ++i) { /* face normals */
+            const pn_real *p = P + 3 * ((i + 1) % 4), *q = P + 3 * ((i + 2) % 4), *r = P + 3 * ((i + 3) % 4);
+            pn_real u[3], v[3];
+            for (k = 0; k < 3; ++k) u[k] = q[k] - p[k], v[k] = r[k] - p[k];
+            axes[na][0] = u[1] * v[2] - u[2] * v[1], axes[na][1] = u[2] * v[0] - u[0] * v[2];
+            axes[na++][2] = u[0] * v[1] - u[1] * v[0];
+        }
+        for (i = 0; i < 4; ++i)
+            for (j = i + 1; j < 4; ++j) /* edges x box axes: e x e_a */
+                for (a = 0; a < 3; ++a) {
+                    pn_real e[3];
+                    for (k = 0; k < 3; ++k) e[k] = P[3 * j + k] - P[3 * i + k];
+                    axes[na][a] = 0, axes[na][(a + 1) % 3] = e[(a + 2) % 3], axes[na++][(a + 2) % 3] = -e[(a + 1) % 3];
+                }
+    }
+    for (a = 0; a < na; ++a) {
+        pn_real smin = PN__FEM_FAR, smax = -PN__FEM_FAR, bc = 0, br = 0;
+        for (i = 0; i <= d; ++i) {
+            pn_real t = 0;
+            for (k = 0; k < d; ++k) t += axes[a][k] * P[i * d + k];
+            smin = PN__MIN(smin, t), smax = PN__MAX(smax, t);
+        }
+        for (k = 0; k < d; ++k) bc += axes[a][k] * c[k], br += PN__FABS(axes[a][k]) * h[k];
+        if (br == 0 && smax == smin) continue; /* a degenerate axis separates nothing */
+        if (smax <= bc - br || smin >= bc + br) return 0;
+    }
+    return 1;
+}
+
+/* the first element whose interior a box obstacle's (at time t) meets, or -1: its nodes may
+   all be outside the box (a small box inside a large element), where the nodes' barrier
+   cannot see it */
+static long pn__fem_obstacle_in_element(const pn_fem_mesh *m, const pn_mpm_collider *c, pn_real t) {
+    int d = m->dim, i, a;
+    pn_real lo[3], hi[3], P[12];
+    size_t e;
+    if (c->shape != PN_MPM_SHAPE_BOX) return -1; /* a half-space meets an element only where a node is inside */
+    for (i = 0; i < d; ++i) {
+        pn_real ci = c->center_m[i] + t * c->velocity_m_s[i];
+        lo[i] = ci - c->half_extent_m[i], hi[i] = ci + c->half_extent_m[i];
+    }
+    for (e = 0; e < m->n_elems; ++e) {
+        const int *el = m->elem + e * (size_t)(d + 1);
+        int out = 0;
+        for (a = 0; a <= d; ++a)
+            for (i = 0; i < d; ++i) P[a * d + i] = m->x[(size_t)el[a] * (size_t)d + (size_t)i];
+        for (i = 0; i < d && !out; ++i) { /* the bounding boxes first */
+            pn_real emin = P[i], emax = P[i];
+            for (a = 1; a <= d; ++a) emin = PN__MIN(emin, P[a * d + i]), emax = PN__MAX(emax, P[a * d + i]);
+            out = emax <= lo[i] || emin >= hi[i];
+        }
+        if (!out && pn__fem_box_meets_simplex(d, lo, hi, P)) return (long)e;
+    }
+    return -1;
+}
+
 PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, int *index) {
     int i, d;
     size_t k;
@@ -7105,6 +7178,9 @@ PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, 
             return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: node %lu is inside the obstacle",
                                 (unsigned long)k);
         }
+    if ((m->error_element = pn__fem_obstacle_in_element(m, c, m->time_s)) >= 0)
+        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the obstacle reaches into element %ld (no "
+                            "node of it inside the obstacle, so the nodes' barrier cannot see it)", m->error_element);
     m->obstacles[m->n_obstacles] = *c;
     for (i = d; i < 3; ++i) m->obstacles[m->n_obstacles].velocity_m_s[i] = 0;
     if (index) *index = m->n_obstacles;
@@ -8626,6 +8702,16 @@ static long pn__fem_nonfinite_node(const pn_fem_mesh *m) {
     return -1;
 }
 
+/* after a step: no box obstacle reaches into an element between its nodes */
+static pn_result pn__fem_obstacles_clear(pn_fem_mesh *m, const char *who) {
+    int o;
+    for (o = 0; o < m->n_obstacles; ++o)
+        if ((m->error_element = pn__fem_obstacle_in_element(m, &m->obstacles[o], m->time_s)) >= 0)
+            return pn__fem_fail(m, PN_ERROR_UNSUPPORTED, "%s: obstacle %d reached into element %ld between its nodes (the "
+                                "barrier acts on nodes: a finer mesh there, or a larger obstacle)", who, o, m->error_element);
+    return PN_OK;
+}
+
 /* a step's checks: dt, and a state every step can start from (x, v finite) */
 static pn_result pn__fem_check_step(pn_fem_mesh *m, pn_real dt, const char *who) {
     pn_result r = pn__fem_check_dt(m, dt, who);
@@ -8752,6 +8838,10 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
         return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: %s: take a smaller step", msg);
     }
     m->time_s += dt;
+    if ((r = pn__fem_obstacles_clear(m, "pn_fem_step_explicit")) != PN_OK) {
+        pn__fem_restore(m);
+        return r;
+    }
     m->steps++;
     if (stats) {
         pn_real sdt;
@@ -9161,6 +9251,10 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
         memset(&st, 0, sizeof st);
         st.substeps = nsub;
         for (sub = 0, r = PN_OK; sub < nsub && r == PN_OK; ++sub) r = pn__fem_implicit_once(m, dt / nsub, &o, &st);
+        if (r == PN_OK && (r = pn__fem_obstacles_clear(m, "pn_fem_step_implicit")) != PN_OK) { /* substeps will not help */
+            pn__fem_restore(m);
+            return r;
+        }
         if (r == PN_OK) {
             m->steps++;
             st.linear_solver = ((pn__fem *)m->impl)->sparse ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY;
@@ -10405,6 +10499,57 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     return PN_OK;
 }
 
+/* The candidate and friction pairs' storage, reserved once so that steps do not allocate:
+   each target's box grown by dhat and a cell on every side (what a step's motion adds), at
+   the densest particle spacing, twice over; never more than every particle with every
+   target. A scene beyond it (a mesh that stretches a great deal) still grows the arrays,
+   doubling, in the step that needs it. */
+static pn_result pn__cpl_reserve(pn_coupled *c) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn__fem *s = (pn__fem *)m->impl;
+    const pn_allocator *al = &m->desc.allocator;
+    int d = w->dim, i;
+    size_t t, p, active = 0, need, h = PN__FEM_PAIR_H(d);
+    double vmin = HUGE_VAL, est = 0, pad = 2 * ((double)c->dhat + (double)w->desc.dx_m);
+    for (p = 0; p < w->n; ++p)
+        if (w->active[p]) active++, vmin = PN__MIN(vmin, (double)w->vol0[p]);
+    if (!active || !(vmin > 0)) return PN_OK;
+    for (t = 0; t < s->ntgt; ++t) {
+        const int *tn = pn__cpl_target(m, t);
+        double box = 1;
+        for (i = 0; i < d; ++i) {
+            double lo = HUGE_VAL, hi = -HUGE_VAL;
+            int j;
+            for (j = 0; j < d; ++j) {
+                double x = (double)m->x[(size_t)tn[j] * (size_t)d + (size_t)i];
+                lo = PN__MIN(lo, x), hi = PN__MAX(hi, x);
+            }
+            box *= hi - lo + pad;
+        }
+        est += 2 * box / vmin;
+    }
+    need = est < (double)active * (double)s->ntgt ? (size_t)est + 256 : active * s->ntgt;
+    if (need > k->ccap) {
+        if (!pn__cpl_grow(al, (void **)&k->cp, k->ccap, need, sizeof(size_t)) ||
+            !pn__cpl_grow(al, (void **)&k->ck, k->ccap, need, sizeof(size_t)) ||
+            !pn__cpl_grow(al, (void **)&k->ch, k->ccap * h, need * h, sizeof(pn_real)) ||
+            !pn__cpl_grow(al, (void **)&k->con, k->ccap, need, 1))
+            return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for %lu particle-boundary pairs",
+                                (unsigned long)need);
+        k->ccap = need;
+    }
+    if (c->friction > 0 && need > k->fcap) {
+        if (!pn__cpl_grow(al, (void **)&k->fp, k->fcap, need, sizeof(size_t)) ||
+            !pn__cpl_grow(al, (void **)&k->fnode, 3 * k->fcap, 3 * need, sizeof(long)) ||
+            !pn__cpl_grow(al, (void **)&k->fdat, PN__CPL_FD * k->fcap, PN__CPL_FD * need, sizeof(pn_real)))
+            return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the friction pairs");
+        k->fcap = need;
+    }
+    return PN_OK;
+}
+
 /* the coupled solver's storage for the world's grid and the mesh: once */
 static pn_result pn__cpl_alloc(pn_coupled *c) {
     pn__cpl *k = (pn__cpl *)c->impl;
@@ -10424,7 +10569,7 @@ static pn_result pn__cpl_alloc(pn_coupled *c) {
     k->qq = k->pp + zc, k->xf = k->qq + zc, k->xd = k->xf + nd, k->pa = k->xd + nd, k->pb = k->pa + nd;
     k->y = k->pb + nd, k->yd = k->y + np, k->fx = k->yd + np, k->vn = k->fx + 2 * np, k->g0 = k->vn + zc;
     k->m0 = k->g0 + zc;
-    return PN_OK;
+    return pn__cpl_reserve(c);
 }
 
 PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_coupled_implicit_desc *desc,
@@ -10503,6 +10648,11 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
             w->time_s = t0 + dt, w->steps = steps0 + 1, m->steps = fsteps0 + 1;
             pn__cpl_here(c);
             if ((r = pn__cpl_find(c, 0)) != PN_OK) break;
+            if ((r = pn__fem_obstacles_clear(m, "pn_coupled_step_implicit")) != PN_OK) {
+                memcpy(why, m->error, sizeof why);
+                first = r;
+                break;
+            }
             dmin = pn__cpl_closest_pair(c, &st.pairs);
             st.min_distance_m = PN__MIN(st.min_distance_m, dmin);
             c->error[0] = 0, c->error_particle = -1;

@@ -430,6 +430,20 @@ PN_TEST(couple_bad_input) {
     free(keep);
     pn_coupled_destroy(t.c);
     t.c = NULL;
+    { /* a mesh outside the world's walls, or straddling one, is refused naming the node */
+        size_t k;
+        pn_real *x0 = (pn_real *)malloc(fbytes);
+        memcpy(x0, t.m->x, fbytes);
+        for (k = 0; k < t.nn; ++k) t.m->x[2 * k] += (pn_real)5; /* entirely outside */
+        PN_CHECK(pn_coupled_create(t.w, t.m, NULL, &c2, why, sizeof why) == PN_ERROR_OUTSIDE_DOMAIN && !c2 &&
+                 strstr(why, "node 0") && strstr(why, "walls"));
+        memcpy(t.m->x, x0, fbytes);
+        for (k = 0; k < t.nn; ++k) t.m->x[2 * k + 1] += (pn_real)0.4; /* its top beyond the upper wall */
+        PN_CHECK(pn_coupled_create(t.w, t.m, NULL, &c2, why, sizeof why) == PN_ERROR_OUTSIDE_DOMAIN && !c2);
+        PN_REPORT("a mesh straddling the wall: %s", why);
+        memcpy(t.m->x, x0, fbytes);
+        free(x0);
+    }
     { /* a particle inside the mesh, and meshes of another dimension */
         size_t k;
         pn_real x0[2];
@@ -453,10 +467,51 @@ PN_TEST(couple_bad_input) {
     t_cpl_free(&t);
 }
 
+/* Warm coupled steps allocate nothing: a block thrown into the sand (contact pairs appear
+   and grow through the impact) with a counting allocator on the world and the mesh: after
+   two steps none of the next thirty implicit ones, nor of 1,500 explicit ones at the coupled
+   bound, calls it. 2D and 3D. */
+PN_TEST(couple_warm_no_alloc) {
+    int dim, implicit;
+    for (dim = 2; dim <= 3; ++dim)
+        for (implicit = 0; implicit <= 1; ++implicit) {
+            t_cpl t;
+            t_cpl_scene sc = t_cpl_collision(dim);
+            long allocs = 0, warm = 0;
+            size_t pairs = 0;
+            int s, ok = 1, nsteps = implicit ? 32 : 1500; /* explicit: the block reaches the sand at ~0.01 s */
+            sc.allocator.alloc = t_cpl_alloc, sc.allocator.free = t_cpl_release, sc.allocator.user = &allocs;
+            if (!t_cpl_make(&t, &sc)) {
+                PN_CHECK(0);
+                t_cpl_free(&t);
+                continue;
+            }
+            for (s = 0; s < nsteps && ok; ++s) {
+                pn_coupled_stats st;
+                pn_real dt = (pn_real)(implicit ? 1e-3 : 0);
+                pn_result r;
+                if (!implicit) pn_coupled_stable_dt(t.c, &dt);
+                r = implicit ? pn_coupled_step_implicit(t.c, dt, NULL, &st) : pn_coupled_step_explicit(t.c, dt, &st);
+                PN_CHECK(r == PN_OK);
+                ok = r == PN_OK;
+                if (!ok) fprintf(stderr, "  %s\n", pn_coupled_error(t.c));
+                if (s == 1) warm = allocs;
+                pairs = PN__MAX(pairs, st.pairs);
+            }
+            PN_CHECK(allocs == warm);
+            PN_CHECK(pairs > 0);
+            PN_REPORT("%dD %s: %ld allocations in %d warm steps (up to %lu pairs within dhat)", dim,
+                      implicit ? "implicit dt 1e-3" : "explicit at the coupled bound", allocs - warm, nsteps - 2,
+                      (unsigned long)pairs);
+            t_cpl_free(&t);
+        }
+}
+
 static const pn_test_case pn_tests_couple[] = {
     {"couple_bad_input", couple_bad_input},
     {"couple_threads_identical", couple_threads_identical},
     {"couple_explicit_implicit", couple_explicit_implicit},
     {"couple_rest", couple_rest},
     {"couple_momentum", couple_momentum},
+    {"couple_warm_no_alloc", couple_warm_no_alloc},
 };

@@ -1371,6 +1371,123 @@ PN_TEST(fem_bad_mesh) {
     }
 }
 
+/* the mesh's state, bit for bit (nodes, elements' plastic state, time, steps) */
+static int t_fem_same(const pn_fem_mesh *m, const pn_real *x, const pn_real *v, const pn_real *Fp, const pn_real *h, double t,
+                      long steps) {
+    size_t nd = m->n_nodes * (size_t)m->dim, ne = m->n_elems, dd = (size_t)(m->dim * m->dim);
+    return memcmp(m->x, x, sizeof(pn_real) * nd) == 0 && memcmp(m->v, v, sizeof(pn_real) * nd) == 0 &&
+           memcmp(m->Fp_inv, Fp, sizeof(pn_real) * ne * dd) == 0 && memcmp(m->h, h, sizeof(pn_real) * ne) == 0 &&
+           m->time_s == t && m->steps == steps;
+}
+
+/* A NaN or infinite node position or velocity written by hand is refused by both steps
+   (PN_ERROR_NONFINITE naming the node, the mesh unchanged) before any of it reaches the
+   self-contact grid (where it once became an integer: a crash). 2D and 3D, with self-contact.
+   Solver settings that are NaN, infinite or negative are refused, not replaced by defaults. */
+PN_TEST(fem_nonfinite_state) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_fem_grid g = t_fem_grid(dim, 4, 3, 2, 0.4, 0.3, 0.2);
+        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_VON_MISES, 1e6, 1000);
+        pn_fem_implicit_desc id;
+        t_fem t;
+        pn_real *x, *v, *Fp, *h;
+        size_t nd, k = 5;
+        int bad, which;
+        if (!t_fem_make(&t, &g, &grp, -9.81)) {
+            PN_CHECK(0);
+            continue;
+        }
+        nd = t.nn * (size_t)dim;
+        x = (pn_real *)malloc(sizeof(pn_real) * nd), v = (pn_real *)malloc(sizeof(pn_real) * nd);
+        Fp = (pn_real *)malloc(sizeof(pn_real) * t.ne * (size_t)(dim * dim)), h = (pn_real *)malloc(sizeof(pn_real) * t.ne);
+        PN_CHECK(pn_fem_step_implicit(t.m, 1e-3, NULL, NULL) == PN_OK);
+        for (bad = 0; bad < 4; ++bad)
+            for (which = 0; which < 2; ++which) {
+                pn_real *arr = bad < 2 ? t.m->v : t.m->x, keep = arr[k * (size_t)dim + 1];
+                pn_result r;
+                arr[k * (size_t)dim + 1] = bad % 2 ? (pn_real)HUGE_VAL : (pn_real)NAN;
+                memcpy(x, t.m->x, sizeof(pn_real) * nd), memcpy(v, t.m->v, sizeof(pn_real) * nd);
+                memcpy(Fp, t.m->Fp_inv, sizeof(pn_real) * t.ne * (size_t)(dim * dim));
+                memcpy(h, t.m->h, sizeof(pn_real) * t.ne);
+                r = which ? pn_fem_step_explicit(t.m, 1e-5, NULL) : pn_fem_step_implicit(t.m, 1e-3, NULL, NULL);
+                PN_CHECK(r == PN_ERROR_NONFINITE);
+                PN_CHECK(t.m->error_node == (long)k && strstr(pn_fem_error(t.m), "node 5") != NULL);
+                PN_CHECK(t_fem_same(t.m, x, v, Fp, h, t.m->time_s, 1));
+                arr[k * (size_t)dim + 1] = keep;
+            }
+        for (bad = 0; bad < 5; ++bad) {
+            memset(&id, 0, sizeof id);
+            if (bad == 0) id.newton_tol = (pn_real)NAN;
+            if (bad == 1) id.newton_tol = -1;
+            if (bad == 2) id.cg_rel_tol = (pn_real)HUGE_VAL;
+            if (bad == 3) id.newton_max = -2;
+            if (bad == 4) id.cg_max = -1;
+            PN_CHECK(pn_fem_step_implicit(t.m, 1e-3, &id, NULL) == PN_ERROR_INVALID_ARGUMENT && t.m->steps == 1);
+            PN_CHECK(strstr(pn_fem_error(t.m), bad < 2 ? "newton_tol" : bad == 2 ? "cg_rel_tol" : bad == 3 ? "newton_max" : "cg_max"));
+        }
+        PN_CHECK(pn_fem_step_implicit(t.m, 1e-3, NULL, NULL) == PN_OK);
+        free(x), free(v), free(Fp), free(h);
+        t_fem_free(&t);
+    }
+}
+
+/* A box obstacle that reaches into an element with none of the element's nodes inside it (a
+   small box inside a coarse element, or a thin one through an element's middle) is refused
+   by pn_fem_add_obstacle naming the element; a box beside the mesh is taken. The test's own
+   check: points sampled inside the box, located by barycentric coordinates. */
+PN_TEST(fem_obstacle_inside_element) {
+    int dim, cs;
+    for (dim = 2; dim <= 3; ++dim)
+        for (cs = 0; cs < 3; ++cs) {
+            pn_fem_grid g = t_fem_grid(dim, 2, 2, 2, 1, 1, 1);
+            pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+            pn_mpm_collider c;
+            t_fem t;
+            int i, inside_any = 0, s;
+            pn_result r;
+            if (!t_fem_make(&t, &g, &grp, 0)) {
+                PN_CHECK(0);
+                continue;
+            }
+            memset(&c, 0, sizeof c);
+            c.shape = PN_MPM_SHAPE_BOX;
+            for (i = 0; i < dim; ++i) c.center_m[i] = (pn_real)0.27, c.half_extent_m[i] = (pn_real)0.05;
+            if (cs == 1) c.center_m[0] = (pn_real)0.5, c.half_extent_m[0] = (pn_real)0.7, c.half_extent_m[1] = (pn_real)0.01,
+                         c.center_m[1] = (pn_real)0.27; /* a thin bar right through the mesh, between node rows */
+            if (cs == 2) c.center_m[0] = (pn_real)1.3; /* beside the mesh */
+            /* independent: sample the box, is any sample inside any element? */
+            for (s = 0; s < 4096 && !inside_any; ++s) {
+                pn_real q[3];
+                size_t e;
+                for (i = 0; i < dim; ++i)
+                    q[i] = c.center_m[i] + c.half_extent_m[i] * (pn_real)(2 * ((s >> (4 * i)) % 16 + 0.5) / 16 - 1);
+                for (e = 0; e < t.ne && !inside_any; ++e) {
+                    double A[9], b[3], lam[4], sum = 0;
+                    const int *el = t.el + e * (size_t)(dim + 1);
+                    int a, j, ok = 1;
+                    for (a = 0; a < dim; ++a) {
+                        b[a] = q[a] - t.X[el[0] * dim + a];
+                        for (j = 0; j < dim; ++j) A[a * dim + j] = t.X[el[j + 1] * dim + a] - t.X[el[0] * dim + a];
+                    }
+                    for (a = 0; a < dim; ++a) { /* Cramer */
+                        double Ai[9];
+                        memcpy(Ai, A, sizeof Ai);
+                        for (j = 0; j < dim; ++j) Ai[j * dim + a] = b[j];
+                        lam[a] = t_det(dim, Ai) / t_det(dim, A);
+                    }
+                    for (a = 0; a < dim; ++a) ok &= lam[a] > 1e-9, sum += lam[a];
+                    inside_any = ok && sum < 1 - 1e-9;
+                }
+            }
+            PN_CHECK(inside_any == (cs < 2));
+            r = pn_fem_add_obstacle(t.m, &c, NULL);
+            PN_CHECK(r == (cs < 2 ? PN_ERROR_INVALID_ARGUMENT : PN_OK));
+            if (cs < 2) PN_CHECK(t.m->n_obstacles == 0 && strstr(pn_fem_error(t.m), "element") != NULL);
+            t_fem_free(&t);
+        }
+}
+
 /* a unit square of two triangles (one listed clockwise), with a line and a point element */
 static const char t_fem_msh2[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n10 0 0 0\n20 1 0 0\n30 1 1 0\n40 0 1 0\n$EndNodes\n"
                                  "$Elements\n4\n1 15 2 0 1 10\n2 1 2 7 1 10 20\n3 2 2 5 1 10 20 30\n4 2 2 5 1 10 40 30\n$EndElements\n";
@@ -1489,4 +1606,6 @@ static const pn_test_case pn_tests_fem[] = {
     {"fem_threads_same_bits", fem_threads_same_bits},
     {"fem_self_contact", fem_self_contact},
     {"fem_bad_mesh", fem_bad_mesh},
+    {"fem_nonfinite_state", fem_nonfinite_state},
+    {"fem_obstacle_inside_element", fem_obstacle_inside_element},
 };
