@@ -1,4 +1,4 @@
-/* plastinet.h - v0.7 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.9 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -121,34 +121,10 @@
    at some -O levels and not others, while libm's pow is not always correctly rounded.
 
    ======================================================================================
-   VERSION HISTORY
+   VERSION
    ======================================================================================
-     0.1  constitutive core: deformation math, elastic energies, return mappings,
-          exact von Mises and lagged-plasticity energies.
-     0.2  learned models: MLP inference with exact Hessians, PlasticityNet energies and the
-          learned return mapping; model headers in models/ (format version 1).
-     0.3  model format 2 (array lengths checked, NaN weights refused; gen/upgrade_format.py);
-          pn_model_material names its reason; pn_material_check; result codes
-          PN_ERROR_STEP_TOO_LARGE, PN_ERROR_OUTSIDE_DOMAIN, PN_ERROR_CAPACITY; the same bits
-          from gcc and clang (no pow that a compiler may fold).
-     0.4  closed-form 2x2 SVD; in 2D the Drucker-Prager friction angle is the in-plane
-          Mohr-Coulomb angle (alpha = sin(phi) / sqrt(2); the sand_2d models retrained);
-          Stomakhin snow defined for inverted trial states, optional J_p bounds
-          (snow_jp_min, snow_jp_max).
-     0.5  explicit MPM: no sort (P2G in particle order, a slab of rows per thread), 2D fixed
-          corotated and Stomakhin snow in vector lanes (closed-form clamp); implicit MPM:
-          pn_mpm_implicit_desc.newton_budget, pn_mpm_stats.cg_capped and dt_over_cfl;
-          the P2G record holds only k tau and the hardening (x, v, C read from the state).
-     0.6  implicit MPM: multigrid-preconditioned Newton (assembled Hessian, Galerkin levels,
-          coloured Gauss-Seidel; pn_mpm_implicit_desc.linear_solver, mg_levels, mg_rebuild,
-          pn_mpm_stats.mg_builds); pn_mlp_eval_lanes and pn_pnet_energy_lanes (the network
-          in float vector lanes; pnet_double keeps the double path); a positive definite
-          Hessian skips the eigen-decomposition of its PSD projection.
-     0.7  implicit MPM: the stress formulation (PN_MPM_FORMULATION_STRESS: stresses as
-          unknowns, projected Gauss-Seidel by colour; sweeps_max, sweep_tol,
-          pn_mpm_stats.sweeps); the frozen-yield DP energy frozen at F^n.
-     0.8  the stress formulation's stresses per cell, or per cell then per particle
-          (pn_mpm_implicit_desc.stress_unknowns, cell_relax).
+   One version for the three headers (the banners and PN_VERSION_MAJOR / _MINOR below);
+   CHANGELOG.md has what each version changed, with every rename and refusal it added.
 */
 #ifndef PLASTINET_H
 #define PLASTINET_H
@@ -166,7 +142,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 8
+#define PN_VERSION_MINOR 9
 
 #ifdef __cplusplus
 extern "C" {

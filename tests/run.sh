@@ -165,6 +165,17 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     sh tests/readme_snippets.sh >build/readme_snippets.log 2>&1
     tally readme_snippets build/readme_snippets.log $?
 fi
+# 4b. one version everywhere: each header's banner, PN_VERSION_MAJOR/_MINOR and CHANGELOG.md's newest entry
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    v=$(sed -n 's/^#define PN_VERSION_MAJOR \([0-9]*\)$/\1/p' plastinet.h).$(sed -n 's/^#define PN_VERSION_MINOR \([0-9]*\)$/\1/p' plastinet.h)
+    c=$(sed -n 's/^## \([0-9][0-9.]*\).*/\1/p' CHANGELOG.md | head -n 1)
+    vok=1
+    for h in plastinet.h plastinet_mpm.h plastinet_rom.h; do
+        head -n 1 "$h" | grep -q " - v$v - " || { vok=0; echo "    $h: banner $(head -n 1 "$h" | cut -c1-40) is not v$v"; }
+    done
+    [ "$c" = "$v" ] || { vok=0; echo "    CHANGELOG.md's newest entry is $c, PN_VERSION is $v"; }
+    if [ $vok = 1 ]; then ok "version $v: banners, PN_VERSION and CHANGELOG.md agree"; else bad "version: banners, PN_VERSION and CHANGELOG.md disagree"; fi
+fi
 # 5. the same bits from every compiler (tests/cross_compiler.sh: gcc, g++, clang at -O2 with
 #    -ffp-contract=off, every integrator and energy); skipped with fewer than two compilers
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
