@@ -9,14 +9,16 @@
    over 1 m (2D) / 0.5 m (3D), walls separate with Coulomb friction 0.5, transfer filter time
    2e-3 s (pn_mpm_desc.filter_time_s; 0: APIC). Then the explicit reference (steps of
    pn_mpm_stable_dt) on the same particles to the same time.
-   Why these: measured at res 64 (one core), the stress formulation's deposit is within 2% of
-   the reference's in runout and height (runout 0.358 m against 0.351 m) in about a second.
-   PlasticityNet at dt 1e-3 s stops short (runout 0.14 m), and at 2.5e-4 s is still 21%
-   short at 20 times the cost: `--energy pnet` runs it (the energy formulation with the
-   embedded model; PlasticityNet's regularizer w = 1, --regularizer -1: off). Particles on
-   the lattice (--lattice) collapse in vertical strands in every integrator, the reference
-   too: the lattice's columns of particles share grid nodes and stay in line; jitter breaks
-   that. The old demo: --energy pnet --lattice.
+   Why these: measured at res 64 on one core, the stress formulation's deposit is within 2%
+   of the reference's in runout and height (runout 0.358 m against 0.353 m, height 0.086 m
+   against 0.086 m) in about a second of steps. PlasticityNet at dt 1e-3 s stops short
+   (runout 0.139 m, 39% of the reference's), at 2.5e-4 s is still 22% short after 14 s of
+   steps, and comes within 6% only at 1e-4 s, below the explicit stable step (1.5e-4 s),
+   after 21 s: `--energy pnet` runs it (the energy formulation with the embedded model;
+   PlasticityNet's regularizer w = 1, --regularizer -1: off). Particles on
+   the lattice (--lattice) collapse in vertical strands with every integrator, the
+   reference's included (seen at res 64); jittered, none of them does. The old demo:
+   --energy pnet --lattice.
    Writes DIR/frame_NNNN.png (--png), DIR/preview.png (--apng, animated), DIR/frame_NNNN.ply
    (--ply, points) and DIR/frame_NNNN.obj (--obj, 3D surfaces); a progress line on stderr; a
    one-line JSON summary on stdout: frames, wall seconds of the steps (monotonic clock),
@@ -33,7 +35,8 @@ static void usage(FILE *f, const pn_ex_cli *d) {
                "  of the stress: no energy), jittered particles, res 64; its deposit is within 2%% of the\n"
                "  explicit reference's. PlasticityNet (the energy formulation with the embedded model) is\n"
                "  one flag away, --energy pnet, but at 1e-3 s its deposit stops short (runout 0.14 m against\n"
-               "  the reference's 0.35 m). Particles on the lattice (--lattice) collapse in vertical strands.\n"
+               "  the reference's 0.35 m); it comes within 10%% only at --dt 1e-4, below the explicit stable\n"
+               "  step, more than 20 times slower. Particles on the lattice (--lattice) collapse in vertical strands.\n"
                "  The old demo: --energy pnet --lattice.\n"
                "  --energy pnet|lagged|dp|elastic   what implicit steps minimize; selects the energy\n"
                "                             formulation unless --formulation is given [none: stress]\n"
