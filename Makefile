@@ -18,9 +18,11 @@ build/material_point: examples/material_point.c plastinet.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/material_point.c $(LDLIBS) -o $@
 
-# The main demo: a 2D sand column collapsing under gravity, implicit at dt = 1e-3 s with the
-# embedded PlasticityNet sand model (E = 1e7 Pa); PNG frames and an animated preview in
-# build/sand_column_frames/.
+# The main demo: a 2D sand column collapsing under gravity (E = 1e7 Pa), implicit at dt = 1e-3 s
+# in the stress formulation (Drucker-Prager as the stress's return mapping), then the explicit
+# reference on the same particles; the JSON line compares their deposits (runout_ratio,
+# height_ratio). PNG frames and an animated preview in build/sand_column_frames/.
+# PlasticityNet: build/sand_column --energy pnet (sand_column --help says why it is not the default).
 run: build/sand_column
 	build/sand_column --png --apng --frames 30 --out build/sand_column_frames
 	@echo "# frames: build/sand_column_frames/frame_0001.png ... frame_0030.png, animated: preview.png"
@@ -250,8 +252,8 @@ test-web: web
 
 # ---- the README's pictures (docs/images): animated previews the examples write -----------------
 pictures: build/sand_column build/snowball build/materials build/drop_on_sand
-	build/sand_column --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/sand_2d --quiet
-	build/sand_column --dim 3 --res 32 --jitter --integrator explicit --dt 1e-4 --apng --frames 15 --fps 15 --out build/pictures/sand_3d --quiet
+	build/sand_column --apng --out build/pictures/sand_2d --quiet
+	build/sand_column --dim 3 --res 32 --jitter --integrator explicit --dt 1e-4 --no-reference --apng --frames 15 --fps 15 --out build/pictures/sand_3d --quiet
 	build/snowball --res 128 --jitter --apng --frames 15 --fps 15 --out build/pictures/snow_2d --quiet
 	@mkdir -p docs/images
 	cp build/pictures/sand_2d/preview.png docs/images/sand_column_2d.png
@@ -259,7 +261,7 @@ pictures: build/sand_column build/snowball build/materials build/drop_on_sand
 	build/materials --apng --out build/pictures/materials --quiet
 	cp build/pictures/snow_2d/preview.png docs/images/snowball_2d.png
 	cp build/pictures/materials/preview.png docs/images/materials_2d.png
-	build/drop_on_sand --png --frames 4 --out build/pictures/drop >/dev/null
+	build/drop_on_sand --res 128 --png --frames 4 --out build/pictures/drop >/dev/null
 	cp build/pictures/drop/frame_0004.png docs/images/drop_on_sand_2d.png
 	@if [ -f build/web_test/after.png ]; then cp build/web_test/after.png docs/images/web_demo.png; \
 	else echo "docs/images/web_demo.png: run make test-web first for the browser screenshot"; fi

@@ -9,7 +9,7 @@
 //   --stress     the same with the stress formulation (PN_MPM_FORMULATION_STRESS)
 //   --stress-cells, --stress-cells-first: the stress formulation with a stress per cell, or
 //                per cell then per particle (pn_mpm_implicit_desc.stress_unknowns)
-//   --png DIR    a picture of every 10th frame (examples/pn_render.h)
+//   --png DIR    a picture of every 10th frame into DIR (created; examples/pn_render.h)
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
@@ -20,13 +20,15 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <string>
+#include <system_error>
 #include <vector>
 
 namespace {
 
 struct Options {
-    int frames = 120, res = 32;
+    int frames = 60, res = 32; // one second of play; 120 frames took about a minute on one core
     double E = 1e6; // Pa: softer than real sand (1e7 - 1e8) so that explicit steps are few
     bool implicit = false, stress = false;
     pn_mpm_stress_unknowns where = PN_MPM_STRESS_PARTICLES;
@@ -48,8 +50,17 @@ bool parse(int argc, char **argv, Options &o) {
         };
         double x = 0;
         if (a == "--help" || a == "-h") {
-            std::printf("usage: game_loop [--frames N] [--res N] [--E PA] [--implicit] [--stress] [--stress-cells]\n"
-                        "                 [--stress-cells-first] [--png DIR]\n");
+            std::printf("usage: game_loop [flags]   a 3D sandbox and a plough, one pn_mpm_advance per 60 Hz frame\n"
+                        "  --frames N             frames [60: one second; 120 before issue 42]\n"
+                        "  --res N                grid cells per axis, 16 .. 256 [32]\n"
+                        "  --E PA                 the sand's Young's modulus [1e6]\n"
+                        "  --implicit             one implicit step per frame (frozen-yield Drucker-Prager energy)\n"
+                        "                         [explicit steps at pn_mpm_stable_dt]\n"
+                        "  --stress               the same in the stress formulation (PN_MPM_FORMULATION_STRESS)\n"
+                        "  --stress-cells  --stress-cells-first   the stress formulation with a stress per cell,\n"
+                        "                         or per cell then per particle (pn_mpm_implicit_desc.stress_unknowns)\n"
+                        "  --png DIR              a picture of every 10th frame into DIR (created)\n"
+                        "  --help                 this text\n");
             std::exit(0);
         } else if (a == "--implicit") {
             o.implicit = true;
@@ -136,6 +147,13 @@ int main(int argc, char **argv) {
     std::vector<unsigned char> rgb;
     pn_render_desc view{};
     if (!opt.png.empty()) {
+        std::error_code err;
+        std::filesystem::create_directories(opt.png, err);
+        if (err) {
+            std::fprintf(stderr, "game_loop: cannot create the folder %s: %s\n", opt.png.c_str(), err.message().c_str());
+            pn_mpm_destroy(w);
+            return 1;
+        }
         rgb.resize(960 * 540 * 3);
         view.width = 960, view.height = 540, view.dim = 3;
         view.hi[0] = view.hi[1] = view.hi[2] = L;
@@ -184,7 +202,7 @@ int main(int argc, char **argv) {
             std::snprintf(path, sizeof path, "%s/frame_%04d.png", opt.png.c_str(), frame);
             if (!pn_render_particles(&view, w->n, w->x, nullptr, w->active, rgb.data()) ||
                 !pn_png_write(path, 960, 540, rgb.data()))
-                std::fprintf(stderr, "game_loop: cannot write %s (does the folder exist?)\n", path);
+                std::fprintf(stderr, "game_loop: cannot write %s\n", path);
         }
     }
     std::printf("game_loop: %.2f ms per frame on average, %.2f ms at worst, %.1f steps per frame, "

@@ -14,8 +14,13 @@ enum { SAND, RUBBER, METAL, SNOW, KINDS };
 static const char *const names[KINDS] = {"sand", "rubber", "steel", "snow"};
 
 static void usage(FILE *f) {
-    fprintf(f, "usage: materials [--frames N] [--res N] [--out DIR] [--png] [--apng] [--quiet]\n"
-               "  four materials and two colliders in a 2D box; 30 frames at 30 fps, res 64 [defaults]\n");
+    fprintf(f, "usage: materials [flags]   four materials and two colliders in a 2D box, explicit steps\n"
+               "  --frames N      frames at 30 per second [30]\n"
+               "  --res N         grid cells per axis, 32 .. 512 [64]\n"
+               "  --out DIR       where frames go (created) [build/materials_frames]\n"
+               "  --png  --apng   frames as PNG pictures, one animated PNG of every second frame (DIR/preview.png)\n"
+               "  --quiet         no progress line\n"
+               "  --help          this text\n");
 }
 
 /* material of kind k (E lowered from real values so that explicit steps stay few) */

@@ -58,7 +58,8 @@ static void usage(FILE *f) {
                "  --fps N                   frames per simulated second [25]\n"
                "  --alternating             2D: two triangles per square, not four (crossed)\n"
                "  --png --vtu --obj         outputs (DIR/frame_NNNN.*)\n"
-               "  --out DIR                 [build/metal_frame_frames]\n");
+               "  --out DIR                 [build/metal_frame_frames]\n"
+               "  --help                    this text\n");
 }
 
 /* the element's equivalent plastic strain: h for von Mises */

@@ -446,6 +446,21 @@ PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double 
     return PN_OK;
 }
 
+/* One frame of frame_s seconds in explicit steps of pn_mpm_stable_dt (pn_mpm_advance); adds
+   them to *t. Returns the first failure's code (pn_mpm_error says why). */
+PN_EX_UNUSED static pn_result pn_ex_advance_explicit(pn_mpm_world *w, double frame_s, pn_ex_tally *t) {
+    pn_mpm_advance_desc a;
+    pn_mpm_stats st;
+    pn_result r;
+    memset(&a, 0, sizeof a);
+    a.integrator = PN_MPM_EXPLICIT;
+    if ((r = pn_mpm_advance(w, (pn_real)frame_s, &a, &st)) != PN_OK) return r;
+    t->steps += st.substeps;
+    if ((double)st.dt_over_cfl > t->max_dt_over_cfl) t->max_dt_over_cfl = (double)st.dt_over_cfl;
+    if ((double)st.max_speed_m_s > t->max_speed_m_s) t->max_speed_m_s = (double)st.max_speed_m_s;
+    return PN_OK;
+}
+
 /* Ends an example's JSON line: the means over the steps of the force-error statistics when they
    were measured (--force-error, implicit), then the closing brace. */
 PN_EX_UNUSED static void pn_ex_json_end(const pn_ex_tally *t, int measured) {
@@ -464,13 +479,17 @@ typedef struct pn_ex_cli {
     int dim, implicit, frames, fps, res, png, ply, obj, apng, quiet, boundary, jitter;
     pn_mpm_implicit_desc solver; /* --fixed-point, --contact-rounds, --newton-tol, --cg-tol,
                                     --cg-forcing, --force-error                            */
-    double dt, E, friction, filter;  /* filter < 0: the scene's default                  */
+    double dt;                   /* the step (s); 0: the integrator's default (implicit 1e-3,
+                                    explicit pn_mpm_stable_dt before each step)            */
+    double E, friction, filter;  /* filter < 0: the scene's default                        */
     double regularizer;          /* PlasticityNet's w (0: 1, < 0: off)                     */
     const char *energy, *out;    /* the energy's name as given; the example maps it        */
 } pn_ex_cli;
 
-/* defaults: 2D, implicit, pnet, dt 1e-3 s, 1 pass, 30 frames at 30 fps, the scene's res and
-   E (0: the scene's default), separate walls with friction 0.5, frames into out */
+/* defaults: 2D, implicit, pnet, the energy formulation, dt 0 (implicit 1e-3 s, explicit the
+   stable step), 1 pass, 30 frames at 30 fps, the scene's res and E (0: the scene's default),
+   separate walls with friction 0.5, particles on the lattice, frames into out. An example
+   may change these before parsing; pn_ex_cli_usage prints them. */
 PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
     memset(c, 0, sizeof *c);
     c->dim = 2;
@@ -479,7 +498,6 @@ PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
     c->solver.contact_rounds = 1;
     c->frames = c->fps = 30;
     c->boundary = PN_MPM_BOUNDARY_SEPARATE;
-    c->dt = 1e-3;
     c->friction = 0.5;
     c->filter = -1;
     c->energy = "pnet";
@@ -542,6 +560,7 @@ PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const cha
     if (!strcmp(a, "--obj")) return c->obj = 1;
     if (!strcmp(a, "--apng")) return c->apng = 1;
     if (!strcmp(a, "--jitter")) return c->jitter = 1;
+    if (!strcmp(a, "--lattice")) return (c->jitter = 0) + 1;
     if (!strcmp(a, "--quiet")) return c->quiet = 1;
     if (!strcmp(a, "--force-error")) return c->solver.measure_force_error = 1;
     if (!strcmp(a, "--pnet-double")) return c->solver.pnet_double = 1;
@@ -593,7 +612,7 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const char *prog, const pn_ex_cli *c, pn
     const char *bad = NULL;
     if (c->dim != 2 && c->dim != 3) bad = "--dim must be 2 or 3";
     else if (!(c->friction >= 0)) bad = "--friction must be >= 0";
-    else if (!(c->dt > 0)) bad = "--dt must be > 0";
+    else if (!(c->dt >= 0)) bad = "--dt must be > 0 (0: the integrator's default)";
     else if (c->solver.fixed_point_iters < 1) bad = "--fixed-point must be >= 1";
     else if (c->solver.contact_rounds < 1) bad = "--contact-rounds must be >= 1";
     else if (!(c->solver.newton_tol >= 0)) bad = "--newton-tol must be >= 0 (0: the default)";
@@ -620,13 +639,16 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const char *prog, const pn_ex_cli *c, pn
     return 1;
 }
 
-/* The flags every example takes, for its --help. */
-PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f) {
+/* The flags every example takes, for its --help, with the example's defaults d (what
+   pn_ex_cli_default gave, as the example changed it). Each example lists its own --energy
+   names: they differ. */
+PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f, const pn_ex_cli *d) {
+    int stress = d->solver.formulation == PN_MPM_FORMULATION_STRESS;
     fprintf(f, "  --dim 2|3                  dimension [2]\n"
-               "  --integrator implicit|explicit  [implicit]\n"
-               "  --energy NAME              what implicit steps minimize [pnet]\n"
-               "  --dt S                     step (s) [1e-3]\n"
-               "  --frames N  --fps N        frames and frames per second [30, 30]\n"
+               "  --integrator implicit|explicit  [%s]\n"
+               "  --dt S                     step (s) [implicit 1e-3; explicit: pn_mpm_stable_dt before each\n"
+               "                             step (pn_mpm_advance), a fixed step only when --dt is given]\n"
+               "  --frames N  --fps N        frames and frames per second [%d, %d]\n"
                "  --res N                    grid cells per axis [64 in 2D, 24 in 3D]\n"
                "  --E PA                     Young's modulus [the scene's]\n"
                "  --boundary sticky|slip|separate  --friction MU   the domain walls [separate, 0.5]\n"
@@ -638,19 +660,21 @@ PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f) {
                "                             the Newton systems' solver (pn_mpm_implicit_desc) [multigrid, 8, 0]\n"
                "  --formulation energy|stress  --sweeps N  --sweep-tol X\n"
                "                             what implicit steps solve for; the stress formulation's Gauss-Seidel\n"
-               "                             sweeps and tolerance (pn_mpm_implicit_desc) [energy, 1000, 1e-4]\n"
+               "                             sweeps and tolerance (pn_mpm_implicit_desc) [%s, 1000, 1e-4]\n"
                "  --stress-unknowns particles|cells|cells-then-particles  --cell-relax X\n"
                "                             where the stress formulation's stresses live, and the cells'\n"
                "                             over-relaxation (pn_mpm_implicit_desc) [particles, 1.8]\n"
                "  --pnet-double              PlasticityNet one particle at a time in double (the reference;\n"
                "                             default: its network in float vector lanes)\n"
                "  --force-error              measure the energy's force error (pn_mpm_stats)\n"
-               "  --jitter                   particles jittered in their lattice cells\n"
-               "  --out DIR                  where frames go (created)\n"
+               "  --jitter  --lattice        particles jittered in their lattice cells, or on the lattice [%s]\n"
+               "  --out DIR                  where frames go (created) [%s]\n"
                "  --png  --apng  --ply  --obj   frames as PNG pictures, one animated PNG (DIR/preview.png),\n"
                "                             PLY points, OBJ surfaces (3D; marching tetrahedra)\n"
                "  --quiet                    no progress line\n"
-               "  --help                     this text\n");
+               "  --help                     this text\n",
+            d->implicit ? "implicit" : "explicit", d->frames, d->fps, stress ? "stress" : "energy",
+            d->jitter ? "jitter" : "lattice", d->out);
 }
 
 /* ---- frames and the run loop ------------------------------------------------------------ */
@@ -791,20 +815,24 @@ PN_EX_UNUSED static int pn_ex_outputs(const char *prog, const pn_mpm_world *w, p
     return 1;
 }
 
-/* An example's whole run: frames of 1/fps s at dt_s (implicit steps with the settings id),
-   the outputs of each frame, a progress line on stderr unless quiet; *wall_s gets the wall
-   seconds of the steps (not of the outputs). Returns 0 after a failure (said on stderr). */
+/* An example's whole run: frames of 1/fps s at dt_s (implicit steps with the settings id;
+   dt_s 0: 1e-3 s implicit, explicit steps of pn_mpm_stable_dt), the outputs of each frame,
+   a progress line on stderr unless quiet; *wall_s gets the wall seconds of the steps (not
+   of the outputs). Returns 0 after a failure (said on stderr). */
 PN_EX_UNUSED static int pn_ex_run(const char *prog, pn_mpm_world *w, int implicit, double dt_s,
                                   const pn_mpm_implicit_desc *id, int frames, int fps, pn_ex_output *o, int quiet,
                                   pn_ex_tally *tally, double *wall_s) {
-    long steps_per_frame = (long)(1.0 / fps / dt_s + 0.5);
-    int frame;
+    int stable = !implicit && !(dt_s > 0), frame;
+    long steps_per_frame;
+    if (implicit && !(dt_s > 0)) dt_s = 1e-3;
+    steps_per_frame = stable ? 0 : (long)(1.0 / fps / dt_s + 0.5);
     memset(tally, 0, sizeof *tally);
     *wall_s = 0;
     if (steps_per_frame < 1) steps_per_frame = 1;
     for (frame = 1; frame <= frames; ++frame) {
         double t0 = pn_ex_seconds();
-        pn_result r = pn_ex_steps(w, implicit, dt_s, id, steps_per_frame, tally);
+        pn_result r = stable ? pn_ex_advance_explicit(w, 1.0 / fps, tally)
+                             : pn_ex_steps(w, implicit, dt_s, id, steps_per_frame, tally);
         *wall_s += pn_ex_seconds() - t0;
         if (r != PN_OK) {
             fprintf(stderr, "\n%s: step %ld failed: %s (%s)\n", prog, tally->steps + 1, pn_mpm_error(w),
@@ -892,6 +920,39 @@ PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, con
         return 0;
     }
     pn_ex_bounds(o->w, o->lo, o->hi);
+    return 1;
+}
+
+/* The explicit reference of scene s (docs/validation.md): the same particles, run to t_end_s
+   in `frames` equal frames of explicit steps at pn_mpm_stable_dt, with no outputs. *out gets
+   the world (the caller destroys it), *t the steps, *wall_s their wall seconds. Returns 0
+   after a failure (said on stderr; nothing left to destroy). */
+PN_EX_UNUSED static int pn_ex_reference(const char *prog, const pn_ex_scene *s, double t_end_s, int frames,
+                                        pn_mpm_world **out, pn_ex_tally *t, double *wall_s) {
+    pn_ex_scene ref = *s;
+    const char *why = "";
+    pn_result r;
+    int k;
+    *out = NULL;
+    *wall_s = 0;
+    memset(t, 0, sizeof *t);
+    ref.energy = PN_MPM_ENERGY_LAGGED; /* explicit steps ignore it; no network to set up */
+    if ((r = pn_ex_scene_create(&ref, out, &why)) != PN_OK) {
+        fprintf(stderr, "%s: the reference: %s (%s)\n", prog, why, pn_result_string(r));
+        return 0;
+    }
+    for (k = 0; k < frames && t_end_s > 0; ++k) {
+        double t0 = pn_ex_seconds();
+        r = pn_ex_advance_explicit(*out, t_end_s / frames, t);
+        *wall_s += pn_ex_seconds() - t0;
+        if (r != PN_OK) {
+            fprintf(stderr, "%s: the reference failed at t = %g s: %s (%s)\n", prog, (double)(*out)->time_s,
+                    pn_mpm_error(*out), pn_result_string(r));
+            pn_mpm_destroy(*out);
+            *out = NULL;
+            return 0;
+        }
+    }
     return 1;
 }
 

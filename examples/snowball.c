@@ -19,13 +19,13 @@
 #define PLASTINET_IMPLEMENTATION
 #include "pn_example.h"
 
-static void usage(FILE *f) {
+static void usage(FILE *f, const pn_ex_cli *d) {
     fprintf(f, "usage: snowball [flags]   a snowball thrown at a frictional floor\n"
                "  --energy pnet|lagged       what implicit steps minimize [pnet]\n"
                "  --speed M_S  --angle DEG   the throw: speed and angle below the horizontal [3, 45]\n"
                "  --h0 LOGJP                 initial consolidation log J_p <= 0 [-0.01]\n"
                "  --no-hardening             Cam-Clay with the state held\n");
-    pn_ex_cli_usage(f);
+    pn_ex_cli_usage(f, d);
 }
 
 int main(int argc, char **argv) {
@@ -34,15 +34,16 @@ int main(int argc, char **argv) {
     int lagged, k;
     double speed = 3, angle = 45, h0 = -0.01;
     int no_hardening = 0;
-    pn_ex_cli c;
+    pn_ex_cli c, d;
     pn_ex_scene sc;
     pn_ex_outcome o;
     pn_ex_cli_default(&c, "build/snowball_frames");
+    d = c;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         int used;
         if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
-            usage(stdout);
+            usage(stdout, &d);
             return 0;
         }
         used = pn_ex_cli_flag(prog, &c, a, v);
@@ -78,7 +79,8 @@ int main(int argc, char **argv) {
            "\"steps\": %ld, \"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, "
            "\"line_search_failures\": %ld, \"spread_m\": %.4f, \"runout_m\": %.4f, \"final_height_m\": %.4f, "
            "\"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
-           c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "return_mapping" : lagged ? "lagged" : "pnet", c.dt,
+           c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "return_mapping" : lagged ? "lagged" : "pnet",
+           o.tally.steps ? (double)o.w->time_s / (double)o.tally.steps : 0.0,
            c.solver.fixed_point_iters, c.solver.contact_rounds, sc.E_pa, speed, angle, h0, no_hardening ? "false" : "true", pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
            (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
            (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,

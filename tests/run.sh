@@ -161,6 +161,48 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     if make -s examples >build/examples.log 2>&1; then ok "examples build (make examples)"
     else bad "examples build (make examples)"; sed 's/^/    /' build/examples.log | head -20; fi
 fi
+# 4b. the front door (issue 42), a few seconds in all: the demo at its defaults against the
+#     explicit reference it runs itself (runout and height within 10%); explicit runs at their
+#     stable step by default; every example's --help exits 0 and lists each flag it takes,
+#     once; game_loop creates its picture folder
+if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -x build/sand_column ]; then
+    json=$(OMP_NUM_THREADS=1 build/sand_column --quiet 2>build/demo_check.err)
+    ro=$(echo "$json" | sed -n 's/.*"runout_ratio": \([^,}]*\).*/\1/p')
+    hr=$(echo "$json" | sed -n 's/.*"height_ratio": \([^,}]*\).*/\1/p')
+    if [ -n "$ro" ] && [ -n "$hr" ] && awk -v a="$ro" -v b="$hr" 'BEGIN { exit !(a >= 0.9 && a <= 1.1 && b >= 0.9 && b <= 1.1) }'; then
+        ok "demo_sand_column_matches_reference: runout and height over the explicit reference's $ro, $hr"
+    else
+        bad "demo_sand_column_matches_reference: runout ratio '$ro', height ratio '$hr' (bar: 0.9 .. 1.1)"
+        sed 's/^/    /' build/demo_check.err | tail -5
+    fi
+    for e in sand_column snowball; do
+        if OMP_NUM_THREADS=1 build/$e --integrator explicit --frames 3 --quiet >build/example_explicit.log 2>&1; then
+            ok "example_explicit_default_step: $e --integrator explicit"
+        else
+            bad "example_explicit_default_step: $e --integrator explicit"; sed 's/^/    /' build/example_explicit.log | tail -5
+        fi
+    done
+    for e in material_point sand_column snowball materials game_loop metal_frame drop_on_sand; do
+        if ! build/$e --help >build/example_help.txt 2>&1; then bad "example_help: $e --help exits $?"; continue; fi
+        # a flag defined twice: on two lines of the help that begin with it
+        dup=$(grep -E '^ *--' build/example_help.txt | while read -r line; do
+            echo "$line" | grep -oE -- '--[A-Za-z0-9-]+' | sort -u; done | sort | uniq -d | tr '\n' ' ')
+        # a flag the source takes that the help does not name
+        case $e in sand_column|snowball) src="examples/$e.c examples/pn_example.h";; game_loop) src=examples/$e.cpp;; *) src=examples/$e.c;; esac
+        # shellcheck disable=SC2086
+        miss=$(grep -ohE '"--[A-Za-z0-9-]+"' $src | tr -d '"' | sort -u | while read -r f; do
+            grep -qE -- "(^|[^A-Za-z0-9-])$f([^A-Za-z0-9-]|$)" build/example_help.txt || echo "$f"; done | tr '\n' ' ')
+        if [ -z "$dup" ] && [ -z "$miss" ]; then ok "example_help: $e"
+        else bad "example_help: $e lists twice: '$dup'; takes but does not list: '$miss'"; fi
+    done
+    rm -rf build/example_png_dir
+    if build/game_loop --frames 1 --res 16 --png build/example_png_dir/sub >build/example_png.log 2>&1 &&
+        [ -d build/example_png_dir/sub ]; then
+        ok "example_game_loop_png_mkdir"
+    else
+        bad "example_game_loop_png_mkdir: build/example_png_dir/sub not created"; sed 's/^/    /' build/example_png.log | tail -5
+    fi
+fi
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     sh tests/readme_snippets.sh >build/readme_snippets.log 2>&1
     tally readme_snippets build/readme_snippets.log $?
