@@ -207,7 +207,7 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     sh tests/readme_snippets.sh >build/readme_snippets.log 2>&1
     tally readme_snippets build/readme_snippets.log $?
 fi
-# 4b. one version everywhere: each header's banner, PN_VERSION_MAJOR/_MINOR and CHANGELOG.md's newest entry
+# 4c. one version everywhere: each header's banner, PN_VERSION_MAJOR/_MINOR and CHANGELOG.md's newest entry
 if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     v=$(sed -n 's/^#define PN_VERSION_MAJOR \([0-9]*\)$/\1/p' plastinet.h).$(sed -n 's/^#define PN_VERSION_MINOR \([0-9]*\)$/\1/p' plastinet.h)
     c=$(sed -n 's/^## \([0-9][0-9.]*\).*/\1/p' CHANGELOG.md | head -n 1)
