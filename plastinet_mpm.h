@@ -75,7 +75,9 @@
    advection_limit cells or leave through a wall (PN_ERROR_STEP_TOO_LARGE,
    PN_ERROR_OUTSIDE_DOMAIN) or (implicit) a solve that does not converge after the fallback
    names the particle in pn_mpm_world.error_particle and leaves the world exactly as it was
-   before the step (the new state is built in scratch arrays and swapped in). No step
+   before the step (the new state is built in scratch arrays and swapped in), down to what
+   only later steps read (PlasticityNet's Taylor models, the multigrid's lag): the next steps
+   are those of a world that never tried the failed one. No step
    returns PN_OK with material lost: outflow is an error unless allow_outflow is set.
    THREADS: compile with -fopenmp to run the particle and node loops on OpenMP threads
    (worlds of at least desc.parallel_min_particles particles, 4096 by default; smaller ones
@@ -880,7 +882,10 @@ PN_API pn_result pn_fem_spin_nodes(pn_fem_mesh *m, size_t n, const int *nodes, c
 PN_API pn_result pn_fem_release_nodes(pn_fem_mesh *m, size_t n, const int *nodes);
 
 /* Add an obstacle (a half-space or a box; copied). Every node must be outside it, further
-   than nothing: PN_ERROR_INVALID_ARGUMENT names a node inside. */
+   than nothing, and a box must not reach into an element between its nodes (the barrier acts
+   on nodes): PN_ERROR_INVALID_ARGUMENT names the node or element. A step after which a box
+   reaches into an element (a coarse element over a small box) fails with
+   PN_ERROR_UNSUPPORTED, the mesh unchanged. */
 PN_API pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, int *index);
 
 /* The largest explicit step the mesh allows: 0.5 l / c over the elements (l the smallest
@@ -1014,7 +1019,10 @@ typedef struct pn_coupled {
 
 /* Couple world w and mesh m (the same dim). PN_ERROR_DIMENSION; PN_ERROR_INVALID_ARGUMENT for
    a negative or non-finite field, or a particle inside the mesh or on its boundary (named);
-   PN_ERROR_OUT_OF_MEMORY. why (optional) says why. */
+   PN_ERROR_OUTSIDE_DOMAIN for a mesh node outside the world's walls (named);
+   PN_ERROR_OUT_OF_MEMORY. why (optional) says why. The pair storage is reserved here, for the
+   mesh's boundary at the particles' spacing: steps allocate nothing unless the contact grows
+   far beyond that. */
 PN_API pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_coupled_desc *desc, pn_coupled **out,
                                    char *why, size_t why_cap);
 PN_API void pn_coupled_destroy(pn_coupled *c); /* the world and mesh stay */
