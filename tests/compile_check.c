@@ -293,7 +293,7 @@ static void smoke_fem(int d) {
         int i;
         memset(&wd, 0, sizeof wd);
         wd.dim = d, wd.dx_m = (pn_real)0.02, wd.max_particles = 4096, wd.gravity[1] = (pn_real)-9.81;
-        for (i = 0; i < d; ++i) wd.res[i] = 16, wd.origin_m[i] = (pn_real)-0.16;
+        for (i = 0; i < d; ++i) wd.res[i] = 20, wd.origin_m[i] = (pn_real)-0.2; /* the mesh within the walls */
         CHECK(pn_mpm_create(&wd, &w, NULL) == PN_OK);
         md.plastic = PN_PLASTIC_DRUCKER_PRAGER, md.elastic = PN_ELASTIC_STVK_HENCKY;
         CHECK(pn_material_init(&sand, &md, NULL) == PN_OK);
