@@ -1301,6 +1301,11 @@ PN_TEST(pnet_bad_input) {
     T_PN_BROKEN("weight_count short", bad.model.mlp.weight_count[2] -= 1, PN_ERROR_FORMAT);
     T_PN_BROKEN("format 2 without lengths", (bad.model.mlp.weight_count[0] = 0, bad.model.mlp.bias_count[0] = 0),
                 PN_ERROR_FORMAT);
+    /* only layer 0 was required to declare its lengths: a later layer without them (its
+       sizes then unchecked) was read past by pn_model_check itself (tests/fuzz/corpus/
+       model_check/layer1_no_lengths) */
+    T_PN_BROKEN("a hidden layer without its lengths", (bad.model.mlp.weight_count[1] = 0, bad.model.mlp.bias_count[1] = 0),
+                PN_ERROR_FORMAT);
     T_PN_BROKEN("NaN weight", t_pn_model_poison(&bad, &sand2.energy, 1, nan), PN_ERROR_FORMAT);
     T_PN_BROKEN("inf bias", t_pn_model_poison(&bad, &sand2.energy, 0, inf), PN_ERROR_FORMAT);
 #undef T_PN_BROKEN
