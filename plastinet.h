@@ -2531,7 +2531,7 @@ static pn__vf pn__vf_exp(pn__vf x) {
         t = t > 87.0f ? 87.0f : t;
         z[l] = t;
         k[l] = (t * 1.44269504f + 12582912.0f) - 12582912.0f; /* round to nearest */
-        bits[l] = ((int32_t)k[l] + 127) * (1 << 23);
+        bits[l] = ((int32_t)(k[l] == k[l] ? k[l] : 0) + 127) * (1 << 23); /* NaN: through r, not the cast */
     }
     memcpy(two_k, bits, sizeof two_k);
     memcpy(&x, z, sizeof z);
