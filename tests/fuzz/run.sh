@@ -74,7 +74,7 @@ report() {
         fi
     else
         failed=$((failed + 1))
-        [ "$rc" = build ] && echo "FAIL fuzz_$n (build)" || echo "FAIL fuzz_$n (exit $rc; log $out/fuzz_$n.log)"
+        if [ "$rc" = build ]; then echo "FAIL fuzz_$n (build)"; else echo "FAIL fuzz_$n (exit $rc; log $out/fuzz_$n.log)"; fi
         grep -v '^INFO\|^#[0-9]' "$out/fuzz_$n.log" | head -30 | sed 's/^/    /'
         for a in "$out"/fuzz_"$n"-*; do [ -e "$a" ] && echo "    input: $a (add it to tests/fuzz/corpus/$n/)"; done
     fi
@@ -87,6 +87,7 @@ for src in tests/fuzz/fuzz_*.c; do
     names="$names $n"
     rm -f "$out/fuzz_$n.rc" "$out"/fuzz_"$n"-*
 done
+# shellcheck disable=SC2086
 set -- $names
 while [ $# -gt 0 ]; do # two at a time (the machine's two cores), reported in order
     a=$1; shift
