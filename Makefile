@@ -217,6 +217,13 @@ crosscheck:
 test-sanitize:
 	@SANITIZE=1 tests/run.sh
 
+# The fuzz targets (tests/fuzz/README.md): FUZZ_SECONDS per target under clang's libFuzzer
+# (without it: the corpus replayed once per target).
+FUZZ_SECONDS ?= 20
+.PHONY: fuzz
+fuzz:
+	@tests/fuzz/run.sh $(FUZZ_SECONDS)
+
 clean:
 	rm -rf build
 

@@ -162,7 +162,7 @@ typedef enum pn_result {
     PN_ERROR_NOT_CONVERGED,     /* an iterative method failed to converge                  */
     PN_ERROR_OUT_OF_MEMORY,
     PN_ERROR_DIMENSION,         /* dimension compiled out, or a model of the wrong dim     */
-    PN_ERROR_FORMAT,            /* a model of an unknown format version                    */
+    PN_ERROR_FORMAT,            /* malformed model or mesh data (version, sizes, values)   */
     PN_ERROR_OVERFLOW,          /* finite inputs, but the result overflowed (NaN or inf):
                                    the deformation is too extreme for the model          */
     PN_ERROR_STEP_TOO_LARGE,    /* a time step beyond what the solver can take honestly
@@ -716,7 +716,7 @@ PN__DEF const char *pn_result_string(pn_result r) {
     case PN_ERROR_NOT_CONVERGED: return "an iterative solve did not converge";
     case PN_ERROR_OUT_OF_MEMORY: return "out of memory";
     case PN_ERROR_DIMENSION: return "unsupported dimension (not 2 or 3, compiled out, or a model of another dimension)";
-    case PN_ERROR_FORMAT: return "unknown model format version";
+    case PN_ERROR_FORMAT: return "malformed model or mesh data (format version, sizes or values)";
     case PN_ERROR_OVERFLOW: return "the result overflowed (NaN or infinity) although the inputs are finite: the deformation is too extreme for the model";
     case PN_ERROR_STEP_TOO_LARGE: return "time step too large: material would move more than the advection limit in one step (use a smaller step or substeps)";
     case PN_ERROR_OUTSIDE_DOMAIN: return "material would leave the simulation domain through a wall (outflow not allowed)";
@@ -2507,7 +2507,7 @@ static pn__vf pn__vf_exp(pn__vf x) {
         t = t > 87.0f ? 87.0f : t;
         z[l] = t;
         k[l] = (t * 1.44269504f + 12582912.0f) - 12582912.0f; /* round to nearest */
-        bits[l] = ((int32_t)k[l] + 127) * (1 << 23);
+        bits[l] = ((int32_t)(k[l] == k[l] ? k[l] : 0) + 127) * (1 << 23); /* NaN: through r, not the cast */
     }
     memcpy(two_k, bits, sizeof two_k);
     memcpy(&x, z, sizeof z);
@@ -2851,6 +2851,15 @@ static int pn__model_normalisation_ok(const pn_model *mo) {
     return 1;
 }
 
+/* a model (format 2 and up) declares the lengths of every layer's arrays: pn__mlp_ok checks
+   only the layers that declare them */
+static int pn__mlp_counted(const pn_mlp *n) {
+    int l;
+    for (l = 0; l < n->n_layers && l < PN_MLP_MAX_LAYERS; ++l)
+        if (n->weight_count[l] == 0 || n->bias_count[l] == 0) return 0;
+    return 1;
+}
+
 PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) {
     const char *w = NULL;
     pn_result r = PN_OK;
@@ -2859,9 +2868,8 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
         w = "model format version differs from PN_MODEL_FORMAT_VERSION: regenerate it (make models; "
             "gen/upgrade_format.py for older formats)";
         r = PN_ERROR_FORMAT;
-    } else if (mo->mlp.n_layers >= 1 && mo->mlp.n_layers <= PN_MLP_MAX_LAYERS &&
-               (mo->mlp.weight_count[0] == 0 || mo->mlp.bias_count[0] == 0)) {
-        w = "model network without its array lengths (pn_mlp.weight_count, bias_count)";
+    } else if (!pn__mlp_counted(&mo->mlp)) {
+        w = "model network without its array lengths (pn_mlp.weight_count, bias_count of every layer)";
         r = PN_ERROR_FORMAT;
     } else if (mo->kind != PN_MODEL_ENERGY && mo->kind != PN_MODEL_RETURN_MAP) {
         w = "unknown model kind";

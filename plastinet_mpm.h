@@ -9507,7 +9507,7 @@ PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const 
     if (al && (al->alloc == NULL) != (al->free == NULL)) return PN_ERROR_INVALID_ARGUMENT;
     memset(&d, 0, sizeof d);
     d.dim = dim;
-    L.p = text, L.end = text + len, L.line = 1;
+    L.p = text, L.end = text ? text + len : text, L.line = 1; /* NULL + 0 is undefined in C */
 #define PN__MSH_FAIL(...) do { pn__fem_why(why, cap, __VA_ARGS__); goto fail; } while (0)
     if (!pn__fem_section(&L, "$MeshFormat") || !pn__fem_real(&L, &version, 0)) PN__MSH_FAIL("line %ld: no $MeshFormat", L.line);
     if (!(version >= 2 && version < 3) && !(version >= 4 && version < 5))
@@ -9630,7 +9630,7 @@ PN__DEF pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, co
     memset(&d, 0, sizeof d);
     d.dim = 3;
 #define PN__TG_FAIL(...) do { pn__fem_why(why, cap, __VA_ARGS__); goto fail; } while (0)
-    L.p = node_text, L.end = node_text + node_len, L.line = 1;
+    L.p = node_text, L.end = node_text ? node_text + node_len : node_text, L.line = 1;
     if (!pn__fem_long(&L, &n, 1) || !pn__fem_long(&L, &dimf, 1) || !pn__fem_long(&L, &nattr, 1) || !pn__fem_long(&L, &nmark, 1) ||
         n < 0 || n > 0x7fffffffL || dimf != 3 || nattr < 0 || nattr > 64 || nmark < 0 || nmark > 1)
         PN__TG_FAIL(".node line %ld: a bad header (count, dimension 3, attributes, boundary marker 0 or 1)", L.line);
@@ -9655,7 +9655,7 @@ PN__DEF pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, co
             if (!pn__fem_real(&L, &skip, 1)) PN__TG_FAIL(".node line %ld: node %ld: a bad attribute", L.line, ids[2 * k]);
         if (nmark && !pn__fem_long(&L, &ks, 1)) PN__TG_FAIL(".node line %ld: node %ld: a bad boundary marker", L.line, ids[2 * k]);
     }
-    L.p = ele_text, L.end = ele_text + ele_len, L.line = 1;
+    L.p = ele_text, L.end = ele_text ? ele_text + ele_len : ele_text, L.line = 1;
     if (!pn__fem_long(&L, &ne, 1) || !pn__fem_long(&L, &per, 1) || !pn__fem_long(&L, &rattr, 1) || ne < 0 || ne > 0x7fffffffL ||
         (per != 4 && per != 10) || (rattr != 0 && rattr != 1))
         PN__TG_FAIL(".ele line %ld: a bad header (count, 4 or 10 nodes per tetrahedron, region attribute 0 or 1)", L.line);

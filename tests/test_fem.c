@@ -1585,8 +1585,35 @@ PN_TEST(fem_loaders) {
     printf("    [fem_loaders] 100000 mutated files: %d parsed, %d of those made a mesh, the rest refused\n", ok_parse, created);
 }
 
+/* A malformed mesh file: PN_ERROR_FORMAT's sentence fits a mesh (not "unknown model format
+   version", as it said for every model and mesh error), and why names the line and the field.
+   Empty input given as NULL (length 0, which the loaders allow) is refused the same way
+   (it computed NULL + 0, undefined in C: UBSan, make test-sanitize). */
+PN_TEST(fem_loader_errors) {
+    static const char bad_count[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\nthree\n$EndNodes\n";
+    const char *s = pn_result_string(PN_ERROR_FORMAT);
+    pn_fem_mesh_data d;
+    char why[256];
+    PN_CHECK(strstr(s, "mesh") != NULL && strstr(s, "model") != NULL && strstr(s, "unknown") == NULL);
+    why[0] = 0;
+    PN_CHECK(pn_fem_parse_msh(bad_count, sizeof bad_count - 1, 2, NULL, &d, why, sizeof why) == PN_ERROR_FORMAT);
+    if (!strstr(why, "line 5") || !strstr(why, "node count")) {
+        fprintf(stderr, "  fem_loader_errors: '%s' does not name line 5 and the node count\n", why);
+        PN_CHECK(0);
+    }
+    why[0] = 0;
+    PN_CHECK(pn_fem_parse_msh(NULL, 0, 3, NULL, &d, why, sizeof why) == PN_ERROR_FORMAT && why[0] && d.nodes == NULL);
+    why[0] = 0;
+    PN_CHECK(pn_fem_parse_tetgen(t_fem_node, sizeof t_fem_node - 1, NULL, 0, NULL, &d, why, sizeof why) == PN_ERROR_FORMAT);
+    PN_CHECK(strstr(why, ".ele line 1") != NULL && d.nodes == NULL && d.elements == NULL);
+    why[0] = 0;
+    PN_CHECK(pn_fem_parse_tetgen(NULL, 0, t_fem_ele, sizeof t_fem_ele - 1, NULL, &d, why, sizeof why) == PN_ERROR_FORMAT);
+    PN_CHECK(strstr(why, ".node line 1") != NULL && d.nodes == NULL);
+}
+
 static const pn_test_case pn_tests_fem[] = {
     {"fem_loaders", fem_loaders},
+    {"fem_loader_errors", fem_loader_errors},
     {"fem_grid_mesh", fem_grid_mesh},
     {"fem_patch", fem_patch},
     {"fem_barrier_fd", fem_barrier_fd},

@@ -1301,6 +1301,11 @@ PN_TEST(pnet_bad_input) {
     T_PN_BROKEN("weight_count short", bad.model.mlp.weight_count[2] -= 1, PN_ERROR_FORMAT);
     T_PN_BROKEN("format 2 without lengths", (bad.model.mlp.weight_count[0] = 0, bad.model.mlp.bias_count[0] = 0),
                 PN_ERROR_FORMAT);
+    /* only layer 0 was required to declare its lengths: a later layer without them (its
+       sizes then unchecked) was read past by pn_model_check itself (tests/fuzz/corpus/
+       model_check/layer1_no_lengths) */
+    T_PN_BROKEN("a hidden layer without its lengths", (bad.model.mlp.weight_count[1] = 0, bad.model.mlp.bias_count[1] = 0),
+                PN_ERROR_FORMAT);
     T_PN_BROKEN("NaN weight", t_pn_model_poison(&bad, &sand2.energy, 1, nan), PN_ERROR_FORMAT);
     T_PN_BROKEN("inf bias", t_pn_model_poison(&bad, &sand2.energy, 0, inf), PN_ERROR_FORMAT);
 #undef T_PN_BROKEN
@@ -1970,6 +1975,29 @@ static double t_prepare_lanes(pn_test_ctx *pn__t, const pn_pnet *net, int dim, i
     return worst;
 }
 
+/* The lane path on a network whose float pre-activation is inf - inf = NaN (finite weights
+   near FLT_MAX, which pn_model_check accepts): PN_ERROR_OVERFLOW and the output untouched.
+   Its exponential cast that NaN to an integer (undefined behaviour: UBSan, make
+   test-sanitize; tests/fuzz/corpus/model_check/lanes_nan_preactivation). */
+PN_TEST(pnet_lanes_nan_preactivation) {
+    static const float w0[4] = {3e38f, -3e38f, 3e38f, -3e38f}, b0[2] = {0, 0}, w1[2] = {1, 1}, b1[1] = {0};
+    float in[2 * PN_MLP_LANES], out[PN_MLP_LANES], grad[2 * PN_MLP_LANES];
+    pn_mlp mlp;
+    int i, act;
+    memset(&mlp, 0, sizeof mlp);
+    mlp.n_layers = 2;
+    mlp.size[0] = 2, mlp.size[1] = 2, mlp.size[2] = 1;
+    mlp.weight[0] = w0, mlp.bias[0] = b0, mlp.weight[1] = w1, mlp.bias[1] = b1;
+    mlp.weight_count[0] = 4, mlp.bias_count[0] = 2, mlp.weight_count[1] = 2, mlp.bias_count[1] = 1;
+    for (i = 0; i < 2 * PN_MLP_LANES; ++i) in[i] = 10;
+    for (act = PN_ACTIVATION_SILU; act <= PN_ACTIVATION_TANH; ++act) {
+        mlp.activation = (pn_activation)act;
+        out[0] = -7;
+        PN_CHECK(pn_mlp_eval_lanes(&mlp, 3, in, 2, out, grad, NULL) == PN_ERROR_OVERFLOW);
+        PN_CHECK(out[0] == -7);
+    }
+}
+
 PN_TEST(pnet_lanes) {
     double worst[3] = {0, 0, 0}, mlp_worst = 0, prep_worst = 0;
     int dim, scaled, act, n, rep, k, format_refused;
@@ -2174,4 +2202,5 @@ static const pn_test_case pn_tests_pnet[] = {
     {"pnet_learned_return_map", pnet_learned_return_map},
     {"pnet_shipped_models", pnet_shipped_models},
     {"pnet_lanes", pnet_lanes},
+    {"pnet_lanes_nan_preactivation", pnet_lanes_nan_preactivation},
 };
