@@ -3083,20 +3083,28 @@ static pn_result pn__mpm_alloc_reuse(pn_mpm_world *w) {
 }
 #undef PN__MPM_A
 
-/* Before a call's first change to particle p's Taylor model (a new model, its point prepared
-   anew, pH taken as scratch), the model as the call found it, with the PSD dP/dF in pH and
-   the point ppt it belongs to */
-static void pn__mpm_touch(pn_mpm_world *w, size_t p) {
+/* particle p's Taylor model (tF, tP, tH, tpsi), its PSD dP/dF in pH and the point ppt it
+   belongs to: into the journal (restore = 0) or back from it (restore = 1) */
+static void pn__mpm_journal_copy(pn_mpm_world *w, size_t p, int restore) {
     size_t dd = (size_t)(w->dim * w->dim);
+#define PN__MPM_J(live, kept, count) \
+    memcpy(restore ? (live) : (kept), restore ? (kept) : (live), sizeof(pn_real) * (count))
+    PN__MPM_J(w->tF + p * dd, w->jF + p * dd, dd);
+    PN__MPM_J(w->tP + p * dd, w->jP + p * dd, dd);
+    PN__MPM_J(w->tH + p * dd * dd, w->jH + p * dd * dd, dd * dd);
+    PN__MPM_J(w->pH + p * dd * dd, w->jpH + p * dd * dd, dd * dd);
+    PN__MPM_J(w->tpsi + p, w->jpsi + p, 1);
+#undef PN__MPM_J
+    if (restore) w->ppt[p] = w->jppt[p];
+    else w->jppt[p] = w->ppt[p];
+}
+
+/* before a call's first change to particle p's model (a new model, its point prepared anew,
+   pH taken as scratch): the model as the call found it */
+static void pn__mpm_touch(pn_mpm_world *w, size_t p) {
     if (w->jst[p]) return;
     w->jst[p] = (unsigned char)(1 + (w->tok[p] != 0));
-    if (!w->tok[p]) return;
-    memcpy(w->jF + p * dd, w->tF + p * dd, sizeof(pn_real) * dd);
-    memcpy(w->jP + p * dd, w->tP + p * dd, sizeof(pn_real) * dd);
-    memcpy(w->jH + p * dd * dd, w->tH + p * dd * dd, sizeof(pn_real) * dd * dd);
-    memcpy(w->jpH + p * dd * dd, w->pH + p * dd * dd, sizeof(pn_real) * dd * dd);
-    w->jpsi[p] = w->tpsi[p];
-    w->jppt[p] = w->ppt[p];
+    if (w->tok[p]) pn__mpm_journal_copy(w, p, 0);
 }
 
 /* a call starts: nothing saved yet */
@@ -3106,17 +3114,10 @@ static void pn__mpm_journal_begin(pn_mpm_world *w) {
 
 /* a failed call (or attempt): every model it changed back as the call found it */
 static void pn__mpm_journal_undo(pn_mpm_world *w) {
-    size_t p, dd = (size_t)(w->dim * w->dim);
+    size_t p;
     if (!w->jst) return;
     for (p = 0; p < w->n; ++p) {
-        if (w->jst[p] == 2) {
-            memcpy(w->tF + p * dd, w->jF + p * dd, sizeof(pn_real) * dd);
-            memcpy(w->tP + p * dd, w->jP + p * dd, sizeof(pn_real) * dd);
-            memcpy(w->tH + p * dd * dd, w->jH + p * dd * dd, sizeof(pn_real) * dd * dd);
-            memcpy(w->pH + p * dd * dd, w->jpH + p * dd * dd, sizeof(pn_real) * dd * dd);
-            w->tpsi[p] = w->jpsi[p];
-            w->ppt[p] = w->jppt[p];
-        }
+        if (w->jst[p] == 2) pn__mpm_journal_copy(w, p, 1);
         if (w->jst[p]) w->tok[p] = (unsigned char)(w->jst[p] == 2);
         w->jst[p] = 0;
     }

@@ -32,6 +32,16 @@
 #define PN_RS_MAX_DRIVES 2
 #define PN_RS_MAX_LOADS 10
 #define PN_RS_PI 3.14159265358979323846
+/* --help: the explicit schemes' two letters (the examples' shared lines) */
+#define PN_RS_SCHEME_HELP \
+    "                    L   Lagrangian: the body's own points near the samples\n" \
+    "                    E   Eulerian: points on a lattice of each grid cell near the samples, mapped back\n" \
+    "                        to the reference domain by Newton (no point is tracked)\n" \
+    "                    second letter, the projection onto the latent:\n" \
+    "                    L   linear: the latent velocity by least squares on the velocities, then\n" \
+    "                        latent += dt x latent velocity\n" \
+    "                    N   nonlinear: the latent by Gauss-Newton on the sampled positions as well\n" \
+    "                    so LN, LL, EN, EL are the four explicit variants (docs/rom.md)\n"
 
 typedef struct pn_rs_region {  /* reference points in the box lo..hi, and within radius of   */
     double lo[3], hi[3];       /* center if radius > 0                                        */
