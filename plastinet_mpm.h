@@ -9764,6 +9764,35 @@ static int pn__cpl_grow(const pn_allocator *al, void **a, size_t have, size_t ne
     return 1;
 }
 
+/* the candidate pairs' arrays (cp, ck, ch, con) for at least need pairs */
+static pn_result pn__cpl_grow_pairs(pn_coupled *c, size_t need) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    const pn_allocator *al = &c->fem->desc.allocator;
+    size_t h = PN__FEM_PAIR_H(c->mpm->dim);
+    if (need <= k->ccap) return PN_OK;
+    if (!pn__cpl_grow(al, (void **)&k->cp, k->ccap, need, sizeof(size_t)) ||
+        !pn__cpl_grow(al, (void **)&k->ck, k->ccap, need, sizeof(size_t)) ||
+        !pn__cpl_grow(al, (void **)&k->ch, k->ccap * h, need * h, sizeof(pn_real)) ||
+        !pn__cpl_grow(al, (void **)&k->con, k->ccap, need, 1))
+        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for %lu particle-boundary pairs",
+                            (unsigned long)need);
+    k->ccap = need;
+    return PN_OK;
+}
+
+/* the friction pairs' arrays (fp, fnode, fdat) for at least need pairs */
+static pn_result pn__cpl_grow_friction(pn_coupled *c, size_t need) {
+    pn__cpl *k = (pn__cpl *)c->impl;
+    const pn_allocator *al = &c->fem->desc.allocator;
+    if (need <= k->fcap) return PN_OK;
+    if (!pn__cpl_grow(al, (void **)&k->fp, k->fcap, need, sizeof(size_t)) ||
+        !pn__cpl_grow(al, (void **)&k->fnode, 3 * k->fcap, 3 * need, sizeof(long)) ||
+        !pn__cpl_grow(al, (void **)&k->fdat, PN__CPL_FD * k->fcap, PN__CPL_FD * need, sizeof(pn_real)))
+        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the friction pairs");
+    k->fcap = need;
+    return PN_OK;
+}
+
 /* positions: the mesh at x^n + dt u (and dt du), the particles at y_p(v) (and dt sum w dv);
    implicit == 0: the particles where they are, the mesh at its positions (dir: the motion
    each made, given as positions already) */
@@ -9807,7 +9836,6 @@ static pn_result pn__cpl_find(pn_coupled *c, int sweep) {
     pn_mpm_world *w = c->mpm;
     pn_fem_mesh *m = c->fem;
     pn__fem *s = (pn__fem *)m->impl;
-    const pn_allocator *al = &m->desc.allocator;
     int d = w->dim, i;
     size_t p, it;
     pn_real ghi[3];
@@ -9834,14 +9862,8 @@ static pn_result pn__cpl_find(pn_coupled *c, int sweep) {
                         size_t t = s->gitem[it];
                         if (t >= s->ntgt || !pn__fem_pair_here(s, d, lo, hi, s->ebox + 6 * t, s->ebox + 6 * t + 3, cc)) continue;
                         if (k->nc == k->ccap) {
-                            size_t nc2 = 2 * k->ccap + 256, h = PN__FEM_PAIR_H(d);
-                            if (!pn__cpl_grow(al, (void **)&k->cp, k->ccap, nc2, sizeof(size_t)) ||
-                                !pn__cpl_grow(al, (void **)&k->ck, k->ccap, nc2, sizeof(size_t)) ||
-                                !pn__cpl_grow(al, (void **)&k->ch, k->ccap * h, nc2 * h, sizeof(pn_real)) ||
-                                !pn__cpl_grow(al, (void **)&k->con, k->ccap, nc2, 1))
-                                return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for %lu "
-                                                    "particle-boundary pairs", (unsigned long)nc2);
-                            k->ccap = nc2;
+                            pn_result r = pn__cpl_grow_pairs(c, 2 * k->ccap + 256);
+                            if (r != PN_OK) return r;
                         }
                         k->cp[k->nc] = p, k->ck[k->nc] = t, k->nc++;
                     }
@@ -9969,7 +9991,6 @@ static pn_real pn__cpl_closest(int d, const pn_real *y, const pn_real *X, pn_rea
    nodes, the closest point's weights, the normal and mu lambda (lambda = kappa_p |b'(d)|) */
 static pn_result pn__cpl_friction_lag(pn_coupled *c) {
     pn__cpl *k = (pn__cpl *)c->impl;
-    const pn_allocator *al = &c->fem->desc.allocator;
     int d = c->mpm->dim, j;
     size_t i;
     k->nf = 0;
@@ -9981,12 +10002,8 @@ static pn_result pn__cpl_friction_lag(pn_coupled *c) {
         dist = pn__cpl_closest(d, yy, yy + d, beta, nrm);
         if (!(dist > 0) || dist >= c->dhat) continue;
         if (k->nf == k->fcap) {
-            size_t n2 = 2 * k->fcap + 64;
-            if (!pn__cpl_grow(al, (void **)&k->fp, k->fcap, n2, sizeof(size_t)) ||
-                !pn__cpl_grow(al, (void **)&k->fnode, 3 * k->fcap, 3 * n2, sizeof(long)) ||
-                !pn__cpl_grow(al, (void **)&k->fdat, PN__CPL_FD * k->fcap, PN__CPL_FD * n2, sizeof(pn_real)))
-                return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the friction pairs");
-            k->fcap = n2;
+            pn_result r = pn__cpl_grow_friction(c, 2 * k->fcap + 64);
+            if (r != PN_OK) return r;
         }
         pn__fem_barrier(dist, c->dhat, &bb, &b1, &b2);
         fd = k->fdat + PN__CPL_FD * k->nf;
@@ -10514,13 +10531,12 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
    target. A scene beyond it (a mesh that stretches a great deal) still grows the arrays,
    doubling, in the step that needs it. */
 static pn_result pn__cpl_reserve(pn_coupled *c) {
-    pn__cpl *k = (pn__cpl *)c->impl;
     pn_mpm_world *w = c->mpm;
     pn_fem_mesh *m = c->fem;
     pn__fem *s = (pn__fem *)m->impl;
-    const pn_allocator *al = &m->desc.allocator;
+    pn_result r;
     int d = w->dim, i;
-    size_t t, p, active = 0, need, h = PN__FEM_PAIR_H(d);
+    size_t t, p, active = 0, need;
     double vmin = HUGE_VAL, est = 0, pad = 2 * ((double)c->dhat + (double)w->desc.dx_m);
     for (p = 0; p < w->n; ++p)
         if (w->active[p]) active++, vmin = PN__MIN(vmin, (double)w->vol0[p]);
@@ -10540,23 +10556,8 @@ static pn_result pn__cpl_reserve(pn_coupled *c) {
         est += 2 * box / vmin;
     }
     need = est < (double)active * (double)s->ntgt ? (size_t)est + 256 : active * s->ntgt;
-    if (need > k->ccap) {
-        if (!pn__cpl_grow(al, (void **)&k->cp, k->ccap, need, sizeof(size_t)) ||
-            !pn__cpl_grow(al, (void **)&k->ck, k->ccap, need, sizeof(size_t)) ||
-            !pn__cpl_grow(al, (void **)&k->ch, k->ccap * h, need * h, sizeof(pn_real)) ||
-            !pn__cpl_grow(al, (void **)&k->con, k->ccap, need, 1))
-            return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for %lu particle-boundary pairs",
-                                (unsigned long)need);
-        k->ccap = need;
-    }
-    if (c->friction > 0 && need > k->fcap) {
-        if (!pn__cpl_grow(al, (void **)&k->fp, k->fcap, need, sizeof(size_t)) ||
-            !pn__cpl_grow(al, (void **)&k->fnode, 3 * k->fcap, 3 * need, sizeof(long)) ||
-            !pn__cpl_grow(al, (void **)&k->fdat, PN__CPL_FD * k->fcap, PN__CPL_FD * need, sizeof(pn_real)))
-            return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the friction pairs");
-        k->fcap = need;
-    }
-    return PN_OK;
+    if ((r = pn__cpl_grow_pairs(c, need)) != PN_OK) return r;
+    return c->friction > 0 ? pn__cpl_grow_friction(c, need) : PN_OK;
 }
 
 /* the coupled solver's storage for the world's grid and the mesh: once */
