@@ -322,8 +322,8 @@ static t_cpl_pairs t_cpl_count_pairs(const t_cpl *t, double dhat, double kap) {
    edge's end); (b) the barrier's force on the block summed over them is, in every step, its
    momentum balance M dv/dt + W (implicit: the forces at the step's end; explicit: those at
    its start), so where it differs from the weight W = rho g V, the block is accelerating: in
-   the first steps it sinks into the bed's settling and the sum is 0.57-0.88 W, and once
-   settled it is W; the extra pairs carry a few percent of it. */
+   the first implicit steps it sinks into the bed's settling and the sum is 0.57-0.88 W,
+   and once settled it is W (explicit, undamped, it keeps swinging); the extra pairs carry a few percent of it. */
 PN_TEST(couple_force_balance) {
     int implicit;
     for (implicit = 1; implicit >= 0; --implicit) {
