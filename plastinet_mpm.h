@@ -6048,11 +6048,10 @@ static pn_result pn__mpm_xcheck(pn_mpm_world *w) {
 #endif
     for (lp = 0; lp < (long)w->n; ++lp) {
         const pn_real *x = w->x + (size_t)lp * (size_t)d;
-        int in = 1, k;
+        int in = w->active[lp] != 0, k;
         for (k = 0; k < d; ++k) in &= x[k] >= w->grid_lo[k] && x[k] <= w->grid_hi[k]; /* also NaN */
-        in |= !w->active[lp];
-        bad |= !in;
-        w->prow[lp] = in ? pn__mpm_row_of(w, x) : 0;
+        bad |= w->active[lp] && !in;
+        w->prow[lp] = in ? pn__mpm_row_of(w, x) : 0; /* (a retired particle's x may be anything) */
     }
     if (!bad) return PN_OK;
     for (lp = 0; lp < (long)w->n; ++lp) {

@@ -26,6 +26,9 @@ SEED = 20230601
 FIELDS = ["format_version", "name", "dim", "latent", "n_layers", "width", "weight", "bias", "activation", "in_lo",
           "in_hi", "out_mean", "out_std", "latent_rest", "latent_std", "cell_m", "origin_m", "cells", "occupied",
           "youngs_pa", "poisson", "density_kg_m3", "dx_m", "per_axis", "frame_dt_s"]
+# format 2 appends the arrays' lengths (checked here against the arrays as parsed)
+FIELDS_2 = FIELDS + ["width_count", "weight_count", "bias_count", "latent_rest_count", "latent_std_count",
+                     "occupied_count"]
 
 
 def strip_comments(s):
@@ -69,9 +72,10 @@ def parse_header(path):
     if not m:
         sys.exit("%s: no pn_rom_model initializer" % path)
     vals = split_top(m.group(2))
-    if len(vals) != len(FIELDS):
-        sys.exit("%s: the initializer has %d fields, pn_rom_model %d" % (path, len(vals), len(FIELDS)))
-    f = dict(zip(FIELDS, vals))
+    fields = FIELDS_2 if len(vals) == len(FIELDS_2) else FIELDS
+    if len(vals) != len(fields):
+        sys.exit("%s: the initializer has %d fields, pn_rom_model %d" % (path, len(vals), len(FIELDS_2)))
+    f = dict(zip(fields, vals))
     num = lambda s: [float(t) for t in s.strip("{} ").split(",")]  # noqa: E731
     model = dict(name=f["name"].strip('"'), dim=int(f["dim"]), latent=int(f["latent"]), n_layers=int(f["n_layers"]),
                  activation=int(f["activation"]), format_version=int(f["format_version"]))
@@ -88,6 +92,13 @@ def parse_header(path):
     for l in range(L):
         if len(model["weight"][l]) != w[l] * w[l + 1] or len(model["bias"][l]) != w[l + 1]:
             sys.exit("%s: layer %d has the wrong weight count" % (path, l))
+    if fields is FIELDS_2:  # the declared lengths against the arrays themselves
+        ints = lambda s: [int(t) for t in s.strip("{} ").split(",") if t.strip()]  # noqa: E731
+        wc, bc = ints(f["weight_count"]), ints(f["bias_count"])
+        if (int(f["width_count"]) != len(w) or wc[:L] != [len(x) for x in model["weight"]] or
+                bc[:L] != [len(x) for x in model["bias"]] or int(f["latent_rest_count"]) != len(model["latent_rest"]) or
+                int(f["latent_std_count"]) != len(model["latent_std"])):
+            sys.exit("%s: the format-2 lengths disagree with the arrays" % path)
     return model
 
 
