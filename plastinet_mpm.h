@@ -6041,18 +6041,21 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
    out of bounds. Each active particle's x is checked against the grid and its row of axis 0
    (prow) taken again: one pass over x, branch-free. */
 static pn_result pn__mpm_xcheck(pn_mpm_world *w) {
-    int d = w->dim, i, bad = 0;
+    int d = w->dim, i, bad = 0, moved = 0;
     long lp;
 #if defined(_OPENMP)
-#pragma omp parallel for schedule(static) reduction(| : bad) if (w->n >= w->desc.parallel_min_particles)
+#pragma omp parallel for schedule(static) reduction(| : bad, moved) if (w->n >= w->desc.parallel_min_particles)
 #endif
-    for (lp = 0; lp < (long)w->n; ++lp) {
+    for (lp = 0; lp < (long)w->n; ++lp) { /* read only: the rows are written again only if one moved */
         const pn_real *x = w->x + (size_t)lp * (size_t)d;
         int in = w->active[lp] != 0, k;
         for (k = 0; k < d; ++k) in &= x[k] >= w->grid_lo[k] && x[k] <= w->grid_hi[k]; /* also NaN */
         bad |= w->active[lp] && !in;
-        w->prow[lp] = in ? pn__mpm_row_of(w, x) : 0; /* (a retired particle's x may be anything) */
+        moved |= in && w->prow[lp] != pn__mpm_row_of(w, x); /* (a retired particle's x may be anything) */
     }
+    if (moved && !bad)
+        for (lp = 0; lp < (long)w->n; ++lp)
+            if (w->active[lp]) w->prow[lp] = pn__mpm_row_of(w, w->x + (size_t)lp * (size_t)d);
     if (!bad) return PN_OK;
     for (lp = 0; lp < (long)w->n; ++lp) {
         const pn_real *x = w->x + (size_t)lp * (size_t)d;
