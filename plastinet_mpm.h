@@ -4903,6 +4903,18 @@ static void pn__mpm_backup(pn_mpm_world *w, int restore) {
 #undef PN__MPM_COPY
 }
 
+/* the counts of an implicit desc that are never negative (0: the default); the first that is,
+   or NULL (max_halvings < 0 means no fallback, and is not among them) */
+static const char *pn__mpm_negative_count(const pn_mpm_implicit_desc *o) {
+    if (o->fixed_point_iters < 0) return "fixed_point_iters";
+    if (o->newton_max < 0) return "newton_max";
+    if (o->cg_max < 0) return "cg_max";
+    if (o->contact_rounds < 0) return "contact_rounds";
+    if (o->newton_budget < 0) return "newton_budget";
+    if (o->sweeps_max < 0) return "sweeps_max";
+    return NULL;
+}
+
 /* the first drive (*load = 0) or load (*load = 1) acting now, or -1: implicit steps refuse them */
 static int pn__mpm_drive_on(const pn_mpm_world *w, int *load) {
     int a;
@@ -4932,6 +4944,9 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     }
     memset(&o, 0, sizeof o);
     if (desc) o = *desc;
+    if (pn__mpm_negative_count(&o))
+        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: %s must be >= 0 (0: the default)",
+                            pn__mpm_negative_count(&o));
     if (!pn__finite(o.newton_tol) || !pn__finite(o.cg_rel_tol) || !pn__finite(o.cg_forcing_max) ||
         o.newton_tol < 0 || o.cg_rel_tol < 0 || o.cg_forcing_max < 0)
         return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: newton_tol, cg_rel_tol and cg_forcing_max "
@@ -10628,6 +10643,9 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     }
     if (o->formulation != PN_MPM_FORMULATION_ENERGY)
         return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: only the energy formulation couples");
+    if (pn__mpm_negative_count(o))
+        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: mpm.%s must be >= 0 (0: the "
+                            "default)", pn__mpm_negative_count(o));
     if (!pn__finite(o->newton_tol) || o->newton_tol < 0 || !pn__finite(o->cg_rel_tol) || o->cg_rel_tol < 0 ||
         !pn__finite(o->pnet_reuse_tol) ||
         o->linear_solver < PN_MPM_LINEAR_DEFAULT || o->linear_solver > PN_MPM_LINEAR_MULTIGRID || o->mg_levels < 0)

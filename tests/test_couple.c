@@ -545,6 +545,9 @@ PN_TEST(couple_bad_input) {
                  strstr(pn_coupled_error(t.c), "theta"));
         od.theta = (pn_real)NAN;
         PN_CHECK(pn_coupled_step_implicit(t.c, 1e-3, &od, NULL) == PN_ERROR_INVALID_ARGUMENT);
+        od.theta = 0, od.mpm.cg_max = -1; /* a negative count: refused, not the default */
+        PN_CHECK(pn_coupled_step_implicit(t.c, 1e-3, &od, NULL) == PN_ERROR_INVALID_ARGUMENT &&
+                 strstr(pn_coupled_error(t.c), "cg_max"));
     }
     /* a step so large the block would pass through the sand: explicit refuses it (CCD), and
        both are unchanged, bit for bit */

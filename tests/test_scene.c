@@ -700,6 +700,15 @@ PN_TEST(scene_errors_name_the_culprit) {
     id.newton_tol = 0;
     id.cg_rel_tol = NAN;
     PN_CHECK(pn_mpm_step_implicit(w, 1e-3, &id, NULL) == PN_ERROR_INVALID_ARGUMENT && w->steps == 0);
+    /* negative counts are refused too (they used to become defaults); max_halvings < 0 is "none" */
+    id.cg_rel_tol = 0;
+    id.newton_max = -3;
+    PN_CHECK(pn_mpm_step_implicit(w, 1e-3, &id, NULL) == PN_ERROR_INVALID_ARGUMENT && w->steps == 0);
+    PN_CHECK(strstr(pn_mpm_error(w), "newton_max") != NULL);
+    id.newton_max = 0, id.sweeps_max = -1, id.formulation = PN_MPM_FORMULATION_STRESS;
+    PN_CHECK(pn_mpm_step_implicit(w, 1e-3, &id, NULL) == PN_ERROR_INVALID_ARGUMENT && w->steps == 0);
+    PN_CHECK(strstr(pn_mpm_error(w), "sweeps_max") != NULL);
+    memset(&id, 0, sizeof id);
     /* a network bound to another material, or of another dimension */
     {
         t_pn_setup s;
