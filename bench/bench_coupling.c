@@ -21,8 +21,9 @@
    sand (docs/validation.md), the mean error of the block's nodes over its bounding-box
    diagonal, the smallest particle-block distance over the run, wall seconds per simulated
    second (the steps only) and the ratio to the fair baseline.
-   Writes DIR/bench_coupling_Nd.csv and .md; progress on stderr. --quick: coarse (res 64 in
-   2D, 16 in 3D), short (T 0.05 s), for a smoke test. --ref-cache DIR: keep the reference's frames in
+   Writes DIR/bench_coupling_Nd.csv and .md; progress on stderr. --quick: a smoke test of a
+   minute or two: coarse (res 64 in 2D, 16 in 3D, whatever --res says), one frame (T 0.025 s),
+   the implicit runs at 1e-2 s only unless --dts is given. --ref-cache DIR: keep the reference's frames in
    DIR and read them on a rerun with the same scene. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/pn_example.h"
@@ -244,7 +245,8 @@ int main(int argc, char **argv) {
             return 2;
         }
     }
-    if (c.quick) c.T = 0.05, c.window = 0.01, c.res = c.res ? c.res : (c.dim == 2 ? 64 : 16);
+    if (c.quick) /* a smoke test: every role and energy once, one frame, coarse, the larger step only */
+        c.T = FRAME_DT, c.window = 0.01, c.res = c.dim == 2 ? 64 : 16, c.dts = c.dts == 3 ? 2 : c.dts;
     if ((c.dim != 2 && c.dim != 3) || !(c.T >= FRAME_DT) || c.T > FRAME_DT * MAX_FRAMES || !(c.window > 0)) {
         fprintf(stderr, "bench_coupling: --dim 2|3, FRAME_DT <= --T <= %g, --window > 0\n", FRAME_DT * MAX_FRAMES);
         return 2;
