@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-sanitize bench-core bench-mpm bench-fem bench-coupling bench-explicit bench-deposit bench-rom rom-data clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-all test-sanitize bench-core bench-mpm bench-fem bench-coupling bench-explicit bench-deposit bench-rom rom-data clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -80,6 +80,11 @@ run-material-point: build/material_point
 
 test:
 	@tests/run.sh
+
+# make test with the whole compile matrix (4 compilers x 6 configurations x 2 levels, and the
+# host's vector units): what CI runs
+test-all:
+	@FULL=1 tests/run.sh
 
 # Nanoseconds per call of the core (SVD, energies, return mappings), 2D and 3D.
 bench-core: bench/bench_core.c bench/bench_util.h plastinet.h

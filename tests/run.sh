@@ -1,6 +1,7 @@
 #!/bin/sh
 # The one test runner: compile-configuration checks, then every unit/property/driver test.
 # Usage: tests/run.sh [name-filter]     SANITIZE=1 tests/run.sh  (ASan + UBSan build)
+#        FULL=1 tests/run.sh (make test-all: the whole compile matrix, as CI runs it)
 # Last line: N passed, N failed
 cd "$(dirname "$0")/.." || exit 1
 mkdir -p build
@@ -34,7 +35,39 @@ cc_launch() { # NAME COMMAND...
     cc_n=$((cc_n + 1))
     if [ $cc_n -ge 2 ]; then cc_flush; fi
 }
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+# FULL=1 (make test-all, what CI runs): every compiler x configuration x level, 52 builds. Else
+# one build per distinct risk, 9: each compiler and language once, each configuration once, gcc
+# at both levels, the host's vector units in float
+if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -z "$FULL" ]; then
+    first_cc() { for c in "$@"; do command -v "$c" >/dev/null 2>&1 && { echo "$c"; return; }; done; }
+    ccc=$(first_cc gcc clang cc)
+    cpp=$(first_cc g++ clang++)
+    two="tests/compile_check.c tests/compile_check_tu2.c"
+    # shellcheck disable=SC2086
+    cc_launch "compile $ccc -std=c99 -O1 default" $ccc -std=c99 $W -O1 $two -lm
+    # shellcheck disable=SC2086
+    cc_launch "compile $ccc -std=c99 -O3 -DPN_REAL=float" $ccc -std=c99 $W -O3 -DPN_REAL=float $two -lm
+    # shellcheck disable=SC2086
+    cc_launch "compile $ccc -std=c99 -O3 -DPLASTINET_STATIC" $ccc -std=c99 $W -O3 -DPLASTINET_STATIC tests/compile_check.c -lm
+    # shellcheck disable=SC2086
+    cc_launch "compile $ccc -std=c99 -O1 -DPN_NO_STDIO" $ccc -std=c99 $W -O1 -DPN_NO_STDIO $two -lm
+    # shellcheck disable=SC2086
+    cc_launch "compile $ccc -std=c99 -O3 -DPN_NO_2D" $ccc -std=c99 $W -O3 -DPN_NO_2D $two -lm
+    # shellcheck disable=SC2086
+    cc_launch "compile $ccc -std=c99 -O1 -DPN_NO_3D" $ccc -std=c99 $W -O1 -DPN_NO_3D $two -lm
+    if command -v clang >/dev/null 2>&1 && [ "$ccc" != clang ]; then
+        # shellcheck disable=SC2086
+        cc_launch "compile clang -std=c99 -O3 default" clang -std=c99 $W -O3 $two -lm
+    fi
+    if [ -n "$cpp" ]; then
+        # shellcheck disable=SC2086
+        cc_launch "compile $cpp c++11 -O1 default" $cpp -x c++ -std=c++11 $W -O1 $two -lm
+    fi
+    # shellcheck disable=SC2086
+    cc_launch "compile $ccc -std=c99 -O3 -march=native -DPN_REAL=float" $ccc -std=c99 $W -O3 -march=native -DPN_REAL=float $two -lm
+    cc_flush
+fi
+if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -n "$FULL" ]; then
     for cc in gcc clang g++ clang++; do
         command -v "$cc" >/dev/null 2>&1 || { echo "skip $cc (not installed)"; continue; }
         case $cc in *++) std="-x c++ -std=c++11";; *) std="-std=c99";; esac
