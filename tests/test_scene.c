@@ -787,6 +787,27 @@ static int t_sc_snap_same(t_sc_snap *s, const pn_mpm_world *w) {
     return same;
 }
 
+/* a world of the step tests (res 32 in 2D, 16 in 3D, gravity) holding a filled box of group
+   kind (t_sc_group) centred at (0.5, cy, 0.5) of half side half; NULL (after a failed check)
+   if any of it fails */
+static pn_mpm_world *t_sc_box_world(pn_test_ctx *pn__t, int dim, int kind, double half, double cy) {
+    pn_mpm_world *w = t_sc_world(dim, dim == 2 ? 32 : 16, dim == 2 ? 1.0 / 32 : 1.0 / 16, NULL, -9.81, 20000);
+    pn_mpm_fill_desc f;
+    int i;
+    PN_CHECK(w != NULL);
+    if (!w) return NULL;
+    memset(&f, 0, sizeof f);
+    f.group = t_sc_group(w, kind);
+    for (i = 0; i < dim; ++i) f.center_m[i] = 0.5, f.half_extent_m[i] = (pn_real)half;
+    f.center_m[1] = (pn_real)cy;
+    if (pn_mpm_fill(w, &f, NULL) != PN_OK) {
+        PN_CHECK(0);
+        pn_mpm_destroy(w);
+        return NULL;
+    }
+    return w;
+}
+
 /* The explicit step keeps its P2G records from one step to the next; a particle whose x a
    caller wrote in between is checked, not read out of bounds: NaN (PN_ERROR_NONFINITE), beyond
    the grid (PN_ERROR_OUTSIDE_DOMAIN), both naming the particle, the world unchanged; moved to
@@ -794,18 +815,13 @@ static int t_sc_snap_same(t_sc_snap *s, const pn_mpm_world *w) {
 PN_TEST(scene_explicit_hand_written_x) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
-        pn_mpm_world *w = t_sc_world(dim, dim == 2 ? 32 : 16, dim == 2 ? 1.0 / 32 : 1.0 / 16, NULL, -9.81, 20000);
-        pn_mpm_fill_desc f;
+        pn_mpm_world *w = t_sc_box_world(pn__t, dim, 0, 0.15, 0.5);
         pn_real dt, keep[3];
         t_sc_snap snap;
-        int i, k, bad;
+        int k, bad;
         size_t p = 7;
-        PN_CHECK(w != NULL);
         if (!w) continue;
-        memset(&f, 0, sizeof f);
-        f.group = t_sc_group(w, 0);
-        for (i = 0; i < dim; ++i) f.center_m[i] = 0.5, f.half_extent_m[i] = 0.15;
-        PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_OK && w->n > p);
+        PN_CHECK(w->n > p);
         PN_CHECK(pn_mpm_stable_dt(w, &dt) == PN_OK);
         for (k = 0; k < 3; ++k) PN_CHECK(pn_mpm_step_explicit(w, dt, NULL) == PN_OK);
         memcpy(keep, w->x + p * (size_t)dim, sizeof(pn_real) * (size_t)dim);
@@ -833,17 +849,11 @@ PN_TEST(scene_explicit_hand_written_x) {
 PN_TEST(scene_explicit_step_too_large) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
-        pn_mpm_world *w = t_sc_world(dim, dim == 2 ? 32 : 16, dim == 2 ? 1.0 / 32 : 1.0 / 16, NULL, -9.81, 20000);
-        pn_mpm_fill_desc f;
+        pn_mpm_world *w = t_sc_box_world(pn__t, dim, 3, 0.1, 0.5); /* metal, E 1e9 */
         pn_real dt, big[3];
         t_sc_snap snap;
         int i;
-        PN_CHECK(w != NULL);
         if (!w) continue;
-        memset(&f, 0, sizeof f);
-        f.group = t_sc_group(w, 3); /* metal, E 1e9 */
-        for (i = 0; i < dim; ++i) f.center_m[i] = 0.5, f.half_extent_m[i] = 0.1;
-        PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_OK);
         PN_CHECK(pn_mpm_stable_dt(w, &dt) == PN_OK);
         big[0] = 10, big[1] = 1e3, big[2] = 5 * dt;
         for (i = 0; i < 3; ++i) {
@@ -863,19 +873,12 @@ PN_TEST(scene_explicit_step_too_large) {
 PN_TEST(scene_stress_free_flight) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
-        pn_mpm_world *w = t_sc_world(dim, dim == 2 ? 32 : 16, dim == 2 ? 1.0 / 32 : 1.0 / 16, NULL, -9.81, 20000);
-        pn_mpm_fill_desc f;
+        pn_mpm_world *w = t_sc_box_world(pn__t, dim, 0, 0.1, 0.6);
         pn_mpm_implicit_desc id;
         double y0 = 0, y1 = 0;
         size_t p;
-        int i, k;
-        PN_CHECK(w != NULL);
+        int k;
         if (!w) continue;
-        memset(&f, 0, sizeof f);
-        f.group = t_sc_group(w, 0);
-        for (i = 0; i < dim; ++i) f.center_m[i] = 0.5, f.half_extent_m[i] = 0.1;
-        f.center_m[1] = 0.6;
-        PN_CHECK(pn_mpm_fill(w, &f, NULL) == PN_OK);
         memset(&id, 0, sizeof id);
         id.formulation = PN_MPM_FORMULATION_STRESS;
         for (p = 0; p < w->n; ++p) y0 += w->x[p * (size_t)dim + 1] / (double)w->n;
