@@ -741,6 +741,192 @@ PN__DEF void pn_free(const pn_allocator *a, void *ptr) {
 }
 
 /* ======================================================================================
+   >>kit: the private helpers every module shares (plastinet_mpm.h and plastinet_rom.h call
+   them too): messages, a hash, quadratic B-spline weights, dense Cholesky, the
+   backtracking line search and preconditioned conjugate gradients. Written once, here.
+   ====================================================================================== */
+#include <stdarg.h>
+#if defined(__GNUC__) || defined(__clang__)
+#define PN__KIT static __attribute__((unused)) /* a build may leave a helper without a caller */
+#else
+#define PN__KIT static
+#endif
+
+/* A message into buf[cap] (nothing when buf is NULL or cap 0). Without stdio
+   (PN_NO_STDIO) the message is the format's text up to its first conversion. */
+PN__KIT void pn__vmsg(char *buf, size_t cap, const char *fmt, va_list ap) {
+    if (!buf || !cap) return;
+#ifndef PN_NO_STDIO
+    vsnprintf(buf, cap, fmt, ap);
+#else
+    {
+        size_t i;
+        (void)ap;
+        for (i = 0; fmt[i] && fmt[i] != '%' && i + 1 < cap; ++i) buf[i] = fmt[i];
+        buf[i] = 0;
+    }
+#endif
+}
+
+PN__KIT void pn__msg(char *buf, size_t cap, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    pn__vmsg(buf, cap, fmt, ap);
+    va_end(ap);
+}
+
+/* Record why a call failed in buf and return its code r: every module's failure path.
+   PN__FAIL(obj, r, ...) writes obj->error (a world's, mesh's or coupled object's). */
+PN__KIT pn_result pn__fail(char *buf, size_t cap, pn_result r, const char *fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    pn__vmsg(buf, cap, fmt, ap);
+    va_end(ap);
+    return r;
+}
+#define PN__FAIL(obj, r, ...) pn__fail((obj)->error, sizeof (obj)->error, r, __VA_ARGS__)
+
+/* The splitmix64 finalizer: a bijection of 64-bit integers whose output bits each depend on
+   every input bit (random numbers: mix a counter; hashes: mix a key). */
+PN__KIT unsigned long long pn__mix64(unsigned long long z) {
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+}
+
+/* Quadratic B-spline weights of a stencil's three nodes, f = x/dx - base in [0.5, 1.5)
+   (base = floor(x/dx - 0.5)), in arithmetic of type T */
+#define PN__BSPLINE2(w0, w1, w2, f, T)                                                       \
+    do {                                                                                     \
+        (w0) = (T)0.5 * ((T)1.5 - (f)) * ((T)1.5 - (f));                                     \
+        (w1) = (T)0.75 - ((f) - 1) * ((f) - 1);                                              \
+        (w2) = (T)0.5 * ((f) - (T)0.5) * ((f) - (T)0.5);                                     \
+    } while (0)
+
+/* Dense Cholesky, in place: the lower triangle of the symmetric n x n row-major A becomes L
+   with A = L L^T (the strict upper triangle is not read or written). Pivot j fails when
+   s_j = A_jj - sum_k L_jk^2 is not above rel * (top > 0 ? top : A_jj) (0 when rel is 0);
+   then, with held_ok and A_jj finite and >= 0, the direction is taken as held (L_jj = 1, the
+   column below 0), else the factorization stops. Returns n, or the column it stopped at.
+   pn__cholesky_solve: x = (L L^T)^-1 b (x may be b). Defined for pn_real and, for the
+   reduced models' normal equations, double (PN__CHOLESKY_DEF below). */
+#define PN__CHOLESKY_DEF(factor, solve, T, SQRT, FINITE)                                     \
+    PN__KIT size_t factor(T *A, size_t n, T rel, T top, int held_ok) {                       \
+        size_t i, j, k;                                                                      \
+        for (j = 0; j < n; ++j) {                                                            \
+            T s = A[j * n + j], s0 = s, floor_j = rel > 0 ? rel * (top > 0 ? top : s0) : 0;  \
+            for (k = 0; k < j; ++k) s -= A[j * n + k] * A[j * n + k];                        \
+            if (!(s > floor_j)) {                                                            \
+                if (!held_ok || !(s0 >= 0) || !FINITE(s0)) return j;                         \
+                A[j * n + j] = 1;                                                            \
+                for (i = j + 1; i < n; ++i) A[i * n + j] = 0;                                \
+                continue;                                                                    \
+            }                                                                                \
+            A[j * n + j] = SQRT(s);                                                          \
+            for (i = j + 1; i < n; ++i) {                                                    \
+                T v = A[i * n + j];                                                          \
+                for (k = 0; k < j; ++k) v -= A[i * n + k] * A[j * n + k];                    \
+                A[i * n + j] = v / A[j * n + j];                                             \
+            }                                                                                \
+        }                                                                                    \
+        return n;                                                                            \
+    }                                                                                        \
+    PN__KIT void solve(const T *L, size_t n, const T *b, T *x) {                             \
+        size_t i, k;                                                                         \
+        for (i = 0; i < n; ++i) {                                                            \
+            T s = b[i];                                                                      \
+            for (k = 0; k < i; ++k) s -= L[i * n + k] * x[k];                                \
+            x[i] = s / L[i * n + i];                                                         \
+        }                                                                                    \
+        for (i = n; i-- > 0;) {                                                              \
+            T s = x[i];                                                                      \
+            for (k = i + 1; k < n; ++k) s -= L[k * n + i] * x[k];                            \
+            x[i] = s / L[i * n + i];                                                         \
+        }                                                                                    \
+    }
+#define PN__KIT_FINITE(x) ((x) == (x) && (x) - (x) == 0)
+PN__CHOLESKY_DEF(pn__cholesky, pn__cholesky_solve, pn_real, PN__SQRT, PN__KIT_FINITE)
+
+typedef pn_result (*pn__objective_fn)(void *ctx, const pn_real *x, pn_real *E);
+
+/* Backtracking along dir from x (Armijo): x + alpha dir for alpha = alpha0, alpha0 / 2, ..
+   until f <= E0 + 1e-4 alpha gd (gd = grad . dir < 0). Returns alpha, with xt and *E1 the
+   accepted point, or 0 when no step down to 1e-10 decreases f. A try where f fails (an
+   element turned inside out, a node in an obstacle, a non-finite energy) is no decrease. */
+PN__KIT pn_real pn__armijo(pn__objective_fn f, void *ctx, size_t n, const pn_real *x, const pn_real *dir, pn_real E0,
+                          pn_real gd, pn_real alpha0, pn_real *xt, pn_real *E1) {
+    pn_real alpha = alpha0;
+    while (alpha >= (pn_real)1e-10) {
+        pn_real e = 0;
+        size_t k;
+        for (k = 0; k < n; ++k) xt[k] = x[k] + alpha * dir[k];
+        if (f(ctx, xt, &e) == PN_OK && e <= E0 + (pn_real)1e-4 * alpha * gd) {
+            *E1 = e;
+            return alpha;
+        }
+        alpha /= 2;
+    }
+    return 0;
+}
+
+/* What preconditioned CG needs of a solver: y = A x, z = B r, and a dot product (MPM sums in
+   fixed chunks so that any thread count gives the same bits). */
+typedef struct pn__cg_ops {
+    void *ctx;
+    void (*apply)(void *ctx, const pn_real *x, pn_real *y);
+    void (*precond)(void *ctx, const pn_real *r, pn_real *z);
+    pn_real (*dot)(void *ctx, size_t n, const pn_real *a, const pn_real *b);
+    int *curv;                   /* optional: set to 1 where a direction of curvature <= 0
+                                    stopped the iteration (A is not positive definite)      */
+} pn__cg_ops;
+
+/* Solve A x = b by preconditioned conjugate gradients to |r| <= rel_tol |b|, b given in r
+   (overwritten by the residual); z, p and q are scratch. warm: start from x (r = b - A x),
+   else from 0. Returns the iterations; *capped when it stopped at max_it short of rel_tol
+   (then x is no solution: never count it as converged). */
+PN__KIT int pn__pcg(const pn__cg_ops *op, size_t n, pn_real *x, pn_real *r, pn_real *z, pn_real *p, pn_real *q, int max_it,
+                   pn_real rel_tol, int warm, int *capped) {
+    pn_real rz, r0, rr;
+    size_t k;
+    int it;
+    *capped = 0;
+    if (warm) op->apply(op->ctx, x, q);
+    else
+        for (k = 0; k < n; ++k) x[k] = 0;
+    r0 = PN__SQRT(op->dot(op->ctx, n, r, r)); /* |b| */
+    if (warm)
+        for (k = 0; k < n; ++k) r[k] -= q[k];
+    op->precond(op->ctx, r, z);
+    memcpy(p, z, sizeof(pn_real) * n);
+    rz = op->dot(op->ctx, n, r, z);
+    if (r0 == 0) return 0;
+    if (PN__SQRT(op->dot(op->ctx, n, r, r)) <= rel_tol * r0) return 0;
+    for (it = 0; it < max_it; ++it) {
+        pn_real pq, alpha, rz_new, beta;
+        op->apply(op->ctx, p, q);
+        pq = op->dot(op->ctx, n, p, q);
+        if (!(pq > 0)) { /* A positive definite: only rounding gets here */
+            if (op->curv) *op->curv = 1;
+            break;
+        }
+        alpha = rz / pq;
+        for (k = 0; k < n; ++k) {
+            x[k] += alpha * p[k];
+            r[k] -= alpha * q[k];
+        }
+        rr = PN__SQRT(op->dot(op->ctx, n, r, r));
+        if (rr <= rel_tol * r0) return it + 1;
+        op->precond(op->ctx, r, z);
+        rz_new = op->dot(op->ctx, n, r, z);
+        beta = rz_new / rz;
+        rz = rz_new;
+        for (k = 0; k < n; ++k) p[k] = z[k] + beta * p[k];
+    }
+    *capped = it == max_it;
+    return it;
+}
+
+/* ======================================================================================
    >>matrix: dense dim x dim helpers (row-major)
    ====================================================================================== */
 
@@ -1105,18 +1291,8 @@ static void pn__project_psd(int n, pn_real *A) {
         for (j = i; j < n; ++j) a[i * n + j] = a[j * n + i] = A[i * n + j];
         top = PN__MAX(top, PN__FABS(A[i * n + i]));
     }
-    for (j = 0; j < n && pd; ++j) { /* Cholesky first: a positive definite A is its own projection */
-        pn_real d = a[j * n + j];
-        for (k = 0; k < j; ++k) d -= q[j * n + k] * q[j * n + k];
-        pd = d > (pn_real)1e-12 * top;
-        if (!pd) break;
-        q[j * n + j] = PN__SQRT(d);
-        for (i = j + 1; i < n; ++i) {
-            pn_real v = a[i * n + j];
-            for (k = 0; k < j; ++k) v -= q[i * n + k] * q[j * n + k];
-            q[i * n + j] = v / q[j * n + j];
-        }
-    }
+    memcpy(q, a, sizeof(pn_real) * (size_t)(n * n)); /* Cholesky first: a positive definite A is its own projection */
+    pd = pn__cholesky(q, (size_t)n, (pn_real)1e-12, top, 0) == (size_t)n;
     if (pd) {
         for (i = 0; i < n; ++i)
             for (j = 0; j < i; ++j) A[i * n + j] = A[j * n + i]; /* symmetric from the upper part, as below */
@@ -1178,7 +1354,7 @@ PN__DEF int pn_plastic_model_from_name(const char *name) {
     return -1;
 }
 
-#define PN__FAIL(code, msg)                                                                 \
+#define PN__REFUSE(code, msg)                                                                 \
     do {                                                                                    \
         if (why) *why = msg;                                                                \
         return code;                                                                        \
@@ -1191,9 +1367,9 @@ PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *des
     PN_ASSERT(out && desc);
     memset(&m, 0, sizeof m);
     if ((int)dd->plastic < 0 || dd->plastic >= PN_PLASTIC_MODEL_COUNT)
-        PN__FAIL(PN_ERROR_INVALID_ARGUMENT, "plastic: unknown plastic model");
+        PN__REFUSE(PN_ERROR_INVALID_ARGUMENT, "plastic: unknown plastic model");
     if ((int)dd->elastic < 0 || dd->elastic >= PN_ELASTIC_MODEL_COUNT)
-        PN__FAIL(PN_ERROR_INVALID_ARGUMENT, "elastic: unknown elastic model");
+        PN__REFUSE(PN_ERROR_INVALID_ARGUMENT, "elastic: unknown elastic model");
     m.plastic = dd->plastic;
     m.elastic = dd->elastic;
     if (m.elastic == PN_ELASTIC_DEFAULT) {
@@ -1205,10 +1381,10 @@ PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *des
         }
     }
     if (!pn__finite(dd->youngs_modulus_pa) || !(dd->youngs_modulus_pa > 0))
-        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "youngs_modulus_pa must be finite and > 0");
+        PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "youngs_modulus_pa must be finite and > 0");
     if (!pn__finite(dd->poisson_ratio) || !(dd->poisson_ratio > -1) ||
         !(dd->poisson_ratio < (pn_real)0.5))
-        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "poisson_ratio must be in (-1, 0.5)");
+        PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "poisson_ratio must be in (-1, 0.5)");
     m.E = dd->youngs_modulus_pa;
     m.nu = dd->poisson_ratio;
     pn_lame(m.E, m.nu, &m.mu, &m.lambda);
@@ -1216,34 +1392,34 @@ PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *des
     case PN_PLASTIC_NONE: break;
     case PN_PLASTIC_DRUCKER_PRAGER:
         if (m.elastic != PN_ELASTIC_STVK_HENCKY)
-            PN__FAIL(PN_ERROR_UNSUPPORTED, "drucker_prager needs stvk_hencky elasticity");
+            PN__REFUSE(PN_ERROR_UNSUPPORTED, "drucker_prager needs stvk_hencky elasticity");
         if (!pn__finite(dd->friction_angle_deg) || !(dd->friction_angle_deg >= 0) ||
             !(dd->friction_angle_deg < 90))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "friction_angle_deg must be in [0, 90)");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "friction_angle_deg must be in [0, 90)");
         if (!pn__finite(dd->cohesion_strain) || !(dd->cohesion_strain >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "cohesion_strain must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "cohesion_strain must be finite and >= 0");
         m.sin_phi = PN__SIN(dd->friction_angle_deg * PN__PI / 180);
         m.cohesion_strain = dd->cohesion_strain;
         m.volume_correction = dd->volume_correction != 0;
         break;
     case PN_PLASTIC_VON_MISES:
         if (!pn__finite(dd->yield_stress_pa) || !(dd->yield_stress_pa > 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "yield_stress_pa must be finite and > 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "yield_stress_pa must be finite and > 0");
         if (!pn__finite(dd->hardening_modulus_pa) || !(dd->hardening_modulus_pa >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "hardening_modulus_pa must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "hardening_modulus_pa must be finite and >= 0");
         m.yield_stress = dd->yield_stress_pa;
         m.hardening_modulus = dd->hardening_modulus_pa;
         break;
     case PN_PLASTIC_CAM_CLAY:
         if (m.elastic != PN_ELASTIC_NEO_HOOKEAN_SNOW)
-            PN__FAIL(PN_ERROR_UNSUPPORTED, "cam_clay needs neo_hookean_snow elasticity");
+            PN__REFUSE(PN_ERROR_UNSUPPORTED, "cam_clay needs neo_hookean_snow elasticity");
         if (!pn__finite(dd->friction_angle_deg) || !(dd->friction_angle_deg > 0) ||
             !(dd->friction_angle_deg < 90))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "friction_angle_deg must be in (0, 90) for cam_clay");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "friction_angle_deg must be in (0, 90) for cam_clay");
         if (!pn__finite(dd->camclay_beta) || !(dd->camclay_beta >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "camclay_beta must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "camclay_beta must be finite and >= 0");
         if (!pn__finite(dd->camclay_xi) || !(dd->camclay_xi >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "camclay_xi must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "camclay_xi must be finite and >= 0");
         m.sin_phi = PN__SIN(dd->friction_angle_deg * PN__PI / 180);
         m.beta = dd->camclay_beta;
         m.xi = dd->camclay_xi;
@@ -1251,15 +1427,15 @@ PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *des
         break;
     case PN_PLASTIC_SNOW_STOMAKHIN:
         if (!pn__finite(dd->snow_theta_c) || !(dd->snow_theta_c > 0) || !(dd->snow_theta_c < 1))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_theta_c must be in (0, 1)");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "snow_theta_c must be in (0, 1)");
         if (!pn__finite(dd->snow_theta_s) || !(dd->snow_theta_s >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_theta_s must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "snow_theta_s must be finite and >= 0");
         if (!pn__finite(dd->snow_xi) || !(dd->snow_xi >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_xi must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "snow_xi must be finite and >= 0");
         if (!pn__finite(dd->snow_jp_min) || !(dd->snow_jp_min >= 0 && dd->snow_jp_min < 1))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_jp_min must be in (0, 1), or 0 for no bound");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "snow_jp_min must be in (0, 1), or 0 for no bound");
         if (!pn__finite(dd->snow_jp_max) || !(dd->snow_jp_max == 0 || dd->snow_jp_max > 1))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "snow_jp_max must be > 1, or 0 for no bound");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "snow_jp_max must be > 1, or 0 for no bound");
         m.theta_c = dd->snow_theta_c;
         m.theta_s = dd->snow_theta_s;
         m.snow_xi = dd->snow_xi;
@@ -1276,53 +1452,53 @@ PN__DEF pn_result pn_material_check(const pn_material *m, const char **why) {
     pn_real mu, lambda;
     PN_ASSERT(m);
     if ((int)m->plastic < 0 || m->plastic >= PN_PLASTIC_MODEL_COUNT)
-        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.plastic: unknown plastic model");
+        PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.plastic: unknown plastic model");
     if ((int)m->elastic <= 0 || m->elastic >= PN_ELASTIC_MODEL_COUNT)
-        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.elastic: unknown elastic model (use pn_material_init)");
+        PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.elastic: unknown elastic model (use pn_material_init)");
     if (!pn__finite(m->E) || !(m->E > 0))
-        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.E must be finite and > 0");
+        PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.E must be finite and > 0");
     if (!pn__finite(m->nu) || !(m->nu > -1) || !(m->nu < (pn_real)0.5))
-        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.nu must be in (-1, 0.5)");
+        PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.nu must be in (-1, 0.5)");
     pn_lame(m->E, m->nu, &mu, &lambda);
     if (!(PN__FABS(m->mu - mu) <= (pn_real)1e-6 * mu) ||
         !(PN__FABS(m->lambda - lambda) <= (pn_real)1e-6 * (PN__FABS(lambda) + mu)))
-        PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.mu and lambda disagree with E and nu (use pn_material_init)");
+        PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.mu and lambda disagree with E and nu (use pn_material_init)");
     switch (m->plastic) {
     case PN_PLASTIC_DRUCKER_PRAGER:
         if (m->elastic != PN_ELASTIC_STVK_HENCKY)
-            PN__FAIL(PN_ERROR_UNSUPPORTED, "drucker_prager needs stvk_hencky elasticity");
+            PN__REFUSE(PN_ERROR_UNSUPPORTED, "drucker_prager needs stvk_hencky elasticity");
         if (!pn__finite(m->sin_phi) || !(m->sin_phi >= 0) || !(m->sin_phi < 1))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.sin_phi must be in [0, 1)");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.sin_phi must be in [0, 1)");
         if (!pn__finite(m->cohesion_strain) || !(m->cohesion_strain >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.cohesion_strain must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.cohesion_strain must be finite and >= 0");
         break;
     case PN_PLASTIC_VON_MISES:
         if (!pn__finite(m->yield_stress) || !(m->yield_stress > 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.yield_stress must be finite and > 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.yield_stress must be finite and > 0");
         if (!pn__finite(m->hardening_modulus) || !(m->hardening_modulus >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.hardening_modulus must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.hardening_modulus must be finite and >= 0");
         break;
     case PN_PLASTIC_CAM_CLAY:
         if (m->elastic != PN_ELASTIC_NEO_HOOKEAN_SNOW)
-            PN__FAIL(PN_ERROR_UNSUPPORTED, "cam_clay needs neo_hookean_snow elasticity");
+            PN__REFUSE(PN_ERROR_UNSUPPORTED, "cam_clay needs neo_hookean_snow elasticity");
         if (!pn__finite(m->sin_phi) || !(m->sin_phi > 0) || !(m->sin_phi < 1))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.sin_phi must be in (0, 1) for cam_clay");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.sin_phi must be in (0, 1) for cam_clay");
         if (!pn__finite(m->beta) || !(m->beta >= 0) || !pn__finite(m->xi) || !(m->xi >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.beta and xi must be finite and >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.beta and xi must be finite and >= 0");
         break;
     case PN_PLASTIC_SNOW_STOMAKHIN:
         if (!pn__finite(m->theta_c) || !(m->theta_c > 0) || !(m->theta_c < 1) ||
             !pn__finite(m->theta_s) || !(m->theta_s >= 0) || !pn__finite(m->snow_xi) || !(m->snow_xi >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.theta_c must be in (0, 1), theta_s and snow_xi >= 0");
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.theta_c must be in (0, 1), theta_s and snow_xi >= 0");
         if (!pn__finite(m->snow_h_min) || !(m->snow_h_min <= 0) || !pn__finite(m->snow_h_max) || !(m->snow_h_max >= 0))
-            PN__FAIL(PN_ERROR_INVALID_PARAMETER, "material.snow_h_min must be <= 0 and snow_h_max >= 0 (log J_p "
+            PN__REFUSE(PN_ERROR_INVALID_PARAMETER, "material.snow_h_min must be <= 0 and snow_h_max >= 0 (log J_p "
                                                  "bounds, 0: none)");
         break;
     default: break;
     }
     return PN_OK;
 }
-#undef PN__FAIL
+#undef PN__REFUSE
 
 #ifndef PN_NO_STDIO
 PN__DEF int pn_material_describe(const pn_material *m, char *buf, size_t cap) {

@@ -14,9 +14,10 @@
    order; a room calls only rooms above it (the three exceptions are declared where used).
 
      room            public functions                what else
-     >>newton        (shared)                        what the MPM, FEM and coupled implicit
-                                                     steps share: backtracking line search,
-                                                     PCG, the checks of a group's energy
+     >>group         (shared)                        a group's implicit energy, checked the
+                                                     same way for worlds and meshes (the line
+                                                     search, PCG and messages: plastinet.h's
+                                                     >>kit)
      >>world         pn_mpm_create, _destroy,        the world's arrays, groups, particles,
                      _error, _add_group,             colliders, walls, a step's statistics,
                      _add_particles, _set_state,     the checks of a state
@@ -1160,122 +1161,17 @@ PN_API pn_result pn_coupled_min_distance(pn_coupled *c, pn_real *dist_m);
 
 #define PN__MPM_CHUNK 1024 /* reductions sum chunks of this size, then the chunks in order */
 
-#include <stdarg.h>
-
-/* Record why a call failed (pn_mpm_error) and return its code. Without stdio the message is
-   the format's text up to its first conversion. */
-static void pn__vmsg(char *buf, size_t cap, const char *fmt, va_list ap) {
-#ifndef PN_NO_STDIO
-    vsnprintf(buf, cap, fmt, ap);
-#else
-    size_t i;
-    (void)ap;
-    for (i = 0; fmt[i] && fmt[i] != '%' && i + 1 < cap; ++i) buf[i] = fmt[i];
-    buf[i] = 0;
-#endif
-}
-
-static pn_result pn__mpm_fail(pn_mpm_world *w, pn_result r, const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    pn__vmsg(w->error, sizeof w->error, fmt, ap);
-    va_end(ap);
-    return r;
-}
-
 /* ======================================================================================
-   >>newton: what the MPM and FEM implicit steps share
+   >>group: a group's implicit energy (pn_mpm_group_set_energy, pn_fem_group_set_energy)
+   checked one way for worlds and meshes
    ====================================================================================== */
-
-typedef pn_result (*pn__objective_fn)(void *ctx, const pn_real *x, pn_real *E);
-
-/* Backtracking along dir from x (Armijo): x + alpha dir for alpha = alpha0, alpha0 / 2, ..
-   until f <= E0 + 1e-4 alpha gd (gd = grad . dir < 0). Returns alpha, with xt and *E1 the
-   accepted point, or 0 when no step down to 1e-10 decreases f. A try where f fails (an
-   element turned inside out, a node in an obstacle, a non-finite energy) is no decrease. */
-static pn_real pn__armijo(pn__objective_fn f, void *ctx, size_t n, const pn_real *x, const pn_real *dir, pn_real E0,
-                          pn_real gd, pn_real alpha0, pn_real *xt, pn_real *E1) {
-    pn_real alpha = alpha0;
-    while (alpha >= (pn_real)1e-10) {
-        pn_real e = 0;
-        size_t k;
-        for (k = 0; k < n; ++k) xt[k] = x[k] + alpha * dir[k];
-        if (f(ctx, xt, &e) == PN_OK && e <= E0 + (pn_real)1e-4 * alpha * gd) {
-            *E1 = e;
-            return alpha;
-        }
-        alpha /= 2;
-    }
-    return 0;
-}
-
-/* What preconditioned CG needs of a solver: y = A x, z = B r, and a dot product (MPM sums in
-   fixed chunks so that any thread count gives the same bits). */
-typedef struct pn__cg_ops {
-    void *ctx;
-    void (*apply)(void *ctx, const pn_real *x, pn_real *y);
-    void (*precond)(void *ctx, const pn_real *r, pn_real *z);
-    pn_real (*dot)(void *ctx, size_t n, const pn_real *a, const pn_real *b);
-    int *curv;                   /* optional: set to 1 where a direction of curvature <= 0
-                                    stopped the iteration (A is not positive definite)      */
-} pn__cg_ops;
-
-/* Solve A x = b by preconditioned conjugate gradients to |r| <= rel_tol |b|, b given in r
-   (overwritten by the residual); z, p and q are scratch. warm: start from x (r = b - A x),
-   else from 0. Returns the iterations; *capped when it stopped at max_it short of rel_tol
-   (then x is no solution: never count it as converged). */
-static int pn__pcg(const pn__cg_ops *op, size_t n, pn_real *x, pn_real *r, pn_real *z, pn_real *p, pn_real *q, int max_it,
-                   pn_real rel_tol, int warm, int *capped) {
-    pn_real rz, r0, rr;
-    size_t k;
-    int it;
-    *capped = 0;
-    if (warm) op->apply(op->ctx, x, q);
-    else
-        for (k = 0; k < n; ++k) x[k] = 0;
-    r0 = PN__SQRT(op->dot(op->ctx, n, r, r)); /* |b| */
-    if (warm)
-        for (k = 0; k < n; ++k) r[k] -= q[k];
-    op->precond(op->ctx, r, z);
-    memcpy(p, z, sizeof(pn_real) * n);
-    rz = op->dot(op->ctx, n, r, z);
-    if (r0 == 0) return 0;
-    if (PN__SQRT(op->dot(op->ctx, n, r, r)) <= rel_tol * r0) return 0;
-    for (it = 0; it < max_it; ++it) {
-        pn_real pq, alpha, rz_new, beta;
-        op->apply(op->ctx, p, q);
-        pq = op->dot(op->ctx, n, p, q);
-        if (!(pq > 0)) { /* A positive definite: only rounding gets here */
-            if (op->curv) *op->curv = 1;
-            break;
-        }
-        alpha = rz / pq;
-        for (k = 0; k < n; ++k) {
-            x[k] += alpha * p[k];
-            r[k] -= alpha * q[k];
-        }
-        rr = PN__SQRT(op->dot(op->ctx, n, r, r));
-        if (rr <= rel_tol * r0) return it + 1;
-        op->precond(op->ctx, r, z);
-        rz_new = op->dot(op->ctx, n, r, z);
-        beta = rz_new / rz;
-        rz = rz_new;
-        for (k = 0; k < n; ++k) p[k] = z[k] + beta * p[k];
-    }
-    *capped = it == max_it;
-    return it;
-}
 
 /* A group's implicit energy (pn_mpm_group_set_energy, pn_fem_group_set_energy): checks net
    and the material; msg says why not. */
 static pn_result pn__group_set_energy(pn_mpm_group *gr, int g, int dim, pn_mpm_energy energy, const pn_pnet *net,
                                       char *msg, size_t cap) {
     msg[0] = 0;
-#ifdef PN_NO_STDIO
-#define PN__MSG(...) (void)cap, (void)g
-#else
-#define PN__MSG(...) snprintf(msg, cap, __VA_ARGS__)
-#endif
+#define PN__MSG(...) pn__msg(msg, cap, __VA_ARGS__)
     if (energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_DP) {
         PN__MSG("energy %d is not a pn_mpm_energy", (int)energy);
         return PN_ERROR_INVALID_ARGUMENT;
@@ -1524,17 +1420,17 @@ PN__DEF int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real dens
     PN_ASSERT(w && m);
     w->error[0] = 0;
     if (w->n_groups >= PN_MPM_MAX_GROUPS) {
-        pn__mpm_fail(w, PN_ERROR_CAPACITY, "pn_mpm_add_group: all PN_MPM_MAX_GROUPS = %d groups are in use",
+        PN__FAIL(w, PN_ERROR_CAPACITY, "pn_mpm_add_group: all PN_MPM_MAX_GROUPS = %d groups are in use",
                      PN_MPM_MAX_GROUPS);
         return -1;
     }
     if (!pn__finite(density_kg_m3) || !(density_kg_m3 > 0)) {
-        pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_group: density_kg_m3 = %g must be finite and > 0",
+        PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_group: density_kg_m3 = %g must be finite and > 0",
                      (double)density_kg_m3);
         return -1;
     }
     if (pn_material_check(m, &why) != PN_OK) {
-        pn__mpm_fail(w, PN_ERROR_INVALID_PARAMETER, "pn_mpm_add_group: %s", why);
+        PN__FAIL(w, PN_ERROR_INVALID_PARAMETER, "pn_mpm_add_group: %s", why);
         return -1;
     }
     memset(&w->groups[w->n_groups], 0, sizeof w->groups[0]);
@@ -1586,26 +1482,26 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
     d = w->dim;
     w->error[0] = 0;
     if (g < 0 || g >= w->n_groups)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: group %d does not exist (%d groups)",
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: group %d does not exist (%d groups)",
                             g, w->n_groups);
     if (!pn__finite(volume_m3) || !(volume_m3 > 0) || !pn__finite(volume_m3 * w->groups[g].density_kg_m3) ||
         !(volume_m3 * w->groups[g].density_kg_m3 > 0))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT,
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT,
                             "pn_mpm_add_particles: volume_m3 = %g (mass %g kg at the group's density) must be "
                             "positive and finite", (double)volume_m3, (double)(volume_m3 * w->groups[g].density_kg_m3));
     if (n > w->cap - w->n)
-        return pn__mpm_fail(w, PN_ERROR_CAPACITY,
+        return PN__FAIL(w, PN_ERROR_CAPACITY,
                             "pn_mpm_add_particles: %lu more particles need max_particles >= %lu (it is %lu, %lu in use)",
                             (unsigned long)n, (unsigned long)(w->n + n), (unsigned long)w->cap, (unsigned long)w->n);
     for (p = 0; p < n; ++p) {
         if (!pn__all_finite(d, x + p * (size_t)d) || (v && !pn__all_finite(d, v + p * (size_t)d))) {
             w->error_particle = w->n + p;
-            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_add_particles: particle %lu of the call has a NaN or "
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_add_particles: particle %lu of the call has a NaN or "
                                 "infinite %s", (unsigned long)p, pn__all_finite(d, x + p * (size_t)d) ? "velocity" : "position");
         }
         if (!pn__mpm_inside(w, x + p * (size_t)d)) {
             w->error_particle = w->n + p;
-            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: particle %lu of the call at "
+            return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: particle %lu of the call at "
                                 "(%g, %g, %g) m is outside the walls (origin_m + [%d dx, (res - %d) dx] on each axis)",
                                 (unsigned long)p, (double)x[p * (size_t)d], (double)x[p * (size_t)d + 1],
                                 d == 3 ? (double)x[p * (size_t)d + 2] : 0.0, w->wall, w->wall);
@@ -1635,12 +1531,12 @@ PN__DEF pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, cons
     PN_ASSERT(w && (h || n == 0));
     w->error[0] = 0;
     if (first > w->n || n > w->n - first)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_state: particles %lu .. %lu + %lu do not exist "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_state: particles %lu .. %lu + %lu do not exist "
                             "(%lu particles)", (unsigned long)first, (unsigned long)first, (unsigned long)n, (unsigned long)w->n);
     for (p = 0; p < n; ++p)
         if (!pn__finite(h[p])) {
             w->error_particle = first + p;
-            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_set_state: h of particle %lu is NaN or infinite",
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_set_state: h of particle %lu is NaN or infinite",
                                 (unsigned long)(first + p));
         }
     memcpy(w->h + first, h, sizeof(pn_real) * n);
@@ -1657,31 +1553,31 @@ PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c,
     k = *c;
     w->error[0] = 0;
     if (w->n_colliders >= PN_MPM_MAX_COLLIDERS)
-        return pn__mpm_fail(w, PN_ERROR_CAPACITY, "pn_mpm_add_collider: all PN_MPM_MAX_COLLIDERS = %d are in use",
+        return PN__FAIL(w, PN_ERROR_CAPACITY, "pn_mpm_add_collider: all PN_MPM_MAX_COLLIDERS = %d are in use",
                             PN_MPM_MAX_COLLIDERS);
     if (k.shape < PN_MPM_SHAPE_HALF_SPACE || k.shape > PN_MPM_SHAPE_SPHERE)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: shape %d is not a pn_mpm_shape", (int)k.shape);
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: shape %d is not a pn_mpm_shape", (int)k.shape);
     if (k.boundary < PN_MPM_BOUNDARY_STICKY || k.boundary > PN_MPM_BOUNDARY_SEPARATE)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: boundary %d is not a pn_mpm_boundary",
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: boundary %d is not a pn_mpm_boundary",
                             (int)k.boundary);
     if (!pn__finite(k.friction) || !(k.friction >= 0))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: friction must be finite and >= 0");
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: friction must be finite and >= 0");
     if (!pn__all_finite(d, k.center_m) || !pn__all_finite(d, k.velocity_m_s))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: center_m or velocity_m_s is not finite");
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: center_m or velocity_m_s is not finite");
     for (i = d; i < 3; ++i) k.center_m[i] = k.normal[i] = k.half_extent_m[i] = k.velocity_m_s[i] = 0;
     if (k.shape == PN_MPM_SHAPE_HALF_SPACE) {
         if (pn__all_finite(d, k.normal))
             for (i = 0; i < d; ++i) nn += k.normal[i] * k.normal[i];
         nn = PN__SQRT(nn);
         if (!(nn > 0) || !pn__finite(nn))
-            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: the half-space normal is zero or not finite");
+            return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: the half-space normal is zero or not finite");
         for (i = 0; i < d; ++i) k.normal[i] /= nn;
     } else if (k.shape == PN_MPM_SHAPE_BOX) {
         for (i = 0; i < d; ++i)
             if (!pn__finite(k.half_extent_m[i]) || !(k.half_extent_m[i] > 0))
-                return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: half_extent_m must be finite and > 0");
+                return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: half_extent_m must be finite and > 0");
     } else if (!pn__finite(k.radius_m) || !(k.radius_m > 0)) {
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: radius_m must be finite and > 0");
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: radius_m must be finite and > 0");
     }
     w->colliders[w->n_colliders] = k;
     if (index) *index = w->n_colliders;
@@ -1697,10 +1593,10 @@ PN__DEF pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real
     d = w->dim;
     w->error[0] = 0;
     if (index < 0 || index >= w->n_colliders)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_move_collider: collider %d does not exist (%d colliders)",
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_move_collider: collider %d does not exist (%d colliders)",
                             index, w->n_colliders);
     if (!pn__all_finite(d, center_m) || (velocity_m_s && !pn__all_finite(d, velocity_m_s)))
-        return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_move_collider: center_m or velocity_m_s is NaN or infinite");
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_move_collider: center_m or velocity_m_s is NaN or infinite");
     c = &w->colliders[index];
     for (i = 0; i < d; ++i) { /* center(t) = center + t velocity passes center_m at time_s */
         c->velocity_m_s[i] = velocity_m_s ? velocity_m_s[i] : 0;
@@ -1758,17 +1654,17 @@ static pn_result pn__mpm_first_error(pn_mpm_world *w, pn_real dt) {
             if (!w->active[p] || !(w->pstat[p] & bits[pass])) continue;
             w->error_particle = p;
             if (pass == 0)
-                return pn__mpm_fail(w, (pn_result)(w->pstat[p] & 0xff), "step of %g s: particle %lu (group %d): %s",
+                return PN__FAIL(w, (pn_result)(w->pstat[p] & 0xff), "step of %g s: particle %lu (group %d): %s",
                                     (double)dt, (unsigned long)p, w->group[p],
                                     pn_result_string((pn_result)(w->pstat[p] & 0xff)));
             for (i = 0; i < d; ++i)
                 far = PN__MAX(far, PN__FABS(w->sx[p * (size_t)d + (size_t)i] - w->x[p * (size_t)d + (size_t)i]));
             if (pass == 1)
-                return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "step of %g s: particle %lu would move %.2f cells (the "
+                return PN__FAIL(w, PN_ERROR_STEP_TOO_LARGE, "step of %g s: particle %lu would move %.2f cells (the "
                                     "advection limit is %g): take steps of at most %.3g s (pn_mpm_advance picks them)",
                                     (double)dt, (unsigned long)p, (double)(far / w->desc.dx_m),
                                     (double)w->desc.advection_limit, (double)(dt * w->desc.advection_limit * w->desc.dx_m / far));
-            return pn__mpm_fail(w, PN_ERROR_OUTSIDE_DOMAIN, "step of %g s: particle %lu would pass through a wall to "
+            return PN__FAIL(w, PN_ERROR_OUTSIDE_DOMAIN, "step of %g s: particle %lu would pass through a wall to "
                                 "(%g, %g, %g) m (smaller steps, or pn_mpm_desc.allow_outflow to let material leave)",
                                 (double)dt, (unsigned long)p, (double)w->sx[p * (size_t)d],
                                 (double)w->sx[p * (size_t)d + 1], d == 3 ? (double)w->sx[p * (size_t)d + 2] : 0.0);
@@ -1786,7 +1682,7 @@ static pn_result pn__mpm_check_state(pn_mpm_world *w) {
             !pn__all_finite(dd, w->C + p * (size_t)dd) || !pn__all_finite(dd, w->F + p * (size_t)dd) ||
             !pn__finite(w->h[p])) {
             w->error_particle = p;
-            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x, v, C, F or h (was it "
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x, v, C, F or h (was it "
                                 "written by hand?)", (unsigned long)p);
         }
     }
@@ -1812,11 +1708,11 @@ static void pn__mpm_stats_clear(pn_mpm_stats *st, int measure) {
 static pn_result pn__mpm_list_check(pn_mpm_world *w, size_t n, const size_t *idx, int drive, const char *fn) {
     size_t k, j;
     int a;
-    if (n == 0 || !idx) return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: no particles (n = 0 or NULL)", fn);
+    if (n == 0 || !idx) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: no particles (n = 0 or NULL)", fn);
     for (k = 0; k < n; ++k) {
         if (idx[k] >= w->n || !w->active[idx[k]]) {
             w->error_particle = idx[k] < w->n ? idx[k] : (size_t)-1;
-            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu (entry %lu) %s", fn, (unsigned long)idx[k],
+            return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu (entry %lu) %s", fn, (unsigned long)idx[k],
                                 (unsigned long)k, idx[k] >= w->n ? "does not exist" : "is not active");
         }
     }
@@ -1828,7 +1724,7 @@ static pn_result pn__mpm_list_check(pn_mpm_world *w, size_t n, const size_t *idx
             for (j = 0; j < D->n; ++j)
                 if (D->idx[j] == idx[k]) {
                     w->error_particle = idx[k];
-                    return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu is already driven by drive %d "
+                    return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu is already driven by drive %d "
                                         "(pn_mpm_release_drive it first)", fn, (unsigned long)idx[k], a);
                 }
     }
@@ -1847,7 +1743,7 @@ PN__DEF pn_result pn_mpm_drive_particles(pn_mpm_world *w, size_t n, const size_t
     w->error[0] = 0;
     if ((velocity_m_s && !pn__all_finite(d, velocity_m_s)) || (center_m && !pn__all_finite(d, center_m)) ||
         (angular_velocity_rad_s && !pn__all_finite(3, angular_velocity_rad_s)))
-        return pn__mpm_fail(w, PN_ERROR_NONFINITE, "%s: velocity_m_s, center_m or angular_velocity_rad_s is NaN or infinite", fn);
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "%s: velocity_m_s, center_m or angular_velocity_rad_s is NaN or infinite", fn);
     memset(&D, 0, sizeof D);
     for (i = 0; i < 3; ++i) {
         D.vel[i] = velocity_m_s && i < d ? velocity_m_s[i] : 0;
@@ -1855,17 +1751,17 @@ PN__DEF pn_result pn_mpm_drive_particles(pn_mpm_world *w, size_t n, const size_t
         D.omega[i] = angular_velocity_rad_s && (d == 3 || i == 2) ? angular_velocity_rad_s[i] : 0;
         spin |= D.omega[i] != 0;
     }
-    if (spin && !center_m) return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: a rotation needs center_m", fn);
+    if (spin && !center_m) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: a rotation needs center_m", fn);
     if ((r = pn__mpm_list_check(w, n, particles, 1, fn)) != PN_OK) return r;
     for (a = 0; a < w->n_drives && w->drives[a].on; ++a) {} /* a released slot is reused */
     if (a == PN_MPM_MAX_DRIVES) a = -1;
-    if (a < 0) return pn__mpm_fail(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_DRIVES = %d are in use", fn, PN_MPM_MAX_DRIVES);
+    if (a < 0) return PN__FAIL(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_DRIVES = %d are in use", fn, PN_MPM_MAX_DRIVES);
     D.idx = (size_t *)pn__mpm_alloc(&w->desc, n, sizeof(size_t), &fail);
     D.x0 = (pn_real *)pn__mpm_alloc(&w->desc, n * (size_t)d, sizeof(pn_real), &fail);
     if (fail) {
         pn_free(&w->desc.allocator, D.idx);
         pn_free(&w->desc.allocator, D.x0);
-        return pn__mpm_fail(w, PN_ERROR_OUT_OF_MEMORY, "%s: out of memory for %lu particles", fn, (unsigned long)n);
+        return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "%s: out of memory for %lu particles", fn, (unsigned long)n);
     }
     D.n = n;
     D.t0 = w->time_s;
@@ -1884,7 +1780,7 @@ PN__DEF pn_result pn_mpm_release_drive(pn_mpm_world *w, int index) {
     PN_ASSERT(w);
     w->error[0] = 0;
     if (index < 0 || index >= w->n_drives || index >= PN_MPM_MAX_DRIVES)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_release_drive: drive %d does not exist (%d drives)", index,
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_release_drive: drive %d does not exist (%d drives)", index,
                             w->n_drives);
     w->drives[index].on = 0;
     return PN_OK;
@@ -1902,17 +1798,17 @@ PN__DEF pn_result pn_mpm_add_load(pn_mpm_world *w, size_t n, const size_t *parti
     d = w->dim;
     w->error[0] = 0;
     if (!force_N || !pn__all_finite(d, force_N))
-        return pn__mpm_fail(w, PN_ERROR_NONFINITE, "%s: force_N is NULL, NaN or infinite", fn);
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "%s: force_N is NULL, NaN or infinite", fn);
     if (!pn__finite(duration_s) || !(duration_s >= 0))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "%s: duration_s = %g must be finite and >= 0 (0: until removed)", fn,
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: duration_s = %g must be finite and >= 0 (0: until removed)", fn,
                             (double)duration_s);
     if ((r = pn__mpm_list_check(w, n, particles, 0, fn)) != PN_OK) return r;
     for (a = 0; a < w->n_loads && w->loads[a].on; ++a) {}
     if (a == PN_MPM_MAX_LOADS) a = -1;
-    if (a < 0) return pn__mpm_fail(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_LOADS = %d are in use", fn, PN_MPM_MAX_LOADS);
+    if (a < 0) return PN__FAIL(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_LOADS = %d are in use", fn, PN_MPM_MAX_LOADS);
     memset(&L, 0, sizeof L);
     L.idx = (size_t *)pn__mpm_alloc(&w->desc, n, sizeof(size_t), &fail);
-    if (fail) return pn__mpm_fail(w, PN_ERROR_OUT_OF_MEMORY, "%s: out of memory for %lu particles", fn, (unsigned long)n);
+    if (fail) return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "%s: out of memory for %lu particles", fn, (unsigned long)n);
     memcpy(L.idx, particles, sizeof(size_t) * n);
     for (k = 0; k < n; ++k) mass += w->mass[particles[k]];
     for (i = 0; i < d; ++i) L.acc[i] = force_N[i] / mass;
@@ -1930,7 +1826,7 @@ PN__DEF pn_result pn_mpm_remove_load(pn_mpm_world *w, int index) {
     PN_ASSERT(w);
     w->error[0] = 0;
     if (index < 0 || index >= w->n_loads || index >= PN_MPM_MAX_LOADS)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_remove_load: load %d does not exist (%d loads)", index,
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_remove_load: load %d does not exist (%d loads)", index,
                             w->n_loads);
     w->loads[index].on = 0;
     return PN_OK;
@@ -1963,9 +1859,9 @@ PN__DEF pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, 
     d = w->dim, dd = d * d;
     w->error[0] = 0;
     if (first > w->n || n > w->n - first)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_particles: particles %lu .. %lu + %lu do not exist "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_particles: particles %lu .. %lu + %lu do not exist "
                             "(%lu particles)", (unsigned long)first, (unsigned long)first, (unsigned long)n, (unsigned long)w->n);
-    if (!pn__finite(time_s)) return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_set_particles: time_s is NaN or infinite");
+    if (!pn__finite(time_s)) return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_set_particles: time_s is NaN or infinite");
     for (p = 0; p < n; ++p) {
         const char *bad = NULL;
         if (x && !pn__all_finite(d, x + p * (size_t)d)) bad = "x";
@@ -1974,12 +1870,12 @@ PN__DEF pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, 
         else if (F && !pn__all_finite(dd, F + p * (size_t)dd)) bad = "F";
         if (bad) {
             w->error_particle = first + p;
-            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_set_particles: %s of particle %lu is NaN or infinite", bad,
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_set_particles: %s of particle %lu is NaN or infinite", bad,
                                 (unsigned long)(first + p));
         }
         if (x && !pn__mpm_inside(w, x + p * (size_t)d)) {
             w->error_particle = first + p;
-            return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_particles: x of particle %lu is outside the walls",
+            return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_particles: x of particle %lu is outside the walls",
                                 (unsigned long)(first + p));
         }
     }
@@ -2046,9 +1942,7 @@ static pn_real pn__mpm_hash01(unsigned long seed, long i, long j, long k, int ax
     unsigned long long z = (unsigned long long)seed * 0x9E3779B97F4A7C15ULL;
     z ^= (unsigned long long)i * 0xBF58476D1CE4E5B9ULL + (unsigned long long)j * 0x94D049BB133111EBULL +
          (unsigned long long)k * 0xD6E8FEB86659FD93ULL + (unsigned long long)axis * 0xA0761D6478BD642FULL;
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL; /* splitmix64 finalizer */
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    z ^= z >> 31;
+    z = pn__mix64(z);
     return (pn_real)((double)(z >> 11) * (1.0 / 9007199254740992.0));
 }
 
@@ -2376,21 +2270,21 @@ PN__DEF pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t
     w->error[0] = 0;
     if (added) *added = 0;
     if (f->group < 0 || f->group >= w->n_groups)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: group %d does not exist (%d groups)", f->group,
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: group %d does not exist (%d groups)", f->group,
                             w->n_groups);
     r = pn__mpm_fill_do(&w->desc, f, NULL, &n, &why, bad);
-    if (r != PN_OK && *why) return pn__mpm_fail(w, r, "%s", why);
+    if (r != PN_OK && *why) return PN__FAIL(w, r, "%s", why);
     if (r != PN_OK)
-        return pn__mpm_fail(w, r, "pn_mpm_fill: the shape reaches outside the walls at (%g, %g, %g) m (move it, or set "
+        return PN__FAIL(w, r, "pn_mpm_fill: the shape reaches outside the walls at (%g, %g, %g) m (move it, or set "
                             "pn_mpm_fill_desc.clip)", (double)bad[0], (double)bad[1], (double)bad[2]);
     if (n > w->cap - w->n)
-        return pn__mpm_fail(w, PN_ERROR_CAPACITY, "pn_mpm_fill: the shape holds %lu particles; max_particles must be >= %lu "
+        return PN__FAIL(w, PN_ERROR_CAPACITY, "pn_mpm_fill: the shape holds %lu particles; max_particles must be >= %lu "
                             "(it is %lu, %lu in use; pn_mpm_fill_count tells before creating the world)",
                             (unsigned long)n, (unsigned long)(w->n + n), (unsigned long)w->cap, (unsigned long)w->n);
     vol = PN__POW(w->desc.dx_m / (pn_real)(f->per_axis ? f->per_axis : 2), d);
     mass = vol * w->groups[f->group].density_kg_m3;
     if (!(vol > 0) || !pn__finite(mass) || !(mass > 0))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: particle volume %g m^3 gives mass %g kg", (double)vol,
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_fill: particle volume %g m^3 gives mass %g kg", (double)vol,
                             (double)mass);
     /* the walk writes straight into the particle arrays, past the particles in use */
     r = pn__mpm_fill_do(&w->desc, f, w->x + w->n * (size_t)d, &q, &why, bad);
@@ -2476,9 +2370,7 @@ static void pn__mpm_stencil(pn_mpm_world *w, size_t p) {
         int b = (int)floor((double)(xc - (pn_real)0.5));
         f = xc - (pn_real)b;
         fx[i] = f;
-        W[i * 3 + 0] = (pn_real)0.5 * ((pn_real)1.5 - f) * ((pn_real)1.5 - f);
-        W[i * 3 + 1] = (pn_real)0.75 - (f - 1) * (f - 1);
-        W[i * 3 + 2] = (pn_real)0.5 * (f - (pn_real)0.5) * (f - (pn_real)0.5);
+        PN__BSPLINE2(W[i * 3 + 0], W[i * 3 + 1], W[i * 3 + 2], f, pn_real);
         flat += (size_t)b * w->stride[i];
     }
     w->pbase[p] = flat;
@@ -2853,7 +2745,7 @@ static pn_result pn__mpm_energy_guard(pn_mpm_world *w, const pn_mpm_implicit_des
         return PN_OK; /* nothing to measure by: the step's own checks stand */
     st->energy_rise = PN__MAX(st->energy_rise, (pn_real)((e1 - e0) / e0));
     if (e1 - e0 > tol * e0)
-        return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "implicit step of %g s: the mechanical energy rose from %.4g J to "
+        return PN__FAIL(w, PN_ERROR_STEP_TOO_LARGE, "implicit step of %g s: the mechanical energy rose from %.4g J to "
                             "%.4g J, by %.3g of it (energy_rise_tol %g), with no work done on the material: the solve's "
                             "answer is wrong for this step; a smaller one holds", (double)dt, e0, e1, (e1 - e0) / e0, tol);
     return PN_OK;
@@ -3130,15 +3022,7 @@ static inline void pn__mpm_base(const pn_mpm_world *w, const pn_real *x, int *ba
     }
 }
 
-/* quadratic B-spline weights of the three nodes from x/dx - base (>>bin) */
-#define PN__MPM_SPLINE3(w0, w1, w2, f)                                                       \
-    do {                                                                                     \
-        w0 = (pn_real)0.5 * ((pn_real)1.5 - (f)) * ((pn_real)1.5 - (f));                     \
-        w1 = (pn_real)0.75 - ((f) - 1) * ((f) - 1);                                          \
-        w2 = (pn_real)0.5 * ((f) - (pn_real)0.5) * ((f) - (pn_real)0.5);                     \
-    } while (0)
-
-#define PN__MPM_SPLINE(W, f) PN__MPM_SPLINE3(W[0], W[1], W[2], f)
+#define PN__MPM_SPLINE(W, f) PN__BSPLINE2(W[0], W[1], W[2], f, pn_real) /* >>kit */
 
 /* the stencil base row (axis 0) of a particle at x inside the grid */
 static inline int pn__mpm_row_of(const pn_mpm_world *w, const pn_real *x) {
@@ -3320,8 +3204,8 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, size_t p0, const size_t *idx
         q10[l] = rec[7][l] + dt * rec[10][l], q11[l] = rec[8][l] + dt * rec[11][l];
         b0[l] = (int)(xc - (pn_real)0.5), b1[l] = (int)(yc - (pn_real)0.5);
         fx0[l] = xc - (pn_real)b0[l], fx1[l] = yc - (pn_real)b1[l];
-        PN__MPM_SPLINE3(wx[0][l], wx[1][l], wx[2][l], fx0[l]);
-        PN__MPM_SPLINE3(wy[0][l], wy[1][l], wy[2][l], fx1[l]);
+        PN__BSPLINE2(wx[0][l], wx[1][l], wx[2][l], fx0[l], pn_real);
+        PN__BSPLINE2(wy[0][l], wy[1][l], wy[2][l], fx1[l], pn_real);
     }
     for (i = 0; i < 3; ++i)
         for (j = 0; j < 3; ++j) {
@@ -3856,8 +3740,8 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         pn_real xc = (px[l] - ox) * inv_dx, yc = (py[l] - oy) * inv_dx;
         b0[l] = (int)(xc - (pn_real)0.5), b1[l] = (int)(yc - (pn_real)0.5);
         fx0[l] = xc - (pn_real)b0[l], fx1[l] = yc - (pn_real)b1[l];
-        PN__MPM_SPLINE3(wx[0][l], wx[1][l], wx[2][l], fx0[l]);
-        PN__MPM_SPLINE3(wy[0][l], wy[1][l], wy[2][l], fx1[l]);
+        PN__BSPLINE2(wx[0][l], wx[1][l], wx[2][l], fx0[l], pn_real);
+        PN__BSPLINE2(wy[0][l], wy[1][l], wy[2][l], fx1[l], pn_real);
         v0[l] = v1[l] = g00[l] = g01[l] = g10[l] = g11[l] = 0;
         nd[l] = ((size_t)b0[l] * s0 + (size_t)b1[l]) * 4;
     }
@@ -3990,9 +3874,9 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
             if (w->pstat[p] < 0x1000) break;
             w->error_particle = p;
             if (w->pstat[p] == 0x2000)
-                return pn__mpm_fail(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by "
+                return PN__FAIL(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by "
                                     "hand?)", (unsigned long)p);
-            return pn__mpm_fail(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by "
+            return PN__FAIL(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by "
                                 "hand?)", (unsigned long)p);
         }
     }
@@ -4027,9 +3911,9 @@ static pn_result pn__mpm_xcheck(pn_mpm_world *w) {
         for (i = 0; i < d && pn__finite(x[i]); ++i) {
         }
         if (i < d)
-            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by hand?)",
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by hand?)",
                                 (unsigned long)lp);
-        return pn__mpm_fail(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by hand?)",
+        return PN__FAIL(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by hand?)",
                             (unsigned long)lp);
     }
     return PN_OK;
@@ -4045,12 +3929,12 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     PN_ASSERT(w);
     w->error[0] = 0;
     if (!pn__finite(dt) || !(dt > 0))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_explicit: dt_s = %g must be finite and > 0", (double)dt);
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_explicit: dt_s = %g must be finite and > 0", (double)dt);
     { /* far beyond the wave-speed bound no explicit step is stable (the largest found stable
          is below 2x pn_mpm_stable_dt: tests/test_scene.c): refused before anything is spent */
         pn_real rest = pn__mpm_rest_dt(w), sdt;
         if (rest > 0 && dt > PN__MPM_EXPLICIT_MAX * rest)
-            return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_mpm_step_explicit: dt_s = %g s is more than %dx the stable "
+            return PN__FAIL(w, PN_ERROR_STEP_TOO_LARGE, "pn_mpm_step_explicit: dt_s = %g s is more than %dx the stable "
                                 "step (pn_mpm_stable_dt: %g s here; pn_mpm_advance takes stable steps)", (double)dt,
                                 PN__MPM_EXPLICIT_MAX, pn_mpm_stable_dt(w, &sdt) == PN_OK ? (double)sdt : (double)rest);
     }
@@ -4220,10 +4104,10 @@ PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy 
     PN_ASSERT(w);
     w->error[0] = 0;
     if (g < 0 || g >= w->n_groups)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: group %d does not exist (%d groups)",
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_group_set_energy: group %d does not exist (%d groups)",
                             g, w->n_groups);
     r = pn__group_set_energy(&w->groups[g], g, w->dim, energy, net, msg, sizeof msg);
-    if (r != PN_OK) return pn__mpm_fail(w, r, "pn_mpm_group_set_energy: %s", msg);
+    if (r != PN_OK) return PN__FAIL(w, r, "pn_mpm_group_set_energy: %s", msg);
     if (w->tok) memset(w->tok, 0, w->cap); /* the Taylor models belong to the old network */
     return PN_OK;
 }
@@ -4633,7 +4517,7 @@ static void pn__mpm_precondition(pn_mpm_world *w, const pn_real *r, pn_real *z) 
     }
 }
 
-/* the world and the step for the shared solvers (>>newton): the filtered Hessian, the
+/* the world and the step for the shared solvers (>>kit, plastinet.h): the filtered Hessian, the
    preconditioner and the chunked dot for pn__pcg, the objective for pn__armijo */
 typedef struct pn__mpm_cg {
     pn_mpm_world *w;
@@ -4651,7 +4535,7 @@ static pn_real pn__mpm_cg_dot(void *ctx, size_t n, const pn_real *a, const pn_re
     return pn__mpm_sum(((pn__mpm_cg *)ctx)->w, n, a, b);
 }
 
-/* Solve S H S dir = -S grad by preconditioned CG (>>newton) to |r| <= rel_tol |S grad|;
+/* Solve S H S dir = -S grad by preconditioned CG (>>kit, plastinet.h) to |r| <= rel_tol |S grad|;
    returns iterations. warm: resume from the dir of the last call (same H and grad). */
 static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol, int warm, int *capped) {
     int d = w->dim;
@@ -4843,7 +4727,7 @@ static void pn__mpm_mark(pn_mpm_world *w, pn_mpm_stats *st, int s) {
     w->clock_last = t;
 }
 
-/* the incremental potential's value for the shared line search (>>newton) */
+/* the incremental potential's value for the shared line search (>>kit, plastinet.h) */
 static pn_result pn__mpm_value(void *ctx, const pn_real *v, pn_real *E) {
     pn__mpm_cg *c = (pn__mpm_cg *)ctx;
     return pn__mpm_objective(c->w, v, c->dt, 0, E);
@@ -5472,7 +5356,7 @@ static void pn__mpm_mg_prolong(pn_mpm_world *w, int l, pn_real *x) {
 static void pn__mpm_mg_dense_factor(pn_mpm_world *w) {
     const pn__mpm_level *L = &w->mg[w->mg_levels - 1];
     int d = w->dim, dd = d * d, nb = PN__MPM_NB(d), t, a, b;
-    size_t n = L->n * (size_t)d, i, j, k;
+    size_t n = L->n * (size_t)d, k;
     pn_real *M = w->mg_dense;
     w->mg_dense_n = 0;
     if (n > PN__MPM_MG_DENSE) return;
@@ -5486,27 +5370,14 @@ static void pn__mpm_mg_dense_factor(pn_mpm_world *w) {
                     M[(k * (size_t)d + (size_t)a) * n + (size_t)c * (size_t)d + (size_t)b] =
                         L->A[(k * (size_t)nb + (size_t)t) * (size_t)dd + (size_t)(a * d + b)];
         }
-    for (j = 0; j < n; ++j) { /* lower triangle: M = L L^T */
-        pn_real s = M[j * n + j], s0 = s;
-        for (k = 0; k < j; ++k) s -= M[j * n + k] * M[j * n + k];
-        if (!(s > (pn_real)1e-10 * s0)) { /* a direction without stiffness (all held): x_j = b_j */
-            if (!(s0 >= 0) || !pn__finite(s0)) return; /* not semi-definite: smooth instead */
-            M[j * n + j] = 1;
-            for (i = j + 1; i < n; ++i) M[i * n + j] = 0;
-            continue;
-        }
-        M[j * n + j] = PN__SQRT(s);
-        for (i = j + 1; i < n; ++i) {
-            pn_real v = M[i * n + j];
-            for (k = 0; k < j; ++k) v -= M[i * n + k] * M[j * n + k];
-            M[i * n + j] = v / M[j * n + j];
-        }
-    }
+    /* M = L L^T; a direction without stiffness (all held) gets x_j = b_j; not semi-definite:
+       smooth instead (mg_dense_n stays 0) */
+    if (pn__cholesky(M, n, (pn_real)1e-10, 0, 1) < n) return;
     w->mg_dense_n = n;
 }
 
 static void pn__mpm_mg_coarsest(pn_mpm_world *w, int l, const pn_real *b, pn_real *x) {
-    size_t n = w->mg_dense_n, i, k;
+    size_t n = w->mg_dense_n;
     const pn_real *M = w->mg_dense;
     if (!n) { /* two symmetric sweeps */
         memset(x, 0, sizeof(pn_real) * w->mg[l].n * (size_t)w->dim);
@@ -5516,16 +5387,7 @@ static void pn__mpm_mg_coarsest(pn_mpm_world *w, int l, const pn_real *b, pn_rea
         pn__mpm_mg_smooth(w, l, b, x, 1);
         return;
     }
-    for (i = 0; i < n; ++i) {
-        pn_real s = b[i];
-        for (k = 0; k < i; ++k) s -= M[i * n + k] * x[k];
-        x[i] = s / M[i * n + i];
-    }
-    for (i = n; i-- > 0;) {
-        pn_real s = x[i];
-        for (k = i + 1; k < n; ++k) s -= M[k * n + i] * x[k];
-        x[i] = s / M[i * n + i];
-    }
+    pn__cholesky_solve(M, n, b, x);
 }
 
 /* x = B b, B one V(1,1)-cycle from level l down */
@@ -5862,7 +5724,7 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
         }
         st->sweeps++;
         if (!pn__finite(res))
-            return pn__mpm_fail(w, PN_ERROR_OVERFLOW, "implicit step of %g s (stress formulation): the velocities "
+            return PN__FAIL(w, PN_ERROR_OVERFLOW, "implicit step of %g s (stress formulation): the velocities "
                                 "overflowed", (double)dt);
         if (res == 0) break; /* nothing moved: converged (material in free flight) */
         if (sweep > 1 && res <= vscale) {
@@ -5874,7 +5736,7 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
     }
     st->newton_residual = PN__MAX(st->newton_residual, res * dt / w->desc.dx_m);
     if (sweep == o->sweeps_max)
-        return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s (stress formulation): sweeps_max = %d "
+        return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s (stress formulation): sweeps_max = %d "
                             "Gauss-Seidel sweeps%s did not converge (the last one moved the grid by %.3g dx / dt, "
                             "tolerance %g): raise sweeps_max or take a smaller step", (double)dt, o->sweeps_max,
                             cells ? " of the cells" : "", (double)(res * dt / w->desc.dx_m), (double)tol);
@@ -5894,7 +5756,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         int fail = 0;
         w->pb = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(ns * d), sizeof(pn_real), &fail);
         if (fail)
-            return pn__mpm_fail(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
+            return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
                                 "for the cells' weights (%lu reals)", (unsigned long)(w->cap * (size_t)(ns * d)));
     }
     pn__mpm_mark(w, st, -1);
@@ -5923,7 +5785,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->pF0 + j * (size_t)dd, &plastic);
         if (rr != PN_OK) {
             w->error_particle = p;
-            return pn__mpm_fail(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
+            return PN__FAIL(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
                                 (unsigned long)p, w->group[p], pn_result_string(rr));
         }
         total += w->active[p];
@@ -6035,7 +5897,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0, gnorm;
                 if (w->newton_left-- <= 0)
-                    return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step: its newton_budget of %d Newton iterations "
+                    return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step: its newton_budget of %d Newton iterations "
                                         "is spent (over its attempts and substeps): take a smaller step", o->newton_budget);
                 pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR); /* the last iteration's bookkeeping */
                 r = pn__mpm_objective(w, w->vsol, dt, 2, &E0);
@@ -6046,7 +5908,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 gprev = gnorm;
                 fresh = it == 0 || o->mg_rebuild || stale;
                 if (w->mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
-                    return pn__mpm_fail(w, r, "implicit step: out of memory for the multigrid hierarchy of %lu active "
+                    return PN__FAIL(w, r, "implicit step: out of memory for the multigrid hierarchy of %lu active "
                                         "nodes", (unsigned long)w->n_act);
                 cg = pn__mpm_pcg(w, dt, o->cg_max, eta, 0, &capped);
                 st->cg_iters += cg;
@@ -6066,7 +5928,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 last_res = dmax / (w->desc.dx_m / dt);
                 if (o->trace) o->trace(o->trace_user, st->solves, it, E0, last_res);
                 if (!pn__finite(dmax))
-                    return pn__mpm_fail(w, PN_ERROR_OVERFLOW, "implicit step of %g s: the Newton direction is not finite "
+                    return PN__FAIL(w, PN_ERROR_OVERFLOW, "implicit step of %g s: the Newton direction is not finite "
                                         "(the Hessian overflowed)", (double)dt);
                 /* a small direction from a solve cut at cg_max proves nothing: go on */
                 if (dmax <= vscale && !capped) break;
@@ -6091,11 +5953,11 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     }
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
     if (capped)
-        return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: the last linear solve stopped at cg_max = %d "
+        return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: the last linear solve stopped at cg_max = %d "
                             "short of cg_rel_tol %g, so Newton did not converge: raise cg_max or take a smaller step",
                             (double)dt, o->cg_max, (double)o->cg_rel_tol);
     if (!(last_res <= 100 * o->newton_tol))
-        return pn__mpm_fail(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped at max |dv| dt / dx = %.3g "
+        return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped at max |dv| dt / dx = %.3g "
                             "(newton_tol %g, newton_max %d; %d line searches failed): a smaller step converges",
                             (double)dt, (double)last_res, (double)o->newton_tol, o->newton_max, st->line_search_failures);
     if (o->measure_force_error) pn__mpm_force_error(w, w->vsol, dt, st);
@@ -6163,21 +6025,21 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     PN_ASSERT(w);
     w->error[0] = 0;
     if (!pn__finite(dt) || !(dt > 0))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_implicit: dt_s = %g must be finite and > 0", (double)dt);
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_step_implicit: dt_s = %g must be finite and > 0", (double)dt);
     {
         int load, a = pn__mpm_drive_on(w, &load);
         if (a >= 0)
-            return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_step_implicit: %s %d is on: drives and loads work with "
+            return PN__FAIL(w, PN_ERROR_UNSUPPORTED, "pn_mpm_step_implicit: %s %d is on: drives and loads work with "
                                 "explicit steps (pn_mpm_step_explicit)", load ? "load" : "drive", a);
     }
     memset(&o, 0, sizeof o);
     if (desc) o = *desc;
     if (pn__mpm_negative_count(&o))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: %s must be >= 0 (0: the default)",
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: %s must be >= 0 (0: the default)",
                             pn__mpm_negative_count(&o));
     if (!pn__finite(o.newton_tol) || !pn__finite(o.cg_rel_tol) || !pn__finite(o.cg_forcing_max) ||
         o.newton_tol < 0 || o.cg_rel_tol < 0 || o.cg_forcing_max < 0)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: newton_tol, cg_rel_tol and cg_forcing_max "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: newton_tol, cg_rel_tol and cg_forcing_max "
                             "must be finite and >= 0 (0: the default)");
     if (o.fixed_point_iters <= 0) o.fixed_point_iters = 1;
     if (o.newton_max <= 0) o.newton_max = 50;
@@ -6187,21 +6049,21 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (o.contact_rounds <= 0) o.contact_rounds = 1;
     if (o.linear_solver < PN_MPM_LINEAR_DEFAULT || o.linear_solver > PN_MPM_LINEAR_MULTIGRID || o.mg_levels < 0 ||
         o.mg_rebuild < 0 || o.mg_rebuild > 1)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: linear_solver %d is not a "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: linear_solver %d is not a "
                             "pn_mpm_linear_solver, mg_levels %d < 0 or mg_rebuild %d not 0 or 1", (int)o.linear_solver,
                             o.mg_levels, o.mg_rebuild);
     if (o.mg_levels == 0) o.mg_levels = PN__MPM_MG_MAX;
     if (o.formulation < PN_MPM_FORMULATION_ENERGY || o.formulation > PN_MPM_FORMULATION_STRESS ||
         !pn__finite(o.sweep_tol) || o.sweep_tol < 0)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
                             "pn_mpm_formulation, or sweep_tol %g is not finite and >= 0", (int)o.formulation,
                             (double)o.sweep_tol);
     if (!pn__finite(o.energy_rise_tol) || !pn__finite(o.pnet_reuse_tol))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: energy_rise_tol %g or pnet_reuse_tol %g "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: energy_rise_tol %g or pnet_reuse_tol %g "
                             "is not finite", (double)o.energy_rise_tol, (double)o.pnet_reuse_tol);
     if (!pn__finite(o.cell_relax) || !(o.cell_relax == 0 || (o.cell_relax >= 1 && o.cell_relax < 2)) ||
         o.stress_unknowns < PN_MPM_STRESS_PARTICLES || o.stress_unknowns > PN_MPM_STRESS_CELLS_THEN_PARTICLES)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: cell_relax %g is not 0 (the "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: cell_relax %g is not 0 (the "
                             "default) or in [1, 2), or stress_unknowns %d is not a pn_mpm_stress_unknowns",
                             (double)o.cell_relax, (int)o.stress_unknowns);
     if (o.sweeps_max <= 0) o.sweeps_max = 1000;
@@ -6211,7 +6073,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         int g;
         for (g = 0; g < w->n_groups; ++g)
             if (!pn__mpm_stress_ok(&w->groups[g].material))
-                return pn__mpm_fail(w, PN_ERROR_UNSUPPORTED, "pn_mpm_implicit_desc: the stress formulation takes "
+                return PN__FAIL(w, PN_ERROR_UNSUPPORTED, "pn_mpm_implicit_desc: the stress formulation takes "
                                     "StVK-Hencky groups (elastic or Drucker-Prager) and Neo-Hookean snow groups (elastic "
                                     "or Cam-Clay); group %d is not one", g);
     }
@@ -6226,7 +6088,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
     if (r == PN_OK) r = pn__mpm_reuse_on(w, &o);
-    if (r != PN_OK) return pn__mpm_fail(w, r, "pn_mpm_step_implicit: out of memory for the solver storage");
+    if (r != PN_OK) return PN__FAIL(w, r, "pn_mpm_step_implicit: out of memory for the solver storage");
     if (pn_mpm_stable_dt(w, &cfl) == PN_OK) cfl = dt / cfl;
     else cfl = -1;
     pn__mpm_stats_clear(&st, o.measure_force_error);
@@ -6308,12 +6170,12 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
     memset(&a, 0, sizeof a);
     if (desc) a = *desc;
     if (!pn__finite(frame_s) || !(frame_s > 0))
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance: frame_s = %g must be finite and > 0", (double)frame_s);
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance: frame_s = %g must be finite and > 0", (double)frame_s);
     if (a.integrator != PN_MPM_EXPLICIT && a.integrator != PN_MPM_IMPLICIT)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance_desc.integrator %d is not a pn_mpm_integrator",
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance_desc.integrator %d is not a pn_mpm_integrator",
                             (int)a.integrator);
     if (!pn__finite(a.max_step_s) || a.max_step_s < 0 || !pn__finite(a.courant) || a.courant < 0)
-        return pn__mpm_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance_desc: max_step_s and courant must be finite "
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_advance_desc: max_step_s and courant must be finite "
                             "and >= 0 (0: the default)");
     courant = a.courant > 0 ? a.courant : 1;
     if (a.integrator == PN_MPM_IMPLICIT && !(a.max_step_s > 0)) a.max_step_s = (pn_real)1e-3;
@@ -6325,7 +6187,7 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
         pn_result r;
         if (a.integrator == PN_MPM_EXPLICIT) {
             if ((r = pn_mpm_stable_dt(w, &dt)) != PN_OK)
-                return pn__mpm_fail(w, r, "pn_mpm_advance: no stable step (no group, or a non-finite state)");
+                return PN__FAIL(w, r, "pn_mpm_advance: no stable step (no group, or a non-finite state)");
             stable = dt;
             dt *= courant;
             if (a.max_step_s > 0) dt = PN__MIN(dt, a.max_step_s);
@@ -6344,11 +6206,11 @@ PN__DEF pn_result pn_mpm_advance(pn_mpm_world *w, pn_real frame_s, const pn_mpm_
                 dt = g2 > 0 ? 2 * reach / (vmax + PN__SQRT(vmax * vmax + 4 * PN__SQRT(g2) * reach)) : reach / vmax;
         }
         if (!(dt > 0) || !pn__finite(dt))
-            return pn__mpm_fail(w, PN_ERROR_NONFINITE, "pn_mpm_advance: the step came out as %g s", (double)dt);
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_advance: the step came out as %g s", (double)dt);
         if (left <= dt * (pn_real)1.0001) dt = left;
         else if (left < 2 * dt) dt = left / 2; /* no sliver of a last step */
         if (++steps > 1000000L)
-            return pn__mpm_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_mpm_advance: a frame of %g s needs more than 1e6 steps of "
+            return PN__FAIL(w, PN_ERROR_STEP_TOO_LARGE, "pn_mpm_advance: a frame of %g s needs more than 1e6 steps of "
                                 "%g s (a stiffer material than the frame rate allows explicitly: use the implicit integrator)",
                                 (double)frame_s, (double)dt);
         r = a.integrator == PN_MPM_EXPLICIT ? pn_mpm_step_explicit(w, dt, &st) : pn_mpm_step_implicit(w, dt, a.implicit, &st);
@@ -6446,22 +6308,6 @@ typedef struct pn__fem {
     unsigned hflags;             /* the element Hessians' flags: PN_EVAL_PROJECT_PSD, or 0
                                     near a minimum (pn__fem_minimize)                       */
 } pn__fem;
-
-static pn_result pn__fem_fail(pn_fem_mesh *m, pn_result r, const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    pn__vmsg(m->error, sizeof m->error, fmt, ap);
-    va_end(ap);
-    return r;
-}
-
-static void pn__fem_why(char *why, size_t cap, const char *fmt, ...) {
-    va_list ap;
-    if (!why || !cap) return;
-    va_start(ap, fmt);
-    pn__vmsg(why, cap, fmt, ap);
-    va_end(ap);
-}
 
 /* Ds of element e at positions x (columns x_a - x_0, row-major d x d) */
 static void pn__fem_ds(const pn_fem_mesh *m, size_t e, const pn_real *x, pn_real *Ds) {
@@ -6931,48 +6777,48 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     *out = NULL;
     d = desc->dim;
     if (!pn__dim_ok(d)) {
-        pn__fem_why(why, why_cap, "pn_fem_desc.dim is %d: 2 or 3 (and not compiled out by PN_NO_2D / PN_NO_3D)", d);
+        pn__msg(why, why_cap, "pn_fem_desc.dim is %d: 2 or 3 (and not compiled out by PN_NO_2D / PN_NO_3D)", d);
         return PN_ERROR_DIMENSION;
     }
     dd = d * d, dp = d + 1, n = desc->n_nodes, ne = desc->n_elements;
     if (!desc->rest_m || !desc->elements || n < (size_t)dp || ne < 1 || n > 0x7fffffff) {
-        pn__fem_why(why, why_cap, "pn_fem_desc: rest_m and elements are required, with at least %d nodes and one element "
+        pn__msg(why, why_cap, "pn_fem_desc: rest_m and elements are required, with at least %d nodes and one element "
                     "(fewer than 2^31 nodes)", dp);
         return PN_ERROR_INVALID_ARGUMENT;
     }
     if (!desc->groups || desc->n_groups < 1 || desc->n_groups > PN_FEM_MAX_GROUPS) {
-        pn__fem_why(why, why_cap, "pn_fem_desc.n_groups is %d: 1 .. %d groups are needed", desc->n_groups, PN_FEM_MAX_GROUPS);
+        pn__msg(why, why_cap, "pn_fem_desc.n_groups is %d: 1 .. %d groups are needed", desc->n_groups, PN_FEM_MAX_GROUPS);
         return PN_ERROR_INVALID_ARGUMENT;
     }
     if ((desc->allocator.alloc == NULL) != (desc->allocator.free == NULL)) {
-        pn__fem_why(why, why_cap, "pn_fem_desc.allocator: set both alloc and free, or neither");
+        pn__msg(why, why_cap, "pn_fem_desc.allocator: set both alloc and free, or neither");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     for (i = 0; i < 3; ++i)
         if (!pn__finite(desc->gravity[i])) {
-            pn__fem_why(why, why_cap, "pn_fem_desc.gravity[%d] is not finite", (int)i);
+            pn__msg(why, why_cap, "pn_fem_desc.gravity[%d] is not finite", (int)i);
             return PN_ERROR_NONFINITE;
         }
     if (!(desc->contact_distance_m >= 0) || !pn__finite(desc->contact_distance_m) || !(desc->contact_stiffness >= 0) ||
         !pn__finite(desc->contact_stiffness) || !(desc->friction_velocity_m_s >= 0) || !pn__finite(desc->friction_velocity_m_s)) {
-        pn__fem_why(why, why_cap, "pn_fem_desc: contact_distance_m, contact_stiffness and friction_velocity_m_s must be finite "
+        pn__msg(why, why_cap, "pn_fem_desc: contact_distance_m, contact_stiffness and friction_velocity_m_s must be finite "
                     "and >= 0");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     for (g = 0; g < desc->n_groups; ++g) {
         const char *mw = NULL;
         if (pn_material_check(&desc->groups[g].material, &mw) != PN_OK) {
-            pn__fem_why(why, why_cap, "pn_fem_desc.groups[%d].material: %s", g, mw ? mw : "invalid");
+            pn__msg(why, why_cap, "pn_fem_desc.groups[%d].material: %s", g, mw ? mw : "invalid");
             return PN_ERROR_INVALID_PARAMETER;
         }
         if (!(desc->groups[g].density_kg_m3 > 0) || !pn__finite(desc->groups[g].density_kg_m3)) {
-            pn__fem_why(why, why_cap, "pn_fem_desc.groups[%d].density_kg_m3 must be positive and finite", g);
+            pn__msg(why, why_cap, "pn_fem_desc.groups[%d].density_kg_m3 must be positive and finite", g);
             return PN_ERROR_INVALID_ARGUMENT;
         }
     }
     for (i = 0; i < n * (size_t)d; ++i)
         if (!pn__finite(desc->rest_m[i])) {
-            pn__fem_why(why, why_cap, "node %lu: coordinate %d is not finite", (unsigned long)(i / (size_t)d), (int)(i % (size_t)d));
+            pn__msg(why, why_cap, "node %lu: coordinate %d is not finite", (unsigned long)(i / (size_t)d), (int)(i % (size_t)d));
             return PN_ERROR_NONFINITE;
         }
     for (i = 0; i < n; ++i)
@@ -6988,18 +6834,18 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
         int a, b;
         for (a = 0; a < dp; ++a) {
             if (el[a] < 0 || (size_t)el[a] >= n) {
-                pn__fem_why(why, why_cap, "element %lu: node index %d is out of range (%lu nodes)", (unsigned long)e, el[a],
+                pn__msg(why, why_cap, "element %lu: node index %d is out of range (%lu nodes)", (unsigned long)e, el[a],
                             (unsigned long)n);
                 return PN_ERROR_INVALID_ARGUMENT;
             }
             for (b = 0; b < a; ++b)
                 if (el[a] == el[b]) {
-                    pn__fem_why(why, why_cap, "element %lu: node %d appears twice", (unsigned long)e, el[a]);
+                    pn__msg(why, why_cap, "element %lu: node %d appears twice", (unsigned long)e, el[a]);
                     return PN_ERROR_INVALID_ARGUMENT;
                 }
         }
         if (desc->element_group && (desc->element_group[e] < 0 || desc->element_group[e] >= desc->n_groups)) {
-            pn__fem_why(why, why_cap, "element %lu: group %d does not exist (%d groups)", (unsigned long)e, desc->element_group[e],
+            pn__msg(why, why_cap, "element %lu: group %d does not exist (%d groups)", (unsigned long)e, desc->element_group[e],
                         desc->n_groups);
             return PN_ERROR_INVALID_ARGUMENT;
         }
@@ -7020,12 +6866,12 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
         vol = pn__fem_volume(d, Ds);
         /* degenerate: volume below 1e-9 of the longest edge's cube (square) */
         if (!(PN__FABS(vol) > (pn_real)1e-9 * (d == 2 ? lmax * lmax : lmax * lmax * lmax))) {
-            pn__fem_why(why, why_cap, "element %lu (nodes %d %d %d%s%s) is degenerate: volume %g", (unsigned long)e, el[0], el[1],
+            pn__msg(why, why_cap, "element %lu (nodes %d %d %d%s%s) is degenerate: volume %g", (unsigned long)e, el[0], el[1],
                         el[2], d == 3 ? " ..." : "", "", (double)vol);
             return PN_ERROR_INVALID_ARGUMENT;
         }
         if (vol < 0) {
-            pn__fem_why(why, why_cap, "element %lu is inverted (negative volume %g): list its nodes %s", (unsigned long)e,
+            pn__msg(why, why_cap, "element %lu is inverted (negative volume %g): list its nodes %s", (unsigned long)e,
                         (double)vol, d == 2 ? "counter-clockwise" : "so that (x1-x0) x (x2-x0) . (x3-x0) > 0");
             return PN_ERROR_INVALID_ARGUMENT;
         }
@@ -7080,7 +6926,7 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     }
     for (i = 0; i < n; ++i)
         if (!(m->mass[i] > 0)) {
-            pn__fem_why(why, why_cap, "node %lu belongs to no element (it would have no mass)", (unsigned long)i);
+            pn__msg(why, why_cap, "node %lu belongs to no element (it would have no mass)", (unsigned long)i);
             pn_fem_destroy(m);
             return PN_ERROR_INVALID_ARGUMENT;
         }
@@ -7098,7 +6944,7 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     r = pn__fem_alloc_solver(m);
     if (r != PN_OK) {
         pn_fem_destroy(m);
-        pn__fem_why(why, why_cap, "out of memory for a mesh of %lu nodes and %lu elements", (unsigned long)n, (unsigned long)ne);
+        pn__msg(why, why_cap, "out of memory for a mesh of %lu nodes and %lu elements", (unsigned long)n, (unsigned long)ne);
         return r;
     }
     *out = m;
@@ -7111,10 +6957,10 @@ PN__DEF pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_mpm_energy e
     if (!m) return PN_ERROR_INVALID_ARGUMENT;
     m->error[0] = 0;
     if (g < 0 || g >= m->n_groups)
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_group_set_energy: group %d does not exist (%d groups)", g,
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_group_set_energy: group %d does not exist (%d groups)", g,
                             m->n_groups);
     r = pn__group_set_energy(&m->groups[g], g, m->dim, energy, net, msg, sizeof msg);
-    if (r != PN_OK) return pn__fem_fail(m, r, "pn_fem_group_set_energy: %s", msg);
+    if (r != PN_OK) return PN__FAIL(m, r, "pn_fem_group_set_energy: %s", msg);
     return PN_OK;
 }
 
@@ -7130,10 +6976,10 @@ static void pn__fem_cross(const pn_real *a, const pn_real *b, pn_real *c) {
 /* the node list of a pn_fem_*_nodes call checked; PN_OK or the failure, named */
 static pn_result pn__fem_node_list(pn_fem_mesh *m, size_t n, const int *nodes, const char *who) {
     size_t k;
-    if (n && !nodes) return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "%s: nodes is NULL", who);
+    if (n && !nodes) return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "%s: nodes is NULL", who);
     for (k = 0; k < n; ++k)
         if (nodes[k] < 0 || (size_t)nodes[k] >= m->n_nodes)
-            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "%s: node index %d (entry %lu) is out of range", who, nodes[k],
+            return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "%s: node index %d (entry %lu) is out of range", who, nodes[k],
                                 (unsigned long)k);
     return PN_OK;
 }
@@ -7148,7 +6994,7 @@ PN__DEF pn_result pn_fem_fix_nodes(pn_fem_mesh *m, size_t n, const int *nodes, c
     if (velocity_m_s)
         for (i = 0; i < m->dim; ++i)
             if (!pn__finite(velocity_m_s[i]))
-                return pn__fem_fail(m, PN_ERROR_NONFINITE, "pn_fem_fix_nodes: velocity[%d] is not finite", i);
+                return PN__FAIL(m, PN_ERROR_NONFINITE, "pn_fem_fix_nodes: velocity[%d] is not finite", i);
     for (k = 0; k < n; ++k) {
         size_t p = (size_t)nodes[k];
         m->fixed[p] = 1;
@@ -7167,10 +7013,10 @@ PN__DEF pn_result pn_fem_spin_nodes(pn_fem_mesh *m, size_t n, const int *nodes, 
     m->error[0] = 0;
     if ((r = pn__fem_node_list(m, n, nodes, "pn_fem_spin_nodes")) != PN_OK) return r;
     if (!center_m || !angular_velocity_rad_s)
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_spin_nodes: center_m or angular_velocity_rad_s is NULL");
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_spin_nodes: center_m or angular_velocity_rad_s is NULL");
     for (i = 0; i < 3; ++i)
         if ((i < m->dim && !pn__finite(center_m[i])) || !pn__finite(angular_velocity_rad_s[i]))
-            return pn__fem_fail(m, PN_ERROR_NONFINITE, "pn_fem_spin_nodes: center_m[%d] or angular_velocity_rad_s[%d] is not "
+            return PN__FAIL(m, PN_ERROR_NONFINITE, "pn_fem_spin_nodes: center_m[%d] or angular_velocity_rad_s[%d] is not "
                                 "finite", i, i);
     for (k = 0; k < n; ++k) {
         size_t p = (size_t)nodes[k];
@@ -7333,29 +7179,29 @@ PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, 
     m->error[0] = 0;
     d = m->dim;
     if (m->n_obstacles >= PN_FEM_MAX_OBSTACLES)
-        return pn__fem_fail(m, PN_ERROR_CAPACITY, "pn_fem_add_obstacle: the mesh has its %d obstacles", PN_FEM_MAX_OBSTACLES);
+        return PN__FAIL(m, PN_ERROR_CAPACITY, "pn_fem_add_obstacle: the mesh has its %d obstacles", PN_FEM_MAX_OBSTACLES);
     if (c->shape != PN_MPM_SHAPE_HALF_SPACE && c->shape != PN_MPM_SHAPE_BOX)
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: shape %d: half-spaces and boxes only", (int)c->shape);
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: shape %d: half-spaces and boxes only", (int)c->shape);
     for (i = 0; i < d; ++i) {
         if (!pn__finite(c->center_m[i]) || !pn__finite(c->normal[i]) || !pn__finite(c->velocity_m_s[i]) ||
             !pn__finite(c->half_extent_m[i]))
-            return pn__fem_fail(m, PN_ERROR_NONFINITE, "pn_fem_add_obstacle: a coordinate of axis %d is not finite", i);
+            return PN__FAIL(m, PN_ERROR_NONFINITE, "pn_fem_add_obstacle: a coordinate of axis %d is not finite", i);
         nn += c->normal[i] * c->normal[i];
         if (c->shape == PN_MPM_SHAPE_BOX && !(c->half_extent_m[i] > 0 && pn__finite(c->friction)))
-            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: half_extent_m[%d] must be > 0", i);
+            return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: half_extent_m[%d] must be > 0", i);
     }
     if (!(c->friction >= 0) || !pn__finite(c->friction))
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: friction must be finite and >= 0");
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: friction must be finite and >= 0");
     if (c->shape == PN_MPM_SHAPE_HALF_SPACE && !(nn > 0))
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the half-space's normal is zero");
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the half-space's normal is zero");
     for (k = 0; k < m->n_nodes; ++k)
         if (!(pn__fem_obstacle_sd(c, d, m->time_s, NULL, m->x + k * (size_t)d, nrm) > 0)) {
             m->error_node = (long)k;
-            return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: node %lu is inside the obstacle",
+            return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: node %lu is inside the obstacle",
                                 (unsigned long)k);
         }
     if ((m->error_element = pn__fem_obstacle_in_element(m, c, m->time_s)) >= 0)
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the obstacle reaches into element %ld (no "
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the obstacle reaches into element %ld (no "
                             "node of it inside the obstacle, so the nodes' barrier cannot see it)", m->error_element);
     m->obstacles[m->n_obstacles] = *c;
     for (i = d; i < 3; ++i) m->obstacles[m->n_obstacles].velocity_m_s[i] = 0;
@@ -7928,7 +7774,7 @@ static void pn__fem_coarse_correct(const pn__fem *s, size_t n, const pn_real *t,
 /* defined below, used here: */
 static void pn__fem_off_apply(const pn_fem_mesh *m, const pn_real *x, pn_real *y); /* >>fem-objective */
 
-/* the shared CG (>>newton) on the skyline matrix (or the blocks) plus the side list, in row
+/* the shared CG (>>kit, plastinet.h) on the skyline matrix (or the blocks) plus the side list, in row
    order; the skyline's Cholesky factor (or the blocks' incomplete one) preconditions */
 static void pn__fem_cg_apply(void *ctx, const pn_real *x, pn_real *y) {
     const pn_fem_mesh *m = (const pn_fem_mesh *)ctx;
@@ -7987,7 +7833,7 @@ static pn_result pn__fem_linear_setup(pn_fem_mesh *m, pn_fem_linear_solver ls) {
     const pn_allocator *al = &m->desc.allocator;
     int i;
     if (ls < PN_FEM_LINEAR_DEFAULT || ls > PN_FEM_LINEAR_PCG)
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: linear_solver %d is not a pn_fem_linear_solver",
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_step_implicit: linear_solver %d is not a pn_fem_linear_solver",
                             (int)ls);
     s->sparse = ls == PN_FEM_LINEAR_PCG ||
                 (ls == PN_FEM_LINEAR_DEFAULT &&
@@ -7999,7 +7845,7 @@ static pn_result pn__fem_linear_setup(pn_fem_mesh *m, pn_fem_linear_solver ls) {
             s->n_mov += v[0] != 0 || v[1] != 0 || v[2] != 0;
         }
         if (pn__fem_sparse_reserve(m) != PN_OK)
-            return pn__fem_fail(m, PN_ERROR_OUT_OF_MEMORY, "pn_fem_step_implicit: out of memory for the sparse Hessian of %lu "
+            return PN__FAIL(m, PN_ERROR_OUT_OF_MEMORY, "pn_fem_step_implicit: out of memory for the sparse Hessian of %lu "
                                 "nodes", (unsigned long)m->n_nodes);
         return PN_OK;
     }
@@ -8009,7 +7855,7 @@ static pn_result pn__fem_linear_setup(pn_fem_mesh *m, pn_fem_linear_solver ls) {
         if (!s->L || !s->A) {
             pn_free(al, s->L), pn_free(al, s->A);
             s->L = s->A = NULL;
-            return pn__fem_fail(m, PN_ERROR_OUT_OF_MEMORY, "pn_fem_step_implicit: out of memory for the Cholesky factor "
+            return PN__FAIL(m, PN_ERROR_OUT_OF_MEMORY, "pn_fem_step_implicit: out of memory for the Cholesky factor "
                                 "(%.0f MB; PN_FEM_LINEAR_PCG needs far less)", s->sky_mb);
         }
     }
@@ -8459,7 +8305,7 @@ static int pn__fem_self_visit(pn_fem_mesh *m, const pn__fem_pair *pr, void *vctx
         int *n2 = (int *)pn_alloc(al, sizeof(int) * 4 * cap);
         if (!o2 || !n2) {
             pn_free(al, o2), pn_free(al, n2);
-            cx->r = pn__fem_fail(m, PN_ERROR_OUT_OF_MEMORY, "self-contact: out of memory for %lu pairs outside the "
+            cx->r = PN__FAIL(m, PN_ERROR_OUT_OF_MEMORY, "self-contact: out of memory for %lu pairs outside the "
                                  "Hessian's pattern", (unsigned long)cap);
             return 1;
         }
@@ -8923,11 +8769,11 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
         if (st == INVERTED) {
             pn_real Fe[9];
             pn__fem_fe(m, e, m->x, Fe);
-            return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu turned inside out (det Fe = %g)", (unsigned long)e,
+            return PN__FAIL(m, PN_ERROR_INVERTED, "element %lu turned inside out (det Fe = %g)", (unsigned long)e,
                                 (double)pn_mat_det(d, Fe));
         }
-        if (st == SINGULAR) return pn__fem_fail(m, PN_ERROR_INVERTED, "element %lu: Fe is singular", (unsigned long)e);
-        return pn__fem_fail(m, (pn_result)(st - FAILED), "element %lu: the return mapping failed (%s)", (unsigned long)e,
+        if (st == SINGULAR) return PN__FAIL(m, PN_ERROR_INVERTED, "element %lu: Fe is singular", (unsigned long)e);
+        return PN__FAIL(m, (pn_result)(st - FAILED), "element %lu: the return mapping failed (%s)", (unsigned long)e,
                             pn_result_string((pn_result)(st - FAILED)));
     }
     return PN_OK;
@@ -8977,7 +8823,7 @@ PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
 
 static pn_result pn__fem_check_dt(pn_fem_mesh *m, pn_real dt, const char *who) {
     if (!(dt > 0) || !pn__finite(dt))
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "%s: dt %g must be positive and finite", who, (double)dt);
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "%s: dt %g must be positive and finite", who, (double)dt);
     return PN_OK;
 }
 
@@ -8995,7 +8841,7 @@ static pn_result pn__fem_obstacles_clear(pn_fem_mesh *m, const char *who) {
     int o;
     for (o = 0; o < m->n_obstacles; ++o)
         if ((m->error_element = pn__fem_obstacle_in_element(m, &m->obstacles[o], m->time_s)) >= 0)
-            return pn__fem_fail(m, PN_ERROR_UNSUPPORTED, "%s: obstacle %d reached into element %ld between its nodes (the "
+            return PN__FAIL(m, PN_ERROR_UNSUPPORTED, "%s: obstacle %d reached into element %ld between its nodes (the "
                                 "barrier acts on nodes: a finer mesh there, or a larger obstacle)", who, o, m->error_element);
     return PN_OK;
 }
@@ -9005,7 +8851,7 @@ static pn_result pn__fem_check_step(pn_fem_mesh *m, pn_real dt, const char *who)
     pn_result r = pn__fem_check_dt(m, dt, who);
     if (r != PN_OK) return r;
     if ((m->error_node = pn__fem_nonfinite_node(m)) >= 0)
-        return pn__fem_fail(m, PN_ERROR_NONFINITE, "%s: node %ld has a NaN or infinite position or velocity (was it "
+        return PN__FAIL(m, PN_ERROR_NONFINITE, "%s: node %ld has a NaN or infinite position or velocity (was it "
                             "written by hand?)", who, m->error_node);
     return PN_OK;
 }
@@ -9041,7 +8887,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
         const pn_real *q = s->q + e * (size_t)(d * dp), *P = s->eP + e * (size_t)(d * d);
         if (s->estat[e]) {
             m->error_element = (long)e;
-            return pn__fem_fail(m, (pn_result)s->estat[e], "pn_fem_step_explicit: element %lu: %s", (unsigned long)e,
+            return PN__FAIL(m, (pn_result)s->estat[e], "pn_fem_step_explicit: element %lu: %s", (unsigned long)e,
                                 pn_result_string((pn_result)s->estat[e]));
         }
         for (a = 0; a < dp; ++a)
@@ -9065,7 +8911,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
         r = pn__fem_self(m, m->x, 1, &Es, &dm);
         if (r != PN_OK) {
             pn__fem_restore(m);
-            return pn__fem_fail(m, r, "pn_fem_step_explicit: node %ld touches an edge of the mesh", m->error_node);
+            return PN__FAIL(m, r, "pn_fem_step_explicit: node %ld touches an edge of the mesh", m->error_node);
         }
         for (k = 0; k < m->n_nodes * (size_t)d; ++k) f[k] -= s->g[k];
     }
@@ -9079,7 +8925,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
             if (!pn__finite(m->x[c])) {
                 pn__fem_restore(m);
                 m->error_node = (long)k;
-                return pn__fem_fail(m, PN_ERROR_OVERFLOW, "pn_fem_step_explicit: node %lu's position is not finite: take a "
+                return PN__FAIL(m, PN_ERROR_OVERFLOW, "pn_fem_step_explicit: node %lu's position is not finite: take a "
                                     "smaller step (pn_fem_stable_dt)", (unsigned long)k);
             }
         }
@@ -9088,7 +8934,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
         for (k = 0; k < m->n_nodes * (size_t)d; ++k) s->dir[k] = m->x[k] - s->bx[k];
         if (pn__fem_self_ccd(m, s->bx, s->dir, 1) < 1) {
             pn__fem_restore(m);
-            return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: a boundary node would close on an edge "
+            return PN__FAIL(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: a boundary node would close on an edge "
                                 "of the mesh in a step of %g s: take a smaller step (pn_fem_stable_dt)", (double)dt);
         }
     }
@@ -9115,7 +8961,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     }
     if (m->n_obstacles && !(pn__fem_min_distance(m, m->time_s + dt) > 0)) {
         pn__fem_restore(m);
-        return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: a node would reach an obstacle in a step of %g "
+        return PN__FAIL(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: a node would reach an obstacle in a step of %g "
                             "s: take a smaller step (pn_fem_stable_dt)", (double)dt);
     }
     r = pn__fem_return(m, &plastic);
@@ -9123,7 +8969,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
         char msg[256];
         memcpy(msg, m->error, sizeof msg);
         pn__fem_restore(m);
-        return pn__fem_fail(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: %s: take a smaller step", msg);
+        return PN__FAIL(m, PN_ERROR_STEP_TOO_LARGE, "pn_fem_step_explicit: %s: take a smaller step", msg);
     }
     m->time_s += dt;
     if ((r = pn__fem_obstacles_clear(m, "pn_fem_step_explicit")) != PN_OK) {
@@ -9178,10 +9024,10 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
             r = pn__fem_objective(m, s->xs, 2, &E0);
             s->hflags = PN_EVAL_PROJECT_PSD; /* what every other evaluation uses */
             if (r != PN_OK)
-                return pn__fem_fail(m, r, "implicit step: the energy at an accepted iterate failed (%s, element %ld, node %ld)",
+                return PN__FAIL(m, r, "implicit step: the energy at an accepted iterate failed (%s, element %ld, node %ld)",
                                     pn_result_string(r), m->error_element, m->error_node);
             if (s->sparse && s->bmiss)
-                return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "implicit step: %ld Hessian entries fell outside the "
+                return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "implicit step: %ld Hessian entries fell outside the "
                                     "block pattern (a bug: please report)", s->bmiss);
             for (k = 0; k < nu; ++k) s->xtry[pn__fem_row(m, k)] = -s->g[k];
             op.ctx = m, op.apply = pn__fem_cg_apply, op.precond = pn__fem_cg_precond, op.dot = pn__fem_cg_dot, op.curv = &curv;
@@ -9209,7 +9055,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
                 }
             }
             if (!full)
-                return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the Hessian is not positive definite (a "
+                return PN__FAIL(m, PN_ERROR_NOT_CONVERGED, "implicit step: the Hessian is not positive definite (a "
                                     "material's energy is not convex where it was projected)");
             full = 0, full_below = res / 10; /* indefinite here (a saddle on the way): project until
                                                  the steps are 10x shorter */
@@ -9225,7 +9071,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
         if (res > PN__FEM_FULL_H * m->edge_mean) full_below = PN__FEM_FULL_H * m->edge_mean; /* moved on */
         if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / m->edge_mean);
         if (!pn__finite(res))
-            return pn__fem_fail(m, PN_ERROR_OVERFLOW, "implicit step: the Newton direction is not finite");
+            return PN__FAIL(m, PN_ERROR_OVERFLOW, "implicit step: the Newton direction is not finite");
         /* converged: the step is below tol and so is each node's residual force over its mass
            times dt^2 (the move it would cause through inertia alone). The second matters
            where a stiff term is flat: at the edge of the barrier's reach b is cubic, Newton
@@ -9253,7 +9099,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
                 full_below = res / 10;
                 continue;
             }
-            return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step: the line search found no decrease at max |dx| = "
+            return PN__FAIL(m, PN_ERROR_NOT_CONVERGED, "implicit step: the line search found no decrease at max |dx| = "
                                 "%.3g of the mean edge (newton_tol %g)", (double)(res / m->edge_mean), (double)o->newton_tol);
         }
         memcpy(s->xs, s->xtry, sizeof(pn_real) * nu);
@@ -9262,7 +9108,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
             hard, where b'' is large: a force of weights for a move of 1e-12 m) */
     }
     if (res <= 100 * tol && gres <= 100 * gfloor) return PN_OK; /* within 100 newton_tol, as MPM's */
-    return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped after %d iterations at max |dx| = %.3g "
+    return PN__FAIL(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped after %d iterations at max |dx| = %.3g "
                         "of the mean edge (newton_tol %g): a smaller step converges", (double)s->dt, o->newton_max,
                         (double)(res / m->edge_mean), (double)o->newton_tol);
 }
@@ -9290,7 +9136,7 @@ static pn_result pn__fem_prepare(pn_fem_mesh *m, const pn_real *x) {
     for (e = 0; e < m->n_elems; ++e)
         if (s->estat[e]) {
             m->error_element = (long)e;
-            return pn__fem_fail(m, (pn_result)s->estat[e], "element %lu: preparing its energy at F0 failed (%s)", (unsigned long)e,
+            return PN__FAIL(m, (pn_result)s->estat[e], "element %lu: preparing its energy at F0 failed (%s)", (unsigned long)e,
                                 pn_result_string((pn_result)s->estat[e]));
         }
     return PN_OK;
@@ -9313,7 +9159,7 @@ static pn_result pn__fem_rounds(pn_fem_mesh *m, const pn_fem_implicit_desc *o, p
         for (k = nd; k < s->nu; ++k) off = PN__MAX(off, PN__FABS(s->xs[k] - s->target[k - nd]));
         if (off <= tol) return PN_OK;
         if (round >= 30)
-            return pn__fem_fail(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: a moving obstacle is still %g m short of "
+            return PN__FAIL(m, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: a moving obstacle is still %g m short of "
                                 "its position after %d rounds: a smaller step", (double)s->dt, (double)off, round + 1);
         for (k = nd; k < s->nu; ++k) s->al_lam[k - nd] -= s->al_k * (s->xs[k] - s->target[k - nd]);
     }
@@ -9437,10 +9283,10 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
     if (desc) o = *desc;
     /* zero means the default; NaN, infinite or negative is refused, never replaced */
     if (o.fixed_point_iters < 0 || o.newton_max < 0 || o.cg_max < 0)
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_implicit_desc: fixed_point_iters %d, newton_max %d and "
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_implicit_desc: fixed_point_iters %d, newton_max %d and "
                             "cg_max %d must be >= 0 (0: the default)", o.fixed_point_iters, o.newton_max, o.cg_max);
     if (!pn__finite(o.newton_tol) || o.newton_tol < 0 || !pn__finite(o.cg_rel_tol) || o.cg_rel_tol < 0)
-        return pn__fem_fail(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_implicit_desc: newton_tol %g and cg_rel_tol %g must be "
+        return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_implicit_desc: newton_tol %g and cg_rel_tol %g must be "
                             "finite and >= 0 (0: the default)", (double)o.newton_tol, (double)o.cg_rel_tol);
     if (!o.fixed_point_iters) o.fixed_point_iters = 1;
     if (!o.newton_max) o.newton_max = 100;
@@ -9596,7 +9442,7 @@ static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, char *why, size_
     pn__fem_sort_longs(ids, d->n_nodes, 2, 1);
     for (k = 1; k < d->n_nodes; ++k)
         if (ids[2 * k] == ids[2 * k - 2]) {
-            pn__fem_why(why, cap, "node id %ld appears twice", ids[2 * k]);
+            pn__msg(why, cap, "node id %ld appears twice", ids[2 * k]);
             return PN_ERROR_FORMAT;
         }
     for (e = 0; e < d->n_elements; ++e) {
@@ -9605,7 +9451,7 @@ static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, char *why, size_
         for (a = 0; a < dp; ++a) {
             long ix = pn__fem_find(ids, d->n_nodes, (long)el[a]);
             if (ix < 0) {
-                pn__fem_why(why, cap, "element %lu names node %d, which is not in the file", (unsigned long)e, el[a]);
+                pn__msg(why, cap, "element %lu names node %d, which is not in the file", (unsigned long)e, el[a]);
                 return PN_ERROR_FORMAT;
             }
             el[a] = (int)ix;
@@ -9669,7 +9515,7 @@ PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const 
     memset(&d, 0, sizeof d);
     d.dim = dim;
     L.p = text, L.end = text ? text + len : text, L.line = 1; /* NULL + 0 is undefined in C */
-#define PN__MSH_FAIL(...) do { pn__fem_why(why, cap, __VA_ARGS__); goto fail; } while (0)
+#define PN__MSH_FAIL(...) do { pn__msg(why, cap, __VA_ARGS__); goto fail; } while (0)
     if (!pn__fem_section(&L, "$MeshFormat") || !pn__fem_real(&L, &version, 0)) PN__MSH_FAIL("line %ld: no $MeshFormat", L.line);
     if (!(version >= 2 && version < 3) && !(version >= 4 && version < 5))
         PN__MSH_FAIL("line %ld: MeshFormat %g: versions 2.x and 4.x are read", L.line, (double)version);
@@ -9790,7 +9636,7 @@ PN__DEF pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, co
     if (!pn__dim_ok(3)) return PN_ERROR_DIMENSION;
     memset(&d, 0, sizeof d);
     d.dim = 3;
-#define PN__TG_FAIL(...) do { pn__fem_why(why, cap, __VA_ARGS__); goto fail; } while (0)
+#define PN__TG_FAIL(...) do { pn__msg(why, cap, __VA_ARGS__); goto fail; } while (0)
     L.p = node_text, L.end = node_text ? node_text + node_len : node_text, L.line = 1;
     if (!pn__fem_long(&L, &n, 1) || !pn__fem_long(&L, &dimf, 1) || !pn__fem_long(&L, &nattr, 1) || !pn__fem_long(&L, &nmark, 1) ||
         n < 0 || n > 0x7fffffffL || dimf != 3 || nattr < 0 || nattr > 64 || nmark < 0 || nmark > 1)
@@ -9885,14 +9731,6 @@ typedef struct pn__cpl {
 
 #define PN__CPL_FD 19
 
-static pn_result pn__cpl_fail(pn_coupled *c, pn_result r, const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    pn__vmsg(c->error, sizeof c->error, fmt, ap);
-    va_end(ap);
-    return r;
-}
-
 /* particle p's stencil: compact node indices (into the implicit step's active nodes) and
    weights */
 static int pn__cpl_stencil(const pn_mpm_world *w, size_t p, long *node, pn_real *wt) {
@@ -9934,7 +9772,7 @@ static pn_result pn__cpl_grow_pairs(pn_coupled *c, size_t need) {
         !pn__cpl_grow(al, (void **)&k->ck, k->ccap, need, sizeof(size_t)) ||
         !pn__cpl_grow(al, (void **)&k->ch, k->ccap * h, need * h, sizeof(pn_real)) ||
         !pn__cpl_grow(al, (void **)&k->con, k->ccap, need, 1))
-        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for %lu particle-boundary pairs",
+        return PN__FAIL(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for %lu particle-boundary pairs",
                             (unsigned long)need);
     k->ccap = need;
     return PN_OK;
@@ -9948,7 +9786,7 @@ static pn_result pn__cpl_grow_friction(pn_coupled *c, size_t need) {
     if (!pn__cpl_grow(al, (void **)&k->fp, k->fcap, need, sizeof(size_t)) ||
         !pn__cpl_grow(al, (void **)&k->fnode, 3 * k->fcap, 3 * need, sizeof(long)) ||
         !pn__cpl_grow(al, (void **)&k->fdat, PN__CPL_FD * k->fcap, PN__CPL_FD * need, sizeof(pn_real)))
-        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the friction pairs");
+        return PN__FAIL(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the friction pairs");
     k->fcap = need;
     return PN_OK;
 }
@@ -9962,7 +9800,7 @@ static const int *pn__cpl_target(const pn_fem_mesh *m, size_t t) {
 /* the mesh's positions and velocities finite (the world's checks its own) */
 static pn_result pn__cpl_check_mesh(pn_coupled *c, const char *who) {
     if ((c->error_node = pn__fem_nonfinite_node(c->fem)) >= 0)
-        return pn__cpl_fail(c, PN_ERROR_NONFINITE, "%s: the mesh's node %ld has a non-finite position or velocity", who,
+        return PN__FAIL(c, PN_ERROR_NONFINITE, "%s: the mesh's node %ld has a non-finite position or velocity", who,
                             c->error_node);
     return PN_OK;
 }
@@ -10014,7 +9852,7 @@ static pn_result pn__cpl_alloc(pn_coupled *c) {
     if (!k->z || !k->fidx) {
         pn_free(al, k->z), pn_free(al, k->fidx);
         k->z = NULL, k->fidx = NULL;
-        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the solver storage");
+        return PN__FAIL(c, PN_ERROR_OUT_OF_MEMORY, "coupled step: out of memory for the solver storage");
     }
     k->zcap = zc;
     k->g = k->z + zc, k->dir = k->g + zc, k->zt = k->dir + zc, k->r = k->zt + zc, k->zz = k->r + zc, k->pp = k->zz + zc;
@@ -10051,12 +9889,12 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
     size_t p, e;
     if (why && why_cap) why[0] = 0;
     if (!w || !m || !out) {
-        pn__fem_why(why, why_cap, "pn_coupled_create: the world, the mesh and out must not be NULL");
+        pn__msg(why, why_cap, "pn_coupled_create: the world, the mesh and out must not be NULL");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     *out = NULL;
     if (w->dim != m->dim) {
-        pn__fem_why(why, why_cap, "pn_coupled_create: the world is %dD, the mesh %dD", w->dim, m->dim);
+        pn__msg(why, why_cap, "pn_coupled_create: the world is %dD, the mesh %dD", w->dim, m->dim);
         return PN_ERROR_DIMENSION;
     }
     d = w->dim;
@@ -10065,7 +9903,7 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
     if (!pn__finite(de.contact_distance_m) || de.contact_distance_m < 0 || !pn__finite(de.contact_stiffness) ||
         de.contact_stiffness < 0 || !pn__finite(de.friction) || de.friction < 0 || !pn__finite(de.friction_velocity_m_s) ||
         de.friction_velocity_m_s < 0) {
-        pn__fem_why(why, why_cap, "pn_coupled_desc: contact_distance_m %g, contact_stiffness %g, friction %g and "
+        pn__msg(why, why_cap, "pn_coupled_desc: contact_distance_m %g, contact_stiffness %g, friction %g and "
                     "friction_velocity_m_s %g must be finite and >= 0 (0: the default)", (double)de.contact_distance_m,
                     (double)de.contact_stiffness, (double)de.friction, (double)de.friction_velocity_m_s);
         return PN_ERROR_INVALID_ARGUMENT;
@@ -10073,7 +9911,7 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
     for (e = 0; e < m->n_nodes * (size_t)d; ++e) { /* the mesh within the walls, where the particles are */
         int a = (int)(e % (size_t)d);
         if (!(m->x[e] >= w->wall_lo[a] && m->x[e] <= w->wall_hi[a])) {
-            pn__fem_why(why, why_cap, "pn_coupled_create: the mesh's node %lu is at %g m on axis %d, outside the world's "
+            pn__msg(why, why_cap, "pn_coupled_create: the mesh's node %lu is at %g m on axis %d, outside the world's "
                         "walls [%g, %g] m", (unsigned long)(e / (size_t)d), (double)m->x[e], a, (double)w->wall_lo[a],
                         (double)w->wall_hi[a]);
             return pn__finite(m->x[e]) ? PN_ERROR_OUTSIDE_DOMAIN : PN_ERROR_NONFINITE;
@@ -10085,7 +9923,7 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
     k = (pn__cpl *)pn_alloc(al, sizeof *k);
     if (!c || !k) {
         pn_free(al, c), pn_free(al, k);
-        pn__fem_why(why, why_cap, "pn_coupled_create: out of memory");
+        pn__msg(why, why_cap, "pn_coupled_create: out of memory");
         return PN_ERROR_OUT_OF_MEMORY;
     }
     memset(c, 0, sizeof *c);
@@ -10099,13 +9937,13 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
     c->error_particle = c->error_node = -1;
     if ((r = pn__cpl_alloc(c)) != PN_OK) {
         pn_coupled_destroy(c);
-        pn__fem_why(why, why_cap, "pn_coupled_create: out of memory");
+        pn__msg(why, why_cap, "pn_coupled_create: out of memory");
         return r;
     }
     /* no particle on the boundary or inside the mesh: the barrier keeps them apart only if
        they start apart */
     if ((r = pn_coupled_min_distance(c, &dist)) != PN_OK || !(dist > 0)) {
-        pn__fem_why(why, why_cap, "pn_coupled_create: particle %ld touches the mesh's boundary", c->error_particle);
+        pn__msg(why, why_cap, "pn_coupled_create: particle %ld touches the mesh's boundary", c->error_particle);
         pn_coupled_destroy(c);
         return r != PN_OK ? r : PN_ERROR_INVALID_ARGUMENT;
     }
@@ -10135,7 +9973,7 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
                 in &= lam[a] >= 0;
             }
             if (in && sum <= 1) {
-                pn__fem_why(why, why_cap, "pn_coupled_create: particle %lu lies inside element %lu of the mesh",
+                pn__msg(why, why_cap, "pn_coupled_create: particle %lu lies inside element %lu of the mesh",
                             (unsigned long)p, (unsigned long)e);
                 pn_coupled_destroy(c);
                 return PN_ERROR_INVALID_ARGUMENT;
@@ -10653,24 +10491,24 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         pn__cpl_positions(c, 1, k->z, NULL);
         r = pn__cpl_objective(c, k->z, 2, &E0);
         if (r != PN_OK)
-            return pn__cpl_fail(c, r, "coupled implicit step of %g s: the energy at an accepted iterate failed (%s; "
+            return PN__FAIL(c, r, "coupled implicit step of %g s: the energy at an accepted iterate failed (%s; "
                                 "particle %lu, element %ld)", (double)dt, pn_result_string(r),
                                 (unsigned long)w->error_particle, m->error_element);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
         fresh = it == 0 || o->mg_rebuild || stale; /* the grid's hierarchy lagged as its own step does */
         if (w->mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
-            return pn__cpl_fail(c, r, "coupled implicit step: out of memory for the grid's multigrid hierarchy");
+            return PN__FAIL(c, r, "coupled implicit step: out of memory for the grid's multigrid hierarchy");
         if (!w->mg_on) pn__mpm_diagonal(w, dt);
         if (s->sparse) {
             if (!pn__fem_bfactor(s))
-                return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step: the mesh's matrix has no "
+                return PN__FAIL(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step: the mesh's matrix has no "
                                     "incomplete factor");
             s->coarse = !s->one_level && pn__fem_coarse_build(m, k->xf);
             if (s->coarse) s->omega = pn__fem_smoother_damping(m);
         } else {
             memcpy(s->A, s->L, sizeof(pn_real) * s->rs[s->nu]); /* kept for CG's products */
             if (!pn__sky_cholesky(s->fc, s->rs, s->L, s->nu))
-                return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step: the mesh's Hessian is not "
+                return PN__FAIL(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step: the mesh's Hessian is not "
                                     "positive definite");
         }
         for (i = 0; i < nz; ++i) k->r[i] = -k->g[i];
@@ -10683,7 +10521,7 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         for (res = 0, gd = 0, i = 0; i < nz; ++i) res = PN__MAX(res, PN__FABS(k->dir[i])), gd += k->g[i] * k->dir[i];
         if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / (w->desc.dx_m / dt));
         if (!pn__finite(res))
-            return pn__cpl_fail(c, PN_ERROR_OVERFLOW, "coupled implicit step of %g s: the Newton direction is not finite",
+            return PN__FAIL(c, PN_ERROR_OVERFLOW, "coupled implicit step of %g s: the Newton direction is not finite",
                                 (double)dt);
         if (res <= vscale && !capped) break;
         pn__cpl_positions(c, 1, k->z, k->dir);
@@ -10718,7 +10556,7 @@ static pn_result pn__cpl_passes(pn_coupled *c, const pn_mpm_implicit_desc *o, in
         pn__cpl_positions(c, 1, k->z, NULL);
         r = pn__mpm_prepare_pass(w, k->z, dt, pass == 0, &fp);
         if (r == PN_OK) r = pn__fem_prepare(m, k->xf);
-        if (r != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: preparing the energies at F0 failed (%s)",
+        if (r != PN_OK) return PN__FAIL(c, r, "coupled implicit step: preparing the energies at F0 failed (%s)",
                                             w->error[0] ? w->error : m->error);
         st->fixed_point_iters++;
         /* interface friction lagged at the step's start, then at each pass's solution */
@@ -10833,7 +10671,7 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
         for (q = 0; q < n; ++q) m->mass[q] = mm0[q] / (th * th);
         if (r != PN_OK) {
             memcpy(m->mass, mm0, sizeof(pn_real) * n);
-            return pn__cpl_fail(c, r, "coupled implicit step: the forces at the step's start failed (%s)",
+            return PN__FAIL(c, r, "coupled implicit step: the forces at the step's start failed (%s)",
                                 w->error[0] ? w->error : m->error);
         }
         k->lin = (1 - th) / th;
@@ -10860,11 +10698,11 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     if (r != PN_OK) return r;
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
     if (capped)
-        return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: the last linear solve stopped at "
+        return PN__FAIL(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: the last linear solve stopped at "
                             "cg_max = %d short of cg_rel_tol %g: raise cg_max or take a smaller step", (double)dt, o->cg_max,
                             (double)o->cg_rel_tol);
     if (!(last_res <= 100 * o->newton_tol))
-        return pn__cpl_fail(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: Newton stopped at max |dz| dt / dx = "
+        return PN__FAIL(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step of %g s: Newton stopped at max |dz| dt / dx = "
                             "%.3g (newton_tol %g): a smaller step converges", (double)dt, (double)last_res,
                             (double)o->newton_tol);
     if (th < 1) /* the grid's end velocities; held components keep their held values */
@@ -10876,14 +10714,14 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
             pn__mpm_hold(w, q, k->zt + q * (size_t)d);
         }
     r = pn__mpm_g2p(w, k->z, th < 1 ? k->zt : NULL, dt, &mst);
-    if (r != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: %s", w->error);
+    if (r != PN_OK) return PN__FAIL(c, r, "coupled implicit step: %s", w->error);
     pn__cpl_positions(c, 1, k->z, NULL);
     for (q = 0; q < nd; ++q) {
         pn_real u = (k->xf[q] - m->x[q]) / dt;
         m->v[q] = th < 1 && !m->fixed[q / (size_t)d] ? (u - (1 - th) * k->vn[k->nv + q]) / th : u;
         m->x[q] = k->xf[q];
     }
-    if ((r = pn__fem_return(m, &plastic)) != PN_OK) return pn__cpl_fail(c, r, "coupled implicit step: %s", m->error);
+    if ((r = pn__fem_return(m, &plastic)) != PN_OK) return PN__FAIL(c, r, "coupled implicit step: %s", m->error);
     m->time_s += dt;
     pn__mpm_friction_record(w, dt);
     pn__mpm_commit(w, dt, &mst);
@@ -10909,34 +10747,34 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     w = c->mpm, m = c->fem;
     c->error[0] = 0, c->error_particle = c->error_node = -1;
     if (!pn__finite(dt) || !(dt > 0))
-        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_step_implicit: dt_s = %g must be finite and > 0",
+        return PN__FAIL(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_step_implicit: dt_s = %g must be finite and > 0",
                             (double)dt);
     memset(&od, 0, sizeof od);
     if (desc) od = *desc;
     if ((a = pn__mpm_drive_on(w, &load)) >= 0)
-        return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: %s %d is on (drives and loads work with "
+        return PN__FAIL(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: %s %d is on (drives and loads work with "
                             "explicit steps)", load ? "load" : "drive", a);
     for (a = 0; a < m->n_obstacles; ++a) {
         const pn_real *u = m->obstacles[a].velocity_m_s;
         if (u[0] != 0 || u[1] != 0 || u[2] != 0)
-            return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: the mesh's obstacle %d moves (only "
+            return PN__FAIL(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: the mesh's obstacle %d moves (only "
                                 "pn_fem_step_implicit moves obstacles)", a);
     }
     if (o->formulation != PN_MPM_FORMULATION_ENERGY)
-        return pn__cpl_fail(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: only the energy formulation couples");
+        return PN__FAIL(c, PN_ERROR_UNSUPPORTED, "pn_coupled_step_implicit: only the energy formulation couples");
     if (pn__mpm_negative_count(o))
-        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: mpm.%s must be >= 0 (0: the "
+        return PN__FAIL(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: mpm.%s must be >= 0 (0: the "
                             "default)", pn__mpm_negative_count(o));
     if (!pn__finite(o->newton_tol) || o->newton_tol < 0 || !pn__finite(o->cg_rel_tol) || o->cg_rel_tol < 0 ||
         !pn__finite(o->pnet_reuse_tol) ||
         o->linear_solver < PN_MPM_LINEAR_DEFAULT || o->linear_solver > PN_MPM_LINEAR_MULTIGRID || o->mg_levels < 0)
-        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: newton_tol %g and cg_rel_tol %g must "
+        return PN__FAIL(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: newton_tol %g and cg_rel_tol %g must "
                             "be finite and >= 0, pnet_reuse_tol finite, linear_solver %d a pn_mpm_linear_solver, "
                             "mg_levels %d >= 0",
                             (double)o->newton_tol, (double)o->cg_rel_tol, (int)o->linear_solver, o->mg_levels);
     if (od.theta == 0) od.theta = 1;
     if (!(od.theta >= (pn_real)0.5 && od.theta <= 1))
-        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: theta %g is not in [0.5, 1] (0: 1, "
+        return PN__FAIL(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: theta %g is not in [0.5, 1] (0: 1, "
                             "backward Euler)", (double)od.theta);
     if (o->fixed_point_iters <= 0) o->fixed_point_iters = 1;
     if (o->newton_max <= 0) o->newton_max = 50;
@@ -10947,12 +10785,12 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     if (o->mg_levels == 0) o->mg_levels = PN__MPM_MG_MAX;
     if (o->max_halvings == 0) o->max_halvings = 3;
     if (o->max_halvings > 10) o->max_halvings = 10;
-    if ((r = pn__mpm_check_state(w)) != PN_OK) return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", w->error);
+    if ((r = pn__mpm_check_state(w)) != PN_OK) return PN__FAIL(c, r, "pn_coupled_step_implicit: %s", w->error);
     if ((r = pn__cpl_check_mesh(c, "pn_coupled_step_implicit")) != PN_OK) return r;
     if ((r = pn__mpm_alloc_implicit(w)) != PN_OK || (r = pn__mpm_reuse_on(w, o)) != PN_OK)
-        return pn__cpl_fail(c, r, "pn_coupled_step_implicit: out of memory for the world's solver storage");
+        return PN__FAIL(c, r, "pn_coupled_step_implicit: out of memory for the world's solver storage");
     if ((r = pn__fem_linear_setup(m, od.fem_linear_solver)) != PN_OK)
-        return pn__cpl_fail(c, r, "pn_coupled_step_implicit: %s", m->error);
+        return PN__FAIL(c, r, "pn_coupled_step_implicit: %s", m->error);
     if ((r = pn__cpl_alloc(c)) != PN_OK) return r;
     t0 = w->time_s, steps0 = w->steps, fsteps0 = m->steps, left0 = w->left_total;
     stale0 = w->mg_stale, rec0 = w->rec_ok;
@@ -11070,11 +10908,11 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
     d = w->dim, nd = m->n_nodes * (size_t)d, kind = d == 2 ? PN__FEM_PE : PN__FEM_PT;
     c->error[0] = 0, c->error_particle = c->error_node = -1;
     if (!pn__finite(dt) || !(dt > 0))
-        return pn__cpl_fail(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_step_explicit: dt_s = %g must be finite and > 0",
+        return PN__FAIL(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_step_explicit: dt_s = %g must be finite and > 0",
                             (double)dt);
     if ((r = pn__mpm_alloc_implicit(w)) != PN_OK || (r = pn__cpl_alloc(c)) != PN_OK)
-        return pn__cpl_fail(c, PN_ERROR_OUT_OF_MEMORY, "pn_coupled_step_explicit: out of memory for the storage");
-    if ((r = pn__mpm_check_state(w)) != PN_OK) return pn__cpl_fail(c, r, "pn_coupled_step_explicit: %s", w->error);
+        return PN__FAIL(c, PN_ERROR_OUT_OF_MEMORY, "pn_coupled_step_explicit: out of memory for the storage");
+    if ((r = pn__mpm_check_state(w)) != PN_OK) return PN__FAIL(c, r, "pn_coupled_step_explicit: %s", w->error);
     if ((r = pn__cpl_check_mesh(c, "pn_coupled_step_explicit")) != PN_OK) return r;
     pn__cpl_here(c);
     if ((r = pn__cpl_find(c, 0)) != PN_OK) return r;
@@ -11093,7 +10931,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
     w->xf_idx = NULL, w->xf = NULL, w->xf_n = 0;
     if (r != PN_OK) {
         c->error_particle = (long)w->error_particle;
-        return pn__cpl_fail(c, r, "pn_coupled_step_explicit: %s", w->error);
+        return PN__FAIL(c, r, "pn_coupled_step_explicit: %s", w->error);
     }
     s->fext = k->pa;
     r = pn_fem_step_explicit(m, dt, &fst);
@@ -11107,7 +10945,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
             pn__cpl_pair_y(c, i, yy, dy);
             if (pn__pair_ccd(kind, d, d + 1, 1, yy, dy, 0, 1) < 1) {
                 c->error_particle = (long)k->cp[i];
-                r = pn__cpl_fail(c, PN_ERROR_STEP_TOO_LARGE, "pn_coupled_step_explicit: particle %lu would close on the "
+                r = PN__FAIL(c, PN_ERROR_STEP_TOO_LARGE, "pn_coupled_step_explicit: particle %lu would close on the "
                                  "mesh's boundary in a step of %g s: take a smaller step (pn_coupled_stable_dt)",
                                  (unsigned long)k->cp[i], (double)dt);
                 pn__fem_restore(m);
@@ -11116,7 +10954,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
             }
         }
     } else
-        r = pn__cpl_fail(c, r, "pn_coupled_step_explicit: %s", m->error);
+        r = PN__FAIL(c, r, "pn_coupled_step_explicit: %s", m->error);
     if (r != PN_OK) { /* the world back as it was, with the P2G records the step swapped out */
         pn_real *t = w->ppay;
         int *row = w->prow;

@@ -382,26 +382,6 @@ struct pn_rom_world {
    >>model: checks, the affine map, the reference domain
    ====================================================================================== */
 
-/* a message into buf (without stdio: the format's text up to its first conversion) */
-static void pn__rom_vmsg(char *buf, size_t cap, const char *fmt, va_list ap) {
-#ifndef PN_NO_STDIO
-    vsnprintf(buf, cap, fmt, ap);
-#else
-    size_t i;
-    (void)ap;
-    for (i = 0; fmt[i] && fmt[i] != '%' && i + 1 < cap; ++i) buf[i] = fmt[i];
-    buf[i] = 0;
-#endif
-}
-
-static void pn__rom_msg(char *buf, size_t cap, const char *fmt, ...) {
-    va_list ap;
-    if (!buf || !cap) return;
-    va_start(ap, fmt);
-    pn__rom_vmsg(buf, cap, fmt, ap);
-    va_end(ap);
-}
-
 static int pn__rom_finite(double x) { return x == x && x - x == 0; }
 static int pn__rom_all_finite(size_t n, const double *a) {
     size_t i;
@@ -423,21 +403,21 @@ static pn_result pn__rom_model_common(const pn_rom_model *m, char *why, size_t c
     for (i = 0; i < d; ++i)
         if (!pn__rom_finite(m->in_lo[i]) || !pn__rom_finite(m->in_hi[i]) || !(m->in_hi[i] > m->in_lo[i]) ||
             !pn__rom_finite(m->out_mean[i]) || !pn__rom_finite(m->out_std[i]) || !(m->out_std[i] > 0)) {
-            pn__rom_msg(why, cap, "model %s: in_lo/in_hi or out_mean/out_std[%d] invalid (need finite, in_hi > in_lo, out_std > 0)",
+            pn__msg(why, cap, "model %s: in_lo/in_hi or out_mean/out_std[%d] invalid (need finite, in_hi > in_lo, out_std > 0)",
                         nm, i);
             return PN_ERROR_FORMAT;
         }
     if (!pn__rom_finite(m->youngs_pa) || m->youngs_pa < 0 || !pn__rom_finite(m->density_kg_m3) || m->density_kg_m3 < 0 ||
         !pn__rom_finite(m->poisson) || !(m->poisson > -1 && m->poisson < 0.5) || !pn__rom_finite(m->dx_m) || m->dx_m < 0 ||
         !pn__rom_finite(m->frame_dt_s) || m->frame_dt_s < 0 || m->per_axis < 0) {
-        pn__rom_msg(why, cap, "model %s: youngs_pa %g, poisson %g, density_kg_m3 %g, dx_m %g, per_axis %d or frame_dt_s %g "
+        pn__msg(why, cap, "model %s: youngs_pa %g, poisson %g, density_kg_m3 %g, dx_m %g, per_axis %d or frame_dt_s %g "
                     "is not finite or out of range", nm, m->youngs_pa, m->poisson, m->density_kg_m3, m->dx_m, m->per_axis,
                     m->frame_dt_s);
         return PN_ERROR_FORMAT;
     }
     if (m->cells[0] == 0 && m->cells[1] == 0 && m->cells[2] == 0) { /* no reference domain */
         if (m->occupied || m->occupied_count) {
-            pn__rom_msg(why, cap, "model %s: occupied is set (occupied_count %lu) but cells is 0 x 0 x 0", nm,
+            pn__msg(why, cap, "model %s: occupied is set (occupied_count %lu) but cells is 0 x 0 x 0", nm,
                         (unsigned long)m->occupied_count);
             return PN_ERROR_FORMAT;
         }
@@ -445,28 +425,28 @@ static pn_result pn__rom_model_common(const pn_rom_model *m, char *why, size_t c
     }
     for (i = 0; i < 3; ++i)
         if (m->cells[i] < 1 || m->cells[i] > (i < d ? PN_ROM_MAX_CELLS : 1)) {
-            pn__rom_msg(why, cap, "model %s: cells[%d] = %d outside 1 .. %d", nm, i, m->cells[i], i < d ? PN_ROM_MAX_CELLS : 1);
+            pn__msg(why, cap, "model %s: cells[%d] = %d outside 1 .. %d", nm, i, m->cells[i], i < d ? PN_ROM_MAX_CELLS : 1);
             return PN_ERROR_DIMENSION;
         }
     for (i = 0; i < 3; ++i) cells *= (unsigned long long)m->cells[i];
     if (cells > PN__ROM_MAX_OCCUPANCY) {
-        pn__rom_msg(why, cap, "model %s: cells %d x %d x %d: more than %llu occupancy cells", nm, m->cells[0], m->cells[1],
+        pn__msg(why, cap, "model %s: cells %d x %d x %d: more than %llu occupancy cells", nm, m->cells[0], m->cells[1],
                     m->cells[2], PN__ROM_MAX_OCCUPANCY);
         return PN_ERROR_DIMENSION;
     }
     if (!m->occupied || (unsigned long long)m->occupied_count != cells) {
-        pn__rom_msg(why, cap, "model %s: occupied_count = %lu, but cells %d x %d x %d needs %llu bytes%s", nm,
+        pn__msg(why, cap, "model %s: occupied_count = %lu, but cells %d x %d x %d needs %llu bytes%s", nm,
                     (unsigned long)m->occupied_count, m->cells[0], m->cells[1], m->cells[2], cells,
                     m->occupied ? "" : " (occupied is NULL)");
         return PN_ERROR_FORMAT;
     }
     if (!pn__rom_finite(m->cell_m) || !(m->cell_m > 0) || !pn__rom_all_finite((size_t)d, m->origin_m)) {
-        pn__rom_msg(why, cap, "model %s: cell_m = %g must be finite and > 0, origin_m finite", nm, m->cell_m);
+        pn__msg(why, cap, "model %s: cell_m = %g must be finite and > 0, origin_m finite", nm, m->cell_m);
         return PN_ERROR_FORMAT;
     }
     for (i = 0; i < d; ++i) /* the domain's far corner within the range of the grid keys */
         if (!(fabs(m->origin_m[i]) + m->cell_m * m->cells[i] < 1e6)) {
-            pn__rom_msg(why, cap, "model %s: origin_m[%d] + cells x cell_m is beyond 1e6 m", nm, i);
+            pn__msg(why, cap, "model %s: origin_m[%d] + cells x cell_m is beyond 1e6 m", nm, i);
             return PN_ERROR_FORMAT;
         }
     return PN_OK;
@@ -477,72 +457,72 @@ PN__DEF pn_result pn_rom_model_check(const pn_rom_model *m, char *why, size_t ca
     const char *nm;
     pn_result r;
     if (!m) {
-        pn__rom_msg(why, cap, "model is NULL");
+        pn__msg(why, cap, "model is NULL");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     nm = pn__rom_name(m);
     if (m->format_version != PN_ROM_FORMAT_VERSION) {
-        pn__rom_msg(why, cap, "model %s: format_version %d, this plastinet_rom.h reads %d (regenerate it, or convert it with "
+        pn__msg(why, cap, "model %s: format_version %d, this plastinet_rom.h reads %d (regenerate it, or convert it with "
                     "gen/upgrade_rom_format.py)", nm, m->format_version, PN_ROM_FORMAT_VERSION);
         return PN_ERROR_FORMAT;
     }
     d = m->dim, K = m->latent;
     if (d != 2 && d != 3) {
-        pn__rom_msg(why, cap, "model %s: dim %d is not 2 or 3", nm, d);
+        pn__msg(why, cap, "model %s: dim %d is not 2 or 3", nm, d);
         return PN_ERROR_DIMENSION;
     }
     if (m->activation != PN_ROM_ELU && m->activation != PN_ROM_AFFINE) {
-        pn__rom_msg(why, cap, "model %s: activation %d is not PN_ROM_ELU or PN_ROM_AFFINE", nm, m->activation);
+        pn__msg(why, cap, "model %s: activation %d is not PN_ROM_ELU or PN_ROM_AFFINE", nm, m->activation);
         return PN_ERROR_FORMAT;
     }
     if (m->activation == PN_ROM_AFFINE ? K != d + d * d : K < 1 || K > PN_ROM_MAX_LATENT) {
-        pn__rom_msg(why, cap, "model %s: latent %d must be %s", nm, K,
+        pn__msg(why, cap, "model %s: latent %d must be %s", nm, K,
                     m->activation == PN_ROM_AFFINE ? "dim + dim^2 (affine)" : "1 .. PN_ROM_MAX_LATENT = 32");
         return PN_ERROR_DIMENSION;
     }
     if ((m->latent_rest ? m->latent_rest_count != K : m->latent_rest_count != 0) ||
         (m->latent_std ? m->latent_std_count != K : m->latent_std_count != 0)) {
-        pn__rom_msg(why, cap, "model %s: latent_rest_count %d and latent_std_count %d must be latent = %d (0 for a NULL array)",
+        pn__msg(why, cap, "model %s: latent_rest_count %d and latent_std_count %d must be latent = %d (0 for a NULL array)",
                     nm, m->latent_rest_count, m->latent_std_count, K);
         return PN_ERROR_FORMAT;
     }
     if ((m->latent_rest && !pn__rom_all_finite((size_t)K, m->latent_rest)) ||
         (m->latent_std && !pn__rom_all_finite((size_t)K, m->latent_std))) {
-        pn__rom_msg(why, cap, "model %s: latent_rest or latent_std is not finite", nm);
+        pn__msg(why, cap, "model %s: latent_rest or latent_std is not finite", nm);
         return PN_ERROR_FORMAT;
     }
     if (m->latent_std)
         for (i = 0; i < K; ++i)
             if (m->latent_std[i] < 0) {
-                pn__rom_msg(why, cap, "model %s: latent_std[%d] = %g < 0", nm, i, m->latent_std[i]);
+                pn__msg(why, cap, "model %s: latent_std[%d] = %g < 0", nm, i, m->latent_std[i]);
                 return PN_ERROR_FORMAT;
             }
     if ((r = pn__rom_model_common(m, why, cap)) != PN_OK) return r;
     if (m->activation == PN_ROM_AFFINE) return PN_OK;
     if (m->n_layers < 2 || m->n_layers > PN_ROM_MAX_LAYERS || !m->width || !m->weight || !m->bias) {
-        pn__rom_msg(why, cap, "model %s: n_layers %d outside 2 .. %d, or width, weight or bias is NULL", nm, m->n_layers,
+        pn__msg(why, cap, "model %s: n_layers %d outside 2 .. %d, or width, weight or bias is NULL", nm, m->n_layers,
                     PN_ROM_MAX_LAYERS);
         return PN_ERROR_DIMENSION;
     }
     if (m->width_count != m->n_layers + 1) {
-        pn__rom_msg(why, cap, "model %s: width_count = %d, but n_layers %d needs %d widths", nm, m->width_count, m->n_layers,
+        pn__msg(why, cap, "model %s: width_count = %d, but n_layers %d needs %d widths", nm, m->width_count, m->n_layers,
                     m->n_layers + 1);
         return PN_ERROR_FORMAT;
     }
     if (m->width[0] != d + K || m->width[m->n_layers] != d) {
-        pn__rom_msg(why, cap, "model %s: width[0] = %d must be dim + latent = %d and width[%d] = %d must be dim", nm, m->width[0],
+        pn__msg(why, cap, "model %s: width[0] = %d must be dim + latent = %d and width[%d] = %d must be dim", nm, m->width[0],
                     d + K, m->n_layers, m->width[m->n_layers]);
         return PN_ERROR_DIMENSION;
     }
     for (l = 1; l < m->n_layers; ++l)
         if (m->width[l] < 1 || m->width[l] > PN_ROM_MAX_WIDTH) {
-            pn__rom_msg(why, cap, "model %s: width[%d] = %d outside 1 .. %d", nm, l, m->width[l], PN_ROM_MAX_WIDTH);
+            pn__msg(why, cap, "model %s: width[%d] = %d outside 1 .. %d", nm, l, m->width[l], PN_ROM_MAX_WIDTH);
             return PN_ERROR_DIMENSION;
         }
     for (l = 0; l < PN_ROM_MAX_LAYERS; ++l) {
         int wc = l < m->n_layers ? m->width[l] * m->width[l + 1] : 0, bc = l < m->n_layers ? m->width[l + 1] : 0;
         if (m->weight_count[l] != wc || m->bias_count[l] != bc) {
-            pn__rom_msg(why, cap, "model %s: weight_count[%d] = %d and bias_count[%d] = %d, but the widths need %d and %d", nm, l,
+            pn__msg(why, cap, "model %s: weight_count[%d] = %d and bias_count[%d] = %d, but the widths need %d and %d", nm, l,
                         m->weight_count[l], l, m->bias_count[l], wc, bc);
             return PN_ERROR_FORMAT;
         }
@@ -550,7 +530,7 @@ PN__DEF pn_result pn_rom_model_check(const pn_rom_model *m, char *why, size_t ca
     for (l = 0; l < m->n_layers; ++l)
         if (!m->weight[l] || !m->bias[l] || !pn__rom_all_finite((size_t)m->weight_count[l], m->weight[l]) ||
             !pn__rom_all_finite((size_t)m->bias_count[l], m->bias[l])) {
-            pn__rom_msg(why, cap, "model %s: layer %d has missing or non-finite weights (weight[%d], bias[%d])", nm, l, l, l);
+            pn__msg(why, cap, "model %s: layer %d has missing or non-finite weights (weight[%d], bias[%d])", nm, l, l, l);
             return PN_ERROR_FORMAT;
         }
     return PN_OK;
@@ -845,16 +825,8 @@ static void pn__rom_map(const pn_rom_world *w, const double *xhat, size_t n, con
    >>world: creation, drives, loads, the latent
    ====================================================================================== */
 
-static pn_result pn__rom_fail(pn_rom_world *w, pn_result r, const char *fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    pn__rom_vmsg(w->error, sizeof w->error, fmt, ap);
-    va_end(ap);
-    return r;
-}
-
 /* the const calls' failure message: the world's error text is the one thing they write */
-#define PN__ROM_CFAIL(w, r, ...) pn__rom_fail((pn_rom_world *)(w), r, __VA_ARGS__)
+#define PN__ROM_CFAIL(w, r, ...) PN__FAIL((pn_rom_world *)(w), r, __VA_ARGS__) /* >>kit */
 
 PN__DEF const char *pn_rom_error(const pn_rom_world *w) { return w ? w->error : "no world"; }
 
@@ -918,7 +890,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     size_t p, n;
     const char *bad;
     if (!out || !desc) {
-        pn__rom_msg(why, cap, "pn_rom_create: desc or out is NULL");
+        pn__msg(why, cap, "pn_rom_create: desc or out is NULL");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     *out = NULL;
@@ -927,7 +899,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     if ((r = pn_rom_model_check(m, why, cap)) != PN_OK) return r;
     dim = m->dim;
     if ((d.allocator.alloc == NULL) != (d.allocator.free == NULL)) {
-        pn__rom_msg(why, cap, "pn_rom_desc.allocator: set both alloc and free, or neither");
+        pn__msg(why, cap, "pn_rom_desc.allocator: set both alloc and free, or neither");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     /* every numeric field: zero means the default; NaN, infinity, negative or out of range
@@ -949,11 +921,11 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
           : !d.points && d.n_points ? "n_points is set but points is NULL"
           : NULL;
     if (bad) {
-        pn__rom_msg(why, cap, "pn_rom_desc.%s", bad);
+        pn__msg(why, cap, "pn_rom_desc.%s", bad);
         return PN_ERROR_INVALID_ARGUMENT;
     }
     if (d.refine < 0 || d.refine > PN_ROM_MAX_REFINE) {
-        pn__rom_msg(why, cap, "pn_rom_desc.refine = %d must be 0 .. PN_ROM_MAX_REFINE = %d (0: 1)", d.refine, PN_ROM_MAX_REFINE);
+        pn__msg(why, cap, "pn_rom_desc.refine = %d must be 0 .. PN_ROM_MAX_REFINE = %d (0: 1)", d.refine, PN_ROM_MAX_REFINE);
         return PN_ERROR_INVALID_ARGUMENT;
     }
     if (d.refine == 0) d.refine = 1;
@@ -983,12 +955,12 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
           : !d.points && m->cells[0] <= 0 ? "points is NULL and the model has no reference domain to fill"
           : NULL;
     if (bad) {
-        pn__rom_msg(why, cap, "pn_rom_desc.%s", bad);
+        pn__msg(why, cap, "pn_rom_desc.%s", bad);
         return PN_ERROR_INVALID_ARGUMENT;
     }
     n = d.points ? d.n_points : pn_rom_lattice(m, d.refine, NULL, 0);
     if (n > PN_ROM_MAX_POINTS) { /* counted in closed form: nothing allocated yet */
-        pn__rom_msg(why, cap, "pn_rom_desc.refine = %d: the model's lattice has %.4g points, more than PN_ROM_MAX_POINTS = %lu "
+        pn__msg(why, cap, "pn_rom_desc.refine = %d: the model's lattice has %.4g points, more than PN_ROM_MAX_POINTS = %lu "
                     "(draw finer lattices with pn_rom_lattice and pn_rom_map instead)", d.refine, (double)n,
                     (unsigned long)PN_ROM_MAX_POINTS);
         return PN_ERROR_CAPACITY;
@@ -1000,7 +972,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     md.poisson_ratio = (pn_real)d.poisson;
     w = (pn_rom_world *)pn_alloc(&d.allocator, sizeof *w);
     if (!w) {
-        pn__rom_msg(why, cap, "pn_rom_create: out of memory");
+        pn__msg(why, cap, "pn_rom_create: out of memory");
         return PN_ERROR_OUT_OF_MEMORY;
     }
     memset(w, 0, sizeof *w);
@@ -1008,7 +980,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     w->model = *m;
     w->dim = dim, w->latent = m->latent;
     if ((r = pn_material_init(&w->material, &md, &bad)) != PN_OK) {
-        pn__rom_msg(why, cap, "pn_rom_desc: youngs_pa / poisson: %s", bad ? bad : "invalid");
+        pn__msg(why, cap, "pn_rom_desc: youngs_pa / poisson: %s", bad ? bad : "invalid");
         pn_rom_destroy(w);
         return PN_ERROR_INVALID_PARAMETER;
     }
@@ -1034,7 +1006,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
             }
     }
     if (fail) {
-        pn__rom_msg(why, cap, "pn_rom_create: out of memory for %lu points", (unsigned long)n);
+        pn__msg(why, cap, "pn_rom_create: out of memory for %lu points", (unsigned long)n);
         pn_rom_destroy(w);
         return PN_ERROR_OUT_OF_MEMORY;
     }
@@ -1045,7 +1017,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
         for (i = 0; i < dim; ++i) v *= h;
         if (d.points && d.point_volume_m3 > 0) v = d.point_volume_m3;
         if (!(v > 0)) {
-            pn__rom_msg(why, cap, "pn_rom_desc.point_volume_m3 is needed: the model has no cell size");
+            pn__msg(why, cap, "pn_rom_desc.point_volume_m3 is needed: the model has no cell size");
             pn_rom_destroy(w);
             return PN_ERROR_INVALID_ARGUMENT;
         }
@@ -1096,10 +1068,10 @@ PN__DEF pn_result pn_rom_drive(pn_rom_world *w, const pn_rom_region *r, const do
     int d = w->dim, a, i, spin = 0, fail = 0;
     size_t p;
     w->error[0] = 0;
-    if (bad) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: %s", bad);
+    if (bad) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: %s", bad);
     if ((velocity && !pn__rom_all_finite((size_t)d, velocity)) || (center && !pn__rom_all_finite((size_t)d, center)) ||
         (omega && !pn__rom_all_finite(3, omega)))
-        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_drive: velocity, center or angular velocity is not finite");
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_drive: velocity, center or angular velocity is not finite");
     memset(&D, 0, sizeof D);
     D.r = *r;
     for (i = 0; i < 3; ++i) {
@@ -1108,14 +1080,14 @@ PN__DEF pn_result pn_rom_drive(pn_rom_world *w, const pn_rom_region *r, const do
         D.omega[i] = omega && (d == 3 || i == 2) ? omega[i] : 0;
         spin |= D.omega[i] != 0;
     }
-    if (spin && !center) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: a rotation needs center_m");
+    if (spin && !center) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: a rotation needs center_m");
     for (p = 0; p < w->n; ++p) D.n_pts += (size_t)pn__rom_in_region(r, d, w->X + p * (size_t)d);
-    if (!D.n_pts) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: the region holds none of the world's points");
+    if (!D.n_pts) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_drive: the region holds none of the world's points");
     for (a = 0; a < w->n_drives && w->drives[a].on; ++a) {}
     if (a == PN_ROM_MAX_DRIVES)
-        return pn__rom_fail(w, PN_ERROR_CAPACITY, "pn_rom_drive: all PN_ROM_MAX_DRIVES = %d are in use", PN_ROM_MAX_DRIVES);
+        return PN__FAIL(w, PN_ERROR_CAPACITY, "pn_rom_drive: all PN_ROM_MAX_DRIVES = %d are in use", PN_ROM_MAX_DRIVES);
     D.pts = (size_t *)pn__rom_alloc(w, D.n_pts, sizeof(size_t), &fail);
-    if (fail) return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_drive: out of memory");
+    if (fail) return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_drive: out of memory");
     for (D.n_pts = 0, p = 0; p < w->n; ++p)
         if (pn__rom_in_region(r, d, w->X + p * (size_t)d)) D.pts[D.n_pts++] = p;
     D.t0 = w->time_s;
@@ -1132,7 +1104,7 @@ PN__DEF pn_result pn_rom_drive(pn_rom_world *w, const pn_rom_region *r, const do
 PN__DEF pn_result pn_rom_release_drive(pn_rom_world *w, int index) {
     w->error[0] = 0;
     if (index < 0 || index >= w->n_drives || index >= PN_ROM_MAX_DRIVES)
-        return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_release_drive: drive %d does not exist", index);
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_release_drive: drive %d does not exist", index);
     w->drives[index].on = 0;
     w->cub_dirty = 1;
     return PN_OK;
@@ -1145,17 +1117,17 @@ PN__DEF pn_result pn_rom_add_load(pn_rom_world *w, const pn_rom_region *r, const
     int d = w->dim, a, i;
     size_t p;
     w->error[0] = 0;
-    if (bad) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: %s", bad);
+    if (bad) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: %s", bad);
     if (!force || !pn__rom_all_finite((size_t)d, force))
-        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_add_load: force_N is NULL or not finite");
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_add_load: force_N is NULL or not finite");
     if (!pn__rom_finite(duration_s) || duration_s < 0)
-        return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: duration_s = %g must be finite and >= 0", duration_s);
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: duration_s = %g must be finite and >= 0", duration_s);
     for (p = 0; p < w->n; ++p)
         if (pn__rom_in_region(r, d, w->X + p * (size_t)d)) mass += w->mass[p];
-    if (!(mass > 0)) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: the region holds none of the world's points");
+    if (!(mass > 0)) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_add_load: the region holds none of the world's points");
     for (a = 0; a < w->n_loads && w->loads[a].on; ++a) {}
     if (a == PN_ROM_MAX_LOADS)
-        return pn__rom_fail(w, PN_ERROR_CAPACITY, "pn_rom_add_load: all PN_ROM_MAX_LOADS = %d are in use", PN_ROM_MAX_LOADS);
+        return PN__FAIL(w, PN_ERROR_CAPACITY, "pn_rom_add_load: all PN_ROM_MAX_LOADS = %d are in use", PN_ROM_MAX_LOADS);
     memset(&L, 0, sizeof L);
     L.r = *r;
     for (i = 0; i < d; ++i) L.acc[i] = force[i] / mass;
@@ -1171,7 +1143,7 @@ PN__DEF pn_result pn_rom_add_load(pn_rom_world *w, const pn_rom_region *r, const
 PN__DEF pn_result pn_rom_remove_load(pn_rom_world *w, int index) {
     w->error[0] = 0;
     if (index < 0 || index >= w->n_loads || index >= PN_ROM_MAX_LOADS)
-        return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_remove_load: load %d does not exist", index);
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_remove_load: load %d does not exist", index);
     w->loads[index].on = 0;
     w->cub_dirty = 1;
     return PN_OK;
@@ -1181,7 +1153,7 @@ PN__DEF pn_result pn_rom_set_latent(pn_rom_world *w, const double *xhat, const d
     int K = w->latent, i;
     w->error[0] = 0;
     if (!xhat || !pn__rom_all_finite((size_t)K, xhat) || (vhat && !pn__rom_all_finite((size_t)K, vhat)))
-        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_set_latent: xhat is NULL, or xhat or vhat not finite");
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_set_latent: xhat is NULL, or xhat or vhat not finite");
     for (i = 0; i < K; ++i) w->xhat[i] = w->xhat_prev[i] = xhat[i], w->vhat[i] = vhat ? vhat[i] : 0;
     w->cvel_ok = 0;
     return PN_OK;
@@ -1312,41 +1284,23 @@ static long pn__rom_hash_put(pn_rom_world *w, pn__rom_hash *h, unsigned long lon
 }
 
 static double pn__rom_rand(unsigned long long *st) { /* splitmix64, [0, 1) */
-    unsigned long long z = (*st += 0x9E3779B97F4A7C15ULL);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-    z ^= z >> 31;
+    unsigned long long z = pn__mix64(*st += 0x9E3779B97F4A7C15ULL);
     return (double)(z >> 11) / 9007199254740992.0;
 }
 
 /* quadratic B-spline weights of the 3 nodes from base (f = x/dx - base in [0.5, 1.5)) */
 static void pn__rom_spline(double f, double *wt) {
-    wt[0] = 0.5 * (1.5 - f) * (1.5 - f), wt[1] = 0.75 - (f - 1) * (f - 1), wt[2] = 0.5 * (f - 0.5) * (f - 0.5);
+    PN__BSPLINE2(wt[0], wt[1], wt[2], f, double);
 }
+
+/* the kit's dense Cholesky in double: the normal equations of the reduced models */
+PN__CHOLESKY_DEF(pn__rom_cholesky, pn__rom_cholesky_solve, double, sqrt, pn__rom_finite)
 
 /* solve the symmetric positive definite K x K system A x = b in place (Cholesky); 0 if A is
    not positive definite */
 static int pn__rom_spd_solve(int K, double *A, double *b) {
-    int i, j, k;
-    for (j = 0; j < K; ++j) {
-        double s = A[j * K + j];
-        for (k = 0; k < j; ++k) s -= A[j * K + k] * A[j * K + k];
-        if (!(s > 0)) return 0;
-        A[j * K + j] = sqrt(s);
-        for (i = j + 1; i < K; ++i) {
-            double t = A[i * K + j];
-            for (k = 0; k < j; ++k) t -= A[i * K + k] * A[j * K + k];
-            A[i * K + j] = t / A[j * K + j];
-        }
-    }
-    for (i = 0; i < K; ++i) {
-        for (k = 0; k < i; ++k) b[i] -= A[i * K + k] * b[k];
-        b[i] /= A[i * K + i];
-    }
-    for (i = K - 1; i >= 0; --i) {
-        for (k = i + 1; k < K; ++k) b[i] -= A[k * K + i] * b[k];
-        b[i] /= A[i * K + i];
-    }
+    if (pn__rom_cholesky(A, (size_t)K, 0, 0, 0) < (size_t)K) return 0;
+    pn__rom_cholesky_solve(A, (size_t)K, b, b);
     return 1;
 }
 
@@ -1765,7 +1719,7 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     long lq;
     w->error[0] = 0;
     memset(&st, 0, sizeof st);
-    if (!pn__rom_finite(dt) || !(dt > 0)) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_step: dt_s = %g must be > 0", dt);
+    if (!pn__rom_finite(dt) || !(dt > 0)) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_step: dt_s = %g must be > 0", dt);
     if (w->desc.integrator != PN_ROM_EXPLICIT) {
         r = pn__rom_step_implicit(w, dt, &st);
         if (r == PN_OK && stats) *stats = st;
@@ -1775,7 +1729,7 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
         double bound = 0;
         if ((r = pn_rom_stable_dt(w, &bound)) != PN_OK) return r;
         if (dt > 1.5 * bound) /* measured stable to 1.5x the bound (docs/rom.md): beyond, refused */
-            return pn__rom_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_rom_step: dt_s = %g s is above 1.5x the explicit bound "
+            return PN__FAIL(w, PN_ERROR_STEP_TOO_LARGE, "pn_rom_step: dt_s = %g s is above 1.5x the explicit bound "
                                 "pn_rom_stable_dt = %g s (grid dx_m %g m, wave speed %g m/s): take %.0f substeps, or an "
                                 "implicit integrator", dt, bound, w->desc.dx_m, pn__rom_wave_speed(w), ceil(dt / bound));
     }
@@ -1783,13 +1737,13 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     /* 1. samples and their kinematics at the current latent */
     ns = w->desc.samples < 0 || (size_t)w->desc.samples >= w->n ? w->n
                                                                  : (size_t)w->desc.samples + (size_t)(w->desc.boundary_samples * w->n_drives);
-    if (!pn__rom_reserve(w, ns, w->cap_q ? w->cap_q : 64 * ns)) return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_step: out of memory");
+    if (!pn__rom_reserve(w, ns, w->cap_q ? w->cap_q : 64 * ns)) return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_step: out of memory");
     ns = pn__rom_sample(w);
     pn__rom_map(w, w->xhat, ns, w->sX, w->sx, w->sF, w->sG);
     /* 2. their grid nodes, and the quadrature points that reach them */
-    if ((r = pn__rom_nodes(w, ns, &nn)) != PN_OK) return pn__rom_fail(w, r, "pn_rom_step: out of memory (grid nodes)");
+    if ((r = pn__rom_nodes(w, ns, &nn)) != PN_OK) return PN__FAIL(w, r, "pn_rom_step: out of memory (grid nodes)");
     r = w->desc.quadrature == PN_ROM_EULERIAN ? pn__rom_quad_eulerian(w, ns, &nq, &failed) : pn__rom_quad_lagrangian(w, &nq);
-    if (r != PN_OK) return pn__rom_fail(w, r, "pn_rom_step: out of memory (quadrature)");
+    if (r != PN_OK) return PN__FAIL(w, r, "pn_rom_step: out of memory (quadrature)");
     /* 3. velocity, affine velocity (APIC: C = dF/dt F^-1, dF/dt by a central difference of
           F along vhat), stress and flags of each quadrature point */
     for (q = 0; q < nq; ++q) {
@@ -1925,7 +1879,7 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     /* 7. projection: vhat by least squares on the velocities (Eq. 21/23); xhat += dt vhat
           (LINEAR) or by Gauss-Newton on the positions from 2 xhat - xhat_prev (Eq. 22) */
     if (!pn__rom_lsq(d, K, ns, w->sG, w->sv, vh))
-        return pn__rom_fail(w, PN_ERROR_NOT_CONVERGED, "pn_rom_step: the velocity projection is singular (%lu samples)",
+        return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "pn_rom_step: the velocity projection is singular (%lu samples)",
                             (unsigned long)ns);
     if (w->desc.projection == PN_ROM_LINEAR) {
         for (i = 0; i < K; ++i) xh[i] = w->xhat[i] + dt * vh[i];
@@ -1961,7 +1915,7 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
     }
     for (s = 0; s < ns * (size_t)d; ++s) rms += (w->sxt[s] - w->tx[s]) * (w->sxt[s] - w->tx[s]);
     if (!pn__rom_all_finite((size_t)K, xh) || !pn__rom_all_finite((size_t)K, vh) || !pn__rom_finite(rms))
-        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s too large for the "
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s too large for the "
                             "scene?)", dt);
     for (i = 0; i < K; ++i) w->xhat_prev[i] = w->xhat[i], w->xhat[i] = xh[i], w->vhat[i] = vh[i];
     w->cvel_ok = 0;
@@ -2208,12 +2162,12 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
             }
         flight = h * v + h * h * acc;
         if (!(flight <= PN__ROM_MAX_FLIGHT * w->size_m))
-            return pn__rom_fail(w, PN_ERROR_STEP_TOO_LARGE, "pn_rom_step: dt_s = %g s would carry free material %.3g m in one step "
+            return PN__FAIL(w, PN_ERROR_STEP_TOO_LARGE, "pn_rom_step: dt_s = %g s would carry free material %.3g m in one step "
                                 "(speed %.3g m/s, acceleration %.3g m/s^2), more than %g times the body's size %.3g m: take "
                                 "steps of at most %.3g s", h, flight, v, acc, PN__ROM_MAX_FLIGHT, w->size_m,
                                 v > 0 || acc > 0 ? 2 * PN__ROM_MAX_FLIGHT * w->size_m / (v + sqrt(v * v + 4 * acc * PN__ROM_MAX_FLIGHT * w->size_m)) : h);
     }
-    if (w->cub_dirty && (r = pn__rom_cubature(w)) != PN_OK) return pn__rom_fail(w, r, "pn_rom_step: out of memory (cubature)");
+    if (w->cub_dirty && (r = pn__rom_cubature(w)) != PN_OK) return PN__FAIL(w, r, "pn_rom_step: out of memory (cubature)");
     C = w->n_c;
     if (mode == PN_ROM_BDF2 && (w->cvel_ok < 2 || h != w->h_prev)) mode = PN_ROM_IMPLICIT; /* BDF2 starts as backward Euler */
     /* each scheme as one minimization: inertia weight beta m, target x_n + tau v_n + tau^2 a
@@ -2262,7 +2216,7 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
         double dz[PN_ROM_MAX_LATENT], A[PN_ROM_MAX_LATENT * PN_ROM_MAX_LATENT], gd = 0, alpha = 1, Et = 0, tr = 0, lam = 0, big = 0;
         int tries;
         if (!pn__rom_ip(w, z, &E, grad, H))
-            return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the implicit step's energy is not finite (dt = %g s)", h);
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_step: the implicit step's energy is not finite (dt = %g s)", h);
         for (i = 0; i < K; ++i) tr += H[i * K + i];
         for (tries = 0; tries < 30; ++tries) { /* Cholesky, with a growing ridge if it fails */
             memcpy(A, H, sizeof(double) * (size_t)(K * K));
@@ -2294,7 +2248,7 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
         st->newton_iterations = it + 1;
     }
     if (!pn__rom_all_finite((size_t)K, z))
-        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s)", h);
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s)", h);
     /* the new state: the latent (midpoint: extrapolated from the midpoint state, z_n+1 =
        2 z_n+1/2 - z_n), the cubature velocities by the scheme's difference formula (midpoint:
        v_n+1 = 2 v_n+1/2 - v_n = 2 (x_n+1 - x_n) / h - v_n), the latent velocity by difference */
@@ -2329,13 +2283,13 @@ PN__DEF pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, 
     int fail = 0;
     w->error[0] = 0;
     if (!x || !pn__rom_all_finite(nd, x) || (v && !pn__rom_all_finite(nd, v)))
-        return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_fit: x is NULL, or x or v not finite");
+        return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_fit: x is NULL, or x or v not finite");
     gx = (double *)pn__rom_alloc(w, nd, sizeof(double), &fail);
     r = (double *)pn__rom_alloc(w, nd, sizeof(double), &fail);
     G = (double *)pn__rom_alloc(w, nd * (size_t)K, sizeof(double), &fail);
     if (fail) {
         pn_free(&w->desc.allocator, gx), pn_free(&w->desc.allocator, r), pn_free(&w->desc.allocator, G);
-        return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_fit: out of memory");
+        return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_fit: out of memory");
     }
     memcpy(xh, w->xhat, sizeof xh);
     for (it = 0; it < 50; ++it) { /* Gauss-Newton with halving */
@@ -2359,7 +2313,7 @@ PN__DEF pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, 
     }
     if (!pn__rom_all_finite((size_t)K, xh)) {
         pn_free(&w->desc.allocator, gx), pn_free(&w->desc.allocator, r), pn_free(&w->desc.allocator, G);
-        return pn__rom_fail(w, PN_ERROR_NOT_CONVERGED, "pn_rom_fit: Gauss-Newton did not converge");
+        return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "pn_rom_fit: Gauss-Newton did not converge");
     }
     for (i = 0; i < K; ++i) w->xhat[i] = w->xhat_prev[i] = xh[i], w->vhat[i] = 0;
     w->cvel_ok = 0;
@@ -2475,14 +2429,14 @@ PN__DEF pn_result pn_rom_embed(pn_rom_world *w, size_t n, const float *X, double
     pn__rom_ekey *t;
     pn_rom_embedding *e;
     w->error[0] = 0;
-    if (!out) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_embed: out is NULL");
+    if (!out) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_embed: out is NULL");
     *out = NULL;
     if (!pn__rom_finite(spacing) || !(spacing > 0))
-        return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_embed: spacing_m = %g must be > 0", spacing);
-    if (!X || !n) return pn__rom_fail(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_embed: no points");
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_embed: spacing_m = %g must be > 0", spacing);
+    if (!X || !n) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_rom_embed: no points");
     for (p = 0; p < n * (size_t)d; ++p)
         if (!pn__rom_finite((double)X[p]) || fabs((double)X[p]) / spacing > 1e6)
-            return pn__rom_fail(w, PN_ERROR_NONFINITE, "pn_rom_embed: point %lu is not finite, or beyond 1e6 spacings",
+            return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_embed: point %lu is not finite, or beyond 1e6 spacings",
                                 (unsigned long)(p / (size_t)d));
     t = (pn__rom_ekey *)pn__rom_alloc(w, n, sizeof *t, &fail);
     e = (pn_rom_embedding *)pn__rom_alloc(w, 1, sizeof *e, &fail);
@@ -2493,7 +2447,7 @@ PN__DEF pn_result pn_rom_embed(pn_rom_world *w, size_t n, const float *X, double
     }
     if (fail) {
         pn_free(&w->desc.allocator, t), pn_rom_embed_destroy(e);
-        return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_embed: out of memory for %lu points", (unsigned long)n);
+        return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_embed: out of memory for %lu points", (unsigned long)n);
     }
     for (p = 0; p < n; ++p) {
         long long c[3] = {0, 0, 0};
@@ -2508,7 +2462,7 @@ PN__DEF pn_result pn_rom_embed(pn_rom_world *w, size_t n, const float *X, double
     e->nF = (double *)pn__rom_alloc(w, nn * (size_t)(d * d), sizeof(double), &fail);
     if (fail) {
         pn_free(&w->desc.allocator, t), pn_rom_embed_destroy(e);
-        return pn__rom_fail(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_embed: out of memory for %lu nodes", (unsigned long)nn);
+        return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "pn_rom_embed: out of memory for %lu nodes", (unsigned long)nn);
     }
     for (k = 0, p = 0; p < n; ++p) {
         const float *Xp = X + t[p].p * (size_t)d;
