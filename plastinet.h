@@ -43,7 +43,11 @@
    A pn_real[9] serves both dimensions. Fourth-order tensors (dP/dF) are dim^2 x dim^2
    row-major: dPdF[(i*dim+j)*dim*dim + k*dim+l] = dP_ij / dF_kl.
 
-   What is here (greppable banners in the implementation: // >>name):
+   What is here (greppable banners in the implementation: // >>name), in file order:
+     >>config   every option resolved in one place
+     >>kit      the private helpers every module shares (plastinet_mpm.h and plastinet_rom.h
+                too): messages, a hash, B-spline weights, dense Cholesky, the backtracking
+                line search, preconditioned CG
      >>matrix   small dense 2D/3D matrix helpers
      >>svd      SVD with rotation-valued U and V (det +1), the sign of an inverted F carried
                 by the smallest singular value; polar decomposition; Hencky strain
@@ -56,6 +60,7 @@
                 singular-value clamp snow of Stomakhin et al. 2013
      >>energy-vm      exact StVK-Hencky + von Mises elastoplastic energy (the return mapping's
                       incremental potential, hardening included)
+     >>energy-dp      the frozen-yield Drucker-Prager energy
      >>energy-lagged  lagged-plasticity energy Psi_el(F G), G = F0^-1 Z(F0)
      >>mlp      inference of small MLPs stored as float arrays: value, input gradient and the
                 exact input Hessian (forward-mode second order)
@@ -63,6 +68,28 @@
      >>pnet     PlasticityNet learned elastoplastic energy Psi(F; F0, h) (Li et al. 2022,
                 Eqs. 8 and 11) from a model header in models/, rescaled to any E
      >>learned-return  learned volume-preserving von Mises return mapping (Eqs. 12-13)
+
+   ======================================================================================
+   CONVENTIONS (all four modules: core, MPM, FEM and coupling, ROM)
+   ======================================================================================
+   Names     pn_<module>_<verb>[_<object>] (pn_mpm_fill, pn_fem_step_implicit); private
+             names pn__, private macros PN__; the types MPM and FEM share are neutral
+             (pn_collider, pn_energy, pn_group).
+   Units     a field or argument with a unit says it: _m, _s, _m_s, _pa, _kg_m3, _N, _j
+             (joules), _deg; iteration counters end in _iters.
+   Objects   pn_<module>_create(desc, &out, why, why_cap) allocates through desc's
+             allocator; _destroy(NULL) does nothing; _error(obj) is why obj's last call
+             failed ("" when none, and for NULL). A description zeroed by memset means
+             defaults; each module resolves its defaults in one function.
+   Why       every call that can refuse without an object to hold the message (creates,
+             inits, checks, loaders) takes char *why, size_t why_cap: a sentence naming the
+             field or value at fault (NULL or 0: not wanted).
+   Indices   particles and their counts are size_t; mesh nodes and elements are int (as
+             the element arrays and the loaders hold them); groups, colliders, drives and
+             loads are int. The culprit of a failed step is a long, -1 for none
+             (error_particle, error_node, error_element).
+   Results   every fallible call returns a pn_result; on failure its object and outputs
+             are as they were (ERRORS below).
 
    ======================================================================================
    OPTIONS (define before including the implementation)
@@ -77,6 +104,9 @@
      PN_NO_STDIO         off             removes pn_material_describe (the only use of stdio)
      PN_NO_2D            off             dim = 2 is rejected with PN_ERROR_DIMENSION
      PN_NO_3D            off             dim = 3 is rejected with PN_ERROR_DIMENSION
+     PN_NO_VECTOR_EXTENSIONS off         plain C loops instead of gcc/clang vector types (the
+                                         float lanes of the networks)
+     plastinet_mpm.h and plastinet_rom.h add their own (their OPTIONS tables)
 
    ======================================================================================
    MEMORY

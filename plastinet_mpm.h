@@ -86,6 +86,16 @@
      >>couple-explicit pn_coupled_step_explicit,     both explicit, forces exchanged as loads
                      pn_coupled_stable_dt
 
+   OPTIONS (define before including the implementation; plastinet.h's apply too)
+     macro                          default  effect
+     PN_NO_FEM                      off      leaves out PART II (FEM) and PART III (coupling):
+                                             a game that simulates only particles compiles
+                                             38% less code (gcc -O2, x86-64)
+     PN_FEM_CHOLESKY_MAX_MB         1024     PN_FEM_LINEAR_DEFAULT factors by skyline
+     PN_FEM_CHOLESKY_MAX_GFLOP_2D   4        Cholesky while its factor stays under these
+     PN_FEM_CHOLESKY_MAX_GFLOP_3D   8        (storage, work per factorization), PCG beyond
+     -fopenmp (compiler flag)       off      particle and node loops on threads (THREADS)
+
    QUICK START (README.md has it as a complete program)
        pn_mpm_desc wd;  pn_mpm_fill_desc f;  pn_mpm_world *w;  pn_material sand;  size_t n;
        memset(&wd, 0, sizeof wd);                            // zeroed fields mean defaults
@@ -453,34 +463,18 @@ typedef struct pn__mpm_level {
     size_t *crow, cstart[28];    /* rows by colour (node index mod 3 per axis)                 */
 } pn__mpm_level;
 
-/* The world. Particle arrays (structure of arrays, read-only for users): x, v (dim per
-   particle), C (affine velocity, dim^2), F (elastic deformation gradient, dim^2), h (plastic
-   state), vol0 (initial volume m^3), mass (kg), group, active. A step builds the new state in
-   scratch arrays and swaps them in, so x, v, C, F, h and active point elsewhere after every
-   step: read w->x after the step, never keep the pointer across one. Particle p keeps its
-   index for the life of the world. The rest is internal. */
-typedef struct pn_mpm_world {
-    pn_mpm_desc desc;
-    int dim, wall;
-    size_t n, cap, nodes, stride[3];
+/* The solver's own state: stencils, the compact and dense grids, contact, the implicit
+   solver's storage and hierarchy, the Taylor models and their journal, drives and loads.
+   Private: read and written only by the library (pn_mpm_world.s). */
+typedef struct pn__mpm_solver {
+    int wall;                    /* the walls' thickness in cells                           */
+    size_t nodes, stride[3];     /* grid nodes; flat node = sum idx_a stride_a               */
     int ns, slot[27][3];         /* stencil size 3^dim and its offsets per axis             */
     size_t slot_off[27];         /* flat node offset of each stencil slot                   */
-    pn_real *x, *v, *C, *F, *h, *vol0, *mass;
-    int *group;
-    unsigned char *active;
-    pn_mpm_group groups[PN_MPM_MAX_GROUPS];
-    int n_groups;
-    pn_mpm_collider colliders[PN_MPM_MAX_COLLIDERS];
-    int n_colliders;
     pn__mpm_drive drives[PN_MPM_MAX_DRIVES]; /* >>drive: pn_mpm_drive_particles, pn_mpm_add_load */
     pn__mpm_load loads[PN_MPM_MAX_LOADS];
     int n_drives, n_loads;
-    pn_real time_s;
-    long steps;
     long newton_left;            /* implicit: Newton iterations the current call may still take */
-    size_t error_particle;       /* particle that made the last step fail ((size_t)-1: none) */
-    size_t left_total;           /* particles deactivated for leaving the domain, in total  */
-    char error[256];             /* why the last call failed (pn_mpm_error)                 */
     /* >>bin: stencils, sort, active nodes */
     size_t *pbase;               /* flat index of each particle's stencil base node          */
     pn_real *pw, *pfx;           /* per axis: 3 weights and x/dx - base                      */
@@ -562,6 +556,31 @@ typedef struct pn_mpm_world {
     const size_t *xf_idx;
     const pn_real *xf;
     size_t xf_n;
+} pn__mpm_solver;
+
+/* The world. Particle arrays (structure of arrays, read-only for users): x, v (dim per
+   particle), C (affine velocity, dim^2), F (elastic deformation gradient, dim^2), h (plastic
+   state), vol0 (initial volume m^3), mass (kg), group, active. A step builds the new state in
+   scratch arrays and swaps them in, so x, v, C, F, h and active point elsewhere after every
+   step: read w->x after the step, never keep the pointer across one. Particle p keeps its
+   index for the life of the world. Everything a user reads is here; s is the solver's. */
+typedef struct pn_mpm_world {
+    pn_mpm_desc desc;            /* as given, defaults resolved                              */
+    int dim;                     /* 2 or 3                                                   */
+    size_t n, cap;               /* particles (active or retired) and max_particles          */
+    pn_real *x, *v, *C, *F, *h, *vol0, *mass;
+    int *group;
+    unsigned char *active;
+    pn_mpm_group groups[PN_MPM_MAX_GROUPS];
+    int n_groups;
+    pn_mpm_collider colliders[PN_MPM_MAX_COLLIDERS];
+    int n_colliders;
+    pn_real time_s;              /* simulated time (s)                                       */
+    long steps;                  /* steps taken                                              */
+    size_t error_particle;       /* particle that made the last step fail ((size_t)-1: none) */
+    size_t left_total;           /* particles deactivated for leaving the domain, in total  */
+    char error[256];             /* why the last call failed (pn_mpm_error)                 */
+    pn__mpm_solver s;            /* private                                                  */
 } pn_mpm_world;
 
 /* Create a world (*out set on success). PN_ERROR_DIMENSION for a dim other than 2 or 3 (or
@@ -1233,12 +1252,12 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
 
 /* every array the world owns (X-macro: one list for destroy) */
 #define PN__MPM_ARRAYS(X)                                                                       \
-    X(x) X(v) X(C) X(F) X(h) X(vol0) X(mass) X(group) X(active) X(pbase) X(pw) X(pfx)    \
-    X(order) X(start) X(act) X(dof) X(mark) X(grid_m) X(grid_v) X(grid_v0) X(pmat) X(pscal) X(part)        \
-    X(pstat) X(sx) X(sv) X(sC) X(sF) X(sh) X(sactive) X(cn) X(ckind) X(chold) X(cdir) X(cvel)   \
-    X(cmu) X(clam) X(ctan) X(vstar) X(vsol) X(vtry) X(grad) X(dir) X(cg_r) X(cg_z) X(cg_p) X(cg_q)      \
-    X(diag) X(pP) X(pH) X(pG) X(phG) X(pF0) X(pty) X(ppt) X(tF) X(tpsi) X(tP) X(tH) X(tok) X(jF) X(jpsi) X(jP) X(jH) X(jpH) X(jppt) X(jst) X(pq) X(pb) X(pdof) X(inc) X(inc_start) X(prank) X(bx) X(bv) X(bC) X(bF) X(bh) X(bactive)  \
-    X(lnode) X(blnode) X(lval) X(blval) X(bmark) X(bact) X(rowcount) X(gdense) X(gdense0) X(ppay) X(spay) X(prow) X(srow)
+    X(x) X(v) X(C) X(F) X(h) X(vol0) X(mass) X(group) X(active) X(s.pbase) X(s.pw) X(s.pfx)    \
+    X(s.order) X(s.start) X(s.act) X(s.dof) X(s.mark) X(s.grid_m) X(s.grid_v) X(s.grid_v0) X(s.pmat) X(s.pscal) X(s.part)        \
+    X(s.pstat) X(s.sx) X(s.sv) X(s.sC) X(s.sF) X(s.sh) X(s.sactive) X(s.cn) X(s.ckind) X(s.chold) X(s.cdir) X(s.cvel)   \
+    X(s.cmu) X(s.clam) X(s.ctan) X(s.vstar) X(s.vsol) X(s.vtry) X(s.grad) X(s.dir) X(s.cg_r) X(s.cg_z) X(s.cg_p) X(s.cg_q)      \
+    X(s.diag) X(s.pP) X(s.pH) X(s.pG) X(s.phG) X(s.pF0) X(s.pty) X(s.ppt) X(s.tF) X(s.tpsi) X(s.tP) X(s.tH) X(s.tok) X(s.jF) X(s.jpsi) X(s.jP) X(s.jH) X(s.jpH) X(s.jppt) X(s.jst) X(s.pq) X(s.pb) X(s.pdof) X(s.inc) X(s.inc_start) X(s.prank) X(s.bx) X(s.bv) X(s.bC) X(s.bF) X(s.bh) X(s.bactive)  \
+    X(s.lnode) X(s.blnode) X(s.lval) X(s.blval) X(s.bmark) X(s.bact) X(s.rowcount) X(s.gdense) X(s.gdense0) X(s.ppay) X(s.spay) X(s.prow) X(s.srow)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
     pn_allocator a;
@@ -1249,15 +1268,15 @@ PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
 #undef PN__MPM_FREE
     {
         int l;
-        for (l = 0; l < w->n_drives; ++l) pn_free(&a, w->drives[l].idx), pn_free(&a, w->drives[l].x0);
-        for (l = 0; l < w->n_loads; ++l) pn_free(&a, w->loads[l].idx);
+        for (l = 0; l < w->s.n_drives; ++l) pn_free(&a, w->s.drives[l].idx), pn_free(&a, w->s.drives[l].x0);
+        for (l = 0; l < w->s.n_loads; ++l) pn_free(&a, w->s.loads[l].idx);
         for (l = 0; l < PN__MPM_MG_MAX; ++l) {
-            pn__mpm_level *L = &w->mg[l];
+            pn__mpm_level *L = &w->s.mg[l];
             void *m[] = {L->node, L->dof, L->mark, L->nbr, L->A, L->Dinv, L->x, L->b, L->r, L->crow};
             size_t i;
             for (i = 0; i < sizeof m / sizeof m[0]; ++i) pn_free(&a, m[i]);
         }
-        pn_free(&a, w->mg_dense);
+        pn_free(&a, w->s.mg_dense);
     }
     pn_free(&a, w);
 }
@@ -1265,15 +1284,15 @@ PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
 /* the stencil slots s = 0 .. 3^d - 1: offsets per axis and flat node offsets, once */
 static void pn__mpm_slots(pn_mpm_world *w) {
     int s, i;
-    w->ns = w->dim == 3 ? 27 : 9;
-    for (s = 0; s < w->ns; ++s) {
+    w->s.ns = w->dim == 3 ? 27 : 9;
+    for (s = 0; s < w->s.ns; ++s) {
         int r = s;
-        w->slot_off[s] = 0;
-        w->slot[s][2] = 0;
+        w->s.slot_off[s] = 0;
+        w->s.slot[s][2] = 0;
         for (i = w->dim - 1; i >= 0; --i) {
-            w->slot[s][i] = r % 3;
+            w->s.slot[s][i] = r % 3;
             r /= 3;
-            w->slot_off[s] += (size_t)w->slot[s][i] * w->stride[i];
+            w->s.slot_off[s] += (size_t)w->s.slot[s][i] * w->s.stride[i];
         }
     }
 }
@@ -1326,28 +1345,28 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     if (!(w->desc.advection_limit > 0)) w->desc.advection_limit = 1;
     if (w->desc.parallel_min_particles == 0) w->desc.parallel_min_particles = 4096;
     w->dim = d;
-    w->wall = wall;
+    w->s.wall = wall;
     w->cap = cap;
-    w->nodes = nodes;
+    w->s.nodes = nodes;
     w->error_particle = (size_t)-1;
-    w->stride[d - 1] = 1;
-    for (i = d - 2; i >= 0; --i) w->stride[i] = w->stride[i + 1] * (size_t)(desc->res[i + 1] + 1);
-    w->nblocks = 1;
+    w->s.stride[d - 1] = 1;
+    for (i = d - 2; i >= 0; --i) w->s.stride[i] = w->s.stride[i + 1] * (size_t)(desc->res[i + 1] + 1);
+    w->s.nblocks = 1;
     for (i = 0; i < d; ++i) {
-        w->nblk[i] = (size_t)desc->res[i] / PN__MPM_BLOCK + 1; /* covers the res + 1 nodes */
-        w->nblocks *= w->nblk[i];
+        w->s.nblk[i] = (size_t)desc->res[i] / PN__MPM_BLOCK + 1; /* covers the res + 1 nodes */
+        w->s.nblocks *= w->s.nblk[i];
     }
-    w->bstride[d - 1] = 1;
-    for (i = d - 2; i >= 0; --i) w->bstride[i] = w->bstride[i + 1] * w->nblk[i + 1];
-    w->inv_dx = 1 / desc->dx_m;
+    w->s.bstride[d - 1] = 1;
+    for (i = d - 2; i >= 0; --i) w->s.bstride[i] = w->s.bstride[i + 1] * w->s.nblk[i + 1];
+    w->s.inv_dx = 1 / desc->dx_m;
     for (i = 0; i < d; ++i) {
         /* where a stencil fits (base node >= 0, base + 2 <= res: [0.5 dx, (res - 0.5) dx)), with
            a quarter cell to spare for rounding. A wall of one cell has its plane at dx: a
            particle a hair past it is put back on it, not taken for one that went through */
-        w->grid_lo[i] = w->desc.origin_m[i] + (pn_real)0.75 * desc->dx_m;
-        w->grid_hi[i] = w->desc.origin_m[i] + ((pn_real)desc->res[i] - (pn_real)0.75) * desc->dx_m;
-        w->wall_lo[i] = w->desc.origin_m[i] + wall * desc->dx_m;
-        w->wall_hi[i] = w->desc.origin_m[i] + (desc->res[i] - wall) * desc->dx_m;
+        w->s.grid_lo[i] = w->desc.origin_m[i] + (pn_real)0.75 * desc->dx_m;
+        w->s.grid_hi[i] = w->desc.origin_m[i] + ((pn_real)desc->res[i] - (pn_real)0.75) * desc->dx_m;
+        w->s.wall_lo[i] = w->desc.origin_m[i] + wall * desc->dx_m;
+        w->s.wall_hi[i] = w->desc.origin_m[i] + (desc->res[i] - wall) * desc->dx_m;
     }
     pn__mpm_slots(w);
     nparts = (cap > nodes * (size_t)d ? cap : nodes * (size_t)d) / PN__MPM_CHUNK + 2;
@@ -1361,50 +1380,50 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     PN__MPM_A(mass, cap, pn_real);
     PN__MPM_A(group, cap, int);
     PN__MPM_A(active, cap, unsigned char);
-    PN__MPM_A(pbase, cap, size_t);
-    PN__MPM_A(pw, cap * 9, pn_real);
-    PN__MPM_A(pfx, cap * 3, pn_real);
-    PN__MPM_A(order, cap, size_t);
-    PN__MPM_A(start, nodes + 1, size_t);
-    PN__MPM_A(act, nodes, size_t);
-    PN__MPM_A(dof, nodes, long);
-    PN__MPM_A(mark, nodes, unsigned char);
-    PN__MPM_A(grid_m, nodes, pn_real);
-    PN__MPM_A(grid_v, nodes * (size_t)d, pn_real);
-    PN__MPM_A(grid_v0, nodes * (size_t)d, pn_real);
-    PN__MPM_A(pmat, cap * (size_t)dd, pn_real);
-    PN__MPM_A(pscal, cap > nodes ? cap : nodes, pn_real);
-    PN__MPM_A(part, nparts, pn_real);
-    PN__MPM_A(pstat, cap, int);
-    PN__MPM_A(sx, cap * (size_t)d, pn_real);
-    PN__MPM_A(sv, cap * (size_t)d, pn_real);
-    PN__MPM_A(sC, cap * (size_t)dd, pn_real);
-    PN__MPM_A(sF, cap * (size_t)dd, pn_real);
-    PN__MPM_A(sh, cap, pn_real);
-    PN__MPM_A(sactive, cap, unsigned char);
-    PN__MPM_A(cn, nodes, unsigned char);
-    PN__MPM_A(ckind, nodes, unsigned char);
-    PN__MPM_A(chold, nodes, unsigned char);
-    PN__MPM_A(cdir, nodes * 9, pn_real);
-    PN__MPM_A(cvel, nodes * 3, pn_real);
-    PN__MPM_A(cmu, nodes, pn_real);
-    PN__MPM_A(clam, nodes, pn_real);
-    PN__MPM_A(ctan, nodes * 3, pn_real);
-    PN__MPM_A(bmark, w->nblocks, unsigned char);
-    PN__MPM_A(bact, w->nblocks, size_t);
-    PN__MPM_A(rowcount, (size_t)desc->res[0] + 1, size_t);
-    PN__MPM_A(gdense, nodes * 4, pn_real); /* zero: each explicit step leaves it so */
-    if (desc->filter_time_s > 0) PN__MPM_A(gdense0, nodes * (size_t)d, pn_real);
-    PN__MPM_A(ppay, (cap + PN__MPM_LANES - 1) / PN__MPM_LANES * PN__MPM_LANES * (size_t)PN__MPM_PAY(d), pn_real);
-    PN__MPM_A(spay, (cap + PN__MPM_LANES - 1) / PN__MPM_LANES * PN__MPM_LANES * (size_t)PN__MPM_PAY(d), pn_real);
-    PN__MPM_A(prow, cap, int);
-    PN__MPM_A(srow, cap, int);
+    PN__MPM_A(s.pbase, cap, size_t);
+    PN__MPM_A(s.pw, cap * 9, pn_real);
+    PN__MPM_A(s.pfx, cap * 3, pn_real);
+    PN__MPM_A(s.order, cap, size_t);
+    PN__MPM_A(s.start, nodes + 1, size_t);
+    PN__MPM_A(s.act, nodes, size_t);
+    PN__MPM_A(s.dof, nodes, long);
+    PN__MPM_A(s.mark, nodes, unsigned char);
+    PN__MPM_A(s.grid_m, nodes, pn_real);
+    PN__MPM_A(s.grid_v, nodes * (size_t)d, pn_real);
+    PN__MPM_A(s.grid_v0, nodes * (size_t)d, pn_real);
+    PN__MPM_A(s.pmat, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.pscal, cap > nodes ? cap : nodes, pn_real);
+    PN__MPM_A(s.part, nparts, pn_real);
+    PN__MPM_A(s.pstat, cap, int);
+    PN__MPM_A(s.sx, cap * (size_t)d, pn_real);
+    PN__MPM_A(s.sv, cap * (size_t)d, pn_real);
+    PN__MPM_A(s.sC, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.sF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.sh, cap, pn_real);
+    PN__MPM_A(s.sactive, cap, unsigned char);
+    PN__MPM_A(s.cn, nodes, unsigned char);
+    PN__MPM_A(s.ckind, nodes, unsigned char);
+    PN__MPM_A(s.chold, nodes, unsigned char);
+    PN__MPM_A(s.cdir, nodes * 9, pn_real);
+    PN__MPM_A(s.cvel, nodes * 3, pn_real);
+    PN__MPM_A(s.cmu, nodes, pn_real);
+    PN__MPM_A(s.clam, nodes, pn_real);
+    PN__MPM_A(s.ctan, nodes * 3, pn_real);
+    PN__MPM_A(s.bmark, w->s.nblocks, unsigned char);
+    PN__MPM_A(s.bact, w->s.nblocks, size_t);
+    PN__MPM_A(s.rowcount, (size_t)desc->res[0] + 1, size_t);
+    PN__MPM_A(s.gdense, nodes * 4, pn_real); /* zero: each explicit step leaves it so */
+    if (desc->filter_time_s > 0) PN__MPM_A(s.gdense0, nodes * (size_t)d, pn_real);
+    PN__MPM_A(s.ppay, (cap + PN__MPM_LANES - 1) / PN__MPM_LANES * PN__MPM_LANES * (size_t)PN__MPM_PAY(d), pn_real);
+    PN__MPM_A(s.spay, (cap + PN__MPM_LANES - 1) / PN__MPM_LANES * PN__MPM_LANES * (size_t)PN__MPM_PAY(d), pn_real);
+    PN__MPM_A(s.prow, cap, int);
+    PN__MPM_A(s.srow, cap, int);
     if (fail) {
         pn_mpm_destroy(w);
         if (why) *why = "out of memory for max_particles particles and the grid";
         return PN_ERROR_OUT_OF_MEMORY;
     }
-    for (k = 0; k < nodes; ++k) w->dof[k] = -1;
+    for (k = 0; k < nodes; ++k) w->s.dof[k] = -1;
     *out = w;
     return PN_OK;
 }
@@ -1443,7 +1462,7 @@ PN__DEF int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real dens
 static int pn__mpm_inside(const pn_mpm_world *w, const pn_real *x) {
     int i;
     for (i = 0; i < w->dim; ++i)
-        if (!(x[i] >= w->wall_lo[i] && x[i] <= w->wall_hi[i])) return 0;
+        if (!(x[i] >= w->s.wall_lo[i] && x[i] <= w->s.wall_hi[i])) return 0;
     return 1;
 }
 
@@ -1463,14 +1482,14 @@ static int pn__mpm_inside(const pn_mpm_world *w, const pn_real *x) {
 static inline void pn__mpm_wall_plane(const pn_mpm_world *w, pn_real *x) {
     int i;
     for (i = 0; i < w->dim; ++i) {
-        if (x[i] < w->wall_lo[i]) x[i] = w->wall_lo[i];
-        else if (x[i] > w->wall_hi[i]) x[i] = w->wall_hi[i];
+        if (x[i] < w->s.wall_lo[i]) x[i] = w->s.wall_lo[i];
+        else if (x[i] > w->s.wall_hi[i]) x[i] = w->s.wall_hi[i];
     }
 }
 
 static inline int pn__mpm_in_grid(const pn_mpm_world *w, const pn_real *x) {
     int i, in = 1;
-    for (i = 0; i < w->dim; ++i) in &= x[i] >= w->grid_lo[i] && x[i] <= w->grid_hi[i];
+    for (i = 0; i < w->dim; ++i) in &= x[i] >= w->s.grid_lo[i] && x[i] <= w->s.grid_hi[i];
     return in;
 }
 
@@ -1504,7 +1523,7 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
             return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: particle %lu of the call at "
                                 "(%g, %g, %g) m is outside the walls (origin_m + [%d dx, (res - %d) dx] on each axis)",
                                 (unsigned long)p, (double)x[p * (size_t)d], (double)x[p * (size_t)d + 1],
-                                d == 3 ? (double)x[p * (size_t)d + 2] : 0.0, w->wall, w->wall);
+                                d == 3 ? (double)x[p * (size_t)d + 2] : 0.0, w->s.wall, w->s.wall);
         }
     }
     for (p = 0; p < n; ++p) {
@@ -1522,7 +1541,7 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
         w->active[q] = 1;
     }
     w->n += n;
-    w->rec_ok = 0;
+    w->s.rec_ok = 0;
     return PN_OK;
 }
 
@@ -1540,7 +1559,7 @@ PN__DEF pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, cons
                                 (unsigned long)(first + p));
         }
     memcpy(w->h + first, h, sizeof(pn_real) * n);
-    w->rec_ok = 0;
+    w->s.rec_ok = 0;
     return PN_OK;
 }
 
@@ -1633,9 +1652,9 @@ static pn_real pn__mpm_sum(pn_mpm_world *w, size_t n, const pn_real *a, const pn
             for (i = lo; i < hi; ++i) acc += a[i] * b[i];
         else
             for (i = lo; i < hi; ++i) acc += a[i];
-        w->part[c] = acc;
+        w->s.part[c] = acc;
     }
-    for (c = 0; c < nc; ++c) s += w->part[c];
+    for (c = 0; c < nc; ++c) s += w->s.part[c];
     return s;
 }
 
@@ -1646,19 +1665,19 @@ static pn_result pn__mpm_first_error(pn_mpm_world *w, pn_real dt) {
     size_t p;
     int d = w->dim, i, pass, any = 0;
     static const int bits[3] = {0xff, 0x400, 0x800};
-    for (p = 0; p < w->n; ++p) any |= w->pstat[p];
+    for (p = 0; p < w->n; ++p) any |= w->s.pstat[p];
     if (!(any & 0xcff)) return PN_OK;
     for (pass = 0; pass < 3; ++pass)
         for (p = 0; p < w->n; ++p) {
             pn_real far = 0;
-            if (!w->active[p] || !(w->pstat[p] & bits[pass])) continue;
+            if (!w->active[p] || !(w->s.pstat[p] & bits[pass])) continue;
             w->error_particle = p;
             if (pass == 0)
-                return PN__FAIL(w, (pn_result)(w->pstat[p] & 0xff), "step of %g s: particle %lu (group %d): %s",
+                return PN__FAIL(w, (pn_result)(w->s.pstat[p] & 0xff), "step of %g s: particle %lu (group %d): %s",
                                     (double)dt, (unsigned long)p, w->group[p],
-                                    pn_result_string((pn_result)(w->pstat[p] & 0xff)));
+                                    pn_result_string((pn_result)(w->s.pstat[p] & 0xff)));
             for (i = 0; i < d; ++i)
-                far = PN__MAX(far, PN__FABS(w->sx[p * (size_t)d + (size_t)i] - w->x[p * (size_t)d + (size_t)i]));
+                far = PN__MAX(far, PN__FABS(w->s.sx[p * (size_t)d + (size_t)i] - w->x[p * (size_t)d + (size_t)i]));
             if (pass == 1)
                 return PN__FAIL(w, PN_ERROR_STEP_TOO_LARGE, "step of %g s: particle %lu would move %.2f cells (the "
                                     "advection limit is %g): take steps of at most %.3g s (pn_mpm_advance picks them)",
@@ -1666,8 +1685,8 @@ static pn_result pn__mpm_first_error(pn_mpm_world *w, pn_real dt) {
                                     (double)w->desc.advection_limit, (double)(dt * w->desc.advection_limit * w->desc.dx_m / far));
             return PN__FAIL(w, PN_ERROR_OUTSIDE_DOMAIN, "step of %g s: particle %lu would pass through a wall to "
                                 "(%g, %g, %g) m (smaller steps, or pn_mpm_desc.allow_outflow to let material leave)",
-                                (double)dt, (unsigned long)p, (double)w->sx[p * (size_t)d],
-                                (double)w->sx[p * (size_t)d + 1], d == 3 ? (double)w->sx[p * (size_t)d + 2] : 0.0);
+                                (double)dt, (unsigned long)p, (double)w->s.sx[p * (size_t)d],
+                                (double)w->s.sx[p * (size_t)d + 1], d == 3 ? (double)w->s.sx[p * (size_t)d + 2] : 0.0);
         }
     return PN_OK;
 }
@@ -1717,8 +1736,8 @@ static pn_result pn__mpm_list_check(pn_mpm_world *w, size_t n, const size_t *idx
         }
     }
     if (!drive) return PN_OK;
-    for (a = 0; a < w->n_drives; ++a) {
-        const pn__mpm_drive *D = &w->drives[a];
+    for (a = 0; a < w->s.n_drives; ++a) {
+        const pn__mpm_drive *D = &w->s.drives[a];
         if (!D->on) continue;
         for (k = 0; k < n; ++k)
             for (j = 0; j < D->n; ++j)
@@ -1753,7 +1772,7 @@ PN__DEF pn_result pn_mpm_drive_particles(pn_mpm_world *w, size_t n, const size_t
     }
     if (spin && !center_m) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: a rotation needs center_m", fn);
     if ((r = pn__mpm_list_check(w, n, particles, 1, fn)) != PN_OK) return r;
-    for (a = 0; a < w->n_drives && w->drives[a].on; ++a) {} /* a released slot is reused */
+    for (a = 0; a < w->s.n_drives && w->s.drives[a].on; ++a) {} /* a released slot is reused */
     if (a == PN_MPM_MAX_DRIVES) a = -1;
     if (a < 0) return PN__FAIL(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_DRIVES = %d are in use", fn, PN_MPM_MAX_DRIVES);
     D.idx = (size_t *)pn__mpm_alloc(&w->desc, n, sizeof(size_t), &fail);
@@ -1768,10 +1787,10 @@ PN__DEF pn_result pn_mpm_drive_particles(pn_mpm_world *w, size_t n, const size_t
     D.on = 1;
     memcpy(D.idx, particles, sizeof(size_t) * n);
     for (k = 0; k < n; ++k) memcpy(D.x0 + k * (size_t)d, w->x + particles[k] * (size_t)d, sizeof(pn_real) * (size_t)d);
-    pn_free(&w->desc.allocator, w->drives[a].idx); /* a released drive's */
-    pn_free(&w->desc.allocator, w->drives[a].x0);
-    w->drives[a] = D;
-    if (a == w->n_drives) w->n_drives++;
+    pn_free(&w->desc.allocator, w->s.drives[a].idx); /* a released drive's */
+    pn_free(&w->desc.allocator, w->s.drives[a].x0);
+    w->s.drives[a] = D;
+    if (a == w->s.n_drives) w->s.n_drives++;
     if (index) *index = a;
     return PN_OK;
 }
@@ -1779,10 +1798,10 @@ PN__DEF pn_result pn_mpm_drive_particles(pn_mpm_world *w, size_t n, const size_t
 PN__DEF pn_result pn_mpm_release_drive(pn_mpm_world *w, int index) {
     PN_ASSERT(w);
     w->error[0] = 0;
-    if (index < 0 || index >= w->n_drives || index >= PN_MPM_MAX_DRIVES)
+    if (index < 0 || index >= w->s.n_drives || index >= PN_MPM_MAX_DRIVES)
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_release_drive: drive %d does not exist (%d drives)", index,
-                            w->n_drives);
-    w->drives[index].on = 0;
+                            w->s.n_drives);
+    w->s.drives[index].on = 0;
     return PN_OK;
 }
 
@@ -1803,7 +1822,7 @@ PN__DEF pn_result pn_mpm_add_load(pn_mpm_world *w, size_t n, const size_t *parti
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: duration_s = %g must be finite and >= 0 (0: until removed)", fn,
                             (double)duration_s);
     if ((r = pn__mpm_list_check(w, n, particles, 0, fn)) != PN_OK) return r;
-    for (a = 0; a < w->n_loads && w->loads[a].on; ++a) {}
+    for (a = 0; a < w->s.n_loads && w->s.loads[a].on; ++a) {}
     if (a == PN_MPM_MAX_LOADS) a = -1;
     if (a < 0) return PN__FAIL(w, PN_ERROR_CAPACITY, "%s: all PN_MPM_MAX_LOADS = %d are in use", fn, PN_MPM_MAX_LOADS);
     memset(&L, 0, sizeof L);
@@ -1815,9 +1834,9 @@ PN__DEF pn_result pn_mpm_add_load(pn_mpm_world *w, size_t n, const size_t *parti
     L.n = n;
     L.t_end = duration_s > 0 ? w->time_s + duration_s : (pn_real)HUGE_VAL;
     L.on = 1;
-    pn_free(&w->desc.allocator, w->loads[a].idx);
-    w->loads[a] = L;
-    if (a == w->n_loads) w->n_loads++;
+    pn_free(&w->desc.allocator, w->s.loads[a].idx);
+    w->s.loads[a] = L;
+    if (a == w->s.n_loads) w->s.n_loads++;
     if (index) *index = a;
     return PN_OK;
 }
@@ -1825,10 +1844,10 @@ PN__DEF pn_result pn_mpm_add_load(pn_mpm_world *w, size_t n, const size_t *parti
 PN__DEF pn_result pn_mpm_remove_load(pn_mpm_world *w, int index) {
     PN_ASSERT(w);
     w->error[0] = 0;
-    if (index < 0 || index >= w->n_loads || index >= PN_MPM_MAX_LOADS)
+    if (index < 0 || index >= w->s.n_loads || index >= PN_MPM_MAX_LOADS)
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_remove_load: load %d does not exist (%d loads)", index,
-                            w->n_loads);
-    w->loads[index].on = 0;
+                            w->s.n_loads);
+    w->s.loads[index].on = 0;
     return PN_OK;
 }
 
@@ -1884,8 +1903,8 @@ PN__DEF pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, 
     if (C) memcpy(w->C + first * (size_t)dd, C, sizeof(pn_real) * n * (size_t)dd);
     if (F) memcpy(w->F + first * (size_t)dd, F, sizeof(pn_real) * n * (size_t)dd);
     if (time_s >= 0) w->time_s = time_s;
-    w->rec_ok = 0;
-    w->n_lag = 0;
+    w->s.rec_ok = 0;
+    w->s.n_lag = 0;
     return PN_OK;
 }
 
@@ -2300,7 +2319,7 @@ PN__DEF pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t
         w->active[p] = 1;
     }
     w->n += n;
-    w->rec_ok = 0;
+    w->s.rec_ok = 0;
     if (added) *added = n;
     return PN_OK;
 }
@@ -2363,7 +2382,7 @@ PN__DEF pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s) {
 
 static void pn__mpm_stencil(pn_mpm_world *w, size_t p) {
     int d = w->dim, i;
-    pn_real dx = w->desc.dx_m, *W = w->pw + p * 9, *fx = w->pfx + p * 3;
+    pn_real dx = w->desc.dx_m, *W = w->s.pw + p * 9, *fx = w->s.pfx + p * 3;
     size_t flat = 0;
     for (i = 0; i < d; ++i) {
         pn_real xc = (w->x[p * (size_t)d + (size_t)i] - w->desc.origin_m[i]) / dx, f;
@@ -2371,15 +2390,15 @@ static void pn__mpm_stencil(pn_mpm_world *w, size_t p) {
         f = xc - (pn_real)b;
         fx[i] = f;
         PN__BSPLINE2(W[i * 3 + 0], W[i * 3 + 1], W[i * 3 + 2], f, pn_real);
-        flat += (size_t)b * w->stride[i];
+        flat += (size_t)b * w->s.stride[i];
     }
-    w->pbase[p] = flat;
+    w->s.pbase[p] = flat;
 }
 
 /* weight of particle p at its stencil offset o (0..2 per axis) and the offset node -
    particle (m) */
 static pn_real pn__mpm_weight(const pn_mpm_world *w, size_t p, const int *o, pn_real *dpos) {
-    const pn_real *W = w->pw + p * 9, *fx = w->pfx + p * 3;
+    const pn_real *W = w->s.pw + p * 9, *fx = w->s.pfx + p * 3;
     pn_real dx = w->desc.dx_m, a = W[o[0]], b = W[3 + o[1]], c = 1;
     if (w->dim == 3) {
         c = W[6 + o[2]];
@@ -2403,13 +2422,13 @@ static void pn__mpm_node_index(const pn_mpm_world *w, size_t node, int *idx) {
 static int pn__mpm_node_bases(const pn_mpm_world *w, size_t node, size_t *base, int (*o)[3], int *sl) {
     int idx[3], s, i, n = 0;
     pn__mpm_node_index(w, node, idx);
-    for (s = 0; s < w->ns; ++s) {
+    for (s = 0; s < w->s.ns; ++s) {
         int ok = 1;
-        for (i = 0; i < w->dim; ++i) ok &= idx[i] >= w->slot[s][i];
+        for (i = 0; i < w->dim; ++i) ok &= idx[i] >= w->s.slot[s][i];
         if (!ok) continue;
-        for (i = 0; i < 3; ++i) o[n][i] = w->slot[s][i];
+        for (i = 0; i < 3; ++i) o[n][i] = w->s.slot[s][i];
         sl[n] = s;
-        base[n++] = node - w->slot_off[s];
+        base[n++] = node - w->s.slot_off[s];
     }
     return n;
 }
@@ -2418,32 +2437,32 @@ static void pn__mpm_bin(pn_mpm_world *w) {
     size_t p, k, prev = (size_t)-1;
     long lp;
     int s;
-    for (k = 0; k < w->n_act; ++k) w->dof[w->act[k]] = -1;
+    for (k = 0; k < w->s.n_act; ++k) w->s.dof[w->s.act[k]] = -1;
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp)
         if (w->active[lp]) pn__mpm_stencil(w, (size_t)lp);
     /* stable counting sort by base node */
-    memset(w->start, 0, sizeof(size_t) * (w->nodes + 1));
+    memset(w->s.start, 0, sizeof(size_t) * (w->s.nodes + 1));
     for (p = 0; p < w->n; ++p)
-        if (w->active[p]) w->start[w->pbase[p] + 1]++;
-    for (k = 0; k < w->nodes; ++k) w->start[k + 1] += w->start[k];
+        if (w->active[p]) w->s.start[w->s.pbase[p] + 1]++;
+    for (k = 0; k < w->s.nodes; ++k) w->s.start[k + 1] += w->s.start[k];
     for (p = 0; p < w->n; ++p)
-        if (w->active[p]) w->order[w->start[w->pbase[p]]++] = p;
-    for (k = w->nodes; k > 0; --k) w->start[k] = w->start[k - 1];
-    w->start[0] = 0;
+        if (w->active[p]) w->s.order[w->s.start[w->s.pbase[p]]++] = p;
+    for (k = w->s.nodes; k > 0; --k) w->s.start[k] = w->s.start[k - 1];
+    w->s.start[0] = 0;
     /* active nodes: the stencils of the occupied base nodes, listed in ascending order */
-    for (k = 0; k < w->start[w->nodes]; ++k) {
-        size_t b = w->pbase[w->order[k]];
+    for (k = 0; k < w->s.start[w->s.nodes]; ++k) {
+        size_t b = w->s.pbase[w->s.order[k]];
         if (b == prev) continue;
         prev = b;
-        for (s = 0; s < w->ns; ++s) w->mark[b + w->slot_off[s]] = 1;
+        for (s = 0; s < w->s.ns; ++s) w->s.mark[b + w->s.slot_off[s]] = 1;
     }
-    w->n_act = 0;
-    for (k = 0; k < w->nodes; ++k)
-        if (w->mark[k]) {
-            w->mark[k] = 0;
-            w->dof[k] = (long)w->n_act;
-            w->act[w->n_act++] = k;
+    w->s.n_act = 0;
+    for (k = 0; k < w->s.nodes; ++k)
+        if (w->s.mark[k]) {
+            w->s.mark[k] = 0;
+            w->s.dof[k] = (long)w->s.n_act;
+            w->s.act[w->s.n_act++] = k;
         }
 }
 
@@ -2481,13 +2500,13 @@ static void pn__mpm_p2g(pn_mpm_world *w) {
     int d = w->dim, dd = d * d;
     long lk;
     PN__OMP_FOR
-    for (lk = 0; lk < (long)w->n_act; ++lk) {
+    for (lk = 0; lk < (long)w->s.n_act; ++lk) {
         size_t k = (size_t)lk, base[27], s;
-        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->act[k], base, o, sl), b, i, j;
+        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->s.act[k], base, o, sl), b, i, j;
         pn_real m = 0, mom[3] = {0, 0, 0};
         for (b = 0; b < nb; ++b)
-            for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s) {
-                size_t p = w->order[s];
+            for (s = w->s.start[base[b]]; s < w->s.start[base[b] + 1]; ++s) {
+                size_t p = w->s.order[s];
                 pn_real dpos[3], wt = pn__mpm_weight(w, p, o[b], dpos), wm = wt * w->mass[p];
                 const pn_real *vp = w->v + p * (size_t)d, *C = w->C + p * (size_t)dd;
                 m += wm;
@@ -2497,10 +2516,10 @@ static void pn__mpm_p2g(pn_mpm_world *w) {
                     mom[i] += wm * acc;
                 }
             }
-        w->grid_m[k] = m;
+        w->s.grid_m[k] = m;
         for (i = 0; i < d; ++i) {
-            w->grid_v[k * (size_t)d + (size_t)i] = mom[i];
-            if (w->desc.filter_time_s > 0) w->grid_v0[k * (size_t)d + (size_t)i] = m > 0 ? mom[i] / m : 0;
+            w->s.grid_v[k * (size_t)d + (size_t)i] = mom[i];
+            if (w->desc.filter_time_s > 0) w->s.grid_v0[k * (size_t)d + (size_t)i] = m > 0 ? mom[i] / m : 0;
         }
     }
 }
@@ -2552,18 +2571,18 @@ static void pn__mpm_push3_at(const pn_real *q, const long *dof, const pn_real *v
 
 static void pn__mpm_push2(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
                           const pn_real *base, pn_real *out) { /* by sorted index j */
-    pn__mpm_push2_at(w->pq + j * 18, w->pdof + j * 9, v, dt, base, out);
+    pn__mpm_push2_at(w->s.pq + j * 18, w->s.pdof + j * 9, v, dt, base, out);
 }
 
 static void pn__mpm_push3(const pn_mpm_world *w, size_t j, const pn_real *v, pn_real dt,
                           const pn_real *base, pn_real *out) {
-    pn__mpm_push3_at(w->pq + j * 81, w->pdof + j * 27, v, dt, base, out);
+    pn__mpm_push3_at(w->s.pq + j * 81, w->s.pdof + j * 27, v, dt, base, out);
 }
 
 static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_real dt,
                          const pn_real *base, pn_real *out) { /* by particle index p */
-    if (w->dim == 2) pn__mpm_push2(w, w->prank[p], v, dt, base, out);
-    else pn__mpm_push3(w, w->prank[p], v, dt, base, out);
+    if (w->dim == 2) pn__mpm_push2(w, w->s.prank[p], v, dt, base, out);
+    else pn__mpm_push3(w, w->s.prank[p], v, dt, base, out);
 }
 
 /* Grid to particles into scratch: APIC v, C (with filter_time_s > 0, AFLIP: v = v_PIC +
@@ -2587,38 +2606,38 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
         pn_real nv[3] = {0, 0, 0}, nm[3] = {0, 0, 0}, ov[3] = {0, 0, 0}, nC[9] = {0}, Fn[9], Z[9], hn;
         pn_real *xp = w->x + q * (size_t)d;
         int i, j, s, stat;
-        w->sactive[q] = w->active[q];
-        w->pstat[q] = 0;
+        w->s.sactive[q] = w->active[q];
+        w->s.pstat[q] = 0;
         if (!w->active[q]) { /* retired particles keep their last state */
-            memcpy(w->sx + q * (size_t)d, xp, sizeof(pn_real) * (size_t)d);
-            memcpy(w->sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
-            memcpy(w->sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-            memcpy(w->sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-            w->sh[q] = w->h[q];
+            memcpy(w->s.sx + q * (size_t)d, xp, sizeof(pn_real) * (size_t)d);
+            memcpy(w->s.sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+            memcpy(w->s.sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+            memcpy(w->s.sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+            w->s.sh[q] = w->h[q];
             continue;
         }
-        for (s = 0; s < w->ns; ++s) {
-            size_t node = (size_t)w->dof[w->pbase[q] + w->slot_off[s]] * (size_t)d;
+        for (s = 0; s < w->s.ns; ++s) {
+            size_t node = (size_t)w->s.dof[w->s.pbase[q] + w->s.slot_off[s]] * (size_t)d;
             const pn_real *gv = (gvel ? gvel : gv_all) + node;
-            pn_real dpos[3], wt = pn__mpm_weight(w, q, w->slot[s], dpos);
+            pn_real dpos[3], wt = pn__mpm_weight(w, q, w->s.slot[s], dpos);
             for (i = 0; i < d; ++i) {
                 nv[i] += wt * gv[i];
                 nm[i] += wt * gv_all[node + (size_t)i];
-                if (flip > 0) ov[i] += wt * w->grid_v0[node + (size_t)i];
+                if (flip > 0) ov[i] += wt * w->s.grid_v0[node + (size_t)i];
                 for (j = 0; j < d; ++j) nC[i * d + j] += 4 * inv_dx * inv_dx * wt * gv[i] * dpos[j];
             }
         }
-        if (w->stress_on) { /* pq holds g: F = exp(dt sum v g^T) F^n (cells: L_c, >>stress) */
+        if (w->s.stress_on) { /* pq holds g: F = exp(dt sum v g^T) F^n (cells: L_c, >>stress) */
             pn_real L[9];
             pn__mpm_push(w, q, gv_all, dt, NULL, L);
-            if (w->stress_on == 2) { /* the cell's strain rate, the particle's own spin */
-                size_t r = w->inc[2 * w->start[w->nodes] + w->prank[q]];
-                const pn_real *b = w->pb + r * (size_t)(w->ns * d);
-                const long *dof = w->pdof + r * (size_t)w->ns;
+            if (w->s.stress_on == 2) { /* the cell's strain rate, the particle's own spin */
+                size_t r = w->s.inc[2 * w->s.start[w->s.nodes] + w->s.prank[q]];
+                const pn_real *b = w->s.pb + r * (size_t)(w->s.ns * d);
+                const long *dof = w->s.pdof + r * (size_t)w->s.ns;
                 pn_real Lc[9];
                 int a, e;
-                if (d == 2) pn__mpm_push2_at(b, dof, gv_all, dt / w->phG[r], NULL, Lc);
-                else pn__mpm_push3_at(b, dof, gv_all, dt / w->phG[r], NULL, Lc);
+                if (d == 2) pn__mpm_push2_at(b, dof, gv_all, dt / w->s.phG[r], NULL, Lc);
+                else pn__mpm_push3_at(b, dof, gv_all, dt / w->s.phG[r], NULL, Lc);
                 for (a = 0; a < d; ++a)
                     for (e = 0; e < d; ++e)
                         Lc[a * d + e] = (Lc[a * d + e] + Lc[e * d + a]) / 2 + (L[a * d + e] - L[e * d + a]) / 2;
@@ -2638,25 +2657,25 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
         stat = (int)pn_return_map(&g->material, d, Fn, w->h[q], Z, &hn, NULL);
         if (stat == PN_OK && (!pn__all_finite(d, nv) || !pn__all_finite(dd, nC))) stat = PN_ERROR_OVERFLOW;
         if (stat != PN_OK) {
-            w->pstat[q] = stat;
+            w->s.pstat[q] = stat;
             continue;
         }
         if (hn != w->h[q] || memcmp(Z, Fn, sizeof(pn_real) * (size_t)dd) != 0) stat |= 0x100;
         for (i = 0; i < d; ++i) {
-            w->sv[q * (size_t)d + (size_t)i] = nv[i] + flip * (w->v[q * (size_t)d + (size_t)i] - ov[i]);
-            w->sx[q * (size_t)d + (size_t)i] = xp[i] + dt * nm[i];
+            w->s.sv[q * (size_t)d + (size_t)i] = nv[i] + flip * (w->v[q * (size_t)d + (size_t)i] - ov[i]);
+            w->s.sx[q * (size_t)d + (size_t)i] = xp[i] + dt * nm[i];
             if (!(PN__FABS(nm[i]) <= reach)) stat |= 0x400; /* more than the limit along an axis */
         }
-        memcpy(w->sC + q * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);
-        memcpy(w->sF + q * (size_t)dd, Z, sizeof(pn_real) * (size_t)dd);
-        w->sh[q] = hn;
-        if (!pn__mpm_in_grid(w, w->sx + q * (size_t)d)) { /* went through a wall */
-            w->sactive[q] = 0;
+        memcpy(w->s.sC + q * (size_t)dd, nC, sizeof(pn_real) * (size_t)dd);
+        memcpy(w->s.sF + q * (size_t)dd, Z, sizeof(pn_real) * (size_t)dd);
+        w->s.sh[q] = hn;
+        if (!pn__mpm_in_grid(w, w->s.sx + q * (size_t)d)) { /* went through a wall */
+            w->s.sactive[q] = 0;
             stat |= w->desc.allow_outflow ? 0x200 : 0x800;
         } else {
-            pn__mpm_wall_plane(w, w->sx + q * (size_t)d);
+            pn__mpm_wall_plane(w, w->s.sx + q * (size_t)d);
         }
-        w->pstat[q] = stat;
+        w->s.pstat[q] = stat;
     }
     r = pn__mpm_first_error(w, dt);
     if (r != PN_OK) return r;
@@ -2664,12 +2683,12 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
         pn_real sp = 0;
         int i;
         if (!w->active[p]) continue;
-        if (w->pstat[p] & 0x100) st->plastic++;
-        if (w->pstat[p] & 0x200) {
+        if (w->s.pstat[p] & 0x100) st->plastic++;
+        if (w->s.pstat[p] & 0x200) {
             st->left_domain++;
             continue;
         }
-        for (i = 0; i < d; ++i) sp += w->sv[p * (size_t)d + (size_t)i] * w->sv[p * (size_t)d + (size_t)i];
+        for (i = 0; i < d; ++i) sp += w->s.sv[p * (size_t)d + (size_t)i] * w->s.sv[p * (size_t)d + (size_t)i];
         st->particles++;
         st->max_speed_m_s = PN__MAX(st->max_speed_m_s, PN__SQRT(sp));
     }
@@ -2680,13 +2699,13 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
 static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
     pn_real *t;
     unsigned char *u;
-    t = w->x; w->x = w->sx; w->sx = t;
-    t = w->v; w->v = w->sv; w->sv = t;
-    t = w->C; w->C = w->sC; w->sC = t;
-    t = w->F; w->F = w->sF; w->sF = t;
-    t = w->h; w->h = w->sh; w->sh = t;
-    u = w->active; w->active = w->sactive; w->sactive = u;
-    w->rec_ok = 0; /* the explicit step, which keeps the stress, sets it again */
+    t = w->x; w->x = w->s.sx; w->s.sx = t;
+    t = w->v; w->v = w->s.sv; w->s.sv = t;
+    t = w->C; w->C = w->s.sC; w->s.sC = t;
+    t = w->F; w->F = w->s.sF; w->s.sF = t;
+    t = w->h; w->h = w->s.sh; w->s.sh = t;
+    u = w->active; w->active = w->s.sactive; w->s.sactive = u;
+    w->s.rec_ok = 0; /* the explicit step, which keeps the stress, sets it again */
     w->left_total += st->left_domain;
     w->time_s += dt;
     w->steps++;
@@ -2705,26 +2724,26 @@ static int pn__mpm_mech_energy(pn_mpm_world *w, const pn_real *x, const pn_real 
     long lp;
     double low = 0;
     for (i = 0; i < d; ++i) /* the grid's corner lowest along gravity */
-        low += (double)w->desc.gravity[i] * (double)(w->desc.gravity[i] < 0 ? w->grid_lo[i] : w->grid_hi[i]);
+        low += (double)w->desc.gravity[i] * (double)(w->desc.gravity[i] < 0 ? w->s.grid_lo[i] : w->s.grid_hi[i]);
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp) {
         size_t p = (size_t)lp;
         pn_real psi;
         double ke = 0, pe = 0;
         int a;
-        w->pscal[p] = 0;
+        w->s.pscal[p] = 0;
         if (!active[p]) continue;
         if (pn_elastic_energy(&w->groups[w->group[p]].material, d, F + p * (size_t)dd, h[p], &psi, NULL, NULL, 0) != PN_OK) {
-            w->pscal[p] = (pn_real)HUGE_VAL - (pn_real)HUGE_VAL; /* a NaN: the sum says it failed */
+            w->s.pscal[p] = (pn_real)HUGE_VAL - (pn_real)HUGE_VAL; /* a NaN: the sum says it failed */
             continue;
         }
         for (a = 0; a < d; ++a) {
             ke += (double)v[p * (size_t)d + (size_t)a] * (double)v[p * (size_t)d + (size_t)a];
             pe += (double)w->desc.gravity[a] * (double)x[p * (size_t)d + (size_t)a];
         }
-        w->pscal[p] = (pn_real)((double)w->mass[p] * (ke / 2 + (low - pe)) + (double)w->vol0[p] * (double)psi);
+        w->s.pscal[p] = (pn_real)((double)w->mass[p] * (ke / 2 + (low - pe)) + (double)w->vol0[p] * (double)psi);
     }
-    *e = (double)pn__mpm_sum(w, w->n, w->pscal, NULL);
+    *e = (double)pn__mpm_sum(w, w->n, w->s.pscal, NULL);
     return pn__finite((pn_real)*e);
 }
 
@@ -2741,7 +2760,7 @@ static pn_result pn__mpm_energy_guard(pn_mpm_world *w, const pn_mpm_implicit_des
             w->colliders[c].velocity_m_s[2] != 0)
             return PN_OK;
     if (!pn__mpm_mech_energy(w, w->x, w->v, w->F, w->h, w->active, &e0) ||
-        !pn__mpm_mech_energy(w, w->sx, w->sv, w->sF, w->sh, w->sactive, &e1) || !(e0 > 0))
+        !pn__mpm_mech_energy(w, w->s.sx, w->s.sv, w->s.sF, w->s.sh, w->s.sactive, &e1) || !(e0 > 0))
         return PN_OK; /* nothing to measure by: the step's own checks stand */
     st->energy_rise = PN__MAX(st->energy_rise, (pn_real)((e1 - e0) / e0));
     if (e1 - e0 > tol * e0)
@@ -2800,8 +2819,8 @@ static int pn__mpm_obstacle(const pn_mpm_world *w, const int *idx, pn_real m, pn
     for (i = 0; i < 9; ++i) dir[i] = 0;
     for (i = 0; i < 3; ++i) vel[i] = 0;
     for (i = 0; i < d; ++i) { /* the rows on the planes too (see pn__mpm_wall_plane) */
-        if (idx[i] <= w->wall) dir[3 * cn++ + i] = 1;
-        else if (idx[i] >= w->desc.res[i] - w->wall) dir[3 * cn++ + i] = -1;
+        if (idx[i] <= w->s.wall) dir[3 * cn++ + i] = 1;
+        else if (idx[i] >= w->desc.res[i] - w->s.wall) dir[3 * cn++ + i] = -1;
     }
     if (cn == 0) {
         for (i = 0; i < d; ++i) xn[i] = w->desc.origin_m[i] + (pn_real)idx[i] * w->desc.dx_m;
@@ -2836,17 +2855,17 @@ static int pn__mpm_obstacle(const pn_mpm_world *w, const int *idx, pn_real m, pn
 static void pn__mpm_contact(pn_mpm_world *w, pn_real t) {
     long lk;
     PN__OMP_FOR
-    for (lk = 0; lk < (long)w->n_act; ++lk) {
+    for (lk = 0; lk < (long)w->s.n_act; ++lk) {
         size_t k = (size_t)lk;
         int idx[3], kind, cn;
         pn_real mu;
-        pn__mpm_node_index(w, w->act[k], idx);
-        cn = pn__mpm_obstacle(w, idx, w->grid_m[k], t, w->cdir + k * 9, w->cvel + k * 3, &kind, &mu);
-        w->cn[k] = (unsigned char)cn;
-        w->ckind[k] = (unsigned char)kind;
-        w->cmu[k] = mu;
-        w->clam[k] = 0;
-        w->chold[k] = (unsigned char)((1 << cn) - 1);
+        pn__mpm_node_index(w, w->s.act[k], idx);
+        cn = pn__mpm_obstacle(w, idx, w->s.grid_m[k], t, w->s.cdir + k * 9, w->s.cvel + k * 3, &kind, &mu);
+        w->s.cn[k] = (unsigned char)cn;
+        w->s.ckind[k] = (unsigned char)kind;
+        w->s.cmu[k] = mu;
+        w->s.clam[k] = 0;
+        w->s.chold[k] = (unsigned char)((1 << cn) - 1);
     }
 }
 
@@ -2878,14 +2897,14 @@ static void pn__mpm_project(int d, int cn, int kind, const pn_real *dir, const p
 /* remove the held components of x (a node vector) */
 static void pn__mpm_filter(const pn_mpm_world *w, size_t k, pn_real *x) {
     int d = w->dim, b, i;
-    const pn_real *dir = w->cdir + k * 9;
-    if (w->chold[k] & PN__MPM_STICK) {
+    const pn_real *dir = w->s.cdir + k * 9;
+    if (w->s.chold[k] & PN__MPM_STICK) {
         for (i = 0; i < d; ++i) x[i] = 0;
         return;
     }
-    for (b = 0; b < w->cn[k]; ++b) {
+    for (b = 0; b < w->s.cn[k]; ++b) {
         pn_real xn = 0;
-        if (!(w->chold[k] >> b & 1)) continue;
+        if (!(w->s.chold[k] >> b & 1)) continue;
         for (i = 0; i < d; ++i) xn += x[i] * dir[3 * b + i];
         for (i = 0; i < d; ++i) x[i] -= xn * dir[3 * b + i];
     }
@@ -2894,7 +2913,7 @@ static void pn__mpm_filter(const pn_mpm_world *w, size_t k, pn_real *x) {
 /* set the held components of v to the obstacle's */
 static void pn__mpm_hold(const pn_mpm_world *w, size_t k, pn_real *v) {
     int d = w->dim, i;
-    const pn_real *vel = w->cvel + k * 3;
+    const pn_real *vel = w->s.cvel + k * 3;
     pn_real u[3];
     for (i = 0; i < d; ++i) u[i] = v[i] - vel[i];
     pn__mpm_filter(w, k, u);
@@ -3016,7 +3035,7 @@ static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, p
 static inline void pn__mpm_base(const pn_mpm_world *w, const pn_real *x, int *base, pn_real *fx) {
     int i, d = w->dim;
     for (i = 0; i < d; ++i) {
-        pn_real xc = (x[i] - w->desc.origin_m[i]) * w->inv_dx;
+        pn_real xc = (x[i] - w->desc.origin_m[i]) * w->s.inv_dx;
         base[i] = (int)(xc - (pn_real)0.5);
         fx[i] = xc - (pn_real)base[i];
     }
@@ -3026,7 +3045,7 @@ static inline void pn__mpm_base(const pn_mpm_world *w, const pn_real *x, int *ba
 
 /* the stencil base row (axis 0) of a particle at x inside the grid */
 static inline int pn__mpm_row_of(const pn_mpm_world *w, const pn_real *x) {
-    return (int)((x[0] - w->desc.origin_m[0]) * w->inv_dx - (pn_real)0.5);
+    return (int)((x[0] - w->desc.origin_m[0]) * w->s.inv_dx - (pn_real)0.5);
 }
 
 /* What P2G needs of a particle's state beyond x, v, C and m, in one record (written by the G2P
@@ -3039,7 +3058,7 @@ PN__MPM_INLINE void pn__mpm_pack(const pn_mpm_world *w, size_t p, const pn_real 
                                  const int d) {
     int i, j, n = 0, pay = PN__MPM_PAY(d);
     pn_real out[PN__MPM_PAY(3)];
-    pn_real k = -w->vol0[p] * (4 * w->inv_dx * w->inv_dx); /* no division per particle */
+    pn_real k = -w->vol0[p] * (4 * w->s.inv_dx * w->s.inv_dx); /* no division per particle */
     for (i = 0; i < d; ++i)
         for (j = i; j < d; ++j) out[n++] = k * tau[i * d + j];
     out[n] = hard;
@@ -3056,16 +3075,16 @@ static inline void pn__mpm_scatter2(pn_mpm_world *w, size_t p, pn_real dt, pn_re
     const pn_real *x = w->x + p * 2, *v = w->v + p * 2, *C = w->C + p * 4;
     pn_real *g;
     int base[3], i, j;
-    size_t s0 = w->stride[0];
-    for (i = 0; i < 3; ++i) k[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(2));
+    size_t s0 = w->s.stride[0];
+    for (i = 0; i < 3; ++i) k[i] = PN__MPM_REC(w->s.ppay, p, i, PN__MPM_PAY(2));
     for (i = 0; i < 2; ++i) mv[i] = m * v[i];
     for (i = 0; i < 4; ++i) mC[i] = m * C[i];
     q00 = mC[0] + dt * k[0], q01 = mC[1] + dt * k[1], q10 = mC[2] + dt * k[1], q11 = mC[3] + dt * k[2];
     pn__mpm_base(w, x, base, fx);
     PN__MPM_SPLINE(wx, fx[0]);
     PN__MPM_SPLINE(wy, fx[1]);
-    if (mark) w->bmark[(unsigned)base[0] / PN__MPM_BLOCK * w->bstride[0] + (unsigned)base[1] / PN__MPM_BLOCK] = 1;
-    g = w->gdense + ((size_t)(base[0] + i0) * s0 + (size_t)base[1]) * 4;
+    if (mark) w->s.bmark[(unsigned)base[0] / PN__MPM_BLOCK * w->s.bstride[0] + (unsigned)base[1] / PN__MPM_BLOCK] = 1;
+    g = w->s.gdense + ((size_t)(base[0] + i0) * s0 + (size_t)base[1]) * 4;
     for (i = i0; i < i1; ++i, g += s0 * 4) {
         pn_real ex = ((pn_real)i - fx[0]) * dx, a0 = mv[0] + q00 * ex, a1 = mv[1] + q10 * ex;
         for (j = 0; j < 3; ++j) {
@@ -3092,17 +3111,17 @@ static inline void pn__mpm_scatter3(pn_mpm_world *w, size_t p, pn_real dt, pn_re
     const pn_real *x = w->x + p * 3, *v = w->v + p * 3, *C = w->C + p * 9;
     pn_real *g;
     int base[3], i, j, l, c;
-    size_t s0 = w->stride[0], s1 = w->stride[1];
-    for (i = 0; i < 6; ++i) k[i] = PN__MPM_REC(w->ppay, p, i, PN__MPM_PAY(3));
+    size_t s0 = w->s.stride[0], s1 = w->s.stride[1];
+    for (i = 0; i < 6; ++i) k[i] = PN__MPM_REC(w->s.ppay, p, i, PN__MPM_PAY(3));
     for (i = 0; i < 3; ++i) mv[i] = m * v[i];
     for (i = 0; i < 9; ++i) mC[i] = m * C[i];
     pn__mpm_base(w, x, base, fx);
     for (i = 0; i < 3; ++i) PN__MPM_SPLINE(W[i], fx[i]);
     for (c = 0; c < 9; ++c) q[c] = mC[c] + dt * k[sym[c]];
     if (mark)
-        w->bmark[(unsigned)base[0] / PN__MPM_BLOCK * w->bstride[0] + (unsigned)base[1] / PN__MPM_BLOCK * w->bstride[1] +
+        w->s.bmark[(unsigned)base[0] / PN__MPM_BLOCK * w->s.bstride[0] + (unsigned)base[1] / PN__MPM_BLOCK * w->s.bstride[1] +
                  (unsigned)base[2] / PN__MPM_BLOCK] = 1;
-    g = w->gdense + ((size_t)base[0] * s0 + (size_t)base[1] * s1 + (size_t)base[2]) * 4;
+    g = w->s.gdense + ((size_t)base[0] * s0 + (size_t)base[1] * s1 + (size_t)base[2]) * 4;
     for (i = i0; i < i1; ++i) {
         pn_real ex = ((pn_real)i - fx[0]) * dx;
         pn_real a0 = mv[0] + q[0] * ex, a1 = mv[1] + q[3] * ex, a2 = mv[2] + q[6] * ex;
@@ -3174,14 +3193,14 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, size_t p0, const size_t *idx
                                    const unsigned char *mark) {
     enum { L = PN__MPM_LANES, pay = PN__MPM_PAY(2) };
     pn_real rec[12][L], c[9][3][L], t[9][L][4], fx0[L], fx1[L], wx[3][L], wy[3][L], q00[L], q01[L], q10[L], q11[L];
-    pn_real dx = w->desc.dx_m, inv_dx = w->inv_dx;
+    pn_real dx = w->desc.dx_m, inv_dx = w->s.inv_dx;
     pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1];
-    unsigned char *bmark = w->bmark;
+    unsigned char *bmark = w->s.bmark;
     int b0[L], b1[L], i, j, l, k;
-    size_t s0 = w->stride[0], bs0 = w->bstride[0];
+    size_t s0 = w->s.stride[0], bs0 = w->s.bstride[0];
     if (!idx) { /* a whole block: x, m, m v, m C (as pn__mpm_scatter2) and the record's k */
         const pn_real *X = w->x + p0 * 2, *V = w->v + p0 * 2, *Cp = w->C + p0 * 4, *M = w->mass + p0;
-        const pn_real *R = &PN__MPM_REC(w->ppay, p0, 0, pay);
+        const pn_real *R = &PN__MPM_REC(w->s.ppay, p0, 0, pay);
         for (l = 0; l < L; ++l) {
             pn_real m = M[l];
             rec[0][l] = X[2 * l], rec[1][l] = X[2 * l + 1], rec[2][l] = m;
@@ -3196,7 +3215,7 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, size_t p0, const size_t *idx
             rec[0][l] = w->x[2 * q], rec[1][l] = w->x[2 * q + 1], rec[2][l] = m;
             rec[3][l] = m * w->v[2 * q], rec[4][l] = m * w->v[2 * q + 1];
             for (k = 0; k < 4; ++k) rec[5 + k][l] = m * w->C[4 * q + (size_t)k];
-            for (k = 0; k < 3; ++k) rec[9 + k][l] = PN__MPM_REC(w->ppay, q, k, pay);
+            for (k = 0; k < 3; ++k) rec[9 + k][l] = PN__MPM_REC(w->s.ppay, q, k, pay);
         }
     for (l = 0; l < L; ++l) { /* loops over l innermost: gcc -O2 vectorizes them, and unrolls no inner loop */
         pn_real xc = (rec[0][l] - ox) * inv_dx, yc = (rec[1][l] - oy) * inv_dx;
@@ -3220,7 +3239,7 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, size_t p0, const size_t *idx
         }
     for (l = 0; l < n; ++l) {
         int i0 = PN__MAX(r0 - b0[l], 0), i1 = PN__MIN(r1 - b0[l], 3);
-        pn_real *g = w->gdense + ((size_t)b0[l] * s0 + (size_t)b1[l]) * 4;
+        pn_real *g = w->s.gdense + ((size_t)b0[l] * s0 + (size_t)b1[l]) * 4;
         if (mark[l]) bmark[(unsigned)b0[l] / PN__MPM_BLOCK * bs0 + (unsigned)b1[l] / PN__MPM_BLOCK] = 1;
         for (i = i0; i < i1; ++i) {
             pn_real *gi = g + (size_t)i * s0 * 4;
@@ -3247,10 +3266,10 @@ static void pn__mpm_scatter2_lanes(pn_mpm_world *w, size_t p0, const size_t *idx
 static void pn__mpm_xp2g_slab(pn_mpm_world *w, pn_real dt, int r0, int r1) {
     enum { L = PN__MPM_LANES };
     int d = w->dim, whole = r0 == 0 && r1 > w->desc.res[0], nl = 0, l;
-    pn_real *v0 = w->gdense0;
+    pn_real *v0 = w->s.gdense0;
     size_t p, idx[2 * L];
     unsigned char mark[2 * L], bm[L], in[L];
-    const int *prow = w->prow;
+    const int *prow = w->s.prow;
     const unsigned char *active = w->active;
     if (d == 2 && !v0) {
         for (p = 0; p < w->n; p += L) {
@@ -3310,11 +3329,11 @@ static void pn__mpm_xp2g(pn_mpm_world *w, pn_real dt) {
                      4% of a 2D step at 30k particles */
         size_t p, tot = 0, acc = 0, stride = w->n / 8192 + 1;
         int row, k = 1;
-        memset(w->rowcount, 0, sizeof(size_t) * (size_t)rows);
+        memset(w->s.rowcount, 0, sizeof(size_t) * (size_t)rows);
         for (p = 0; p < w->n; p += stride)
-            if (w->active[p]) w->rowcount[w->prow[p]]++, tot++;
+            if (w->active[p]) w->s.rowcount[w->s.prow[p]]++, tot++;
         for (row = 0; row < rows && k < ns; ++row) {
-            acc += w->rowcount[row];
+            acc += w->s.rowcount[row];
             if ((row + 1) % PN__MPM_BLOCK) continue;
             while (k < ns && acc * (size_t)ns >= tot * (size_t)k) cut[k++] = row + 1;
         }
@@ -3325,34 +3344,34 @@ static void pn__mpm_xp2g(pn_mpm_world *w, pn_real dt) {
 #pragma omp parallel for schedule(static, 1) num_threads(ns) if (ns > 1)
 #endif
     for (ls = 0; ls < ns; ++ls) pn__mpm_xp2g_slab(w, dt, cut[ls], cut[ls + 1]);
-    for (b = 0; b < w->nblocks; ++b) { /* upper neighbours of marked blocks get mark 2 */
+    for (b = 0; b < w->s.nblocks; ++b) { /* upper neighbours of marked blocks get mark 2 */
         size_t r = b, up[3];
         int i, o;
-        if (w->bmark[b] != 1) continue;
+        if (w->s.bmark[b] != 1) continue;
         for (i = d - 1; i >= 0; --i) {
-            up[i] = r % w->nblk[i] + 1 < w->nblk[i];
-            r /= w->nblk[i];
+            up[i] = r % w->s.nblk[i] + 1 < w->s.nblk[i];
+            r /= w->s.nblk[i];
         }
         for (o = 1; o < 1 << d; ++o) {
             size_t nb = b;
             int ok = 1;
             for (i = 0; i < d; ++i)
-                if (o >> i & 1) ok &= (int)up[i], nb += w->bstride[i];
-            if (ok && !w->bmark[nb]) w->bmark[nb] = 2;
+                if (o >> i & 1) ok &= (int)up[i], nb += w->s.bstride[i];
+            if (ok && !w->s.bmark[nb]) w->s.bmark[nb] = 2;
         }
     }
-    w->n_bact = 0;
-    for (b = 0; b < w->nblocks; ++b)
-        if (w->bmark[b]) w->bmark[b] = 0, w->bact[w->n_bact++] = b;
+    w->s.n_bact = 0;
+    for (b = 0; b < w->s.nblocks; ++b)
+        if (w->s.bmark[b]) w->s.bmark[b] = 0, w->s.bact[w->s.n_bact++] = b;
 }
 
 /* the node range of block b, clipped to the grid: lo, hi (exclusive) per axis */
 static void pn__mpm_block_nodes(const pn_mpm_world *w, size_t b, int *lo, int *hi) {
     int i;
     for (i = w->dim - 1; i >= 0; --i) {
-        lo[i] = (int)(b % w->nblk[i]) * PN__MPM_BLOCK;
+        lo[i] = (int)(b % w->s.nblk[i]) * PN__MPM_BLOCK;
         hi[i] = PN__MIN(lo[i] + PN__MPM_BLOCK, w->desc.res[i] + 1);
-        b /= w->nblk[i];
+        b /= w->s.nblk[i];
     }
     if (w->dim == 2) lo[2] = 0, hi[2] = 1;
 }
@@ -3362,19 +3381,19 @@ static size_t pn__mpm_xgrid(pn_mpm_world *w, pn_real dt) {
     int d = w->dim;
     long lb;
     size_t count = 0;
-    pn_real *v0 = w->gdense0;
-    int walls_or_colliders = w->wall > 0 || w->n_colliders > 0;
+    pn_real *v0 = w->s.gdense0;
+    int walls_or_colliders = w->s.wall > 0 || w->n_colliders > 0;
 #if defined(_OPENMP)
 #pragma omp parallel for schedule(dynamic, 16) reduction(+ : count) if (w->n >= w->desc.parallel_min_particles)
 #endif
-    for (lb = 0; lb < (long)w->n_bact; ++lb) {
+    for (lb = 0; lb < (long)w->s.n_bact; ++lb) {
         int lo[3], hi[3], idx[3], i;
-        pn__mpm_block_nodes(w, w->bact[lb], lo, hi);
+        pn__mpm_block_nodes(w, w->s.bact[lb], lo, hi);
         for (idx[0] = lo[0]; idx[0] < hi[0]; ++idx[0])
             for (idx[1] = lo[1]; idx[1] < hi[1]; ++idx[1])
                 for (idx[2] = lo[2]; idx[2] < hi[2]; ++idx[2]) {
-                    size_t node = (size_t)idx[0] * w->stride[0] + (size_t)idx[1] * w->stride[1] + (size_t)idx[2];
-                    pn_real *g = w->gdense + node * 4, m = g[0], dir[9], vel[3], mu;
+                    size_t node = (size_t)idx[0] * w->s.stride[0] + (size_t)idx[1] * w->s.stride[1] + (size_t)idx[2];
+                    pn_real *g = w->s.gdense + node * 4, m = g[0], dir[9], vel[3], mu;
                     int kind, cn = 0;
                     if (!(m > 0)) continue;
                     count++;
@@ -3384,7 +3403,7 @@ static size_t pn__mpm_xgrid(pn_mpm_world *w, pn_real dt) {
                     if (!walls_or_colliders) continue;
                     if (w->n_colliders == 0) { /* only walls: an interior node has no obstacle */
                         int inside = 1;
-                        for (i = 0; i < d; ++i) inside &= idx[i] > w->wall && idx[i] < w->desc.res[i] - w->wall;
+                        for (i = 0; i < d; ++i) inside &= idx[i] > w->s.wall && idx[i] < w->desc.res[i] - w->s.wall;
                         if (inside) continue;
                     }
                     cn = pn__mpm_obstacle(w, idx, m, w->time_s, dir, vel, &kind, &mu);
@@ -3407,7 +3426,7 @@ static int pn__mpm_xstencil(const pn_mpm_world *w, const pn_real *x, size_t *nod
                 size_t f = 0;
                 wt[n] = 1;
                 for (i = 0; i < d; ++i) {
-                    f += (size_t)(base[i] + o[i]) * w->stride[i];
+                    f += (size_t)(base[i] + o[i]) * w->s.stride[i];
                     wt[n] *= W[i][o[i]];
                     pos[n][i] = w->desc.origin_m[i] + (pn_real)(base[i] + o[i]) * w->desc.dx_m;
                 }
@@ -3420,8 +3439,8 @@ static int pn__mpm_xstencil(const pn_mpm_world *w, const pn_real *x, size_t *nod
    to the momentum of its nodes (before the grid update divides by the mass) */
 static void pn__mpm_xloads(pn_mpm_world *w, pn_real dt) {
     int d = w->dim, a, s, i, ns;
-    for (a = 0; a < w->n_loads; ++a) {
-        const pn__mpm_load *L = &w->loads[a];
+    for (a = 0; a < w->s.n_loads; ++a) {
+        const pn__mpm_load *L = &w->s.loads[a];
         pn_real span = L->on ? PN__MIN(dt, L->t_end - w->time_s) : 0;
         size_t k, node[27];
         pn_real wt[27], pos[27][3];
@@ -3431,7 +3450,7 @@ static void pn__mpm_xloads(pn_mpm_world *w, pn_real dt) {
             if (!w->active[p]) continue;
             ns = pn__mpm_xstencil(w, w->x + p * (size_t)d, node, wt, pos);
             for (s = 0; s < ns; ++s)
-                for (i = 0; i < d; ++i) w->gdense[node[s] * 4 + 1 + (size_t)i] += wt[s] * w->mass[p] * L->acc[i] * span;
+                for (i = 0; i < d; ++i) w->s.gdense[node[s] * 4 + 1 + (size_t)i] += wt[s] * w->mass[p] * L->acc[i] * span;
         }
     }
 }
@@ -3441,12 +3460,12 @@ static void pn__mpm_xforces(pn_mpm_world *w, pn_real dt) {
     int d = w->dim, s, i, ns;
     size_t k, node[27];
     pn_real wt[27], pos[27][3];
-    for (k = 0; k < w->xf_n; ++k) {
-        size_t p = w->xf_idx[k];
+    for (k = 0; k < w->s.xf_n; ++k) {
+        size_t p = w->s.xf_idx[k];
         if (!w->active[p]) continue;
         ns = pn__mpm_xstencil(w, w->x + p * (size_t)d, node, wt, pos);
         for (s = 0; s < ns; ++s)
-            for (i = 0; i < d; ++i) w->gdense[node[s] * 4 + 1 + (size_t)i] += wt[s] * w->xf[k * (size_t)d + (size_t)i] * dt;
+            for (i = 0; i < d; ++i) w->s.gdense[node[s] * 4 + 1 + (size_t)i] += wt[s] * w->s.xf[k * (size_t)d + (size_t)i] * dt;
     }
 }
 
@@ -3454,8 +3473,8 @@ static void pn__mpm_xforces(pn_mpm_world *w, pn_real dt) {
    of a rotation to second order; the particles themselves land exactly, pn__mpm_xdrive_state) */
 static void pn__mpm_xdrive_grid(pn_mpm_world *w, pn_real dt) {
     int d = w->dim, a, s, ns;
-    for (a = 0; a < w->n_drives; ++a) {
-        const pn__mpm_drive *D = &w->drives[a];
+    for (a = 0; a < w->s.n_drives; ++a) {
+        const pn__mpm_drive *D = &w->s.drives[a];
         pn_real c[3], wt[27], pos[27][3];
         size_t k, node[27];
         if (!D->on) continue;
@@ -3465,7 +3484,7 @@ static void pn__mpm_xdrive_grid(pn_mpm_world *w, pn_real dt) {
             if (!w->active[p]) continue;
             ns = pn__mpm_xstencil(w, w->x + p * (size_t)d, node, wt, pos);
             for (s = 0; s < ns; ++s)
-                if (w->gdense[node[s] * 4] > 0) pn__mpm_drive_vel(D, d, c, pos[s], w->gdense + node[s] * 4 + 1);
+                if (w->s.gdense[node[s] * 4] > 0) pn__mpm_drive_vel(D, d, c, pos[s], w->s.gdense + node[s] * 4 + 1);
         }
     }
 }
@@ -3475,8 +3494,8 @@ static void pn__mpm_xdrive_grid(pn_mpm_world *w, pn_real dt) {
    carry through a wall, keeps what G2P made of it) */
 static void pn__mpm_xdrive_state(pn_mpm_world *w, pn_real dt) {
     int d = w->dim, dd = d * d, a, i;
-    for (a = 0; a < w->n_drives; ++a) {
-        const pn__mpm_drive *D = &w->drives[a];
+    for (a = 0; a < w->s.n_drives; ++a) {
+        const pn__mpm_drive *D = &w->s.drives[a];
         pn_real c[3], xn[3], Wm[9] = {0};
         size_t k;
         if (!D->on) continue;
@@ -3488,14 +3507,14 @@ static void pn__mpm_xdrive_state(pn_mpm_world *w, pn_real dt) {
         for (k = 0; k < D->n; ++k) {
             size_t p = D->idx[k];
             int in = 1;
-            if (!w->active[p] || !w->sactive[p] || (w->pstat[p] & 0xcff)) continue;
+            if (!w->active[p] || !w->s.sactive[p] || (w->s.pstat[p] & 0xcff)) continue;
             pn__mpm_drive_at(D, d, w->time_s + dt, D->x0 + k * (size_t)d, c, xn);
-            for (i = 0; i < d; ++i) in &= xn[i] >= w->wall_lo[i] && xn[i] <= w->wall_hi[i];
+            for (i = 0; i < d; ++i) in &= xn[i] >= w->s.wall_lo[i] && xn[i] <= w->s.wall_hi[i];
             if (!in) continue;
-            memcpy(w->sx + p * (size_t)d, xn, sizeof(pn_real) * (size_t)d);
-            pn__mpm_drive_vel(D, d, c, xn, w->sv + p * (size_t)d);
-            memcpy(w->sC + p * (size_t)dd, Wm, sizeof(pn_real) * (size_t)dd);
-            w->srow[p] = pn__mpm_row_of(w, xn);
+            memcpy(w->s.sx + p * (size_t)d, xn, sizeof(pn_real) * (size_t)d);
+            pn__mpm_drive_vel(D, d, c, xn, w->s.sv + p * (size_t)d);
+            memcpy(w->s.sC + p * (size_t)dd, Wm, sizeof(pn_real) * (size_t)dd);
+            w->s.srow[p] = pn__mpm_row_of(w, xn);
         }
     }
 }
@@ -3507,31 +3526,31 @@ static void pn__mpm_xclear(pn_mpm_world *w) {
 #if defined(_OPENMP)
 #pragma omp parallel for schedule(static, 16) if (w->n >= w->desc.parallel_min_particles)
 #endif
-    for (lb = 0; lb < (long)w->n_bact; ++lb) {
+    for (lb = 0; lb < (long)w->s.n_bact; ++lb) {
         int lo[3], hi[3], a, b;
-        pn__mpm_block_nodes(w, w->bact[lb], lo, hi);
+        pn__mpm_block_nodes(w, w->s.bact[lb], lo, hi);
         for (a = lo[0]; a < hi[0]; ++a)
             for (b = lo[1]; b < hi[1]; ++b) {
-                size_t n0 = (size_t)a * w->stride[0] + (size_t)b * w->stride[1] + (size_t)lo[2];
-                memset(w->gdense + n0 * 4, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * 4));
-                if (w->gdense0) memset(w->gdense0 + n0 * (size_t)d, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * d));
+                size_t n0 = (size_t)a * w->s.stride[0] + (size_t)b * w->s.stride[1] + (size_t)lo[2];
+                memset(w->s.gdense + n0 * 4, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * 4));
+                if (w->s.gdense0) memset(w->s.gdense0 + n0 * (size_t)d, 0, sizeof(pn_real) * (size_t)((hi[2] - lo[2]) * d));
             }
     }
-    w->n_bact = 0;
+    w->s.n_bact = 0;
 }
 
 /* The grid velocity at a particle at x: v = sum_i w_i v_i and C = (4/dx^2) sum_i w_i v_i
    (x_i - x_p)^T = (4/dx) (sum_i w_i v_i o_i^T - v fx^T), o_i the node's offset in cells
    (APIC / MLS-MPM). Spelled out per dimension (see >>transfer). */
 static void pn__mpm_vel2(const pn_mpm_world *w, const pn_real *x, pn_real *v, pn_real *C) {
-    pn_real fx[3], wx[3], wy[3], v0 = 0, v1 = 0, g00 = 0, g01 = 0, g10 = 0, g11 = 0, k = 4 * w->inv_dx;
+    pn_real fx[3], wx[3], wy[3], v0 = 0, v1 = 0, g00 = 0, g01 = 0, g10 = 0, g11 = 0, k = 4 * w->s.inv_dx;
     const pn_real *gb;
     int base[3], i, j;
-    size_t s0 = w->stride[0] * 4;
+    size_t s0 = w->s.stride[0] * 4;
     pn__mpm_base(w, x, base, fx);
     PN__MPM_SPLINE(wx, fx[0]);
     PN__MPM_SPLINE(wy, fx[1]);
-    gb = w->gdense + ((size_t)base[0] * w->stride[0] + (size_t)base[1]) * 4;
+    gb = w->s.gdense + ((size_t)base[0] * w->s.stride[0] + (size_t)base[1]) * 4;
     for (i = 0; i < 3; ++i, gb += s0) {
         pn_real a0 = 0, a1 = 0, b0 = 0, b1 = 0; /* sums over j: w_j v and w_j v j */
         for (j = 0; j < 3; ++j) {
@@ -3549,16 +3568,16 @@ static void pn__mpm_vel2(const pn_mpm_world *w, const pn_real *x, pn_real *v, pn
 }
 
 static void pn__mpm_vel3(const pn_mpm_world *w, const pn_real *x, pn_real *v, pn_real *C) {
-    pn_real fx[3], W[3][3], g[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}}, k = 4 * w->inv_dx;
+    pn_real fx[3], W[3][3], g[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}}, k = 4 * w->s.inv_dx;
     const pn_real *gb;
     int base[3], i, j, l, c;
     pn__mpm_base(w, x, base, fx);
     for (i = 0; i < 3; ++i) PN__MPM_SPLINE(W[i], fx[i]);
     v[0] = v[1] = v[2] = 0;
-    gb = w->gdense + ((size_t)base[0] * w->stride[0] + (size_t)base[1] * w->stride[1] + (size_t)base[2]) * 4;
+    gb = w->s.gdense + ((size_t)base[0] * w->s.stride[0] + (size_t)base[1] * w->s.stride[1] + (size_t)base[2]) * 4;
     for (i = 0; i < 3; ++i)
         for (j = 0; j < 3; ++j) {
-            const pn_real *gn = gb + ((size_t)i * w->stride[0] + (size_t)j * w->stride[1]) * 4;
+            const pn_real *gn = gb + ((size_t)i * w->s.stride[0] + (size_t)j * w->s.stride[1]) * 4;
             pn_real wij = W[0][i] * W[1][j];
             for (l = 0; l < 3; ++l) {
                 pn_real wt = wij * W[2][l], a = wt * gn[4 * l + 1], b = wt * gn[4 * l + 2], e = wt * gn[4 * l + 3];
@@ -3582,10 +3601,10 @@ static void pn__mpm_vel0(const pn_mpm_world *w, const pn_real *x, pn_real *ov) {
     for (i = 0; i < 3; ++i)
         for (j = 0; j < 3; ++j)
             for (l = 0; l < (d == 3 ? 3 : 1); ++l) {
-                size_t node = (size_t)(base[0] + i) * w->stride[0] + (size_t)(base[1] + j) * w->stride[1] +
+                size_t node = (size_t)(base[0] + i) * w->s.stride[0] + (size_t)(base[1] + j) * w->s.stride[1] +
                               (d == 3 ? (size_t)(base[2] + l) : 0);
                 pn_real wt = W[0][i] * W[1][j] * W[2][l];
-                for (c = 0; c < d; ++c) ov[c] += wt * w->gdense0[node * (size_t)d + (size_t)c];
+                for (c = 0; c < d; ++c) ov[c] += wt * w->s.gdense0[node * (size_t)d + (size_t)c];
             }
 }
 
@@ -3600,9 +3619,9 @@ PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real 
     const pn_real *F = w->F + p * (size_t)dd;
     const pn_material *mat = &w->groups[w->group[p]].material;
     pn_real nv[3], ov[3] = {0, 0, 0}, nC[9], Fn[9], Z[9] = {0}, tau[9] = {0}, hn = w->h[p], chk[4] = {0, 0, 0, 0}, fin = 0;
-    pn_real x[3], hard = PN__MPM_REC(w->ppay, p, pay - 1, pay);
+    pn_real x[3], hard = PN__MPM_REC(w->s.ppay, p, pay - 1, pay);
     for (i = 0; i < d; ++i) x[i] = w->x[p * (size_t)d + (size_t)i];
-    pn_real *sx = w->sx + p * (size_t)d, *sv = w->sv + p * (size_t)d;
+    pn_real *sx = w->s.sx + p * (size_t)d, *sv = w->s.sv + p * (size_t)d;
     if (vc) { /* found by pn__mpm_xg2p2_lanes */
         for (i = 0; i < 2; ++i) nv[i] = vc[i * PN__MPM_LANES + lane];
         for (i = 0; i < 4; ++i) nC[i] = vc[(i + 2) * PN__MPM_LANES + lane];
@@ -3626,7 +3645,7 @@ PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real 
         stat = fin == 0 ? (int)pn__return_tau(mat, d, Fn, w->h[p], Z, &hn, tau, &plastic) : (int)PN_ERROR_OVERFLOW;
         if (plastic) hard = pn__hardening(mat, hn);
     }
-    w->sactive[p] = 1;
+    w->s.sactive[p] = 1;
     for (i = 0; i < d; ++i) {
         sv[i] = nv[i] + flip * (w->v[p * (size_t)d + (size_t)i] - ov[i]);
         sx[i] = x[i] + dt * nv[i];
@@ -3640,26 +3659,26 @@ PN__MPM_INLINE void pn__mpm_xg2p(pn_mpm_world *w, size_t p, pn_real dt, pn_real 
     }
     if ((stat & 0xff) != PN_OK) { /* an input written by hand, or the deformation overflowed */
         if (!pn__all_finite(dd, F) || !pn__finite(w->h[p])) stat = PN_ERROR_NONFINITE;
-        w->pstat[p] = stat & 0xff;
+        w->s.pstat[p] = stat & 0xff;
         return;
     }
     if (plastic) stat |= 0x100;
-    for (i = 0; i < dd; ++i) w->sC[p * (size_t)dd + (size_t)i] = nC[i], w->sF[p * (size_t)dd + (size_t)i] = Z[i];
-    w->sh[p] = hn;
+    for (i = 0; i < dd; ++i) w->s.sC[p * (size_t)dd + (size_t)i] = nC[i], w->s.sF[p * (size_t)dd + (size_t)i] = Z[i];
+    w->s.sh[p] = hn;
     {
         int in = 1;
-        for (i = 0; i < d; ++i) in &= sx[i] >= w->grid_lo[i] && sx[i] <= w->grid_hi[i];
+        for (i = 0; i < d; ++i) in &= sx[i] >= w->s.grid_lo[i] && sx[i] <= w->s.grid_hi[i];
         if (!in) { /* went through a wall */
-            w->sactive[p] = 0;
+            w->s.sactive[p] = 0;
             stat |= w->desc.allow_outflow ? 0x200 : 0x800;
-            w->pstat[p] = stat;
+            w->s.pstat[p] = stat;
             return;
         }
     }
-    for (i = 0; i < d; ++i) sx[i] = PN__MIN(PN__MAX(sx[i], w->wall_lo[i]), w->wall_hi[i]); /* pn__mpm_wall_plane */
-    w->srow[p] = pn__mpm_row_of(w, sx);
-    pn__mpm_pack(w, p, tau, hard, w->spay, d);
-    w->pstat[p] = stat;
+    for (i = 0; i < d; ++i) sx[i] = PN__MIN(PN__MAX(sx[i], w->s.wall_lo[i]), w->s.wall_hi[i]); /* pn__mpm_wall_plane */
+    w->s.srow[p] = pn__mpm_row_of(w, sx);
+    pn__mpm_pack(w, p, tau, hard, w->s.spay, d);
+    w->s.pstat[p] = stat;
 }
 
 /* x[l] = sqrt(x[l]) for the PN__MPM_LANES (8) lanes, correctly rounded as PN__SQRT: one
@@ -3699,16 +3718,16 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
                                 pn_real *v2max) {
     enum { L = PN__MPM_LANES, pay = PN__MPM_PAY(2) };
     pn_real fx0[L], fx1[L], wx[3][L], wy[3][L], g00[L], g01[L], g10[L], g11[L], Fn[4][L], tau[4][L], nx[2][L];
-    pn_real qq[L], rr[L], mu[L], la[L], lo[L], hi[L], hard[L], k = 4 * w->inv_dx, inv_dx = w->inv_dx;
+    pn_real qq[L], rr[L], mu[L], la[L], lo[L], hi[L], hard[L], k = 4 * w->s.inv_dx, inv_dx = w->s.inv_dx;
     pn_real rot[2][L], ratio[L], hnew[L], Fin[4][L];
     pn_real ox = w->desc.origin_m[0], oy = w->desc.origin_m[1], v0[L], v1[L], C[4][L], px[L], py[L];
-    const pn_real *G = w->gdense;
+    const pn_real *G = w->s.gdense;
     pn_real ok[L], clamped[L], vol[L]; /* flags as reals: see pn__snow2_clamp */
     int b0[L], b1[L], i, j, l;
-    size_t s0 = w->stride[0], nd[L];
-    const pn_real *F0 = w->F + p0 * 4, *X = w->x + p0 * 2, *rb = &PN__MPM_REC(w->ppay, p0, 0, pay); /* p0: a block's first */
+    size_t s0 = w->s.stride[0], nd[L];
+    const pn_real *F0 = w->F + p0 * 4, *X = w->x + p0 * 2, *rb = &PN__MPM_REC(w->s.ppay, p0, 0, pay); /* p0: a block's first */
     /* x clamped to the grid: a no-op for an active particle; a retired one's may be anywhere */
-    pn_real glo0 = w->grid_lo[0], glo1 = w->grid_lo[1], ghi0 = w->grid_hi[0], ghi1 = w->grid_hi[1];
+    pn_real glo0 = w->s.grid_lo[0], glo1 = w->s.grid_lo[1], ghi0 = w->s.grid_hi[0], ghi1 = w->s.grid_hi[1];
     if (n == L) { /* the inputs: contiguous, F strided, the group's parameters a gather */
         const int *grp = w->group + p0;
         const unsigned char *act = w->active + p0;
@@ -3799,8 +3818,8 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         chk = (Zl[0] - Zl[0]) + (Zl[1] - Zl[1]) + (Zl[2] - Zl[2]) + (Zl[3] - Zl[3]) + (tl[0] - tl[0]) +
               (tl[1] - tl[1]) + (tl[3] - tl[3]) + (C[0][l] - C[0][l]) + (C[1][l] - C[1][l]) +
               (C[2][l] - C[2][l]) + (C[3][l] - C[3][l]) + (v0[l] - v0[l]) + (v1[l] - v1[l]) + (hnew[l] - hnew[l]);
-        ok[l] = ((chk == 0) & (PN__FABS(v0[l]) <= reach) & (PN__FABS(v1[l]) <= reach) & (nx[0][l] >= w->grid_lo[0]) &
-                 (nx[0][l] <= w->grid_hi[0]) & (nx[1][l] >= w->grid_lo[1]) & (nx[1][l] <= w->grid_hi[1]))
+        ok[l] = ((chk == 0) & (PN__FABS(v0[l]) <= reach) & (PN__FABS(v1[l]) <= reach) & (nx[0][l] >= w->s.grid_lo[0]) &
+                 (nx[0][l] <= w->s.grid_hi[0]) & (nx[1][l] >= w->s.grid_lo[1]) & (nx[1][l] <= w->s.grid_hi[1]))
                     ? ok[l]
                     : 0;
         tau[0][l] = tl[0], tau[1][l] = tl[1], tau[2][l] = tl[2], tau[3][l] = tl[3];
@@ -3817,8 +3836,8 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
         }
     { /* every lane's P2G record, as pn__mpm_pack, into the record block (a lane that did not
          finish here is written again by pn__mpm_xg2p) */
-        pn_real *out = &PN__MPM_REC(w->spay, p0, 0, pay), kk = -(4 * w->inv_dx * w->inv_dx);
-        pn_real wl0 = w->wall_lo[0], wl1 = w->wall_lo[1], wh0 = w->wall_hi[0], wh1 = w->wall_hi[1]; /* out may alias w */
+        pn_real *out = &PN__MPM_REC(w->s.spay, p0, 0, pay), kk = -(4 * w->s.inv_dx * w->s.inv_dx);
+        pn_real wl0 = w->s.wall_lo[0], wl1 = w->s.wall_lo[1], wh0 = w->s.wall_hi[0], wh1 = w->s.wall_hi[1]; /* out may alias w */
         for (l = 0; l < L; ++l) {
             pn_real k = vol[l] * kk;
             nx[0][l] = PN__MIN(PN__MAX(nx[0][l], wl0), wh0); /* pn__mpm_wall_plane */
@@ -3828,15 +3847,15 @@ static void pn__mpm_xg2p2_lanes(pn_mpm_world *w, size_t p0, int n, pn_real dt, p
     }
     for (l = 0; l < n; ++l) {
         size_t p = p0 + (size_t)l;
-        pn_real *sx = w->sx + p * 2, *sv = w->sv + p * 2, *sC = w->sC + p * 4, *sF = w->sF + p * 4;
+        pn_real *sx = w->s.sx + p * 2, *sv = w->s.sv + p * 2, *sC = w->s.sC + p * 4, *sF = w->s.sF + p * 4;
         done[l] = (unsigned char)(ok[l] != 0);
         if (!done[l]) continue;
         sv[0] = v0[l], sv[1] = v1[l], sx[0] = nx[0][l], sx[1] = nx[1][l];
         for (i = 0; i < 4; ++i) sC[i] = C[i][l], sF[i] = Fn[i][l];
-        w->sh[p] = hnew[l];
-        w->sactive[p] = 1;
-        w->srow[p] = pn__mpm_row_of(w, sx);
-        w->pstat[p] = clamped[l] != 0 ? 0x100 : 0;
+        w->s.sh[p] = hnew[l];
+        w->s.sactive[p] = 1;
+        w->s.srow[p] = pn__mpm_row_of(w, sx);
+        w->s.pstat[p] = clamped[l] != 0 ? 0x100 : 0;
     }
 }
 
@@ -3850,30 +3869,30 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
         size_t p = (size_t)lp;
         const pn_real *x = w->x + p * (size_t)d;
         pn_real tau[9] = {0}, hard;
-        w->pstat[p] = 0;
+        w->s.pstat[p] = 0;
         if (!w->active[p]) continue;
         if (!pn__mpm_in_grid(w, x)) { /* also NaN */
-            w->pstat[p] = pn__all_finite(d, x) ? 0x1000 : 0x2000;
+            w->s.pstat[p] = pn__all_finite(d, x) ? 0x1000 : 0x2000;
             continue;
         }
         if (!pn__all_finite(d, w->v + p * (size_t)d) || !pn__all_finite(dd, w->C + p * (size_t)dd)) {
-            w->pstat[p] = PN_ERROR_NONFINITE;
+            w->s.pstat[p] = PN_ERROR_NONFINITE;
             continue;
         }
-        w->pstat[p] = (int)pn_kirchhoff_stress(&w->groups[w->group[p]].material, d, w->F + p * (size_t)dd, w->h[p], tau);
-        if (w->pstat[p] != PN_OK) continue;
-        w->prow[p] = pn__mpm_row_of(w, x);
+        w->s.pstat[p] = (int)pn_kirchhoff_stress(&w->groups[w->group[p]].material, d, w->F + p * (size_t)dd, w->h[p], tau);
+        if (w->s.pstat[p] != PN_OK) continue;
+        w->s.prow[p] = pn__mpm_row_of(w, x);
         hard = pn__hardening(&w->groups[w->group[p]].material, w->h[p]);
-        if (d == 2) pn__mpm_pack(w, p, tau, hard, w->ppay, 2);
-        else pn__mpm_pack(w, p, tau, hard, w->ppay, 3);
+        if (d == 2) pn__mpm_pack(w, p, tau, hard, w->s.ppay, 2);
+        else pn__mpm_pack(w, p, tau, hard, w->s.ppay, 3);
     }
     {
         size_t p;
         for (p = 0; p < w->n; ++p) { /* the first particle at fault */
-            if (!w->active[p] || !w->pstat[p]) continue;
-            if (w->pstat[p] < 0x1000) break;
+            if (!w->active[p] || !w->s.pstat[p]) continue;
+            if (w->s.pstat[p] < 0x1000) break;
             w->error_particle = p;
-            if (w->pstat[p] == 0x2000)
+            if (w->s.pstat[p] == 0x2000)
                 return PN__FAIL(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by "
                                     "hand?)", (unsigned long)p);
             return PN__FAIL(w, PN_ERROR_OUTSIDE_DOMAIN, "particle %lu is outside the grid (was x written by "
@@ -3896,13 +3915,13 @@ static pn_result pn__mpm_xcheck(pn_mpm_world *w) {
     for (lp = 0; lp < (long)w->n; ++lp) { /* read only: the rows are written again only if one moved */
         const pn_real *x = w->x + (size_t)lp * (size_t)d;
         int in = w->active[lp] != 0, k;
-        for (k = 0; k < d; ++k) in &= x[k] >= w->grid_lo[k] && x[k] <= w->grid_hi[k]; /* also NaN */
+        for (k = 0; k < d; ++k) in &= x[k] >= w->s.grid_lo[k] && x[k] <= w->s.grid_hi[k]; /* also NaN */
         bad |= w->active[lp] && !in;
-        moved |= in && w->prow[lp] != pn__mpm_row_of(w, x); /* (a retired particle's x may be anything) */
+        moved |= in && w->s.prow[lp] != pn__mpm_row_of(w, x); /* (a retired particle's x may be anything) */
     }
     if (moved && !bad)
         for (lp = 0; lp < (long)w->n; ++lp)
-            if (w->active[lp]) w->prow[lp] = pn__mpm_row_of(w, w->x + (size_t)lp * (size_t)d);
+            if (w->active[lp]) w->s.prow[lp] = pn__mpm_row_of(w, w->x + (size_t)lp * (size_t)d);
     if (!bad) return PN_OK;
     for (lp = 0; lp < (long)w->n; ++lp) {
         const pn_real *x = w->x + (size_t)lp * (size_t)d;
@@ -3944,19 +3963,19 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     flip = tf > 0 && dt < tf ? 1 - dt / tf : 0; /* the FLIP share 1 - s */
     reach = w->desc.advection_limit * w->desc.dx_m / dt; /* the fastest honest speed */
     pn__mpm_stats_clear(&st, 0);
-    if (!w->rec_ok && (r = pn__mpm_xrecords(w, dt)) != PN_OK) return r;
-    if (w->rec_ok && (r = pn__mpm_xcheck(w)) != PN_OK) return r;
-    w->rec_ok = 1;
+    if (!w->s.rec_ok && (r = pn__mpm_xrecords(w, dt)) != PN_OK) return r;
+    if (w->s.rec_ok && (r = pn__mpm_xcheck(w)) != PN_OK) return r;
+    w->s.rec_ok = 1;
     pn__mpm_xp2g(w, dt);
-    if (w->n_loads) pn__mpm_xloads(w, dt);
-    if (w->xf_n) pn__mpm_xforces(w, dt);
+    if (w->s.n_loads) pn__mpm_xloads(w, dt);
+    if (w->s.xf_n) pn__mpm_xforces(w, dt);
     st.active_nodes = pn__mpm_xgrid(w, dt);
-    if (w->n_drives) pn__mpm_xdrive_grid(w, dt);
+    if (w->s.n_drives) pn__mpm_xdrive_grid(w, dt);
     { /* G2P in index order (the particle arrays stream), retired particles copied, and the
          statistics: integer counts and a max, the same whatever the thread count */
         size_t n_plastic = 0, n_left = 0, n_alive = 0;
         long nb = (long)((w->n + PN__MPM_LANES - 1) / PN__MPM_LANES);
-        int any = 0, g, lanes = d == 2 && flip == 0 && w->gdense0 == NULL, chunk = 8;
+        int any = 0, g, lanes = d == 2 && flip == 0 && w->s.gdense0 == NULL, chunk = 8;
 #if defined(_OPENMP)
         /* about 16 chunks per thread: enough to even out a busy core, few enough that the
            chunks' shared edges (every output array's cache line there) and the queue stay rare */
@@ -3979,23 +3998,23 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
             pn_real vc[6][PN__MPM_LANES];
             if (lanes) pn__mpm_xg2p2_lanes(w, q0, nl, dt, reach, gpar, done, vc, &n_alive, &n_plastic, &v2max);
             for (q = q0; q < q0 + (size_t)nl; ++q) {
-                const pn_real *sv = w->sv + q * (size_t)d;
+                const pn_real *sv = w->s.sv + q * (size_t)d;
                 pn_real sp = 0;
                 int i, stat;
                 if (done[q - q0]) continue; /* counted in the lanes */
                 if (!w->active[q]) { /* retired particles keep their last state */
-                    w->pstat[q] = 0;
-                    w->sactive[q] = 0;
-                    memcpy(w->sx + q * (size_t)d, w->x + q * (size_t)d, sizeof(pn_real) * (size_t)d);
-                    memcpy(w->sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
-                    memcpy(w->sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-                    memcpy(w->sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-                    w->sh[q] = w->h[q];
+                    w->s.pstat[q] = 0;
+                    w->s.sactive[q] = 0;
+                    memcpy(w->s.sx + q * (size_t)d, w->x + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+                    memcpy(w->s.sv + q * (size_t)d, w->v + q * (size_t)d, sizeof(pn_real) * (size_t)d);
+                    memcpy(w->s.sC + q * (size_t)dd, w->C + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+                    memcpy(w->s.sF + q * (size_t)dd, w->F + q * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+                    w->s.sh[q] = w->h[q];
                     continue;
                 }
                 if (d == 2) pn__mpm_xg2p(w, q, dt, flip, reach, 2, lanes ? vc[0] : NULL, (int)(q - q0));
                 else pn__mpm_xg2p(w, q, dt, flip, reach, 3, NULL, 0);
-                stat = w->pstat[q];
+                stat = w->s.pstat[q];
                 any |= stat;
                 n_plastic += (size_t)((stat & 0x100) != 0);
                 if (stat & 0x200) {
@@ -4007,7 +4026,7 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
                 v2max = PN__MAX(v2max, sp);
             }
         }
-        if (w->n_drives) pn__mpm_xdrive_state(w, dt);
+        if (w->s.n_drives) pn__mpm_xdrive_state(w, dt);
         pn__mpm_xclear(w);
         if ((any & 0xcff) && (r = pn__mpm_first_error(w, dt)) != PN_OK) return r;
         st.plastic = n_plastic;
@@ -4016,10 +4035,10 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
     }
     st.max_speed_m_s = PN__SQRT(v2max);
     pn__mpm_commit(w, dt, &st);
-    t = w->ppay, w->ppay = w->spay, w->spay = t;
-    row = w->prow, w->prow = w->srow, w->srow = row;
-    w->rec_ok = 1;
-    w->n_lag = 0; /* the implicit friction memory is stale now */
+    t = w->s.ppay, w->s.ppay = w->s.spay, w->s.spay = t;
+    row = w->s.prow, w->s.prow = w->s.srow, w->s.srow = row;
+    w->s.rec_ok = 1;
+    w->s.n_lag = 0; /* the implicit friction memory is stale now */
     if (stats) *stats = st;
     return PN_OK;
 }
@@ -4041,52 +4060,52 @@ PN__DEF pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt, pn_mpm_stats
 
 static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     const pn_mpm_desc *desc = &w->desc;
-    size_t nd = w->nodes * (size_t)w->dim, cap = w->cap;
+    size_t nd = w->s.nodes * (size_t)w->dim, cap = w->cap;
     int d = w->dim, dd = d * d, fail = 0;
-    if (w->vstar) return PN_OK;
-    PN__MPM_A(vstar, nd, pn_real);
-    PN__MPM_A(vsol, nd, pn_real);
-    PN__MPM_A(vtry, nd, pn_real);
-    PN__MPM_A(grad, nd, pn_real);
-    PN__MPM_A(dir, nd, pn_real);
-    PN__MPM_A(cg_r, nd, pn_real);
-    PN__MPM_A(cg_z, nd, pn_real);
-    PN__MPM_A(cg_p, nd, pn_real);
-    PN__MPM_A(cg_q, nd, pn_real);
-    PN__MPM_A(diag, nd, pn_real);
-    PN__MPM_A(pP, cap * (size_t)dd, pn_real);
-    PN__MPM_A(pH, cap * (size_t)(dd * dd), pn_real);
-    PN__MPM_A(pG, cap * (size_t)dd, pn_real);
-    PN__MPM_A(phG, cap, pn_real);
-    PN__MPM_A(pF0, cap * (size_t)dd, pn_real);
-    PN__MPM_A(pty, cap, pn_real);
-    PN__MPM_A(ppt, cap, pn_pnet_point);
-    PN__MPM_A(pq, cap * (size_t)(w->ns * d), pn_real);
-    PN__MPM_A(pdof, cap * (size_t)w->ns, long);
-    PN__MPM_A(inc, cap * (size_t)w->ns, size_t);
-    PN__MPM_A(inc_start, w->nodes + 1, size_t);
-    PN__MPM_A(prank, cap, size_t);
-    PN__MPM_A(bx, cap * (size_t)d, pn_real);
-    PN__MPM_A(bv, cap * (size_t)d, pn_real);
-    PN__MPM_A(bC, cap * (size_t)dd, pn_real);
-    PN__MPM_A(bF, cap * (size_t)dd, pn_real);
-    PN__MPM_A(bh, cap, pn_real);
-    PN__MPM_A(bactive, cap, unsigned char);
-    PN__MPM_A(lnode, w->nodes, size_t);
-    PN__MPM_A(blnode, w->nodes, size_t);
-    PN__MPM_A(lval, w->nodes, pn_real);
-    PN__MPM_A(blval, w->nodes, pn_real);
+    if (w->s.vstar) return PN_OK;
+    PN__MPM_A(s.vstar, nd, pn_real);
+    PN__MPM_A(s.vsol, nd, pn_real);
+    PN__MPM_A(s.vtry, nd, pn_real);
+    PN__MPM_A(s.grad, nd, pn_real);
+    PN__MPM_A(s.dir, nd, pn_real);
+    PN__MPM_A(s.cg_r, nd, pn_real);
+    PN__MPM_A(s.cg_z, nd, pn_real);
+    PN__MPM_A(s.cg_p, nd, pn_real);
+    PN__MPM_A(s.cg_q, nd, pn_real);
+    PN__MPM_A(s.diag, nd, pn_real);
+    PN__MPM_A(s.pP, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.pH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(s.pG, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.phG, cap, pn_real);
+    PN__MPM_A(s.pF0, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.pty, cap, pn_real);
+    PN__MPM_A(s.ppt, cap, pn_pnet_point);
+    PN__MPM_A(s.pq, cap * (size_t)(w->s.ns * d), pn_real);
+    PN__MPM_A(s.pdof, cap * (size_t)w->s.ns, long);
+    PN__MPM_A(s.inc, cap * (size_t)w->s.ns, size_t);
+    PN__MPM_A(s.inc_start, w->s.nodes + 1, size_t);
+    PN__MPM_A(s.prank, cap, size_t);
+    PN__MPM_A(s.bx, cap * (size_t)d, pn_real);
+    PN__MPM_A(s.bv, cap * (size_t)d, pn_real);
+    PN__MPM_A(s.bC, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.bF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.bh, cap, pn_real);
+    PN__MPM_A(s.bactive, cap, unsigned char);
+    PN__MPM_A(s.lnode, w->s.nodes, size_t);
+    PN__MPM_A(s.blnode, w->s.nodes, size_t);
+    PN__MPM_A(s.lval, w->s.nodes, pn_real);
+    PN__MPM_A(s.blval, w->s.nodes, pn_real);
     if (!fail) return PN_OK;
     { /* leave the world as it was: free what this call allocated */
-        void **r[] = {(void **)&w->vstar, (void **)&w->vsol, (void **)&w->vtry, (void **)&w->grad,
-                      (void **)&w->dir, (void **)&w->cg_r, (void **)&w->cg_z, (void **)&w->cg_p,
-                      (void **)&w->cg_q, (void **)&w->diag, (void **)&w->pP, (void **)&w->pH,
-                      (void **)&w->pG, (void **)&w->phG, (void **)&w->pF0, (void **)&w->pty,
-                      (void **)&w->ppt, (void **)&w->pq, (void **)&w->pdof, (void **)&w->inc,
-                      (void **)&w->inc_start, (void **)&w->prank,
-                      (void **)&w->bx, (void **)&w->bv, (void **)&w->bC, (void **)&w->bF,
-                      (void **)&w->bh, (void **)&w->bactive, (void **)&w->lnode, (void **)&w->blnode,
-                      (void **)&w->lval, (void **)&w->blval};
+        void **r[] = {(void **)&w->s.vstar, (void **)&w->s.vsol, (void **)&w->s.vtry, (void **)&w->s.grad,
+                      (void **)&w->s.dir, (void **)&w->s.cg_r, (void **)&w->s.cg_z, (void **)&w->s.cg_p,
+                      (void **)&w->s.cg_q, (void **)&w->s.diag, (void **)&w->s.pP, (void **)&w->s.pH,
+                      (void **)&w->s.pG, (void **)&w->s.phG, (void **)&w->s.pF0, (void **)&w->s.pty,
+                      (void **)&w->s.ppt, (void **)&w->s.pq, (void **)&w->s.pdof, (void **)&w->s.inc,
+                      (void **)&w->s.inc_start, (void **)&w->s.prank,
+                      (void **)&w->s.bx, (void **)&w->s.bv, (void **)&w->s.bC, (void **)&w->s.bF,
+                      (void **)&w->s.bh, (void **)&w->s.bactive, (void **)&w->s.lnode, (void **)&w->s.blnode,
+                      (void **)&w->s.lval, (void **)&w->s.blval};
         size_t i;
         for (i = 0; i < sizeof r / sizeof r[0]; ++i) {
             pn_free(&desc->allocator, *r[i]);
@@ -4108,7 +4127,7 @@ PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy 
                             g, w->n_groups);
     r = pn__group_set_energy(&w->groups[g], g, w->dim, energy, net, msg, sizeof msg);
     if (r != PN_OK) return PN__FAIL(w, r, "pn_mpm_group_set_energy: %s", msg);
-    if (w->tok) memset(w->tok, 0, w->cap); /* the Taylor models belong to the old network */
+    if (w->s.tok) memset(w->s.tok, 0, w->cap); /* the Taylor models belong to the old network */
     return PN_OK;
 }
 
@@ -4141,8 +4160,8 @@ static pn_result pn__group_psi(const pn_mpm_group *g, int d, const pn_real *F, p
 static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, pn_real *psi,
                              pn_real *P, pn_real *H) {
     int dd = w->dim * w->dim;
-    return pn__group_psi(&w->groups[w->group[p]], w->dim, F, w->h[p], w->pG + p * (size_t)dd, w->phG[p], &w->ppt[p],
-                         w->pty[p], psi, P, H, PN_EVAL_PROJECT_PSD);
+    return pn__group_psi(&w->groups[w->group[p]], w->dim, F, w->h[p], w->s.pG + p * (size_t)dd, w->s.phG[p], &w->s.ppt[p],
+                         w->s.pty[p], psi, P, H, PN_EVAL_PROJECT_PSD);
 }
 
 /* The Taylor models' storage (pn_mpm_implicit_desc.pnet_reuse_tol), once a step needs it:
@@ -4154,27 +4173,27 @@ static pn_result pn__mpm_alloc_reuse(pn_mpm_world *w) {
     size_t cap = w->cap;
     int d = w->dim, dd = d * d, fail = 0, g, any = 0;
     for (g = 0; g < w->n_groups; ++g) any |= pn__mpm_energy_of(&w->groups[g]) == PN_MPM_ENERGY_PNET;
-    if (w->tok || !any || !(w->reuse_tol > 0)) return PN_OK;
-    PN__MPM_A(tF, cap * (size_t)dd, pn_real);
-    PN__MPM_A(tpsi, cap, pn_real);
-    PN__MPM_A(tP, cap * (size_t)dd, pn_real);
-    PN__MPM_A(tH, cap * (size_t)(dd * dd), pn_real);
-    PN__MPM_A(tok, cap, unsigned char);
-    PN__MPM_A(jF, cap * (size_t)dd, pn_real);
-    PN__MPM_A(jpsi, cap, pn_real);
-    PN__MPM_A(jP, cap * (size_t)dd, pn_real);
-    PN__MPM_A(jH, cap * (size_t)(dd * dd), pn_real);
-    PN__MPM_A(jpH, cap * (size_t)(dd * dd), pn_real);
-    PN__MPM_A(jppt, cap, pn_pnet_point);
-    PN__MPM_A(jst, cap, unsigned char);
+    if (w->s.tok || !any || !(w->s.reuse_tol > 0)) return PN_OK;
+    PN__MPM_A(s.tF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.tpsi, cap, pn_real);
+    PN__MPM_A(s.tP, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.tH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(s.tok, cap, unsigned char);
+    PN__MPM_A(s.jF, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.jpsi, cap, pn_real);
+    PN__MPM_A(s.jP, cap * (size_t)dd, pn_real);
+    PN__MPM_A(s.jH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(s.jpH, cap * (size_t)(dd * dd), pn_real);
+    PN__MPM_A(s.jppt, cap, pn_pnet_point);
+    PN__MPM_A(s.jst, cap, unsigned char);
     if (!fail) return PN_OK;
     {
-        void *all[] = {w->tF, w->tpsi, w->tP, w->tH, w->tok, w->jF, w->jpsi, w->jP, w->jH, w->jpH, w->jppt, w->jst};
+        void *all[] = {w->s.tF, w->s.tpsi, w->s.tP, w->s.tH, w->s.tok, w->s.jF, w->s.jpsi, w->s.jP, w->s.jH, w->s.jpH, w->s.jppt, w->s.jst};
         size_t i;
         for (i = 0; i < sizeof all / sizeof all[0]; ++i) pn_free(&desc->allocator, all[i]);
     }
-    w->tF = w->tpsi = w->tP = w->tH = w->jF = w->jpsi = w->jP = w->jH = w->jpH = NULL;
-    w->tok = w->jst = NULL, w->jppt = NULL;
+    w->s.tF = w->s.tpsi = w->s.tP = w->s.tH = w->s.jF = w->s.jpsi = w->s.jP = w->s.jH = w->s.jpH = NULL;
+    w->s.tok = w->s.jst = NULL, w->s.jppt = NULL;
     return PN_ERROR_OUT_OF_MEMORY;
 }
 #undef PN__MPM_A
@@ -4185,43 +4204,43 @@ static void pn__mpm_journal_copy(pn_mpm_world *w, size_t p, int restore) {
     size_t dd = (size_t)(w->dim * w->dim);
 #define PN__MPM_J(live, kept, count) \
     memcpy(restore ? (live) : (kept), restore ? (kept) : (live), sizeof(pn_real) * (count))
-    PN__MPM_J(w->tF + p * dd, w->jF + p * dd, dd);
-    PN__MPM_J(w->tP + p * dd, w->jP + p * dd, dd);
-    PN__MPM_J(w->tH + p * dd * dd, w->jH + p * dd * dd, dd * dd);
-    PN__MPM_J(w->pH + p * dd * dd, w->jpH + p * dd * dd, dd * dd);
-    PN__MPM_J(w->tpsi + p, w->jpsi + p, 1);
+    PN__MPM_J(w->s.tF + p * dd, w->s.jF + p * dd, dd);
+    PN__MPM_J(w->s.tP + p * dd, w->s.jP + p * dd, dd);
+    PN__MPM_J(w->s.tH + p * dd * dd, w->s.jH + p * dd * dd, dd * dd);
+    PN__MPM_J(w->s.pH + p * dd * dd, w->s.jpH + p * dd * dd, dd * dd);
+    PN__MPM_J(w->s.tpsi + p, w->s.jpsi + p, 1);
 #undef PN__MPM_J
-    if (restore) w->ppt[p] = w->jppt[p];
-    else w->jppt[p] = w->ppt[p];
+    if (restore) w->s.ppt[p] = w->s.jppt[p];
+    else w->s.jppt[p] = w->s.ppt[p];
 }
 
 /* before a call's first change to particle p's model (a new model, its point prepared anew,
    pH taken as scratch): the model as the call found it */
 static void pn__mpm_touch(pn_mpm_world *w, size_t p) {
-    if (w->jst[p]) return;
-    w->jst[p] = (unsigned char)(1 + (w->tok[p] != 0));
-    if (w->tok[p]) pn__mpm_journal_copy(w, p, 0);
+    if (w->s.jst[p]) return;
+    w->s.jst[p] = (unsigned char)(1 + (w->s.tok[p] != 0));
+    if (w->s.tok[p]) pn__mpm_journal_copy(w, p, 0);
 }
 
 /* a call starts: nothing saved yet */
 static void pn__mpm_journal_begin(pn_mpm_world *w) {
-    if (w->jst) memset(w->jst, 0, w->n);
+    if (w->s.jst) memset(w->s.jst, 0, w->n);
 }
 
 /* a failed call (or attempt): every model it changed back as the call found it */
 static void pn__mpm_journal_undo(pn_mpm_world *w) {
     size_t p;
-    if (!w->jst) return;
+    if (!w->s.jst) return;
     for (p = 0; p < w->n; ++p) {
-        if (w->jst[p] == 2) pn__mpm_journal_copy(w, p, 1);
-        if (w->jst[p]) w->tok[p] = (unsigned char)(w->jst[p] == 2);
-        w->jst[p] = 0;
+        if (w->s.jst[p] == 2) pn__mpm_journal_copy(w, p, 1);
+        if (w->s.jst[p]) w->s.tok[p] = (unsigned char)(w->s.jst[p] == 2);
+        w->s.jst[p] = 0;
     }
 }
 
 /* reuse_tol of a step from its desc, and the Taylor models' storage if it needs it */
 static pn_result pn__mpm_reuse_on(pn_mpm_world *w, const pn_mpm_implicit_desc *o) {
-    w->reuse_tol = o->pnet_double || o->pnet_reuse_tol < 0 ? 0 : o->pnet_reuse_tol > 0 ? o->pnet_reuse_tol : (pn_real)1e-5;
+    w->s.reuse_tol = o->pnet_double || o->pnet_reuse_tol < 0 ? 0 : o->pnet_reuse_tol > 0 ? o->pnet_reuse_tol : (pn_real)1e-5;
     return pn__mpm_alloc_reuse(w);
 }
 
@@ -4231,43 +4250,43 @@ static pn_result pn__mpm_reuse_on(pn_mpm_world *w, const pn_mpm_implicit_desc *o
    nodes by slot, particles sorted), so every per-node sum keeps one fixed order whatever
    the thread count. */
 static void pn__mpm_implicit_setup(pn_mpm_world *w) {
-    int d = w->dim, dd = d * d, ns = w->ns;
+    int d = w->dim, dd = d * d, ns = w->s.ns;
     long l;
     size_t k;
     PN__OMP_FOR
-    for (l = 0; l < (long)w->start[w->nodes]; ++l) {
-        size_t j = (size_t)l, p = w->order[j];
+    for (l = 0; l < (long)w->s.start[w->s.nodes]; ++l) {
+        size_t j = (size_t)l, p = w->s.order[j];
         const pn_real *Fn = w->F + p * (size_t)dd;
         int s, a, b;
-        w->prank[p] = j;
+        w->s.prank[p] = j;
         for (s = 0; s < ns; ++s) {
-            pn_real dpos[3], *q = w->pq + (j * (size_t)ns + (size_t)s) * (size_t)d;
-            pn_real g = 4 / (w->desc.dx_m * w->desc.dx_m) * pn__mpm_weight(w, p, w->slot[s], dpos);
+            pn_real dpos[3], *q = w->s.pq + (j * (size_t)ns + (size_t)s) * (size_t)d;
+            pn_real g = 4 / (w->desc.dx_m * w->desc.dx_m) * pn__mpm_weight(w, p, w->s.slot[s], dpos);
             for (b = 0; b < d; ++b) { /* q = F^nT g, g = (4/dx^2) w dpos (>>stress: g itself) */
                 q[b] = 0;
-                if (w->stress_on) q[b] = g * dpos[b];
+                if (w->s.stress_on) q[b] = g * dpos[b];
                 else
                     for (a = 0; a < d; ++a) q[b] += Fn[a * d + b] * g * dpos[a];
             }
-            w->pdof[j * (size_t)ns + (size_t)s] = w->dof[w->pbase[p] + w->slot_off[s]];
+            w->s.pdof[j * (size_t)ns + (size_t)s] = w->s.dof[w->s.pbase[p] + w->s.slot_off[s]];
         }
     }
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n_act; ++l) { /* counts, then offsets, then the lists */
+    for (l = 0; l < (long)w->s.n_act; ++l) { /* counts, then offsets, then the lists */
         size_t base[27], c = 0;
-        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->act[l], base, o, sl), b;
-        for (b = 0; b < nb; ++b) c += w->start[base[b] + 1] - w->start[base[b]];
-        w->inc_start[l + 1] = c;
+        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->s.act[l], base, o, sl), b;
+        for (b = 0; b < nb; ++b) c += w->s.start[base[b] + 1] - w->s.start[base[b]];
+        w->s.inc_start[l + 1] = c;
     }
-    w->inc_start[0] = 0;
-    for (k = 0; k < w->n_act; ++k) w->inc_start[k + 1] += w->inc_start[k];
+    w->s.inc_start[0] = 0;
+    for (k = 0; k < w->s.n_act; ++k) w->s.inc_start[k + 1] += w->s.inc_start[k];
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n_act; ++l) {
-        size_t base[27], e = w->inc_start[l], s;
-        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->act[l], base, o, sl), b;
+    for (l = 0; l < (long)w->s.n_act; ++l) {
+        size_t base[27], e = w->s.inc_start[l], s;
+        int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->s.act[l], base, o, sl), b;
         for (b = 0; b < nb; ++b)
-            for (s = w->start[base[b]]; s < w->start[base[b] + 1]; ++s)
-                w->inc[e++] = s * (size_t)ns + (size_t)sl[b];
+            for (s = w->s.start[base[b]]; s < w->s.start[base[b] + 1]; ++s)
+                w->s.inc[e++] = s * (size_t)ns + (size_t)sl[b];
     }
 }
 
@@ -4278,9 +4297,9 @@ static void pn__mpm_implicit_setup(pn_mpm_world *w) {
 static void pn__mpm_gather2(const pn_mpm_world *w, size_t k, pn_real *out) {
     size_t e;
     pn_real a0 = 0, a1 = 0;
-    for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
-        size_t ps = w->inc[e];
-        const pn_real *A = w->pmat + ps / 9 * 4, *q = w->pq + ps * 2; /* ps = j ns + s */
+    for (e = w->s.inc_start[k]; e < w->s.inc_start[k + 1]; ++e) {
+        size_t ps = w->s.inc[e];
+        const pn_real *A = w->s.pmat + ps / 9 * 4, *q = w->s.pq + ps * 2; /* ps = j ns + s */
         a0 += A[0] * q[0] + A[1] * q[1];
         a1 += A[2] * q[0] + A[3] * q[1];
     }
@@ -4291,9 +4310,9 @@ static void pn__mpm_gather2(const pn_mpm_world *w, size_t k, pn_real *out) {
 static void pn__mpm_gather3(const pn_mpm_world *w, size_t k, pn_real *out) {
     size_t e;
     pn_real a0 = 0, a1 = 0, a2 = 0;
-    for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
-        size_t ps = w->inc[e];
-        const pn_real *A = w->pmat + ps / 27 * 9, *q = w->pq + ps * 3;
+    for (e = w->s.inc_start[k]; e < w->s.inc_start[k + 1]; ++e) {
+        size_t ps = w->s.inc[e];
+        const pn_real *A = w->s.pmat + ps / 27 * 9, *q = w->s.pq + ps * 3;
         a0 += A[0] * q[0] + A[1] * q[1] + A[2] * q[2];
         a1 += A[3] * q[0] + A[4] * q[1] + A[5] * q[2];
         a2 += A[6] * q[0] + A[7] * q[1] + A[8] * q[2];
@@ -4307,18 +4326,18 @@ static void pn__mpm_gather3(const pn_mpm_world *w, size_t k, pn_real *out) {
    (rows summed in independent parts: one long chain of dependent additions per row is what
    limited the 3D product) */
 static void pn__mpm_hmul2(pn_mpm_world *w, size_t j, const pn_real *x, pn_real dt) {
-    size_t p = w->order[j];
-    pn_real dF[4], s = w->vol0[p] * dt, *out = w->pmat + j * 4;
-    const pn_real *H = w->pH + p * 16;
+    size_t p = w->s.order[j];
+    pn_real dF[4], s = w->vol0[p] * dt, *out = w->s.pmat + j * 4;
+    const pn_real *H = w->s.pH + p * 16;
     int i;
     pn__mpm_push2(w, j, x, dt, NULL, dF);
     for (i = 0; i < 4; ++i, H += 4) out[i] = s * ((H[0] * dF[0] + H[1] * dF[1]) + (H[2] * dF[2] + H[3] * dF[3]));
 }
 
 static void pn__mpm_hmul3(pn_mpm_world *w, size_t j, const pn_real *x, pn_real dt) {
-    size_t p = w->order[j];
-    pn_real dF[9], s = w->vol0[p] * dt, *out = w->pmat + j * 9;
-    const pn_real *H = w->pH + p * 81;
+    size_t p = w->s.order[j];
+    pn_real dF[9], s = w->vol0[p] * dt, *out = w->s.pmat + j * 9;
+    const pn_real *H = w->s.pH + p * 81;
     int i;
     pn__mpm_push3(w, j, x, dt, NULL, dF);
     for (i = 0; i < 9; ++i, H += 9)
@@ -4337,27 +4356,27 @@ static void pn__mpm_gather_pmat(const pn_mpm_world *w, size_t k, pn_real *out) {
    the energy and |dF|^2 in P. */
 static int pn__mpm_taylor(const pn_mpm_world *w, size_t p, const pn_real *F, pn_real *psi, pn_real *P) {
     int dd = w->dim * w->dim, a, b;
-    const pn_real *F0 = w->tF + p * (size_t)dd, *P0 = w->tP + p * (size_t)dd, *H = w->tH + p * (size_t)(dd * dd);
+    const pn_real *F0 = w->s.tF + p * (size_t)dd, *P0 = w->s.tP + p * (size_t)dd, *H = w->s.tH + p * (size_t)(dd * dd);
     pn_real dF[9], e = 0;
     for (a = 0; a < dd; ++a)
-        if (!(PN__FABS(dF[a] = F[a] - F0[a]) <= w->reuse_tol)) return 0;
+        if (!(PN__FABS(dF[a] = F[a] - F0[a]) <= w->s.reuse_tol)) return 0;
     for (a = 0; a < dd; ++a) {
         pn_real hd = 0;
         for (b = 0; b < dd; ++b) hd += H[a * dd + b] * dF[b];
         e += dF[a] * (P0[a] + hd / 2);
         if (P) P[a] = P0[a] + hd;
     }
-    *psi = w->tpsi[p] + e;
+    *psi = w->s.tpsi[p] + e;
     return 1;
 }
 
-/* E(v); with_derivs: also the gradient (w->grad) and each particle's P, and with_derivs == 2
+/* E(v); with_derivs: also the gradient (w->s.grad) and each particle's P, and with_derivs == 2
    each particle's PSD dP/dF for the Hessian. A failed
    particle evaluation (an inverted F, say) gives *E = +inf without derivatives, else its
    error (w->error_particle says which). */
 static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt, int with_derivs,
                                    pn_real *E) {
-    int d = w->dim, dd = d * d, reuse = w->tok && w->reuse_tol > 0;
+    int d = w->dim, dd = d * d, reuse = w->s.tok && w->s.reuse_tol > 0;
     long l, nblk = (long)((w->n + PN_MLP_LANES - 1) / PN_MLP_LANES);
     pn_result r;
     PN__OMP_FOR
@@ -4368,53 +4387,53 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
         pn_result stl[PN_MLP_LANES];
         int nl = 0, gl = -1, i, k;
         for (p = p0; p < p1; ++p) {
-            pn_real F[9], psi = 0, *P = w->pP + p * (size_t)dd, *H = w->pH + p * (size_t)(dd * dd);
-            w->pscal[p] = 0;
-            w->pstat[p] = 0;
+            pn_real F[9], psi = 0, *P = w->s.pP + p * (size_t)dd, *H = w->s.pH + p * (size_t)(dd * dd);
+            w->s.pscal[p] = 0;
+            w->s.pstat[p] = 0;
             if (!w->active[p]) continue;
             pn__mpm_push(w, p, v, dt, w->F + p * (size_t)dd, F);
-            if (reuse && w->tok[p] && pn__mpm_taylor(w, p, F, &psi, with_derivs ? P : NULL)) {
-                w->pscal[p] = w->vol0[p] * psi; /* pH keeps the PSD dP/dF at tF */
+            if (reuse && w->s.tok[p] && pn__mpm_taylor(w, p, F, &psi, with_derivs ? P : NULL)) {
+                w->s.pscal[p] = w->vol0[p] * psi; /* pH keeps the PSD dP/dF at tF */
                 continue;
             }
-            if (w->pnet_lanes && pn__mpm_energy_of(&w->groups[w->group[p]]) == PN_MPM_ENERGY_PNET &&
+            if (w->s.pnet_lanes && pn__mpm_energy_of(&w->groups[w->group[p]]) == PN_MPM_ENERGY_PNET &&
                 (gl < 0 || gl == w->group[p])) { /* one network per block's lanes */
                 gl = w->group[p];
                 lp[nl] = p;
-                ptl[nl] = &w->ppt[p];
+                ptl[nl] = &w->s.ppt[p];
                 memcpy(Fl + nl * dd, F, sizeof(pn_real) * (size_t)dd);
                 nl++;
                 continue;
             }
-            w->pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs > 1 ? H : NULL);
-            w->pscal[p] = w->vol0[p] * psi;
+            w->s.pstat[p] = (int)pn__mpm_psi(w, p, F, &psi, with_derivs ? P : NULL, with_derivs > 1 ? H : NULL);
+            w->s.pscal[p] = w->vol0[p] * psi;
         }
         if (nl) {
             int keep = reuse && with_derivs > 1; /* a new Taylor model: dP/dF unprojected, then projected here */
             pn_pnet_energy_lanes(&w->groups[gl].pnet, nl, ptl, Fl, psil, with_derivs ? Pl : NULL,
                                  with_derivs > 1 ? Hl : NULL, keep ? 0u : (unsigned)PN_EVAL_PROJECT_PSD, stl);
             for (k = 0; k < nl; ++k) {
-                pn_real *H = w->pH + (p = lp[k]) * (size_t)(dd * dd);
+                pn_real *H = w->s.pH + (p = lp[k]) * (size_t)(dd * dd);
                 if (keep) pn__mpm_touch(w, p); /* before pH and the model change */
                 if (stl[k] == PN_OK && with_derivs > 1) {
                     memcpy(H, Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
                     if (keep) stl[k] = pn_sym_project_psd(dd, H);
                 }
-                w->pstat[p] = (int)stl[k];
+                w->s.pstat[p] = (int)stl[k];
                 if (stl[k] != PN_OK) continue;
-                w->pscal[p] = w->vol0[p] * psil[k];
-                if (with_derivs) memcpy(w->pP + p * (size_t)dd, Pl + k * dd, sizeof(pn_real) * (size_t)dd);
+                w->s.pscal[p] = w->vol0[p] * psil[k];
+                if (with_derivs) memcpy(w->s.pP + p * (size_t)dd, Pl + k * dd, sizeof(pn_real) * (size_t)dd);
                 if (keep) {
-                    w->tok[p] = 1, w->tpsi[p] = psil[k];
-                    memcpy(w->tF + p * (size_t)dd, Fl + k * dd, sizeof(pn_real) * (size_t)dd);
-                    memcpy(w->tP + p * (size_t)dd, Pl + k * dd, sizeof(pn_real) * (size_t)dd);
-                    memcpy(w->tH + p * (size_t)(dd * dd), Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
+                    w->s.tok[p] = 1, w->s.tpsi[p] = psil[k];
+                    memcpy(w->s.tF + p * (size_t)dd, Fl + k * dd, sizeof(pn_real) * (size_t)dd);
+                    memcpy(w->s.tP + p * (size_t)dd, Pl + k * dd, sizeof(pn_real) * (size_t)dd);
+                    memcpy(w->s.tH + p * (size_t)(dd * dd), Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
                 }
             }
         }
         for (p = p0; with_derivs && p < p1; ++p) /* pmat (by sorted index) = V dt P */
-            if (w->active[p] && w->pstat[p] == PN_OK)
-                for (i = 0; i < dd; ++i) w->pmat[w->prank[p] * (size_t)dd + (size_t)i] = w->vol0[p] * dt * w->pP[p * (size_t)dd + (size_t)i];
+            if (w->active[p] && w->s.pstat[p] == PN_OK)
+                for (i = 0; i < dd; ++i) w->s.pmat[w->s.prank[p] * (size_t)dd + (size_t)i] = w->vol0[p] * dt * w->s.pP[p * (size_t)dd + (size_t)i];
     }
     r = pn__mpm_first_error(w, dt);
     if (r != PN_OK) {
@@ -4423,27 +4442,27 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
         return PN_OK;
     }
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n_act; ++l) {
+    for (l = 0; l < (long)w->s.n_act; ++l) {
         size_t k = (size_t)l;
-        const pn_real *vk = v + k * (size_t)d, *sk = w->vstar + k * (size_t)d;
-        pn_real *gk = w->grad + k * (size_t)d, e = 0;
+        const pn_real *vk = v + k * (size_t)d, *sk = w->s.vstar + k * (size_t)d;
+        pn_real *gk = w->s.grad + k * (size_t)d, e = 0;
         int i;
         for (i = 0; i < d; ++i) {
             pn_real dv = vk[i] - sk[i];
-            e += w->grid_m[k] / 2 * dv * dv;
-            if (with_derivs) gk[i] = w->grid_m[k] * dv;
+            e += w->s.grid_m[k] / 2 * dv * dv;
+            if (with_derivs) gk[i] = w->s.grid_m[k] * dv;
         }
-        if (w->clam[k] > 0 && !(w->chold[k] & PN__MPM_STICK)) { /* sliding: mu L t . u */
-            pn_real f = w->cmu[k] * w->clam[k];
+        if (w->s.clam[k] > 0 && !(w->s.chold[k] & PN__MPM_STICK)) { /* sliding: mu L t . u */
+            pn_real f = w->s.cmu[k] * w->s.clam[k];
             for (i = 0; i < d; ++i) {
-                e += f * w->ctan[k * 3 + (size_t)i] * (vk[i] - w->cvel[k * 3 + (size_t)i]);
-                if (with_derivs) gk[i] += f * w->ctan[k * 3 + (size_t)i];
+                e += f * w->s.ctan[k * 3 + (size_t)i] * (vk[i] - w->s.cvel[k * 3 + (size_t)i]);
+                if (with_derivs) gk[i] += f * w->s.ctan[k * 3 + (size_t)i];
             }
         }
         if (with_derivs) pn__mpm_gather_pmat(w, k, gk);
-        w->cg_q[k] = e; /* the node's energy, summed below */
+        w->s.cg_q[k] = e; /* the node's energy, summed below */
     }
-    *E = pn__mpm_sum(w, w->n, w->pscal, NULL) + pn__mpm_sum(w, w->n_act, w->cg_q, NULL);
+    *E = pn__mpm_sum(w, w->n, w->s.pscal, NULL) + pn__mpm_sum(w, w->s.n_act, w->s.cg_q, NULL);
     return PN_OK;
 }
 
@@ -4454,24 +4473,24 @@ static void pn__mpm_mg_apply(pn_mpm_world *w, int l, const pn_real *x, const pn_
 static void pn__mpm_hess_vec(pn_mpm_world *w, const pn_real *x, pn_real dt, pn_real *out) {
     int d = w->dim;
     long l;
-    if (w->mg_on && w->mg_current) { /* the assembled matrix: A^ x = S A x on filtered x */
+    if (w->s.mg_on && w->s.mg_current) { /* the assembled matrix: A^ x = S A x on filtered x */
         size_t k;
         pn__mpm_mg_apply(w, 0, x, NULL, out);
-        for (k = 0; k < w->n_act; ++k) pn__mpm_filter(w, k, out + k * (size_t)d);
+        for (k = 0; k < w->s.n_act; ++k) pn__mpm_filter(w, k, out + k * (size_t)d);
         return;
     }
     PN__OMP_FOR
-    for (l = 0; l < (long)w->start[w->nodes]; ++l) { /* the active particles, sorted */
+    for (l = 0; l < (long)w->s.start[w->s.nodes]; ++l) { /* the active particles, sorted */
         if (d == 2) pn__mpm_hmul2(w, (size_t)l, x, dt);
         else pn__mpm_hmul3(w, (size_t)l, x, dt);
     }
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n_act; ++l) {
+    for (l = 0; l < (long)w->s.n_act; ++l) {
         size_t k = (size_t)l;
         const pn_real *xk = x + k * (size_t)d;
         pn_real *ok = out + k * (size_t)d;
         int i;
-        for (i = 0; i < d; ++i) ok[i] = w->grid_m[k] * xk[i];
+        for (i = 0; i < d; ++i) ok[i] = w->s.grid_m[k] * xk[i];
         pn__mpm_gather_pmat(w, k, ok);
         pn__mpm_filter(w, k, ok);
     }
@@ -4482,14 +4501,14 @@ static void pn__mpm_diagonal(pn_mpm_world *w, pn_real dt) {
     int d = w->dim, dd = d * d;
     long l;
     PN__OMP_FOR
-    for (l = 0; l < (long)w->n_act; ++l) {
+    for (l = 0; l < (long)w->s.n_act; ++l) {
         size_t k = (size_t)l, e;
         int i, a, c;
-        pn_real *dg = w->diag + k * (size_t)d;
-        for (i = 0; i < d; ++i) dg[i] = w->grid_m[k];
-        for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
-            size_t ps = w->inc[e], p = w->order[ps / (size_t)w->ns];
-            const pn_real *H = w->pH + p * (size_t)(dd * dd), *q = w->pq + ps * (size_t)d;
+        pn_real *dg = w->s.diag + k * (size_t)d;
+        for (i = 0; i < d; ++i) dg[i] = w->s.grid_m[k];
+        for (e = w->s.inc_start[k]; e < w->s.inc_start[k + 1]; ++e) {
+            size_t ps = w->s.inc[e], p = w->s.order[ps / (size_t)w->s.ns];
+            const pn_real *H = w->s.pH + p * (size_t)(dd * dd), *q = w->s.pq + ps * (size_t)d;
             for (i = 0; i < d; ++i) {
                 pn_real acc = 0; /* sum_ac H[(i a),(i c)] q_a q_c, q = F^nT g */
                 for (a = 0; a < d; ++a)
@@ -4509,10 +4528,10 @@ static void pn__mpm_mg_vcycle(pn_mpm_world *w, int l, const pn_real *b, pn_real 
 static void pn__mpm_precondition(pn_mpm_world *w, const pn_real *r, pn_real *z) {
     int d = w->dim;
     size_t k, i;
-    if (w->mg_on) pn__mpm_mg_vcycle(w, 0, r, z);
-    for (k = 0; k < w->n_act; ++k) {
-        if (!w->mg_on)
-            for (i = 0; i < (size_t)d; ++i) z[k * (size_t)d + i] = r[k * (size_t)d + i] / w->diag[k * (size_t)d + i];
+    if (w->s.mg_on) pn__mpm_mg_vcycle(w, 0, r, z);
+    for (k = 0; k < w->s.n_act; ++k) {
+        if (!w->s.mg_on)
+            for (i = 0; i < (size_t)d; ++i) z[k * (size_t)d + i] = r[k * (size_t)d + i] / w->s.diag[k * (size_t)d + i];
         pn__mpm_filter(w, k, z + k * (size_t)d);
     }
 }
@@ -4542,14 +4561,14 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol,
     size_t k, i;
     pn__mpm_cg c;
     pn__cg_ops op;
-    if (!warm && !w->mg_on) pn__mpm_diagonal(w, dt);
-    for (k = 0; k < w->n_act; ++k) {
-        for (i = 0; i < (size_t)d; ++i) w->cg_r[k * (size_t)d + i] = -w->grad[k * (size_t)d + i];
-        pn__mpm_filter(w, k, w->cg_r + k * (size_t)d);
+    if (!warm && !w->s.mg_on) pn__mpm_diagonal(w, dt);
+    for (k = 0; k < w->s.n_act; ++k) {
+        for (i = 0; i < (size_t)d; ++i) w->s.cg_r[k * (size_t)d + i] = -w->s.grad[k * (size_t)d + i];
+        pn__mpm_filter(w, k, w->s.cg_r + k * (size_t)d);
     }
     c.w = w, c.dt = dt;
     op.ctx = &c, op.apply = pn__mpm_cg_apply, op.precond = pn__mpm_cg_precond, op.dot = pn__mpm_cg_dot, op.curv = NULL;
-    return pn__pcg(&op, w->n_act * (size_t)d, w->dir, w->cg_r, w->cg_z, w->cg_p, w->cg_q, max_it, rel_tol, warm, capped);
+    return pn__pcg(&op, w->s.n_act * (size_t)d, w->s.dir, w->s.cg_r, w->s.cg_z, w->s.cg_p, w->s.cg_q, max_it, rel_tol, warm, capped);
 }
 
 /* Per-pass preparation of every particle's energy at F0 = F(v) (lagged G, PlasticityNet
@@ -4573,49 +4592,49 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
         int nl = 0, gl = -1, k;
         for (q = p0; q < p1; ++q) {
             const pn_mpm_group *g = &w->groups[w->group[q]];
-            pn_real F0[9], *old = w->pF0 + q * (size_t)dd, diff = 0;
+            pn_real F0[9], *old = w->s.pF0 + q * (size_t)dd, diff = 0;
             pn_mpm_energy en;
             int i;
-            w->pstat[q] = 0;
-            w->pscal[q] = 0;
+            w->s.pstat[q] = 0;
+            w->s.pscal[q] = 0;
             if (!w->active[q]) continue;
             pn__mpm_push(w, q, v, dt, w->F + q * (size_t)dd, F0);
             if (!first)
                 for (i = 0; i < dd; ++i) diff = PN__MAX(diff, PN__FABS(F0[i] - old[i]));
-            w->pscal[q] = diff;
+            w->s.pscal[q] = diff;
             memcpy(old, F0, sizeof(pn_real) * (size_t)dd);
             en = pn__mpm_energy_of(g);
-            if (en == PN_MPM_ENERGY_PNET && w->tok && w->tok[q]) { /* keep a point F0 has not left */
-                const pn_pnet_point *pt = &w->ppt[q];
-                int keep = w->reuse_tol > 0 && pt->h == w->h[q];
-                for (i = 0; keep && i < dd; ++i) keep = PN__FABS(F0[i] - pt->F0[i]) <= w->reuse_tol;
+            if (en == PN_MPM_ENERGY_PNET && w->s.tok && w->s.tok[q]) { /* keep a point F0 has not left */
+                const pn_pnet_point *pt = &w->s.ppt[q];
+                int keep = w->s.reuse_tol > 0 && pt->h == w->h[q];
+                for (i = 0; keep && i < dd; ++i) keep = PN__FABS(F0[i] - pt->F0[i]) <= w->s.reuse_tol;
                 if (keep) continue;
                 pn__mpm_touch(w, q);
-                w->tok[q] = 0;
+                w->s.tok[q] = 0;
             }
-            if (en == PN_MPM_ENERGY_PNET && w->pnet_lanes && (gl < 0 || gl == w->group[q])) {
+            if (en == PN_MPM_ENERGY_PNET && w->s.pnet_lanes && (gl < 0 || gl == w->group[q])) {
                 gl = w->group[q]; /* one network per block's lanes */
                 lp[nl] = q;
                 hl[nl] = w->h[q];
                 memcpy(Fl + nl * dd, F0, sizeof(pn_real) * (size_t)dd);
                 nl++;
             } else if (en == PN_MPM_ENERGY_LAGGED)
-                w->pstat[q] = (int)pn_lagged_prepare(&g->material, d, F0, w->h[q], w->pG + q * (size_t)dd, &w->phG[q]);
+                w->s.pstat[q] = (int)pn_lagged_prepare(&g->material, d, F0, w->h[q], w->s.pG + q * (size_t)dd, &w->s.phG[q]);
             else if (en == PN_MPM_ENERGY_PNET)
-                w->pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->ppt[q], NULL, NULL);
+                w->s.pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->s.ppt[q], NULL, NULL);
             else if (en == PN_MPM_ENERGY_DP)
-                w->pstat[q] = (int)pn_dp_prepare(&g->material, d, first ? w->F + q * (size_t)dd : F0, w->h[q],
-                                                 &w->pty[q]);
+                w->s.pstat[q] = (int)pn_dp_prepare(&g->material, d, first ? w->F + q * (size_t)dd : F0, w->h[q],
+                                                 &w->s.pty[q]);
         }
         if (nl) {
             pn_pnet_prepare_lanes(&w->groups[gl].pnet, nl, Fl, hl, ptl, stl);
             for (k = 0; k < nl; ++k) {
-                w->pstat[lp[k]] = (int)stl[k];
-                if (stl[k] == PN_OK) w->ppt[lp[k]] = ptl[k];
+                w->s.pstat[lp[k]] = (int)stl[k];
+                if (stl[k] == PN_OK) w->s.ppt[lp[k]] = ptl[k];
             }
         }
     }
-    for (p = 0; p < w->n; ++p) worst = PN__MAX(worst, w->pscal[p]);
+    for (p = 0; p < w->n; ++p) worst = PN__MAX(worst, w->s.pscal[p]);
     *res = worst;
     return pn__mpm_first_error(w, dt);
 }
@@ -4665,7 +4684,7 @@ static void pn__mpm_force_error(pn_mpm_world *w, const pn_real *v, pn_real dt, p
             e += (double)((P[i] - T[i]) * (P[i] - T[i]));
             t += (double)(T[i] * T[i]);
             if (pn__mpm_energy_of(g) == PN_MPM_ENERGY_PNET) {
-                double df = (double)(g->pnet.reg * (F[i] - w->ppt[p].F0[i]));
+                double df = (double)(g->pnet.reg * (F[i] - w->s.ppt[p].F0[i]));
                 r += df * df;
             }
         }
@@ -4689,12 +4708,12 @@ static pn_real pn__mpm_model_norm(pn_mpm_world *w, pn_real alpha) {
     int d = w->dim, i;
     size_t k;
     double s = 0;
-    for (k = 0; k < w->n_act; ++k) {
+    for (k = 0; k < w->s.n_act; ++k) {
         pn_real g[3];
-        for (i = 0; i < d; ++i) g[i] = w->grad[k * (size_t)d + (size_t)i];
+        for (i = 0; i < d; ++i) g[i] = w->s.grad[k * (size_t)d + (size_t)i];
         pn__mpm_filter(w, k, g);
         for (i = 0; i < d; ++i) {
-            pn_real e = alpha == 0 ? g[i] : (1 - alpha) * g[i] - alpha * w->cg_r[k * (size_t)d + (size_t)i];
+            pn_real e = alpha == 0 ? g[i] : (1 - alpha) * g[i] - alpha * w->s.cg_r[k * (size_t)d + (size_t)i];
             s += (double)(e * e);
         }
     }
@@ -4723,8 +4742,8 @@ static void pn__mpm_mark(pn_mpm_world *w, pn_mpm_stats *st, int s) {
     double t;
     if (!w->desc.clock_s) return;
     t = w->desc.clock_s(w->desc.clock_user);
-    if (s >= 0) st->stage_s[s] += t - w->clock_last;
-    w->clock_last = t;
+    if (s >= 0) st->stage_s[s] += t - w->s.clock_last;
+    w->s.clock_last = t;
 }
 
 /* the incremental potential's value for the shared line search (>>kit, plastinet.h) */
@@ -4738,7 +4757,7 @@ static pn_result pn__mpm_value(void *ctx, const pn_real *v, pn_real *E) {
    of a node is fixed for a solve; the node sticks (every component held) or slides against
    the constant force mu L t, t its tangential direction. Where L comes from:
    - a solution of this step (later passes and contact rounds): the held normal reaction;
-   - the first solve of a step: the reaction at the end of the last implicit step (w->lnode,
+   - the first solve of a step: the reaction at the end of the last implicit step (w->s.lnode,
      as a force, times dt), else, for a new contact, the impulse that stops the node's own
      approach, m max(0, -u_n), as the explicit projection uses.
    The start value of L matters: the gradient at v* overstates it (the elastic push of the
@@ -4748,12 +4767,12 @@ static pn_result pn__mpm_value(void *ctx, const pn_real *v, pn_real *E) {
 
 /* the node's held normal reaction in gradient g (kg m/s), 0 where nothing holds it */
 static pn_real pn__mpm_reaction(const pn_mpm_world *w, size_t k, const pn_real *g) {
-    const pn_real *dir = w->cdir + k * 9;
+    const pn_real *dir = w->s.cdir + k * 9;
     pn_real L = 0;
     int b, i;
-    for (b = 0; b < w->cn[k]; ++b) {
+    for (b = 0; b < w->s.cn[k]; ++b) {
         pn_real gn = 0;
-        if (!(w->chold[k] >> b & 1)) continue;
+        if (!(w->s.chold[k] >> b & 1)) continue;
         for (i = 0; i < w->dim; ++i) gn += g[i] * dir[3 * b + i];
         L += PN__MAX(gn, 0);
     }
@@ -4761,7 +4780,7 @@ static pn_real pn__mpm_reaction(const pn_mpm_world *w, size_t k, const pn_real *
 }
 
 static int pn__mpm_has_friction(const pn_mpm_world *w, size_t k) {
-    return w->ckind[k] == PN_MPM_BOUNDARY_SEPARATE && (w->chold[k] & 0x7f) && w->cmu[k] > 0;
+    return w->s.ckind[k] == PN_MPM_BOUNDARY_SEPARATE && (w->s.chold[k] & 0x7f) && w->s.cmu[k] > 0;
 }
 
 /* node k with normal impulse L: stick (when lagged_stick, or for a new friction state when
@@ -4769,70 +4788,70 @@ static int pn__mpm_has_friction(const pn_mpm_world *w, size_t k) {
 static void pn__mpm_stick_or_slide(pn_mpm_world *w, size_t k, pn_real *v, pn_real L, int fresh, int stick) {
     int d = w->dim, i;
     pn_real *vk = v + k * (size_t)d, u[3], ut = 0;
-    w->clam[k] = L;
+    w->s.clam[k] = L;
     if (!(L > 0)) {
-        w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
-        w->clam[k] = 0;
+        w->s.chold[k] = (unsigned char)(w->s.chold[k] & ~PN__MPM_STICK);
+        w->s.clam[k] = 0;
         return;
     }
-    for (i = 0; i < d; ++i) u[i] = vk[i] - w->cvel[k * 3 + (size_t)i];
+    for (i = 0; i < d; ++i) u[i] = vk[i] - w->s.cvel[k * 3 + (size_t)i];
     pn__mpm_filter(w, k, u);
     for (i = 0; i < d; ++i) ut += u[i] * u[i];
     ut = PN__SQRT(ut);
-    if (fresh) stick = w->grid_m[k] * ut <= w->cmu[k] * L;
+    if (fresh) stick = w->s.grid_m[k] * ut <= w->s.cmu[k] * L;
     if (stick || !(ut > 0)) {
-        w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
+        w->s.chold[k] = (unsigned char)(w->s.chold[k] | PN__MPM_STICK);
         pn__mpm_hold(w, k, vk);
         return;
     }
-    w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
-    for (i = 0; i < d; ++i) w->ctan[k * 3 + (size_t)i] = u[i] / ut;
+    w->s.chold[k] = (unsigned char)(w->s.chold[k] & ~PN__MPM_STICK);
+    for (i = 0; i < d; ++i) w->s.ctan[k * 3 + (size_t)i] = u[i] / ut;
 }
 
-/* friction for the first solve of a step at start velocities v (v*: w->vstar) */
+/* friction for the first solve of a step at start velocities v (v*: w->s.vstar) */
 static void pn__mpm_friction_start(pn_mpm_world *w, pn_real *v, pn_real dt) {
     int d = w->dim, b, i;
     size_t k, j;
-    for (k = 0; k < w->n_act; ++k) {
-        w->clam[k] = -1; /* not set yet */
-        w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
+    for (k = 0; k < w->s.n_act; ++k) {
+        w->s.clam[k] = -1; /* not set yet */
+        w->s.chold[k] = (unsigned char)(w->s.chold[k] & ~PN__MPM_STICK);
     }
-    for (j = 0; j < w->n_lag; ++j) { /* the contact held at the end of the last step holds on, */
-        long kk = w->dof[w->lnode[j] >> 3]; /* along the directions it held then */
-        if (kk < 0 || w->ckind[kk] != PN_MPM_BOUNDARY_SEPARATE || !w->cn[kk]) continue;
-        w->chold[kk] = (unsigned char)(w->chold[kk] | ((w->lnode[j] & 7) & ((1u << w->cn[kk]) - 1)));
+    for (j = 0; j < w->s.n_lag; ++j) { /* the contact held at the end of the last step holds on, */
+        long kk = w->s.dof[w->s.lnode[j] >> 3]; /* along the directions it held then */
+        if (kk < 0 || w->s.ckind[kk] != PN_MPM_BOUNDARY_SEPARATE || !w->s.cn[kk]) continue;
+        w->s.chold[kk] = (unsigned char)(w->s.chold[kk] | ((w->s.lnode[j] & 7) & ((1u << w->s.cn[kk]) - 1)));
         pn__mpm_hold(w, (size_t)kk, v + (size_t)kk * (size_t)d);
         if (pn__mpm_has_friction(w, (size_t)kk))
-            pn__mpm_stick_or_slide(w, (size_t)kk, v, PN__FABS(w->lval[j]) * dt, 0, w->lval[j] < 0);
+            pn__mpm_stick_or_slide(w, (size_t)kk, v, PN__FABS(w->s.lval[j]) * dt, 0, w->s.lval[j] < 0);
     }
-    for (k = 0; k < w->n_act; ++k) {
+    for (k = 0; k < w->s.n_act; ++k) {
         pn_real L = 0;
-        if (w->clam[k] >= 0) continue;
-        w->clam[k] = 0;
+        if (w->s.clam[k] >= 0) continue;
+        w->s.clam[k] = 0;
         if (!pn__mpm_has_friction(w, k)) continue;
-        for (b = 0; b < w->cn[k]; ++b) { /* the node's own approach */
+        for (b = 0; b < w->s.cn[k]; ++b) { /* the node's own approach */
             pn_real un = 0;
-            if (!(w->chold[k] >> b & 1)) continue;
+            if (!(w->s.chold[k] >> b & 1)) continue;
             for (i = 0; i < d; ++i)
-                un += (w->vstar[k * (size_t)d + (size_t)i] - w->cvel[k * 3 + (size_t)i]) * w->cdir[k * 9 + (size_t)(3 * b + i)];
-            L += w->grid_m[k] * PN__MAX(-un, 0);
+                un += (w->s.vstar[k * (size_t)d + (size_t)i] - w->s.cvel[k * 3 + (size_t)i]) * w->s.cdir[k * 9 + (size_t)(3 * b + i)];
+            L += w->s.grid_m[k] * PN__MAX(-un, 0);
         }
         pn__mpm_stick_or_slide(w, k, v, L, 1, 0);
     }
 }
 
-/* friction for a later solve: L from the reaction at the last solution (w->grad at v); the
+/* friction for a later solve: L from the reaction at the last solution (w->s.grad at v); the
    stick flags are those the active set left, a node with no friction before starts afresh */
 static void pn__mpm_friction_update(pn_mpm_world *w, pn_real *v) {
     size_t k;
-    for (k = 0; k < w->n_act; ++k) {
-        int fresh = !(w->clam[k] > 0);
+    for (k = 0; k < w->s.n_act; ++k) {
+        int fresh = !(w->s.clam[k] > 0);
         if (!pn__mpm_has_friction(w, k)) {
-            w->clam[k] = 0;
+            w->s.clam[k] = 0;
             continue;
         }
-        pn__mpm_stick_or_slide(w, k, v, pn__mpm_reaction(w, k, w->grad + k * (size_t)w->dim), fresh,
-                               (w->chold[k] & PN__MPM_STICK) != 0);
+        pn__mpm_stick_or_slide(w, k, v, pn__mpm_reaction(w, k, w->s.grad + k * (size_t)w->dim), fresh,
+                               (w->s.chold[k] & PN__MPM_STICK) != 0);
     }
 }
 
@@ -4840,14 +4859,14 @@ static void pn__mpm_friction_update(pn_mpm_world *w, pn_real *v) {
    reaction, their reaction force and stick flag at the solution */
 static void pn__mpm_friction_record(pn_mpm_world *w, pn_real dt) {
     size_t k;
-    w->n_lag = 0;
-    for (k = 0; k < w->n_act; ++k) {
+    w->s.n_lag = 0;
+    for (k = 0; k < w->s.n_act; ++k) {
         pn_real L;
-        if (w->ckind[k] != PN_MPM_BOUNDARY_SEPARATE || !(w->chold[k] & 0x7f)) continue;
-        L = pn__mpm_reaction(w, k, w->grad + k * (size_t)w->dim);
+        if (w->s.ckind[k] != PN_MPM_BOUNDARY_SEPARATE || !(w->s.chold[k] & 0x7f)) continue;
+        L = pn__mpm_reaction(w, k, w->s.grad + k * (size_t)w->dim);
         if (!(L > 0)) continue;
-        w->lnode[w->n_lag] = w->act[k] << 3 | (size_t)(w->chold[k] & 7); /* the node, its held directions */
-        w->lval[w->n_lag++] = (w->chold[k] & PN__MPM_STICK ? -L : L) / dt;
+        w->s.lnode[w->s.n_lag] = w->s.act[k] << 3 | (size_t)(w->s.chold[k] & 7); /* the node, its held directions */
+        w->s.lval[w->s.n_lag++] = (w->s.chold[k] & PN__MPM_STICK ? -L : L) / dt;
     }
 }
 
@@ -4858,43 +4877,43 @@ static void pn__mpm_friction_record(pn_mpm_world *w, pn_real dt) {
 static int pn__mpm_active_set(pn_mpm_world *w, pn_real *v, pn_real vtol) {
     int d = w->dim, changed = 0;
     size_t k;
-    for (k = 0; k < w->n_act; ++k) {
-        const pn_real *dir = w->cdir + k * 9, *vel = w->cvel + k * 3, *g = w->grad + k * (size_t)d;
-        pn_real *vk = v + k * (size_t)d, m = w->grid_m[k], f = w->cmu[k] * w->clam[k], gt[3], u[3], a = 0;
-        int b, i, ch = 0, stick = (w->chold[k] & PN__MPM_STICK) != 0;
-        if (w->ckind[k] != PN_MPM_BOUNDARY_SEPARATE || w->cn[k] == 0) continue;
-        for (b = 0; b < w->cn[k]; ++b) {
+    for (k = 0; k < w->s.n_act; ++k) {
+        const pn_real *dir = w->s.cdir + k * 9, *vel = w->s.cvel + k * 3, *g = w->s.grad + k * (size_t)d;
+        pn_real *vk = v + k * (size_t)d, m = w->s.grid_m[k], f = w->s.cmu[k] * w->s.clam[k], gt[3], u[3], a = 0;
+        int b, i, ch = 0, stick = (w->s.chold[k] & PN__MPM_STICK) != 0;
+        if (w->s.ckind[k] != PN_MPM_BOUNDARY_SEPARATE || w->s.cn[k] == 0) continue;
+        for (b = 0; b < w->s.cn[k]; ++b) {
             pn_real gn = 0, un = 0;
             for (i = 0; i < d; ++i) {
                 gn += g[i] * dir[3 * b + i];
                 un += (vk[i] - vel[i]) * dir[3 * b + i];
             }
-            if ((w->chold[k] >> b & 1) && gn < -vtol * m) { /* pulls away: let go */
-                w->chold[k] = (unsigned char)(w->chold[k] & ~(1 << b) & ~PN__MPM_STICK);
+            if ((w->s.chold[k] >> b & 1) && gn < -vtol * m) { /* pulls away: let go */
+                w->s.chold[k] = (unsigned char)(w->s.chold[k] & ~(1 << b) & ~PN__MPM_STICK);
                 ch = 1;
-            } else if (!(w->chold[k] >> b & 1) && un < -vtol) { /* goes in: hold it */
-                w->chold[k] = (unsigned char)(w->chold[k] | 1 << b);
+            } else if (!(w->s.chold[k] >> b & 1) && un < -vtol) { /* goes in: hold it */
+                w->s.chold[k] = (unsigned char)(w->s.chold[k] | 1 << b);
                 ch = 1;
             }
         }
         if (!ch && stick) { /* tangential reaction against the friction cone */
-            w->chold[k] = (unsigned char)(w->chold[k] & ~PN__MPM_STICK);
+            w->s.chold[k] = (unsigned char)(w->s.chold[k] & ~PN__MPM_STICK);
             for (i = 0; i < d; ++i) gt[i] = g[i];
             pn__mpm_filter(w, k, gt);
             for (i = 0; i < d; ++i) a += gt[i] * gt[i];
             a = PN__SQRT(a);
             if (a > f + vtol * m) {
-                for (i = 0; i < d; ++i) w->ctan[k * 3 + (size_t)i] = -gt[i] / a;
+                for (i = 0; i < d; ++i) w->s.ctan[k * 3 + (size_t)i] = -gt[i] / a;
                 ch = 1;
             } else {
-                w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
+                w->s.chold[k] = (unsigned char)(w->s.chold[k] | PN__MPM_STICK);
             }
         } else if (!ch && f > 0) { /* sliding: did friction turn it back? */
             for (i = 0; i < d; ++i) u[i] = vk[i] - vel[i];
             pn__mpm_filter(w, k, u);
-            for (i = 0; i < d; ++i) a += u[i] * w->ctan[k * 3 + (size_t)i];
+            for (i = 0; i < d; ++i) a += u[i] * w->s.ctan[k * 3 + (size_t)i];
             if (a < 0) {
-                w->chold[k] = (unsigned char)(w->chold[k] | PN__MPM_STICK);
+                w->s.chold[k] = (unsigned char)(w->s.chold[k] | PN__MPM_STICK);
                 ch = 1;
             }
         }
@@ -4962,13 +4981,13 @@ static pn_result pn__mpm_mg_reserve(pn_mpm_world *w, pn__mpm_level *L, size_t n,
 /* levels' grids and node maps, once (the first multigrid step) */
 static pn_result pn__mpm_mg_init(pn_mpm_world *w) {
     int d = w->dim, l, a, fail = 0;
-    pn__mpm_level *L = w->mg;
-    if (w->mg_max) return PN_OK;
+    pn__mpm_level *L = w->s.mg;
+    if (w->s.mg_max) return PN_OK;
     for (a = 0; a < 3; ++a) {
         L[0].nn[a] = a < d ? w->desc.res[a] + 1 : 1;
-        L[0].stride[a] = w->stride[a];
+        L[0].stride[a] = w->s.stride[a];
     }
-    L[0].nodes = w->nodes;
+    L[0].nodes = w->s.nodes;
     for (l = 1; l < PN__MPM_MG_MAX; ++l) {
         size_t s = 1;
         int small = 0;
@@ -4985,20 +5004,20 @@ static pn_result pn__mpm_mg_init(pn_mpm_world *w) {
         if (fail) break;
         memset(L[l].dof, 0xff, sizeof(long) * s); /* -1 */
     }
-    w->mg_dense = (pn_real *)pn__mpm_alloc(&w->desc, (size_t)PN__MPM_MG_DENSE * PN__MPM_MG_DENSE, sizeof(pn_real),
+    w->s.mg_dense = (pn_real *)pn__mpm_alloc(&w->desc, (size_t)PN__MPM_MG_DENSE * PN__MPM_MG_DENSE, sizeof(pn_real),
                                            &fail);
     if (fail) return PN_ERROR_OUT_OF_MEMORY; /* pn_mpm_destroy frees what was made */
-    w->mg_max = l;
+    w->s.mg_max = l;
     return PN_OK;
 }
 
 /* neighbour rows of every row of level l (-1: inactive or off the grid) and the colour lists */
 static void pn__mpm_mg_rows(pn_mpm_world *w, int l) {
-    pn__mpm_level *L = &w->mg[l];
+    pn__mpm_level *L = &w->s.mg[l];
     int d = w->dim, nb = PN__MPM_NB(d), nc = d == 2 ? 9 : 27, c;
     size_t k, count[28];
-    const size_t *node = l ? L->node : w->act;
-    const long *dof = l ? L->dof : w->dof;
+    const size_t *node = l ? L->node : w->s.act;
+    const long *dof = l ? L->dof : w->s.dof;
     long lk;
     PN__OMP_FOR
     for (lk = 0; lk < (long)L->n; ++lk) {
@@ -5033,7 +5052,7 @@ static void pn__mpm_mg_rows(pn_mpm_world *w, int l) {
    is held (S = I) */
 static int pn__mpm_filter_matrix(const pn_mpm_world *w, size_t k, pn_real *S) {
     int d = w->dim, i, j;
-    if (!(w->chold[k] & PN__MPM_STICK) && !(w->chold[k] & ((1 << w->cn[k]) - 1))) return 0;
+    if (!(w->s.chold[k] & PN__MPM_STICK) && !(w->s.chold[k] & ((1 << w->s.cn[k]) - 1))) return 0;
     for (j = 0; j < d; ++j) {
         pn_real e[3] = {0, 0, 0};
         e[j] = 1;
@@ -5062,16 +5081,16 @@ static void pn__mpm_mg_dinv(int d, const pn_real *D, pn_real *out) {
    sum_p V_p dt^2 sum_ce H_p[(a c),(b e)] q_pk,c q_pl,e (q = F^nT g as in >>implicit), plus
    m_k I on the diagonal; gathered per row over the row's incidences (their fixed order). */
 static void pn__mpm_mg_fine(pn_mpm_world *w, pn_real dt) {
-    pn__mpm_level *L = w->mg;
-    int d = w->dim, dd = d * d, ns = w->ns, nb = PN__MPM_NB(d), ctr = nb / 2, pair[27 * 27], s, s2;
+    pn__mpm_level *L = w->s.mg;
+    int d = w->dim, dd = d * d, ns = w->s.ns, nb = PN__MPM_NB(d), ctr = nb / 2, pair[27 * 27], s, s2;
     long lk;
     for (s = 0; s < ns; ++s) /* the neighbour index of slot t seen from slot s */
         for (s2 = 0; s2 < ns; ++s2) {
             int o = 0, a, t = s2;
-            for (a = 0; a < d; ++a) o = o * 5 + w->slot[t][a] - w->slot[s][a] + 2;
+            for (a = 0; a < d; ++a) o = o * 5 + w->s.slot[t][a] - w->s.slot[s][a] + 2;
             pair[s * ns + t] = o;
         }
-    L->n = w->n_act;
+    L->n = w->s.n_act;
     pn__mpm_mg_rows(w, 0);
     PN__OMP_FOR
     for (lk = 0; lk < (long)L->n; ++lk) {
@@ -5079,10 +5098,10 @@ static void pn__mpm_mg_fine(pn_mpm_world *w, pn_real dt) {
         pn_real *A = L->A + k * (size_t)(nb * dd);
         int i, t;
         memset(A, 0, sizeof(pn_real) * (size_t)(nb * dd));
-        for (e = w->inc_start[k]; e < w->inc_start[k + 1]; ++e) {
-            size_t ps = w->inc[e], j = ps / (size_t)ns, p = w->order[j];
-            const pn_real *H = w->pH + p * (size_t)(dd * dd), *qs = w->pq + ps * (size_t)d;
-            const pn_real *q = w->pq + j * (size_t)(ns * d);
+        for (e = w->s.inc_start[k]; e < w->s.inc_start[k + 1]; ++e) {
+            size_t ps = w->s.inc[e], j = ps / (size_t)ns, p = w->s.order[j];
+            const pn_real *H = w->s.pH + p * (size_t)(dd * dd), *qs = w->s.pq + ps * (size_t)d;
+            const pn_real *q = w->s.pq + j * (size_t)(ns * d);
             const int *pr = pair + (ps - j * (size_t)ns) * (size_t)ns;
             pn_real c = w->vol0[p] * dt * dt, u[27];
             if (d == 2) { /* u_abe = c sum_c H[(a c),(b e)] qs_c; block_ab += sum_e u_abe q_e */
@@ -5108,7 +5127,7 @@ static void pn__mpm_mg_fine(pn_mpm_world *w, pn_real dt) {
                 }
             }
         }
-        for (i = 0; i < d; ++i) A[ctr * dd + i * d + i] += w->grid_m[k];
+        for (i = 0; i < d; ++i) A[ctr * dd + i * d + i] += w->s.grid_m[k];
     }
     PN__OMP_FOR
     for (lk = 0; lk < (long)L->n; ++lk) { /* the contact filter, then the diagonal's inverse */
@@ -5157,10 +5176,10 @@ static pn_real pn__mpm_mg_parent(int d, const int *idx, int m, int *I) {
 
 /* level l + 1 from level l: its rows (the parents of level l's rows) and P^T A_l P */
 static pn_result pn__mpm_mg_coarsen(pn_mpm_world *w, int l) {
-    pn__mpm_level *F = &w->mg[l], *C = &w->mg[l + 1];
+    pn__mpm_level *F = &w->s.mg[l], *C = &w->s.mg[l + 1];
     int d = w->dim, dd = d * d, nb = PN__MPM_NB(d), ctr = nb / 2;
-    const size_t *fnode = l ? F->node : w->act;
-    const long *fdof = l ? F->dof : w->dof;
+    const size_t *fnode = l ? F->node : w->s.act;
+    const long *fdof = l ? F->dof : w->s.dof;
     size_t k, n = 0, flat;
     long lk;
     pn_result r;
@@ -5263,7 +5282,7 @@ static void pn__mpm_mg_row(int d, int nb, size_t k, const pn_real *A, const long
 
 /* out = A_l x (b NULL) or b - A_l x */
 static void pn__mpm_mg_apply(pn_mpm_world *w, int l, const pn_real *x, const pn_real *b, pn_real *out) {
-    const pn__mpm_level *L = &w->mg[l];
+    const pn__mpm_level *L = &w->s.mg[l];
     int d = w->dim, dd = d * d, nb = PN__MPM_NB(d);
     long lk;
     PN__OMP_FOR
@@ -5278,7 +5297,7 @@ static void pn__mpm_mg_apply(pn_mpm_world *w, int l, const pn_real *x, const pn_
 
 /* one block Gauss-Seidel sweep on A_l x = b, colours in order (or reversed) */
 static void pn__mpm_mg_smooth(pn_mpm_world *w, int l, const pn_real *b, pn_real *x, int backward) {
-    const pn__mpm_level *L = &w->mg[l];
+    const pn__mpm_level *L = &w->s.mg[l];
     int d = w->dim, dd = d * d, nb = PN__MPM_NB(d), nc = d == 2 ? 9 : 27, ci;
     for (ci = 0; ci < nc; ++ci) {
         int c = backward ? nc - 1 - ci : ci;
@@ -5302,10 +5321,10 @@ static void pn__mpm_mg_smooth(pn_mpm_world *w, int l, const pn_real *b, pn_real 
 
 /* coarse b_I = sum over children i of w_iI r_i (level l's r to level l + 1's b) */
 static void pn__mpm_mg_restrict(pn_mpm_world *w, int l) {
-    const pn__mpm_level *F = &w->mg[l];
-    pn__mpm_level *C = &w->mg[l + 1];
+    const pn__mpm_level *F = &w->s.mg[l];
+    pn__mpm_level *C = &w->s.mg[l + 1];
     int d = w->dim, nc = d == 2 ? 9 : 27;
-    const long *fdof = l ? F->dof : w->dof;
+    const long *fdof = l ? F->dof : w->s.dof;
     long lk;
     PN__OMP_FOR
     for (lk = 0; lk < (long)C->n; ++lk) {
@@ -5332,9 +5351,9 @@ static void pn__mpm_mg_restrict(pn_mpm_world *w, int l) {
 
 /* x_i += sum over parents I of w_iI x_I (level l + 1's x into level l's x) */
 static void pn__mpm_mg_prolong(pn_mpm_world *w, int l, pn_real *x) {
-    const pn__mpm_level *F = &w->mg[l], *C = &w->mg[l + 1];
+    const pn__mpm_level *F = &w->s.mg[l], *C = &w->s.mg[l + 1];
     int d = w->dim;
-    const size_t *fnode = l ? F->node : w->act;
+    const size_t *fnode = l ? F->node : w->s.act;
     long lk;
     PN__OMP_FOR
     for (lk = 0; lk < (long)F->n; ++lk) {
@@ -5354,11 +5373,11 @@ static void pn__mpm_mg_prolong(pn_mpm_world *w, int l, pn_real *x) {
 
 /* the coarsest level exactly (dense Cholesky, factored with the hierarchy) when it is small */
 static void pn__mpm_mg_dense_factor(pn_mpm_world *w) {
-    const pn__mpm_level *L = &w->mg[w->mg_levels - 1];
+    const pn__mpm_level *L = &w->s.mg[w->s.mg_levels - 1];
     int d = w->dim, dd = d * d, nb = PN__MPM_NB(d), t, a, b;
     size_t n = L->n * (size_t)d, k;
-    pn_real *M = w->mg_dense;
-    w->mg_dense_n = 0;
+    pn_real *M = w->s.mg_dense;
+    w->s.mg_dense_n = 0;
     if (n > PN__MPM_MG_DENSE) return;
     memset(M, 0, sizeof(pn_real) * n * n);
     for (k = 0; k < L->n; ++k)
@@ -5373,14 +5392,14 @@ static void pn__mpm_mg_dense_factor(pn_mpm_world *w) {
     /* M = L L^T; a direction without stiffness (all held) gets x_j = b_j; not semi-definite:
        smooth instead (mg_dense_n stays 0) */
     if (pn__cholesky(M, n, (pn_real)1e-10, 0, 1) < n) return;
-    w->mg_dense_n = n;
+    w->s.mg_dense_n = n;
 }
 
 static void pn__mpm_mg_coarsest(pn_mpm_world *w, int l, const pn_real *b, pn_real *x) {
-    size_t n = w->mg_dense_n;
-    const pn_real *M = w->mg_dense;
+    size_t n = w->s.mg_dense_n;
+    const pn_real *M = w->s.mg_dense;
     if (!n) { /* two symmetric sweeps */
-        memset(x, 0, sizeof(pn_real) * w->mg[l].n * (size_t)w->dim);
+        memset(x, 0, sizeof(pn_real) * w->s.mg[l].n * (size_t)w->dim);
         pn__mpm_mg_smooth(w, l, b, x, 0);
         pn__mpm_mg_smooth(w, l, b, x, 1);
         pn__mpm_mg_smooth(w, l, b, x, 0);
@@ -5392,8 +5411,8 @@ static void pn__mpm_mg_coarsest(pn_mpm_world *w, int l, const pn_real *b, pn_rea
 
 /* x = B b, B one V(1,1)-cycle from level l down */
 static void pn__mpm_mg_vcycle(pn_mpm_world *w, int l, const pn_real *b, pn_real *x) {
-    pn__mpm_level *L = &w->mg[l], *C = &w->mg[l + 1];
-    if (l == w->mg_levels - 1) {
+    pn__mpm_level *L = &w->s.mg[l], *C = &w->s.mg[l + 1];
+    if (l == w->s.mg_levels - 1) {
         pn__mpm_mg_coarsest(w, l, b, x);
         return;
     }
@@ -5413,21 +5432,21 @@ static void pn__mpm_mg_vcycle(pn_mpm_world *w, int l, const pn_real *b, pn_real 
 static pn_result pn__mpm_mg_build(pn_mpm_world *w, pn_real dt, int fresh, int max_levels) {
     int d = w->dim;
     pn_result r = pn__mpm_mg_init(w);
-    w->mg_current = 0;
-    if (!fresh && w->mg_levels > 0) return PN_OK;
-    if (r == PN_OK) r = pn__mpm_mg_reserve(w, &w->mg[0], w->n_act, 0);
+    w->s.mg_current = 0;
+    if (!fresh && w->s.mg_levels > 0) return PN_OK;
+    if (r == PN_OK) r = pn__mpm_mg_reserve(w, &w->s.mg[0], w->s.n_act, 0);
     if (r != PN_OK) return r;
     pn__mpm_mg_fine(w, dt);
-    w->mg_current = 1;
-    w->mg_levels = 1;
-    while (w->mg_levels < PN__MIN(max_levels, w->mg_max) &&
-           w->mg[w->mg_levels - 1].n * (size_t)d > PN__MPM_MG_DENSE) {
-        r = pn__mpm_mg_coarsen(w, w->mg_levels - 1);
+    w->s.mg_current = 1;
+    w->s.mg_levels = 1;
+    while (w->s.mg_levels < PN__MIN(max_levels, w->s.mg_max) &&
+           w->s.mg[w->s.mg_levels - 1].n * (size_t)d > PN__MPM_MG_DENSE) {
+        r = pn__mpm_mg_coarsen(w, w->s.mg_levels - 1);
         if (r != PN_OK) {
-            w->mg_levels = 0;
+            w->s.mg_levels = 0;
             return r;
         }
-        w->mg_levels++;
+        w->s.mg_levels++;
     }
     pn__mpm_mg_dense_factor(w);
     return PN_OK;
@@ -5534,14 +5553,14 @@ static void pn__mpm_stress_apply(pn_mpm_world *w, const pn_real *g, const long *
     int s;
     if (w->dim == 2) { /* spelled out: see pn__mpm_push2 */
         for (s = 0; s < 9; ++s, g += 2) {
-            pn_real f = w->diag[dof[s]] * sV, *vk = v + (size_t)dof[s] * 2;
+            pn_real f = w->s.diag[dof[s]] * sV, *vk = v + (size_t)dof[s] * 2;
             vk[0] -= f * (dtau[0] * g[0] + dtau[1] * g[1]);
             vk[1] -= f * (dtau[2] * g[0] + dtau[3] * g[1]);
         }
         return;
     }
     for (s = 0; s < 27; ++s, g += 3) {
-        pn_real f = w->diag[dof[s]] * sV, *vk = v + (size_t)dof[s] * 3;
+        pn_real f = w->s.diag[dof[s]] * sV, *vk = v + (size_t)dof[s] * 3;
         vk[0] -= f * (dtau[0] * g[0] + dtau[1] * g[1] + dtau[2] * g[2]);
         vk[1] -= f * (dtau[3] * g[0] + dtau[4] * g[1] + dtau[5] * g[2]);
         vk[2] -= f * (dtau[6] * g[0] + dtau[7] * g[1] + dtau[8] * g[2]);
@@ -5553,12 +5572,12 @@ static void pn__mpm_stress_apply(pn_mpm_world *w, const pn_real *g, const long *
 static void pn__mpm_stress_contact(pn_mpm_world *w, pn_real *v, pn_real *r) {
     int d = w->dim, i;
     size_t k;
-    for (k = 0; k < w->n_act; ++k) {
-        pn_real *vk = v + k * (size_t)d, *rk = r + k * (size_t)d, m = w->grid_m[k], fr[3];
-        if (!w->cn[k]) continue;
-        for (i = 0; i < d; ++i) fr[i] = vk[i] - rk[i] * w->diag[k];
+    for (k = 0; k < w->s.n_act; ++k) {
+        pn_real *vk = v + k * (size_t)d, *rk = r + k * (size_t)d, m = w->s.grid_m[k], fr[3];
+        if (!w->s.cn[k]) continue;
+        for (i = 0; i < d; ++i) fr[i] = vk[i] - rk[i] * w->s.diag[k];
         for (i = 0; i < d; ++i) vk[i] = fr[i];
-        pn__mpm_project(d, w->cn[k], w->ckind[k], w->cdir + k * 9, w->cvel + k * 3, w->cmu[k], vk);
+        pn__mpm_project(d, w->s.cn[k], w->s.ckind[k], w->s.cdir + k * 9, w->s.cvel + k * 3, w->s.cmu[k], vk);
         for (i = 0; i < d; ++i) rk[i] = m * (vk[i] - fr[i]);
     }
 }
@@ -5571,12 +5590,12 @@ static void pn__mpm_stress_contact(pn_mpm_world *w, pn_real *v, pn_real *r) {
    grp[2q] .. grp[2q + 1] - 1 (sorted indices), q from cstart[c] to cstart[c + 1] - 1. grp
    reuses inc (cap ns entries), which only the gather transfer needed before. */
 static void pn__mpm_stress_groups(pn_mpm_world *w, size_t *cstart) {
-    size_t j, np = w->start[w->nodes], count[28] = {0}, ng = 0, *grp = w->inc, *tmp;
+    size_t j, np = w->s.start[w->s.nodes], count[28] = {0}, ng = 0, *grp = w->s.inc, *tmp;
     int c, idx[3], i, d = w->dim, nc = d == 2 ? 9 : 27;
     tmp = grp + 2 * np; /* unsorted groups: start, end, colour (inc has ns >= 9 per particle) */
     for (j = 0; j < np;) {
-        size_t b = w->pbase[w->order[j]], e = j + 1;
-        while (e < np && w->pbase[w->order[e]] == b) ++e;
+        size_t b = w->s.pbase[w->s.order[j]], e = j + 1;
+        while (e < np && w->s.pbase[w->s.order[e]] == b) ++e;
         pn__mpm_node_index(w, b, idx);
         for (c = 0, i = d - 1; i >= 0; --i) c = c * 3 + idx[i] % 3;
         tmp[3 * ng] = j, tmp[3 * ng + 1] = e, tmp[3 * ng + 2] = (size_t)c;
@@ -5594,23 +5613,23 @@ static void pn__mpm_stress_groups(pn_mpm_world *w, size_t *cstart) {
 /* one Gauss-Seidel pass over the unknowns of sorted particles j0 .. j1 - 1 (one stencil base
    node): each particle's, or (cells) each cell's at its first particle (pn__mpm_stress_cells) */
 static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real dt, pn_real *v, int cells) {
-    int d = w->dim, dd = d * d, ns = w->ns, i;
+    int d = w->dim, dd = d * d, ns = w->s.ns, i;
     size_t j;
     for (j = j0; j < j1; ++j) {
-        pn_real L[9], tau[9], dtau[9], *cur = w->pP + j * (size_t)dd, sV, h;
+        pn_real L[9], tau[9], dtau[9], *cur = w->s.pP + j * (size_t)dd, sV, h;
         const pn_real *g;
-        const long *dof = w->pdof + j * (size_t)ns;
-        size_t p = w->order[j];
-        const pn_real *hat = w->pF0 + j * (size_t)dd;
-        pn_real c = w->pty[j];
+        const long *dof = w->s.pdof + j * (size_t)ns;
+        size_t p = w->s.order[j];
+        const pn_real *hat = w->s.pF0 + j * (size_t)dd;
+        pn_real c = w->s.pty[j];
         if (cells) {
-            pn_real *cell = w->pH + j * (size_t)(dd * dd);
-            if (w->phG[j] == 0) continue;
-            g = w->pb + j * (size_t)(ns * d), sV = dt, h = cell[2 * dd + 1], hat = cell, cur = cell + dd, c = cell[2 * dd];
-            if (d == 2) pn__mpm_push2_at(g, dof, v, 1 / w->phG[j], NULL, L);
-            else pn__mpm_push3_at(g, dof, v, 1 / w->phG[j], NULL, L);
+            pn_real *cell = w->s.pH + j * (size_t)(dd * dd);
+            if (w->s.phG[j] == 0) continue;
+            g = w->s.pb + j * (size_t)(ns * d), sV = dt, h = cell[2 * dd + 1], hat = cell, cur = cell + dd, c = cell[2 * dd];
+            if (d == 2) pn__mpm_push2_at(g, dof, v, 1 / w->s.phG[j], NULL, L);
+            else pn__mpm_push3_at(g, dof, v, 1 / w->s.phG[j], NULL, L);
         } else {
-            g = w->pq + j * (size_t)(ns * d), sV = dt * w->vol0[p], h = w->h[p];
+            g = w->s.pq + j * (size_t)(ns * d), sV = dt * w->vol0[p], h = w->h[p];
             pn__mpm_push(w, p, v, 1, NULL, L);
         }
         pn__mpm_stress_local(&w->groups[w->group[p]].material, d, hat, cur, h, L, c, dt, tau);
@@ -5628,9 +5647,9 @@ static pn_real pn__mpm_stress_compliance(const pn_mpm_world *w, const pn_real *g
                                          pn_real dt, pn_real scale) {
     int d = w->dim, s, a, b;
     pn_real G[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, gam = 0;
-    for (s = 0; s < w->ns; ++s, g += d)
+    for (s = 0; s < w->s.ns; ++s, g += d)
         for (a = 0; a < d; ++a)
-            for (b = 0; b < d; ++b) G[a * d + b] += g[a] * g[b] * w->diag[dof[s]] * scale * scale;
+            for (b = 0; b < d; ++b) G[a * d + b] += g[a] * g[b] * w->s.diag[dof[s]] * scale * scale;
     for (a = 0; a < d; ++a) {
         pn_real row = 0;
         for (b = 0; b < d; ++b) row += PN__FABS(G[a * d + b]);
@@ -5653,31 +5672,31 @@ static pn_real pn__mpm_stress_compliance(const pn_mpm_world *w, const pn_real *g
    hourglass mode) meets no stress, and with their own L the particles' F drift in it (an
    elastic layer at rest showed stresses 2.3 times the hydrostatic ones, in a sawtooth). */
 static void pn__mpm_stress_cells(pn_mpm_world *w, const size_t *cstart, pn_real dt, pn_real relax, pn_real *v) {
-    int d = w->dim, dd = d * d, ns = w->ns, nsd = ns * d, i;
-    size_t q, nq = cstart[d == 2 ? 9 : 27], *crep = w->inc + 2 * w->start[w->nodes];
+    int d = w->dim, dd = d * d, ns = w->s.ns, nsd = ns * d, i;
+    size_t q, nq = cstart[d == 2 ? 9 : 27], *crep = w->s.inc + 2 * w->s.start[w->s.nodes];
     for (q = 0; q < nq; ++q) {
-        size_t j0 = w->inc[2 * q], j1 = w->inc[2 * q + 1], j, r;
+        size_t j0 = w->s.inc[2 * q], j1 = w->s.inc[2 * q + 1], j, r;
         for (j = j0; j < j1; ++j) {
-            size_t p = w->order[j];
+            size_t p = w->s.order[j];
             pn_real V = w->vol0[p], *cell;
-            const pn_real *g = w->pq + j * (size_t)nsd, *hat = w->pF0 + j * (size_t)dd;
-            for (r = j0; r < j && !(crep[r] == r && w->group[w->order[r]] == w->group[p]); ++r) {
+            const pn_real *g = w->s.pq + j * (size_t)nsd, *hat = w->s.pF0 + j * (size_t)dd;
+            for (r = j0; r < j && !(crep[r] == r && w->group[w->s.order[r]] == w->group[p]); ++r) {
             }
-            w->phG[j] = 0;
+            w->s.phG[j] = 0;
             crep[j] = r;
             if (r == j) { /* the first particle of its group here: the cell's unknown */
-                memset(w->pH + j * (size_t)(dd * dd), 0, sizeof(pn_real) * (size_t)(2 * dd + 2));
-                memset(w->pb + j * (size_t)nsd, 0, sizeof(pn_real) * (size_t)nsd);
+                memset(w->s.pH + j * (size_t)(dd * dd), 0, sizeof(pn_real) * (size_t)(2 * dd + 2));
+                memset(w->s.pb + j * (size_t)nsd, 0, sizeof(pn_real) * (size_t)nsd);
             }
-            cell = w->pH + r * (size_t)(dd * dd);
-            w->phG[r] += V, cell[2 * dd + 1] += V * w->h[p];
-            for (i = 0; i < nsd; ++i) w->pb[r * (size_t)nsd + (size_t)i] += V * g[i];
+            cell = w->s.pH + r * (size_t)(dd * dd);
+            w->s.phG[r] += V, cell[2 * dd + 1] += V * w->h[p];
+            for (i = 0; i < nsd; ++i) w->s.pb[r * (size_t)nsd + (size_t)i] += V * g[i];
             for (i = 0; i < dd; ++i) cell[i] += V * hat[i];
         }
         for (j = j0; j < j1; ++j) {
-            pn_real V = w->phG[j], *cell = w->pH + j * (size_t)(dd * dd);
-            const pn_real *b = w->pb + j * (size_t)nsd;
-            const long *dof = w->pdof + j * (size_t)ns;
+            pn_real V = w->s.phG[j], *cell = w->s.pH + j * (size_t)(dd * dd);
+            const pn_real *b = w->s.pb + j * (size_t)nsd;
+            const long *dof = w->s.pdof + j * (size_t)ns;
             if (V == 0) continue;
             cell[2 * dd + 1] /= V;
             for (i = 0; i < dd; ++i) cell[i] /= V, cell[dd + i] = cell[i];
@@ -5690,9 +5709,9 @@ static void pn__mpm_stress_cells(pn_mpm_world *w, const size_t *cstart, pn_real 
 /* the cells' stresses handed to their particles (tau_p = tau_c: the same forces, so v stays) */
 static void pn__mpm_stress_uncell(pn_mpm_world *w) {
     int dd = w->dim * w->dim;
-    size_t j, np = w->start[w->nodes], *crep = w->inc + 2 * np;
+    size_t j, np = w->s.start[w->s.nodes], *crep = w->s.inc + 2 * np;
     for (j = 0; j < np; ++j)
-        memcpy(w->pP + j * (size_t)dd, w->pH + crep[j] * (size_t)(dd * dd) + dd, sizeof(pn_real) * (size_t)dd);
+        memcpy(w->s.pP + j * (size_t)dd, w->s.pH + crep[j] * (size_t)(dd * dd) + dd, sizeof(pn_real) * (size_t)dd);
 }
 
 /* Gauss-Seidel sweeps (by colour; the cells' or the particles') and the contact nodes' until
@@ -5703,8 +5722,8 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
                                        const size_t *cstart, int cells, pn_real mref, pn_real *v, pn_real *r,
                                        pn_mpm_stats *st) {
     int d = w->dim, i, sweep;
-    size_t k, nd = w->n_act * (size_t)d;
-    pn_real *v0 = w->vtry, vscale = tol * w->desc.dx_m / dt, res = 0, prev = 0, prev2 = 0;
+    size_t k, nd = w->s.n_act * (size_t)d;
+    pn_real *v0 = w->s.vtry, vscale = tol * w->desc.dx_m / dt, res = 0, prev = 0, prev2 = 0;
     for (sweep = 0; sweep < o->sweeps_max; ++sweep) {
         int c;
         memcpy(v0, v, sizeof(pn_real) * nd);
@@ -5714,11 +5733,11 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
 #pragma omp parallel for schedule(static) if (w->n >= w->desc.parallel_min_particles)
 #endif
             for (q = (long)cstart[c]; q < (long)cstart[c + 1]; ++q)
-                pn__mpm_stress_group(w, w->inc[2 * (size_t)q], w->inc[2 * (size_t)q + 1], dt, v, cells);
+                pn__mpm_stress_group(w, w->s.inc[2 * (size_t)q], w->s.inc[2 * (size_t)q + 1], dt, v, cells);
         }
         pn__mpm_stress_contact(w, v, r);
-        for (res = 0, k = 0; k < w->n_act; ++k) {
-            pn_real sc = mref > 0 ? PN__MIN(w->grid_m[k] / mref, 1) : 1;
+        for (res = 0, k = 0; k < w->s.n_act; ++k) {
+            pn_real sc = mref > 0 ? PN__MIN(w->s.grid_m[k] / mref, 1) : 1;
             for (i = 0; i < d; ++i)
                 res = PN__MAX(res, sc * PN__FABS(v[k * (size_t)d + (size_t)i] - v0[k * (size_t)d + (size_t)i]));
         }
@@ -5744,45 +5763,45 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
 }
 
 static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
-    int d = w->dim, dd = d * d, ns = w->ns, i, cells = o->stress_unknowns != PN_MPM_STRESS_PARTICLES;
+    int d = w->dim, dd = d * d, ns = w->s.ns, i, cells = o->stress_unknowns != PN_MPM_STRESS_PARTICLES;
     int cascade = o->stress_unknowns == PN_MPM_STRESS_CELLS_THEN_PARTICLES;
     size_t k, j, np, total = 0, cstart[28];
-    pn_real *v = w->vsol, *r = w->grad, mref = 0;
+    pn_real *v = w->s.vsol, *r = w->s.grad, mref = 0;
     pn_result rr;
-    if (w->tok) /* pH becomes scratch here: no Taylor model survives */
+    if (w->s.tok) /* pH becomes scratch here: no Taylor model survives */
         for (k = 0; k < w->n; ++k)
-            if (w->tok[k]) pn__mpm_touch(w, k), w->tok[k] = 0;
-    if (cells && !w->pb) {
+            if (w->s.tok[k]) pn__mpm_touch(w, k), w->s.tok[k] = 0;
+    if (cells && !w->s.pb) {
         int fail = 0;
-        w->pb = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(ns * d), sizeof(pn_real), &fail);
+        w->s.pb = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(ns * d), sizeof(pn_real), &fail);
         if (fail)
             return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
                                 "for the cells' weights (%lu reals)", (unsigned long)(w->cap * (size_t)(ns * d)));
     }
     pn__mpm_mark(w, st, -1);
-    w->stress_on = 1;
+    w->s.stress_on = 1;
     pn__mpm_bin(w);
     pn__mpm_implicit_setup(w);
-    w->stress_on = 0; /* set again around the transfer back */
+    w->s.stress_on = 0; /* set again around the transfer back */
     pn__mpm_p2g(w);
     pn__mpm_contact(w, w->time_s);
-    np = w->start[w->nodes];
-    st->active_nodes = w->n_act;
-    for (k = 0; k < w->n_act; ++k) {
-        pn_real m = w->grid_m[k];
-        w->diag[k] = m > 0 ? 1 / m : 0;
+    np = w->s.start[w->s.nodes];
+    st->active_nodes = w->s.n_act;
+    for (k = 0; k < w->s.n_act; ++k) {
+        pn_real m = w->s.grid_m[k];
+        w->s.diag[k] = m > 0 ? 1 / m : 0;
         for (i = 0; i < d; ++i) {
             size_t c = k * (size_t)d + (size_t)i;
-            v[c] = w->vstar[c] = m > 0 ? w->grid_v[c] / m + dt * w->desc.gravity[i] : 0;
+            v[c] = w->s.vstar[c] = m > 0 ? w->s.grid_v[c] / m + dt * w->desc.gravity[i] : 0;
             r[c] = 0;
         }
     }
     for (j = 0; j < np; ++j) { /* tau^ (the state's own stress), c, the first iterate */
-        size_t p = w->order[j];
+        size_t p = w->s.order[j];
         const pn_material *m = &w->groups[w->group[p]].material;
         pn_real Z[9], hn;
         int plastic;
-        rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->pF0 + j * (size_t)dd, &plastic);
+        rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->s.pF0 + j * (size_t)dd, &plastic);
         if (rr != PN_OK) {
             w->error_particle = p;
             return PN__FAIL(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
@@ -5791,11 +5810,11 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         total += w->active[p];
         mref += w->active[p] ? w->mass[p] : 0;
         {
-            const pn_real *g = w->pq + j * (size_t)(ns * d);
-            const long *dof = w->pdof + j * (size_t)ns;
-            w->pty[j] = pn__mpm_stress_compliance(w, g, dof, w->vol0[p], dt, 1);
-            memcpy(w->pP + j * (size_t)dd, w->pF0 + j * (size_t)dd, sizeof(pn_real) * (size_t)dd);
-            if (!cells) pn__mpm_stress_apply(w, g, dof, w->pP + j * (size_t)dd, dt * w->vol0[p], v);
+            const pn_real *g = w->s.pq + j * (size_t)(ns * d);
+            const long *dof = w->s.pdof + j * (size_t)ns;
+            w->s.pty[j] = pn__mpm_stress_compliance(w, g, dof, w->vol0[p], dt, 1);
+            memcpy(w->s.pP + j * (size_t)dd, w->s.pF0 + j * (size_t)dd, sizeof(pn_real) * (size_t)dd);
+            if (!cells) pn__mpm_stress_apply(w, g, dof, w->s.pP + j * (size_t)dd, dt * w->vol0[p], v);
         }
     }
     mref = total ? mref / (pn_real)total : 0;
@@ -5810,13 +5829,13 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         if ((rr = pn__mpm_stress_sweeps(w, dt, o, o->sweep_tol, cstart, 0, mref, v, r, st)) != PN_OK) return rr;
     }
     pn__mpm_mark(w, st, PN_MPM_STAGE_SWEEPS);
-    w->stress_on = cells && !cascade ? 2 : 1;
+    w->s.stress_on = cells && !cascade ? 2 : 1;
     rr = pn__mpm_g2p(w, v, NULL, dt, st);
-    w->stress_on = 0;
+    w->s.stress_on = 0;
     if (rr == PN_OK) rr = pn__mpm_energy_guard(w, o, dt, st);
     pn__mpm_mark(w, st, PN_MPM_STAGE_G2P);
     if (rr != PN_OK) return rr;
-    w->n_lag = 0; /* no friction memory for a later energy-formulation step */
+    w->s.n_lag = 0; /* no friction memory for a later energy-formulation step */
     pn__mpm_commit(w, dt, st);
     return PN_OK;
 }
@@ -5841,33 +5860,33 @@ static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_impl
     pn__mpm_p2g(w);
     pn__mpm_contact(w, w->time_s);
     pn__mpm_mark(w, st, PN_MPM_STAGE_SETUP);
-    nd = w->n_act * (size_t)d;
-    w->pnet_lanes = !o->pnet_double;
-    w->mg_on = o->linear_solver == PN_MPM_LINEAR_MULTIGRID ||
+    nd = w->s.n_act * (size_t)d;
+    w->s.pnet_lanes = !o->pnet_double;
+    w->s.mg_on = o->linear_solver == PN_MPM_LINEAR_MULTIGRID ||
                (o->linear_solver == PN_MPM_LINEAR_DEFAULT && nd >= PN__MPM_MG_MIN);
-    w->mg_levels = 0; /* a new active set: the hierarchy is built afresh */
-    st->active_nodes = w->n_act;
+    w->s.mg_levels = 0; /* a new active set: the hierarchy is built afresh */
+    st->active_nodes = w->s.n_act;
     /* v* = momentum / mass + dt g; separating contacts start held where they approach */
-    for (k = 0; k < w->n_act; ++k) {
-        pn_real m = w->grid_m[k];
+    for (k = 0; k < w->s.n_act; ++k) {
+        pn_real m = w->s.grid_m[k];
         for (i = 0; i < d; ++i) {
             size_t c = k * (size_t)d + (size_t)i;
-            w->vstar[c] = m > 0 ? w->grid_v[c] / m + dt * w->desc.gravity[i] : 0;
+            w->s.vstar[c] = m > 0 ? w->s.grid_v[c] / m + dt * w->desc.gravity[i] : 0;
         }
-        if (w->ckind[k] == PN_MPM_BOUNDARY_SEPARATE && w->cn[k]) {
+        if (w->s.ckind[k] == PN_MPM_BOUNDARY_SEPARATE && w->s.cn[k]) {
             int b;
             has_sep = 1;
-            w->chold[k] = 0;
-            for (b = 0; b < w->cn[k]; ++b) {
+            w->s.chold[k] = 0;
+            for (b = 0; b < w->s.cn[k]; ++b) {
                 pn_real un = 0;
-                for (i = 0; i < d; ++i) un += (w->vstar[k * (size_t)d + (size_t)i] - w->cvel[k * 3 + (size_t)i]) * w->cdir[k * 9 + (size_t)(3 * b + i)];
-                if (un <= 0) w->chold[k] = (unsigned char)(w->chold[k] | 1 << b);
+                for (i = 0; i < d; ++i) un += (w->s.vstar[k * (size_t)d + (size_t)i] - w->s.cvel[k * 3 + (size_t)i]) * w->s.cdir[k * 9 + (size_t)(3 * b + i)];
+                if (un <= 0) w->s.chold[k] = (unsigned char)(w->s.chold[k] | 1 << b);
             }
         }
     }
-    memcpy(w->vsol, w->vstar, sizeof(pn_real) * nd);
-    for (k = 0; k < w->n_act; ++k) pn__mpm_hold(w, k, w->vsol + k * (size_t)d);
-    if (has_sep) pn__mpm_friction_start(w, w->vsol, dt);
+    memcpy(w->s.vsol, w->s.vstar, sizeof(pn_real) * nd);
+    for (k = 0; k < w->s.n_act; ++k) pn__mpm_hold(w, k, w->s.vsol + k * (size_t)d);
+    if (has_sep) pn__mpm_friction_start(w, w->s.vsol, dt);
     return has_sep;
 }
 
@@ -5879,50 +5898,50 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
     pn_result r;
     pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
     has_sep = pn__mpm_implicit_begin(w, dt, o, st);
-    nd = w->n_act * (size_t)d;
+    nd = w->s.n_act * (size_t)d;
     for (pass = 0; pass < o->fixed_point_iters; ++pass) {
         pn_real fp_res = 0;
         int round;
         pn__mpm_mark(w, st, PN_MPM_STAGE_SETUP);
-        r = pn__mpm_prepare_pass(w, w->vsol, dt, pass == 0, &fp_res);
+        r = pn__mpm_prepare_pass(w, w->s.vsol, dt, pass == 0, &fp_res);
         pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
         if (r != PN_OK) return r;
         if (pass > 0) st->fixed_point_residual = PN__MAX(st->fixed_point_residual, fp_res);
         st->fixed_point_iters++;
         for (round = 0; round < o->contact_rounds; ++round) {
-            int it, cg, cg_fresh = 0, fresh, stale = w->mg_stale && w->steps % 16 != 0;
+            int it, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0;
             pn_real eta = 0, gprev = 0, pred = 0; /* forcing: last eta, |S g|, predicted |S g| */
-            if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->vsol);
+            if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->s.vsol);
             st->solves++;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0, gnorm;
-                if (w->newton_left-- <= 0)
+                if (w->s.newton_left-- <= 0)
                     return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step: its newton_budget of %d Newton iterations "
                                         "is spent (over its attempts and substeps): take a smaller step", o->newton_budget);
                 pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR); /* the last iteration's bookkeeping */
-                r = pn__mpm_objective(w, w->vsol, dt, 2, &E0);
+                r = pn__mpm_objective(w, w->s.vsol, dt, 2, &E0);
                 pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
                 if (r != PN_OK) return r;
                 gnorm = pn__mpm_model_norm(w, 0);
                 eta = pn__mpm_forcing(o, it, eta, gprev, pred, gnorm);
                 gprev = gnorm;
                 fresh = it == 0 || o->mg_rebuild || stale;
-                if (w->mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
+                if (w->s.mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
                     return PN__FAIL(w, r, "implicit step: out of memory for the multigrid hierarchy of %lu active "
-                                        "nodes", (unsigned long)w->n_act);
+                                        "nodes", (unsigned long)w->s.n_act);
                 cg = pn__mpm_pcg(w, dt, o->cg_max, eta, 0, &capped);
                 st->cg_iters += cg;
-                st->mg_builds += w->mg_on && fresh;
+                st->mg_builds += w->s.mg_on && fresh;
                 /* a lagged hierarchy that costs half as many iterations again as a fresh one is
                    rebuilt at every Newton iteration from then on (the energy's Hessian moves
                    fast: DP's kinks), retried every 16 steps */
                 if (fresh) cg_fresh = cg;
-                if (!fresh) w->mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
+                if (!fresh) w->s.mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
                 st->newton_iters++;
-                for (k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
+                for (k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->s.dir[k]));
                 if (dmax <= vscale && eta > o->cg_rel_tol) { /* a loose solve may stop Newton early */
                     st->cg_iters += pn__mpm_pcg(w, dt, o->cg_max, o->cg_rel_tol, 1, &capped);
-                    for (dmax = 0, k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->dir[k]));
+                    for (dmax = 0, k = 0; k < nd; ++k) dmax = PN__MAX(dmax, PN__FABS(w->s.dir[k]));
                 }
                 st->cg_capped += capped;
                 last_res = dmax / (w->desc.dx_m / dt);
@@ -5932,12 +5951,12 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                                         "(the Hessian overflowed)", (double)dt);
                 /* a small direction from a solve cut at cg_max proves nothing: go on */
                 if (dmax <= vscale && !capped) break;
-                gd = pn__mpm_sum(w, nd, w->grad, w->dir);
+                gd = pn__mpm_sum(w, nd, w->s.grad, w->s.dir);
                 pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
                 {
                     pn__mpm_cg c;
                     c.w = w, c.dt = dt;
-                    alpha = pn__armijo(pn__mpm_value, &c, nd, w->vsol, w->dir, E0, gd, 1, w->vtry, &E1);
+                    alpha = pn__armijo(pn__mpm_value, &c, nd, w->s.vsol, w->s.dir, E0, gd, 1, w->s.vtry, &E1);
                 }
                 pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
                 if (alpha == 0) { /* no decrease: keep v, count it, stop this round */
@@ -5945,9 +5964,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                     break;
                 }
                 pred = pn__mpm_model_norm(w, alpha);
-                memcpy(w->vsol, w->vtry, sizeof(pn_real) * nd);
+                memcpy(w->s.vsol, w->s.vtry, sizeof(pn_real) * nd);
             }
-            if (!has_sep || !pn__mpm_active_set(w, w->vsol, vscale)) break;
+            if (!has_sep || !pn__mpm_active_set(w, w->s.vsol, vscale)) break;
             if (round + 1 < o->contact_rounds) st->active_set_rounds++;
         }
     }
@@ -5960,9 +5979,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step of %g s: Newton stopped at max |dv| dt / dx = %.3g "
                             "(newton_tol %g, newton_max %d; %d line searches failed): a smaller step converges",
                             (double)dt, (double)last_res, (double)o->newton_tol, o->newton_max, st->line_search_failures);
-    if (o->measure_force_error) pn__mpm_force_error(w, w->vsol, dt, st);
+    if (o->measure_force_error) pn__mpm_force_error(w, w->s.vsol, dt, st);
     pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
-    r = pn__mpm_g2p(w, w->vsol, NULL, dt, st);
+    r = pn__mpm_g2p(w, w->s.vsol, NULL, dt, st);
     if (r == PN_OK) r = pn__mpm_energy_guard(w, o, dt, st);
     pn__mpm_mark(w, st, PN_MPM_STAGE_G2P);
     if (r != PN_OK) return r;
@@ -5980,16 +5999,16 @@ static void pn__mpm_backup(pn_mpm_world *w, int restore) {
     int d = w->dim, dd = d * d;
     size_t n = w->n;
 #define PN__MPM_COPY(a, b, count, type) memcpy(restore ? w->a : w->b, restore ? w->b : w->a, sizeof(type) * (count))
-    PN__MPM_COPY(x, bx, n * (size_t)d, pn_real);
-    PN__MPM_COPY(v, bv, n * (size_t)d, pn_real);
-    PN__MPM_COPY(C, bC, n * (size_t)dd, pn_real);
-    PN__MPM_COPY(F, bF, n * (size_t)dd, pn_real);
-    PN__MPM_COPY(h, bh, n, pn_real);
-    PN__MPM_COPY(active, bactive, n, unsigned char);
-    PN__MPM_COPY(lnode, blnode, restore ? w->bn_lag : w->n_lag, size_t);
-    PN__MPM_COPY(lval, blval, restore ? w->bn_lag : w->n_lag, pn_real);
-    if (restore) w->n_lag = w->bn_lag;
-    else w->bn_lag = w->n_lag;
+    PN__MPM_COPY(x, s.bx, n * (size_t)d, pn_real);
+    PN__MPM_COPY(v, s.bv, n * (size_t)d, pn_real);
+    PN__MPM_COPY(C, s.bC, n * (size_t)dd, pn_real);
+    PN__MPM_COPY(F, s.bF, n * (size_t)dd, pn_real);
+    PN__MPM_COPY(h, s.bh, n, pn_real);
+    PN__MPM_COPY(active, s.bactive, n, unsigned char);
+    PN__MPM_COPY(s.lnode, s.blnode, restore ? w->s.bn_lag : w->s.n_lag, size_t);
+    PN__MPM_COPY(s.lval, s.blval, restore ? w->s.bn_lag : w->s.n_lag, pn_real);
+    if (restore) w->s.n_lag = w->s.bn_lag;
+    else w->s.bn_lag = w->s.n_lag;
 #undef PN__MPM_COPY
 }
 
@@ -6008,10 +6027,10 @@ static const char *pn__mpm_negative_count(const pn_mpm_implicit_desc *o) {
 /* the first drive (*load = 0) or load (*load = 1) acting now, or -1: implicit steps refuse them */
 static int pn__mpm_drive_on(const pn_mpm_world *w, int *load) {
     int a;
-    for (*load = 0, a = 0; a < w->n_drives; ++a)
-        if (w->drives[a].on) return a;
-    for (*load = 1, a = 0; a < w->n_loads; ++a)
-        if (w->loads[a].on && w->loads[a].t_end > w->time_s) return a;
+    for (*load = 0, a = 0; a < w->s.n_drives; ++a)
+        if (w->s.drives[a].on) return a;
+    for (*load = 1, a = 0; a < w->s.n_loads; ++a)
+        if (w->s.loads[a].on && w->s.loads[a].t_end > w->time_s) return a;
     return -1;
 }
 
@@ -6083,7 +6102,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         double b = (double)o.newton_max * o.fixed_point_iters * o.contact_rounds * (double)(1 << PN__MAX(o.max_halvings, 0));
         o.newton_budget = b < 1e9 ? (int)b : 1000000000;
     }
-    w->newton_left = o.newton_budget;
+    w->s.newton_left = o.newton_budget;
     r = pn__mpm_check_state(w);
     if (r != PN_OK) return r;
     r = pn__mpm_alloc_implicit(w);
@@ -6093,7 +6112,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     else cfl = -1;
     pn__mpm_stats_clear(&st, o.measure_force_error);
     pn__mpm_journal_begin(w);
-    stale0 = w->mg_stale, rec0 = w->rec_ok; /* what a failed call must also leave as it was */
+    stale0 = w->s.mg_stale, rec0 = w->s.rec_ok; /* what a failed call must also leave as it was */
     first = pn__mpm_once(w, dt, &o, &st);
     st.dt_over_cfl = cfl;
     if (first == PN_OK) {
@@ -6101,7 +6120,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         return PN_OK;
     }
     pn__mpm_journal_undo(w);
-    w->mg_stale = stale0, w->rec_ok = rec0;
+    w->s.mg_stale = stale0, w->s.rec_ok = rec0;
     /* fallback: the same step as 2, 4, ... substeps; the world is restored if none works,
        and the stats are the first attempt's (how it failed: cg_capped, line searches) */
     {
@@ -6134,18 +6153,18 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
             }
             pn__mpm_backup(w, 1);
             pn__mpm_journal_undo(w);
-            w->mg_stale = stale0, w->rec_ok = rec0;
+            w->s.mg_stale = stale0, w->s.rec_ok = rec0;
             w->time_s = t0;
             w->steps = steps0;
             w->left_total = left0;
-            if (w->newton_left < 0) break; /* the budget is spent */
+            if (w->s.newton_left < 0) break; /* the budget is spent */
         }
         w->error_particle = culprit;
         memcpy(w->error, why, sizeof why);
         if (stats) *stats = st_first;
         if (o.max_halvings > 0) { /* the first failure says why; add that halving did not help */
             size_t len = strlen(w->error);
-            const char *tail = w->newton_left < 0 ? " [and substeps until newton_budget was spent]"
+            const char *tail = w->s.newton_left < 0 ? " [and substeps until newton_budget was spent]"
                                                   : " [also as 2^max_halvings substeps]";
             if (len + strlen(tail) < sizeof w->error) memcpy(w->error + len, tail, strlen(tail) + 1);
         }
@@ -9736,11 +9755,11 @@ typedef struct pn__cpl {
 static int pn__cpl_stencil(const pn_mpm_world *w, size_t p, long *node, pn_real *wt) {
     int s;
     pn_real dpos[3];
-    for (s = 0; s < w->ns; ++s) {
-        node[s] = w->dof[w->pbase[p] + w->slot_off[s]];
-        wt[s] = pn__mpm_weight(w, p, w->slot[s], dpos);
+    for (s = 0; s < w->s.ns; ++s) {
+        node[s] = w->s.dof[w->s.pbase[p] + w->s.slot_off[s]];
+        wt[s] = pn__mpm_weight(w, p, w->s.slot[s], dpos);
     }
-    return w->ns;
+    return w->s.ns;
 }
 
 static pn_real pn__cpl_kappa(const pn_coupled *c, size_t p) {
@@ -9845,7 +9864,7 @@ static pn_result pn__cpl_alloc(pn_coupled *c) {
     pn__cpl *k = (pn__cpl *)c->impl;
     const pn_allocator *al = &c->fem->desc.allocator;
     int d = c->mpm->dim;
-    size_t nd = c->fem->n_nodes * (size_t)d, np = c->mpm->cap * (size_t)d, zc = c->mpm->nodes * (size_t)d + nd;
+    size_t nd = c->fem->n_nodes * (size_t)d, np = c->mpm->cap * (size_t)d, zc = c->mpm->s.nodes * (size_t)d + nd;
     if (k->z) return PN_OK;
     k->z = (pn_real *)pn_alloc(al, sizeof(pn_real) * (11 * zc + 4 * nd + 4 * np + 8));
     k->fidx = (size_t *)pn_alloc(al, sizeof(size_t) * (c->mpm->cap + 1));
@@ -9910,10 +9929,10 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
     }
     for (e = 0; e < m->n_nodes * (size_t)d; ++e) { /* the mesh within the walls, where the particles are */
         int a = (int)(e % (size_t)d);
-        if (!(m->x[e] >= w->wall_lo[a] && m->x[e] <= w->wall_hi[a])) {
+        if (!(m->x[e] >= w->s.wall_lo[a] && m->x[e] <= w->s.wall_hi[a])) {
             pn__msg(why, why_cap, "pn_coupled_create: the mesh's node %lu is at %g m on axis %d, outside the world's "
-                        "walls [%g, %g] m", (unsigned long)(e / (size_t)d), (double)m->x[e], a, (double)w->wall_lo[a],
-                        (double)w->wall_hi[a]);
+                        "walls [%g, %g] m", (unsigned long)(e / (size_t)d), (double)m->x[e], a, (double)w->s.wall_lo[a],
+                        (double)w->s.wall_hi[a]);
             return pn__finite(m->x[e]) ? PN_ERROR_OUTSIDE_DOMAIN : PN_ERROR_NONFINITE;
         }
     }
@@ -10371,7 +10390,7 @@ static pn_result pn__cpl_objective(pn_coupled *c, const pn_real *z, int level, p
         return PN_OK;
     }
     if (level >= 1) {
-        memcpy(k->g, w->grad, sizeof(pn_real) * k->nv);
+        memcpy(k->g, w->s.grad, sizeof(pn_real) * k->nv);
         for (i = 0; i < k->nu; ++i) k->g[k->nv + i] = s->g[i] / k->dt;
     }
     E = E1 + E2 / (k->dt * k->dt);
@@ -10387,7 +10406,7 @@ static pn_result pn__cpl_objective(pn_coupled *c, const pn_real *z, int level, p
             if (level >= 1) k->g[i] += k->lin * k->g0[i];
         }
     if (level >= 1) /* the grid's reactions (wall contact, friction) see the interface too */
-        memcpy(w->grad, k->g, sizeof(pn_real) * k->nv);
+        memcpy(w->s.grad, k->g, sizeof(pn_real) * k->nv);
     *E_out = E;
     return pn__finite(E) ? PN_OK : PN_ERROR_OVERFLOW;
 }
@@ -10446,7 +10465,7 @@ static void pn__cpl_apply(void *ctx, const pn_real *x, pn_real *y) {
             for (b = 0; b < d; ++b) q[a] += Hr[a * d + b] * r[b];
         pn__cpl_fric_scatter(c, i, q, y);
     }
-    for (i = 0; i < w->n_act; ++i) pn__mpm_filter(w, i, y + i * (size_t)d);
+    for (i = 0; i < w->s.n_act; ++i) pn__mpm_filter(w, i, y + i * (size_t)d);
 }
 
 /* z = B r: the grid's preconditioner on its block, the mesh's factor on its own */
@@ -10479,7 +10498,7 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
     pn__fem *s = (pn__fem *)m->impl;
     pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt, res = 0;
     size_t i, nz = k->nz;
-    int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->mg_stale && w->steps % 16 != 0;
+    int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0;
     pn_result r;
     pn__cg_ops op;
     op.ctx = c, op.apply = pn__cpl_apply, op.precond = pn__cpl_precond, op.dot = pn__cpl_dot, op.curv = NULL;
@@ -10496,9 +10515,9 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
                                 (unsigned long)w->error_particle, m->error_element);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
         fresh = it == 0 || o->mg_rebuild || stale; /* the grid's hierarchy lagged as its own step does */
-        if (w->mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
+        if (w->s.mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
             return PN__FAIL(c, r, "coupled implicit step: out of memory for the grid's multigrid hierarchy");
-        if (!w->mg_on) pn__mpm_diagonal(w, dt);
+        if (!w->s.mg_on) pn__mpm_diagonal(w, dt);
         if (s->sparse) {
             if (!pn__fem_bfactor(s))
                 return PN__FAIL(c, PN_ERROR_NOT_CONVERGED, "coupled implicit step: the mesh's matrix has no "
@@ -10512,11 +10531,11 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
                                     "positive definite");
         }
         for (i = 0; i < nz; ++i) k->r[i] = -k->g[i];
-        for (i = 0; i < w->n_act; ++i) pn__mpm_filter(w, i, k->r + i * (size_t)w->dim);
+        for (i = 0; i < w->s.n_act; ++i) pn__mpm_filter(w, i, k->r + i * (size_t)w->dim);
         cg = pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, o->cg_rel_tol, 0, &capped);
         st->cg_iters += cg;
         if (fresh) cg_fresh = cg;
-        else w->mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
+        else w->s.mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
         st->newton_iters++;
         for (res = 0, gd = 0, i = 0; i < nz; ++i) res = PN__MAX(res, PN__FABS(k->dir[i])), gd += k->g[i] * k->dir[i];
         if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / (w->desc.dx_m / dt));
@@ -10566,14 +10585,14 @@ static pn_result pn__cpl_passes(pn_coupled *c, const pn_mpm_implicit_desc *o, in
         }
         if ((r = pn__cpl_find(c, 0)) != PN_OK || (r = pn__cpl_friction_lag(c)) != PN_OK) return r;
         for (round = 0; round < o->contact_rounds; ++round) {
-            memcpy(w->vsol, k->z, sizeof(pn_real) * k->nv);
-            if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->vsol);
-            memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
+            memcpy(w->s.vsol, k->z, sizeof(pn_real) * k->nv);
+            if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->s.vsol);
+            memcpy(k->z, w->s.vsol, sizeof(pn_real) * k->nv);
             st->solves++;
             if ((r = pn__cpl_newton(c, o, st, last_res, capped)) != PN_OK) return r;
-            memcpy(w->vsol, k->z, sizeof(pn_real) * k->nv);
-            if (!has_sep || !pn__mpm_active_set(w, w->vsol, vscale)) break;
-            memcpy(k->z, w->vsol, sizeof(pn_real) * k->nv);
+            memcpy(w->s.vsol, k->z, sizeof(pn_real) * k->nv);
+            if (!has_sep || !pn__mpm_active_set(w, w->s.vsol, vscale)) break;
+            memcpy(k->z, w->s.vsol, sizeof(pn_real) * k->nv);
         }
     }
     return PN_OK;
@@ -10585,7 +10604,7 @@ static void pn__cpl_mass_scale(pn_coupled *c, pn_real s) {
     pn_mpm_world *w = c->mpm;
     pn_fem_mesh *m = c->fem;
     size_t q;
-    for (q = 0; q < w->n_act; ++q) w->grid_m[q] *= s;
+    for (q = 0; q < w->s.n_act; ++q) w->s.grid_m[q] *= s;
     for (q = 0; q < m->n_nodes; ++q) m->mass[q] *= s;
 }
 
@@ -10611,9 +10630,9 @@ static pn_result pn__cpl_start_forces(pn_coupled *c) {
     r = pn__cpl_objective(c, k->zt, 1, &E);
     if (r != PN_OK) return r;
     memcpy(k->g0, k->g, sizeof(pn_real) * k->nz);
-    for (q = 0; q < w->n_act; ++q)
-        if (w->clam[q] > 0 && !(w->chold[q] & PN__MPM_STICK))
-            for (i = 0; i < d; ++i) k->g0[q * (size_t)d + (size_t)i] -= w->cmu[q] * w->clam[q] * w->ctan[q * 3 + (size_t)i];
+    for (q = 0; q < w->s.n_act; ++q)
+        if (w->s.clam[q] > 0 && !(w->s.chold[q] & PN__MPM_STICK))
+            for (i = 0; i < d; ++i) k->g0[q * (size_t)d + (size_t)i] -= w->s.cmu[q] * w->s.clam[q] * w->s.ctan[q * 3 + (size_t)i];
     return PN_OK;
 }
 
@@ -10640,14 +10659,14 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     k->dt = dt, k->theta = th, k->lin = 0;
     /* the grid side as pn_mpm_step_implicit starts; the mesh's as pn_fem_step_implicit */
     has_sep = pn__mpm_implicit_begin(w, dt, o, &mst);
-    k->nv = w->n_act * (size_t)d, k->nu = nd, k->nz = k->nv + nd;
+    k->nv = w->s.n_act * (size_t)d, k->nu = nd, k->nz = k->nv + nd;
     s->dt = dt, s->t_end = m->time_s + dt, s->n_mov = 0, s->nu = nd, s->hflags = PN_EVAL_PROJECT_PSD;
     pn__fem_setup(m);
     if (th < 1) { /* v^n, and the target u~ = v^n + theta dt g */
         for (q = 0; q < k->nv; ++q) {
             pn_real gq = w->desc.gravity[q % (size_t)d];
-            k->vn[q] = w->grid_m[q / (size_t)d] > 0 ? w->vstar[q] - dt * gq : 0;
-            w->vstar[q] -= (1 - th) * dt * gq;
+            k->vn[q] = w->s.grid_m[q / (size_t)d] > 0 ? w->s.vstar[q] - dt * gq : 0;
+            w->s.vstar[q] -= (1 - th) * dt * gq;
         }
         memcpy(k->vn + k->nv, m->v, sizeof(pn_real) * nd);
     }
@@ -10664,10 +10683,10 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     memcpy(s->xlag, m->x, sizeof(pn_real) * nd); /* the mesh's friction with its obstacles: at x^n */
     if (th < 1) {
         /* the start's forces; the masses kept and scaled */
-        memcpy(gm0, w->grid_m, sizeof(pn_real) * w->n_act);
+        memcpy(gm0, w->s.grid_m, sizeof(pn_real) * w->s.n_act);
         memcpy(mm0, m->mass, sizeof(pn_real) * n);
         r = pn__cpl_start_forces(c);
-        for (q = 0; q < w->n_act; ++q) w->grid_m[q] = gm0[q] / (th * th);
+        for (q = 0; q < w->s.n_act; ++q) w->s.grid_m[q] = gm0[q] / (th * th);
         for (q = 0; q < n; ++q) m->mass[q] = mm0[q] / (th * th);
         if (r != PN_OK) {
             memcpy(m->mass, mm0, sizeof(pn_real) * n);
@@ -10680,8 +10699,8 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     }
     /* start at [v*, x~] as far as it is free of crossings from the base [held at rest, x^n] */
     memset(k->zt, 0, sizeof(pn_real) * k->nv);
-    for (q = 0; q < w->n_act; ++q) pn__mpm_hold(w, q, k->zt + q * (size_t)d);
-    for (q = 0; q < k->nv; ++q) k->dir[q] = w->vsol[q] - k->zt[q];
+    for (q = 0; q < w->s.n_act; ++q) pn__mpm_hold(w, q, k->zt + q * (size_t)d);
+    for (q = 0; q < k->nv; ++q) k->dir[q] = w->s.vsol[q] - k->zt[q];
     pn__cpl_positions(c, 1, k->zt, k->dir);
     r = pn__cpl_find(c, 1);
     if (r == PN_OK) {
@@ -10693,7 +10712,7 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     }
     if (th < 1) { /* the masses back (the mesh's are its state) */
         memcpy(m->mass, mm0, sizeof(pn_real) * n);
-        memcpy(w->grid_m, gm0, sizeof(pn_real) * w->n_act);
+        memcpy(w->s.grid_m, gm0, sizeof(pn_real) * w->s.n_act);
     }
     if (r != PN_OK) return r;
     st->newton_residual = PN__MAX(st->newton_residual, last_res);
@@ -10706,7 +10725,7 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
                             "%.3g (newton_tol %g): a smaller step converges", (double)dt, (double)last_res,
                             (double)o->newton_tol);
     if (th < 1) /* the grid's end velocities; held components keep their held values */
-        for (q = 0; q < w->n_act; ++q) {
+        for (q = 0; q < w->s.n_act; ++q) {
             for (i = 0; i < d; ++i) {
                 size_t e = q * (size_t)d + (size_t)i;
                 k->zt[e] = (k->z[e] - (1 - th) * k->vn[e]) / th;
@@ -10793,7 +10812,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
         return PN__FAIL(c, r, "pn_coupled_step_implicit: %s", m->error);
     if ((r = pn__cpl_alloc(c)) != PN_OK) return r;
     t0 = w->time_s, steps0 = w->steps, fsteps0 = m->steps, left0 = w->left_total;
-    stale0 = w->mg_stale, rec0 = w->rec_ok;
+    stale0 = w->s.mg_stale, rec0 = w->s.rec_ok;
     pn__mpm_backup(w, 0);
     pn__mpm_journal_begin(w);
     pn__fem_backup(m);
@@ -10829,13 +10848,13 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
         pn__mpm_journal_undo(w);
         pn__fem_restore(m);
         w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
-        w->mg_stale = stale0, w->rec_ok = rec0;
+        w->s.mg_stale = stale0, w->s.rec_ok = rec0;
     }
     pn__mpm_backup(w, 1); /* (again, after a break: a step that succeeded but failed a check) */
     pn__mpm_journal_undo(w);
     pn__fem_restore(m);
     w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
-    w->mg_stale = stale0, w->rec_ok = rec0;
+    w->s.mg_stale = stale0, w->s.rec_ok = rec0;
     memcpy(c->error, why, sizeof why);
     if (o->max_halvings > 0) {
         const char *tail = " [also as 2^max_halvings substeps]";
@@ -10924,11 +10943,11 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
         for (a = 0; a < d; ++a) fc[nf * (size_t)d + (size_t)a] = f[a];
         k->fidx[nf++] = p;
     }
-    t0 = w->time_s, steps0 = w->steps, left0 = w->left_total, rec0 = w->rec_ok;
+    t0 = w->time_s, steps0 = w->steps, left0 = w->left_total, rec0 = w->s.rec_ok;
     pn__mpm_backup(w, 0);
-    w->xf_idx = k->fidx, w->xf = fc, w->xf_n = nf;
+    w->s.xf_idx = k->fidx, w->s.xf = fc, w->s.xf_n = nf;
     r = pn_mpm_step_explicit(w, dt, &mst);
-    w->xf_idx = NULL, w->xf = NULL, w->xf_n = 0;
+    w->s.xf_idx = NULL, w->s.xf = NULL, w->s.xf_n = 0;
     if (r != PN_OK) {
         c->error_particle = (long)w->error_particle;
         return PN__FAIL(c, r, "pn_coupled_step_explicit: %s", w->error);
@@ -10938,7 +10957,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
     s->fext = NULL;
     if (r == PN_OK) { /* no particle crossed the boundary within the step */
         for (i = 0; i < nd; ++i) k->xf[i] = s->bx[i], k->xd[i] = m->x[i] - s->bx[i];
-        for (i = 0; i < w->n * (size_t)d; ++i) k->y[i] = w->bx[i], k->yd[i] = w->x[i] - w->bx[i];
+        for (i = 0; i < w->n * (size_t)d; ++i) k->y[i] = w->s.bx[i], k->yd[i] = w->x[i] - w->s.bx[i];
         if ((r = pn__cpl_find(c, 1)) != PN_OK) return r;
         for (i = 0; i < k->nc; ++i) {
             pn_real yy[12], dy[12];
@@ -10956,11 +10975,11 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
     } else
         r = PN__FAIL(c, r, "pn_coupled_step_explicit: %s", m->error);
     if (r != PN_OK) { /* the world back as it was, with the P2G records the step swapped out */
-        pn_real *t = w->ppay;
-        int *row = w->prow;
+        pn_real *t = w->s.ppay;
+        int *row = w->s.prow;
         pn__mpm_backup(w, 1);
-        w->ppay = w->spay, w->spay = t, w->prow = w->srow, w->srow = row;
-        w->time_s = t0, w->steps = steps0, w->left_total = left0, w->rec_ok = rec0;
+        w->s.ppay = w->s.spay, w->s.spay = t, w->s.prow = w->s.srow, w->s.srow = row;
+        w->time_s = t0, w->steps = steps0, w->left_total = left0, w->s.rec_ok = rec0;
         return r;
     }
     if (stats) {

@@ -29,6 +29,31 @@
    evaluation of g per drawn point (pn_rom_map, pn_rom_positions), or, through a render
    embedding (pn_rom_embed), one per lattice node plus a 3 x 3 product per point.
 
+   WHAT IS HERE (banners in the implementation: // >>name, in file order)
+     room        public functions                 what else
+     >>model     pn_rom_model_check,              a model's checks, the affine map, the
+                 pn_rom_affine_model,             reference domain and its lattice
+                 pn_rom_inside, pn_rom_lattice
+     >>mlp       pn_rom_eval                      g and its Jacobians in double
+     >>lanes                                      the same in float lanes (the hot path)
+     >>world     pn_rom_create, _destroy,         creation, drives, loads, the latent
+                 _error, _drive, _release_drive,
+                 _add_load, _remove_load,
+                 _set_latent
+     >>step      pn_rom_stable_dt, pn_rom_step    sampling, the quadrature, the full-space
+                                                  update, the projections
+     >>implicit                                   backward Euler / BDF2 / midpoint in the
+                                                  latent over a fixed cubature
+     >>fit, >>render  pn_rom_fit, pn_rom_positions,  the latent of a full state; g at many
+                 pn_rom_map                       points
+     >>embed     pn_rom_embed, _embed_positions,  a render lattice, points drawn by a
+                 _embed_destroy                   Taylor step from their nearest node
+   Messages, the hash, B-spline weights and the dense Cholesky come from plastinet.h's >>kit.
+
+   OPTIONS: those of plastinet.h (PN_REAL does not change the ROM's own arithmetic, which
+   is double, with the networks in float lanes; PN_NO_STDIO shortens its messages to their
+   fixed text; PN_NO_VECTOR_EXTENSIONS: plain loops for the lanes). It has none of its own.
+
    QUICK START
        pn_rom_desc d;  pn_rom_world *w;  char why[256];  pn_rom_region base;
        memset(&d, 0, sizeof d);                         // zeroed fields mean defaults
