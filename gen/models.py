@@ -66,7 +66,7 @@ _add("sand_any_2d", "sand", 2, encoding="scaled", params=SAND_RANGES, output="so
 # 3D: meets every bar but one: at strains far below the box its error at (nu 0.2, 45 deg) is
 # 0.26-0.28 of the lagged energy's (the tests' bar 0.25), after 20000 or 40000 iterations, with
 # the parameters drawn denser at the range ends, compressed states weighted 3x, or on the
-# frozen-yield DP energy as a base (docs/results.md): not shipped
+# frozen-yield DP energy as a base (docs/notebook.md): not shipped
 _add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000, ship=False)
 # snow: xi <= 3 keeps p0 = kappa sinh(xi 0.15) < kappa / 2 over h in [-0.15, 0] (the tip exists)
 SNOW_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 30.0, 50.0), ("beta", 0.1, 0.5), ("xi", 1.5, 3.0))
