@@ -12,11 +12,11 @@
 
        pn_material_desc d;
        pn_material sand;
-       const char *why = NULL;
+       char why[256];
        memset(&d, 0, sizeof d);                       // zeroed fields mean defaults
        d.plastic = PN_PLASTIC_DRUCKER_PRAGER;         // elastic defaults to StVK-Hencky
        d.youngs_modulus_pa = 1e7; d.poisson_ratio = 0.3; d.friction_angle_deg = 30;
-       if (pn_material_init(&sand, &d, &why) != PN_OK) puts(why);
+       if (pn_material_init(&sand, &d, why, sizeof why) != PN_OK) puts(why);
 
        pn_real F[9] = {1.02, 0.01, 0, 0, 0.97, 0, 0, 0, 1};  // 3x3 row-major, trial elastic F
        pn_real Z[9], T[9], h = 0, h_new;
@@ -34,7 +34,7 @@
        pn_material sand2d;  pn_pnet net;  pn_pnet_desc nd;  pn_pnet_point pt;
        pn_model_material(pn_model_sand_2d(), 1e7, &sand2d);   // its training material, E = 1e7
        memset(&nd, 0, sizeof nd);  nd.energy = pn_model_sand_2d();
-       pn_pnet_init(&net, &nd, &sand2d, 2, &why);
+       pn_pnet_init(&net, &nd, &sand2d, 2, why, sizeof why);
        pn_real F0[4] = {1, 0, 0, 0.98}, F1[4] = {1.01, 0, 0.02, 0.97}, P2[4], H2[16];
        pn_pnet_prepare(&net, F0, 0, &pt, NULL, NULL); // once per F0 (each fixed-point pass)
        pn_pnet_energy(&net, &pt, F1, &psi, P2, H2, PN_EVAL_PROJECT_PSD);
@@ -316,14 +316,14 @@ typedef struct pn_material {
     pn_real snow_h_min, snow_h_max; /* log J_p bounds, < 0 and > 0 (0: none)               */
 } pn_material;
 
-/* Validate desc and fill m. On failure m is untouched, and *why (if why is not NULL) points to
+/* Validate desc and fill m. On failure m is untouched, and why (if not NULL) gets
    a static sentence naming the offending parameter. */
-PN_API pn_result pn_material_init(pn_material *m, const pn_material_desc *desc, const char **why);
+PN_API pn_result pn_material_init(pn_material *m, const pn_material_desc *desc, char *why, size_t why_cap);
 
 /* Check a pn_material that did not come from pn_material_init (a copy, a file, a tweak of a
    field): the models and their combination, mu and lambda consistent with E and nu, and the
-   plastic parameters in the ranges pn_material_init enforces. *why names the field. */
-PN_API pn_result pn_material_check(const pn_material *m, const char **why);
+   plastic parameters in the ranges pn_material_init enforces. why names the field. */
+PN_API pn_result pn_material_check(const pn_material *m, char *why, size_t why_cap);
 
 /* Lame constants from Young's modulus and Poisson ratio (PN_ERROR_INVALID_PARAMETER if out of
    range; outputs untouched). kappa = lambda + 2 mu / dim is the bulk-like coefficient. */
@@ -545,13 +545,13 @@ typedef struct pn_model {
 } pn_model;
 
 /* Check a model's format version, kind, layout and dimension (dim = 0: any), that its array
-   lengths (format 2) match its layer sizes, and that every weight is finite. On failure *why
+   lengths (format 2) match its layer sizes, and that every weight is finite. On failure why
    (if not NULL) names the problem. */
-PN_API pn_result pn_model_check(const pn_model *model, int dim, const char **why);
+PN_API pn_result pn_model_check(const pn_model *model, int dim, char *why, size_t why_cap);
 
 /* The material a model was trained for, at Young's modulus E (Pa). On failure (a bad E, a
-   malformed model) m is untouched and *why (optional) says why. */
-PN_API pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m, const char **why);
+   malformed model) m is untouched and why (optional) says why. */
+PN_API pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m, char *why, size_t why_cap);
 
 /* The same as a description, to change what a conditioned model takes as inputs before
    pn_material_init (pn_model.param lists them and their ranges), e.g. another friction angle:
@@ -574,7 +574,8 @@ PN_API void pn_model_param_set(pn_material_desc *d, int kind, double value);
                                small strain, none on rotations (objective). For FEM bodies that
                                bend and buckle: the displacement form makes turning an element
                                cost as much as straining it, and a crushed frame then squashes
-                               instead of folding (docs/results.md, "FEM: the metal frame"). */
+                               instead of folding (docs/notebook.md, "what changed since the
+                               last measurement"). */
 typedef enum pn_pnet_regularizer {
     PN_PNET_REG_DISPLACEMENT = 0,
     PN_PNET_REG_STRAIN = 1
@@ -611,9 +612,9 @@ typedef struct pn_pnet_point {
 /* Bind a model to a material. The material must match the model's training material (models,
    Poisson ratio, plastic parameters relative to E; E itself is free) and dim the model's
    (dim = 0 accepts the model's own):
-   PN_ERROR_INVALID_PARAMETER, PN_ERROR_DIMENSION or PN_ERROR_FORMAT otherwise, with *why. */
+   PN_ERROR_INVALID_PARAMETER, PN_ERROR_DIMENSION or PN_ERROR_FORMAT otherwise, with why. */
 PN_API pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_material *m,
-                              int dim, const char **why);
+                              int dim, char *why, size_t why_cap);
 
 /* Prepare a point for F0 and hardening state h: computes T(F0) by the return mapping (analytic,
    or the learned one) and the linear correction. h_new (optional) gets the return mapping's
@@ -805,6 +806,14 @@ PN__KIT void pn__msg(char *buf, size_t cap, const char *fmt, ...) {
     va_end(ap);
 }
 
+/* A fixed message into buf[cap], truncated (nothing when buf is NULL or cap 0) */
+PN__KIT void pn__put(char *buf, size_t cap, const char *s) {
+    size_t i;
+    if (!buf || !cap) return;
+    for (i = 0; s[i] && i + 1 < cap; ++i) buf[i] = s[i];
+    buf[i] = 0;
+}
+
 /* Record why a call failed in buf and return its code r: every module's failure path.
    PN__FAIL(obj, r, ...) writes obj->error (a world's, mesh's or coupled object's). */
 PN__KIT pn_result pn__fail(char *buf, size_t cap, pn_result r, const char *fmt, ...) {
@@ -897,6 +906,42 @@ PN__KIT pn_real pn__armijo(pn__objective_fn f, void *ctx, size_t n, const pn_rea
         alpha /= 2;
     }
     return 0;
+}
+
+/* The substep fallback of every implicit step, with one rule. try_step(ctx, n) takes the step
+   as n equal substeps: 1, then 2, 4, .. 2^max_halvings (max_halvings <= 0: the whole step
+   only); after each failed try undo(ctx, n) puts the state back as it was before the step;
+   keep_first(ctx), after the first failure, sets its message and statistics aside (the
+   caller restores them: the first failure says why the step failed, the smaller steps only
+   that halving did not help); stop(ctx, n) (optional) ends the halving early. Returns PN_OK
+   from the first try that works, else the first try's code. */
+typedef struct pn__halving {
+    void *ctx;
+    pn_result (*try_step)(void *ctx, int n_sub);
+    void (*undo)(void *ctx, int n_sub);
+    void (*keep_first)(void *ctx);
+    int (*stop)(void *ctx, int n_sub);
+} pn__halving;
+
+PN__KIT pn_result pn__halve(const pn__halving *h, int max_halvings) {
+    pn_result first = PN_OK, r;
+    int level, top = max_halvings > 0 ? max_halvings : 0;
+    for (level = 0; level <= top; ++level) {
+        if ((r = h->try_step(h->ctx, 1 << level)) == PN_OK) return PN_OK;
+        h->undo(h->ctx, 1 << level);
+        if (level == 0) {
+            first = r;
+            if (h->keep_first) h->keep_first(h->ctx);
+        }
+        if (h->stop && h->stop(h->ctx, 1 << level)) break;
+    }
+    return first;
+}
+
+/* tail appended to the message in buf[cap] when it fits whole */
+PN__KIT void pn__append(char *buf, size_t cap, const char *tail) {
+    size_t len = strlen(buf), n = strlen(tail);
+    if (len + n < cap) memcpy(buf + len, tail, n + 1);
 }
 
 /* What preconditioned CG needs of a solver: y = A x, z = B r, and a dot product (MPM sums in
@@ -1390,7 +1435,7 @@ PN__DEF int pn_plastic_model_from_name(const char *name) {
         return code;                                                                        \
     } while (0)
 
-PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *desc,
+static pn_result pn__material_init_why(pn_material *out, const pn_material_desc *desc,
                                    const char **why) {
     pn_material m;
     const pn_material_desc *dd = desc;
@@ -1478,7 +1523,14 @@ PN__DEF pn_result pn_material_init(pn_material *out, const pn_material_desc *des
     return PN_OK;
 }
 
-PN__DEF pn_result pn_material_check(const pn_material *m, const char **why) {
+PN__DEF pn_result pn_material_init(pn_material *m, const pn_material_desc *desc, char *why, size_t why_cap) {
+    const char *msg = NULL;
+    pn_result r = pn__material_init_why(m, desc, &msg);
+    if (r != PN_OK) pn__put(why, why_cap, msg ? msg : pn_result_string(r));
+    return r;
+}
+
+static pn_result pn__material_check_why(const pn_material *m, const char **why) {
     pn_real mu, lambda;
     PN_ASSERT(m);
     if ((int)m->plastic < 0 || m->plastic >= PN_PLASTIC_MODEL_COUNT)
@@ -1527,6 +1579,13 @@ PN__DEF pn_result pn_material_check(const pn_material *m, const char **why) {
     default: break;
     }
     return PN_OK;
+}
+
+PN__DEF pn_result pn_material_check(const pn_material *m, char *why, size_t why_cap) {
+    const char *msg = NULL;
+    pn_result r = pn__material_check_why(m, &msg);
+    if (r != PN_OK) pn__put(why, why_cap, msg ? msg : pn_result_string(r));
+    return r;
 }
 #undef PN__REFUSE
 
@@ -3066,7 +3125,7 @@ static int pn__mlp_counted(const pn_mlp *n) {
     return 1;
 }
 
-PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) {
+static pn_result pn__model_check_why(const pn_model *mo, int dim, const char **why) {
     const char *w = NULL;
     pn_result r = PN_OK;
     PN_ASSERT(mo);
@@ -3105,13 +3164,27 @@ PN__DEF pn_result pn_model_check(const pn_model *mo, int dim, const char **why) 
     return r;
 }
 
-PN__DEF pn_result pn_model_material(const pn_model *mo, pn_real E, pn_material *m, const char **why) {
+PN__DEF pn_result pn_model_check(const pn_model *model, int dim, char *why, size_t why_cap) {
+    const char *msg = NULL;
+    pn_result r = pn__model_check_why(model, dim, &msg);
+    if (r != PN_OK) pn__put(why, why_cap, msg ? msg : pn_result_string(r));
+    return r;
+}
+
+static pn_result pn__model_material_why(const pn_model *mo, pn_real E, pn_material *m, const char **why) {
     pn_material_desc d;
     pn_result r;
     PN_ASSERT(mo && m);
-    if ((r = pn_model_check(mo, 0, why)) != PN_OK) return r;
+    if ((r = pn__model_check_why(mo, 0, why)) != PN_OK) return r;
     pn_model_material_desc(mo, E, &d);
-    return pn_material_init(m, &d, why);
+    return pn__material_init_why(m, &d, why);
+}
+
+PN__DEF pn_result pn_model_material(const pn_model *model, pn_real E, pn_material *m, char *why, size_t why_cap) {
+    const char *msg = NULL;
+    pn_result r = pn__model_material_why(model, E, m, &msg);
+    if (r != PN_OK) pn__put(why, why_cap, msg ? msg : pn_result_string(r));
+    return r;
 }
 
 PN__DEF void pn_model_material_desc(const pn_model *mo, pn_real E, pn_material_desc *dst) {
@@ -3204,7 +3277,7 @@ static pn_result pn__model_matches(const pn_model *mo, const pn_material *m, con
     return PN_ERROR_INVALID_PARAMETER;
 }
 
-PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_material *m,
+static pn_result pn__pnet_init_why(pn_pnet *net, const pn_pnet_desc *desc, const pn_material *m,
                                int dim, const char **why) {
     const pn_model *e, *rm;
     pn_result r;
@@ -3218,7 +3291,7 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
         if (why) *why = "pn_pnet_desc.energy is NULL";
         return PN_ERROR_INVALID_ARGUMENT;
     }
-    r = pn_model_check(e, dim, why);
+    r = pn__model_check_why(e, dim, why);
     if (r != PN_OK) return r;
     if (e->kind != PN_MODEL_ENERGY) {
         if (why) *why = "pn_pnet_desc.energy is not an energy model";
@@ -3238,7 +3311,7 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
         return PN_ERROR_INVALID_ARGUMENT;
     }
     if (rm) {
-        r = pn_model_check(rm, e->dim, why);
+        r = pn__model_check_why(rm, e->dim, why);
         if (r != PN_OK) return r;
         if (rm->kind != PN_MODEL_RETURN_MAP) {
             if (why) *why = "pn_pnet_desc.return_map is not a return-mapping model";
@@ -3284,6 +3357,13 @@ PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_
     net->base = *m;
     net->base.elastic = PN_ELASTIC_STVK_HENCKY; /* same mu, lambda: the base's elasticity */
     return PN_OK;
+}
+
+PN__DEF pn_result pn_pnet_init(pn_pnet *net, const pn_pnet_desc *desc, const pn_material *m, int dim, char *why, size_t why_cap) {
+    const char *msg = NULL;
+    pn_result r = pn__pnet_init_why(net, desc, m, dim, &msg);
+    if (r != PN_OK) pn__put(why, why_cap, msg ? msg : pn_result_string(r));
+    return r;
 }
 
 /* Scaled encoding (gen/pn_torch.py, scaled_raw): with y = x(F), y0 = x(F0),
@@ -3764,7 +3844,7 @@ PN__DEF pn_result pn_learned_return_map(const pn_model *mo, const pn_material *m
     int i, nr, n = d * d, plastic = 0;
     pn_result r;
     PN_ASSERT(mo && m && F);
-    r = pn_model_check(mo, d, NULL);
+    r = pn__model_check_why(mo, d, NULL);
     if (r != PN_OK) return r;
     if (mo->kind != PN_MODEL_RETURN_MAP) return PN_ERROR_INVALID_ARGUMENT;
     r = pn__model_matches(mo, m, NULL);

@@ -97,15 +97,15 @@
      -fopenmp (compiler flag)       off      particle and node loops on threads (THREADS)
 
    QUICK START (README.md has it as a complete program)
-       pn_mpm_desc wd;  pn_mpm_fill_desc f;  pn_mpm_world *w;  pn_material sand;  size_t n;
+       pn_mpm_desc wd;  pn_mpm_fill_desc f;  pn_mpm_world *w;  pn_material sand;  size_t n;  char why[256];
        memset(&wd, 0, sizeof wd);                            // zeroed fields mean defaults
        wd.dim = 2; wd.res[0] = wd.res[1] = 64; wd.dx_m = 1.0 / 64; wd.gravity[1] = -9.81;
-       wd.boundary = PN_MPM_BOUNDARY_SEPARATE; wd.friction = 0.5;
+       wd.boundary = PN_BOUNDARY_SEPARATE; wd.friction = 0.5;
        memset(&f, 0, sizeof f);                              // a block of sand
        f.shape = PN_MPM_FILL_BOX; f.center_m[0] = 0.5; f.center_m[1] = 0.2;
        f.half_extent_m[0] = 0.1; f.half_extent_m[1] = 0.1;
-       pn_mpm_fill_count(&wd, &f, &n, NULL);  wd.max_particles = n;
-       pn_mpm_create(&wd, &w, &why);                         // why: the field at fault
+       pn_mpm_fill_count(&wd, &f, &n, NULL, 0);  wd.max_particles = n;
+       pn_mpm_create(&wd, &w, why, sizeof why);             // why: the field at fault
        f.group = pn_mpm_add_group(w, &sand, 1600);           // material, density kg/m^3
        pn_mpm_fill(w, &f, NULL);                             // pn_mpm_error(w) says why not
        pn_mpm_advance(w, 1.0 / 60, NULL, NULL);              // a frame: stable explicit steps
@@ -156,6 +156,56 @@ extern "C" {
 #endif
 
 /* ######################################################################################
+   SHARED by MPM and FEM: how a wall or collider acts, analytic colliders, the energy an
+   implicit step minimizes, a group (material, density, energy)
+   ###################################################################################### */
+
+typedef enum pn_boundary {
+    PN_BOUNDARY_STICKY = 0,  /* velocity equals the obstacle's                           */
+    PN_BOUNDARY_SLIP,        /* normal velocity equals the obstacle's, tangential free   */
+    PN_BOUNDARY_SEPARATE     /* only approaching normal velocity removed; Coulomb friction */
+} pn_boundary;
+
+typedef enum pn_shape {
+    PN_SHAPE_HALF_SPACE = 0, /* solid where (x - center) . normal < 0                     */
+    PN_SHAPE_BOX,            /* axis-aligned, |x_i - center_i| < half_extent_i            */
+    PN_SHAPE_SPHERE          /* |x - center| < radius (a disk in 2D)                      */
+} pn_shape;
+
+/* An analytic collider: an MPM world's (pn_mpm_add_collider) or an FEM mesh's obstacle
+   (pn_fem_add_obstacle) */
+typedef struct pn_collider {
+    pn_shape shape;
+    pn_boundary boundary;
+    pn_real friction;            /* Coulomb coefficient (SEPARATE), >= 0                    */
+    pn_real center_m[3];         /* at t = 0; a point of the plane for a half-space          */
+    pn_real normal[3];           /* half-space: points out of the solid; need not be unit    */
+    pn_real half_extent_m[3];    /* box                                                      */
+    pn_real radius_m;            /* sphere                                                   */
+    pn_real velocity_m_s[3];     /* the shape translates: center(t) = center + t velocity    */
+} pn_collider;
+
+/* The energy the implicit integrator minimizes for a group (the explicit one always uses the
+   analytic return mapping). */
+typedef enum pn_energy {
+    PN_ENERGY_DEFAULT = 0,   /* elastic for PN_PLASTIC_NONE, else lagged                */
+    PN_ENERGY_ELASTIC,       /* psi_el(F): plasticity ignored inside the solve          */
+    PN_ENERGY_LAGGED,        /* psi_el(F G), G = F0^-1 Z(F0): the no-network baseline   */
+    PN_ENERGY_EXACT_VM,      /* exact StVK-Hencky + von Mises energy (no fixed point)   */
+    PN_ENERGY_PNET,          /* PlasticityNet (set with pn_mpm_group_set_energy)         */
+    PN_ENERGY_DP             /* Drucker-Prager with the yield stress frozen at F0
+                                    (pn_dp_energy): plastic shear free within the step      */
+} pn_energy;
+
+/* A group of particles or elements: one material, density and implicit energy */
+typedef struct pn_group {
+    pn_material material;
+    pn_real density_kg_m3;
+    pn_energy energy;
+    pn_pnet pnet;                /* PN_ENERGY_PNET only                                 */
+} pn_group;
+
+/* ######################################################################################
    PART I: MPM (pn_mpm_*): a world of particles on a background grid
    ###################################################################################### */
 
@@ -163,12 +213,6 @@ extern "C" {
 #define PN_MPM_MAX_COLLIDERS 16
 #define PN_MPM_MAX_DRIVES 16 /* pn_mpm_drive_particles */
 #define PN_MPM_MAX_LOADS 16  /* pn_mpm_add_load */
-
-typedef enum pn_mpm_boundary {
-    PN_MPM_BOUNDARY_STICKY = 0,  /* velocity equals the obstacle's                           */
-    PN_MPM_BOUNDARY_SLIP,        /* normal velocity equals the obstacle's, tangential free   */
-    PN_MPM_BOUNDARY_SEPARATE     /* only approaching normal velocity removed; Coulomb friction */
-} pn_mpm_boundary;
 
 /* World description; zeroed fields mean defaults where one is stated. The domain is the box
    origin + [0, res_i dx]^dim; its walls are wall_cells thick, so material lives in
@@ -179,7 +223,7 @@ typedef struct pn_mpm_desc {
     pn_real dx_m;                /* cell size (m) > 0                                       */
     pn_real origin_m[3];         /* the domain's lowest corner (m) [0]                      */
     pn_real gravity[3];          /* m/s^2                                                   */
-    pn_mpm_boundary boundary;    /* domain walls                                            */
+    pn_boundary boundary;    /* domain walls                                            */
     pn_real friction;            /* Coulomb coefficient of SEPARATE walls, >= 0             */
     pn_real filter_time_s;       /* time scale of the transfer filter, >= 0 [0: APIC]. APIC
                                     filters the particle velocities at every grid round trip,
@@ -211,42 +255,6 @@ typedef struct pn_mpm_desc {
 } pn_mpm_desc;
 
 /* Analytic collider: grid nodes inside it take its velocity as the boundary says. */
-typedef enum pn_mpm_shape {
-    PN_MPM_SHAPE_HALF_SPACE = 0, /* solid where (x - center) . normal < 0                     */
-    PN_MPM_SHAPE_BOX,            /* axis-aligned, |x_i - center_i| < half_extent_i            */
-    PN_MPM_SHAPE_SPHERE          /* |x - center| < radius (a disk in 2D)                      */
-} pn_mpm_shape;
-
-typedef struct pn_mpm_collider {
-    pn_mpm_shape shape;
-    pn_mpm_boundary boundary;
-    pn_real friction;            /* Coulomb coefficient (SEPARATE), >= 0                    */
-    pn_real center_m[3];         /* at t = 0; a point of the plane for a half-space          */
-    pn_real normal[3];           /* half-space: points out of the solid; need not be unit    */
-    pn_real half_extent_m[3];    /* box                                                      */
-    pn_real radius_m;            /* sphere                                                   */
-    pn_real velocity_m_s[3];     /* the shape translates: center(t) = center + t velocity    */
-} pn_mpm_collider;
-
-/* The energy the implicit integrator minimizes for a group (the explicit one always uses the
-   analytic return mapping). */
-typedef enum pn_mpm_energy {
-    PN_MPM_ENERGY_DEFAULT = 0,   /* elastic for PN_PLASTIC_NONE, else lagged                */
-    PN_MPM_ENERGY_ELASTIC,       /* psi_el(F): plasticity ignored inside the solve          */
-    PN_MPM_ENERGY_LAGGED,        /* psi_el(F G), G = F0^-1 Z(F0): the no-network baseline   */
-    PN_MPM_ENERGY_EXACT_VM,      /* exact StVK-Hencky + von Mises energy (no fixed point)   */
-    PN_MPM_ENERGY_PNET,          /* PlasticityNet (set with pn_mpm_group_set_energy)         */
-    PN_MPM_ENERGY_DP             /* Drucker-Prager with the yield stress frozen at F0
-                                    (pn_dp_energy): plastic shear free within the step      */
-} pn_mpm_energy;
-
-typedef struct pn_mpm_group {
-    pn_material material;
-    pn_real density_kg_m3;
-    pn_mpm_energy energy;
-    pn_pnet pnet;                /* PN_MPM_ENERGY_PNET only                                 */
-} pn_mpm_group;
-
 /* How the implicit step solves each Newton system (conjugate gradients, preconditioned). */
 typedef enum pn_mpm_linear_solver {
     PN_MPM_LINEAR_DEFAULT = 0,   /* multigrid, or Jacobi for systems of fewer than 4096
@@ -263,7 +271,7 @@ typedef enum pn_mpm_linear_solver {
 /* What an implicit step solves for (pn_mpm_implicit_desc.formulation). */
 typedef enum pn_mpm_formulation {
     PN_MPM_FORMULATION_ENERGY = 0, /* the grid velocities, by Newton on the incremental
-                                    potential of each group's pn_mpm_energy                 */
+                                    potential of each group's pn_energy                 */
     PN_MPM_FORMULATION_STRESS      /* each particle's stress as well: elasticity enters as a
                                     compliance and plasticity as the return mapping of the
                                     stress, so plastic flow within the step is exact (Daviet
@@ -282,18 +290,18 @@ typedef enum pn_mpm_stress_unknowns {
     PN_MPM_STRESS_PARTICLES = 0, /* one per particle, as the explicit step has them          */
     PN_MPM_STRESS_CELLS,         /* one per cell: 4x (2D) to 8x (3D) fewer unknowns, cheaper
                                     sweeps and over-relaxation; a coarser stress field, which
-                                    costs accuracy (docs/results.md)                         */
+                                    costs accuracy (docs/results.md#where-the-stresses-live) */
     PN_MPM_STRESS_CELLS_THEN_PARTICLES /* the cells to 10 sweep_tol first, then the particles
                                     from their stresses: the per-particle solution, faster
                                     on stiff material and large piles, slower on soft
-                                    material (docs/results.md)                               */
+                                    material (docs/results.md#where-the-stresses-live)       */
 } pn_mpm_stress_unknowns;
 
 /* Implicit step settings; zeroed fields mean the defaults in brackets. */
 typedef struct pn_mpm_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (PlasticityNet Eq. 10) [1]:
-                                    at equal cost a smaller step with one pass beats a larger
-                                    one with more (docs/results.md)                         */
+                                    at equal cost a smaller step with one pass is the better
+                                    buy (docs/notebook.md, "a smaller step beats more passes") */
     int newton_max;              /* Newton iterations per pass [50]                          */
     int cg_max;                  /* conjugate-gradient iterations per Newton step [500]      */
     pn_real newton_tol;          /* stop when max |dv| < newton_tol dx / dt [1e-5]: about
@@ -305,8 +313,8 @@ typedef struct pn_mpm_implicit_desc {
                                     model proved right (Eisenstat-Walker forcing), between
                                     cg_rel_tol and this; a solve that would stop Newton is
                                     finished to cg_rel_tol. Pays where the energy has kinks
-                                    (DP: half the CG work for a third more Newton steps on
-                                    bench_mpm's sand) [0: off, every solve to cg_rel_tol]   */
+                                    (DP; docs/notebook.md, "optional Eisenstat-Walker
+                                    forcing") [0: off, every solve to cg_rel_tol]           */
     int contact_rounds;          /* solves per pass while separating contact changes its
                                     stick / slip / release set; 1: the set is corrected once
                                     per pass, for the next one (lagged, like the friction
@@ -334,7 +342,7 @@ typedef struct pn_mpm_implicit_desc {
     int pnet_double;             /* nonzero: PlasticityNet evaluated one particle at a time in
                                     pn_real (pn_pnet_energy, the reference); 0: its network
                                     over blocks of PN_MLP_LANES particles in float vector
-                                    lanes (pn_pnet_energy_lanes), several times faster [0]  */
+                                    lanes (pn_pnet_energy_lanes), faster (docs/results.md#implicit-steps) [0] */
     int mg_rebuild;              /* multigrid: when the hierarchy is built. 0: at each solve's
                                     first Newton iteration; the later ones precondition with
                                     it (lagged: CG multiplies by their own Hessian over the
@@ -447,9 +455,8 @@ typedef struct pn__mpm_load {
 #define PN__MPM_EXPLICIT_MAX 4 /* explicit steps beyond this many times the wave-speed bound are refused */
 #define PN__MPM_MG_MAX 8     /* most grid levels                                               */
 #define PN__MPM_MG_DENSE 192 /* the coarsest level is factored (Cholesky) up to these unknowns */
-#define PN__MPM_MG_MIN 4096  /* PN_MPM_LINEAR_DEFAULT: multigrid from this many unknowns (the
-                                2D sand column: Jacobi 1.3x faster at 450 particles, even at
-                                1830, multigrid 3.7x faster at 7442)                      */
+#define PN__MPM_MG_MIN 4096  /* PN_MPM_LINEAR_DEFAULT: multigrid from this many unknowns, where
+                                it overtakes Jacobi (docs/results.md#multigrid-preconditioned-newton) */
 typedef struct pn__mpm_level {
     int nn[3];                   /* nodes per axis (level l + 1: nn_l / 2 + 1)                */
     size_t stride[3], nodes;     /* flat node = sum idx_a stride_a                             */
@@ -509,10 +516,9 @@ typedef struct pn__mpm_solver {
     unsigned char *bactive;
     /* contact memory of the last implicit step: the nodes a separating contact held, ascending,
        as node << 3 | the directions held (bit b: the node's obstacle direction b), and their
-       normal force L/dt (N; negative: the node stuck). Holding every direction of a lagged
-       node instead held a corner node on a floor along the side wall's normal as well: with
-       the walls' plane rows held, a block sliding away from a side wall lost 15% of its
-       speed in one step. */
+       normal force L/dt (N; negative: the node stuck). Only the directions held: holding
+       every direction of a lagged node slowed a block sliding away from a side wall
+       (docs/notebook.md, "walls: the sheet on the plane"). */
     size_t *lnode, *blnode, n_lag, bn_lag;
     pn_real *lval, *blval;
     /* >>explicit: the dense grid, its touched spans and the P2G records */
@@ -571,13 +577,13 @@ typedef struct pn_mpm_world {
     pn_real *x, *v, *C, *F, *h, *vol0, *mass;
     int *group;
     unsigned char *active;
-    pn_mpm_group groups[PN_MPM_MAX_GROUPS];
+    pn_group groups[PN_MPM_MAX_GROUPS];
     int n_groups;
-    pn_mpm_collider colliders[PN_MPM_MAX_COLLIDERS];
+    pn_collider colliders[PN_MPM_MAX_COLLIDERS];
     int n_colliders;
     pn_real time_s;              /* simulated time (s)                                       */
     long steps;                  /* steps taken                                              */
-    size_t error_particle;       /* particle that made the last step fail ((size_t)-1: none) */
+    long error_particle;         /* particle that made the last step fail (-1: none)         */
     size_t left_total;           /* particles deactivated for leaving the domain, in total  */
     char error[256];             /* why the last call failed (pn_mpm_error)                 */
     pn__mpm_solver s;            /* private                                                  */
@@ -587,9 +593,9 @@ typedef struct pn_mpm_world {
    compiled out); PN_ERROR_INVALID_ARGUMENT for res outside 8 .. 16384, walls that leave no
    room, dx <= 0, a non-finite origin or gravity, friction < 0, capacity 0, a bad boundary or
    half an allocator, a negative or non-finite filter_time_s or advection_limit;
-   PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). On failure *why (optional)
+   PN_ERROR_OUT_OF_MEMORY if an allocation fails (nothing leaks). On failure why (optional)
    names the field. */
-PN_API pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, const char **why);
+PN_API pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, char *why, size_t why_cap);
 PN_API void pn_mpm_destroy(pn_mpm_world *w);
 
 /* Why the last failed call on w failed: the field, particle, group or capacity at fault and
@@ -659,18 +665,18 @@ typedef struct pn_mpm_fill_desc {
 PN_API pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t *added);
 
 /* How many particles pn_mpm_fill would add to a world of description wd (to size
-   max_particles before creating it). PN_ERROR_INVALID_ARGUMENT for a bad shape (*why). */
+   max_particles before creating it). PN_ERROR_INVALID_ARGUMENT for a bad shape (why). */
 PN_API pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, size_t *count,
-                                   const char **why);
+                                   char *why, size_t why_cap);
 
 /* The largest explicit step (s) the current state allows:
        dt = 0.9 dx / max_p (c_p + |v_p|),   c_p = sqrt(K_p / rho_p),
    K_p the particle's P-wave modulus (lambda + 2 mu, stiffened by compression: divided by J,
    times the hardening of Stomakhin snow), rho_p its current density. The factor 0.9 is
    measured: on sand, rubber, snow and metal scenes in 2D and sand and rubber in 3D the
-   largest step found stable by search was 1.19 to 1.68 times this one (scene_stable_dt in
-   tests/test_scene.c;
-   docs/results.md). Without particles, the groups' materials at rest.
+   largest step found stable by search was above this one (scene_stable_dt in
+   tests/test_scene.c; docs/results.md#scene-helpers-step-bounds-and-errors). Without
+   particles, the groups' materials at rest.
    PN_ERROR_INVALID_ARGUMENT without groups. */
 PN_API pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s);
 
@@ -705,7 +711,7 @@ PN_API pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, const
 /* Add a collider (copied; *index optional). PN_ERROR_INVALID_ARGUMENT for a full list, a bad
    shape or boundary, non-finite or non-positive sizes, a zero half-space normal or a
    negative friction. */
-PN_API pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c, int *index);
+PN_API pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_collider *c, int *index);
 
 /* Move collider `index` (a mouse-driven pusher, a kinematic body driven by a game): from now
    (w->time_s) it is at center_m and translates at velocity_m_s (NULL: at rest). The velocity
@@ -767,10 +773,10 @@ PN_API pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, c
    beyond the grid, with PN_ERROR_NONFINITE or PN_ERROR_OUTSIDE_DOMAIN. */
 PN_API pn_result pn_mpm_step_explicit(pn_mpm_world *w, pn_real dt_s, pn_mpm_stats *stats);
 
-/* Choose the energy group g's particles use in implicit steps. PN_MPM_ENERGY_PNET needs net
+/* Choose the energy group g's particles use in implicit steps. PN_ENERGY_PNET needs net
    (a bound pn_pnet for the group's material, copied). PN_ERROR_INVALID_ARGUMENT or
    PN_ERROR_UNSUPPORTED (exact von Mises or DP for another material) otherwise. */
-PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
+PN_API pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_energy energy,
                                          const pn_pnet *net);
 
 /* One implicit step (optimization time integration, PlasticityNet Eqs. 3, 10, 11): the
@@ -814,7 +820,6 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
 #define PN_FEM_MAX_GROUPS 16
 #define PN_FEM_MAX_OBSTACLES 16
 
-typedef pn_mpm_group pn_fem_group; /* material, density, the implicit energy, its network */
 
 /* Mesh description; zeroed fields mean the defaults in brackets. Elements are positively
    oriented: det [x1 - x0, x2 - x0 (, x3 - x0)] > 0 (counter-clockwise triangles). */
@@ -824,7 +829,7 @@ typedef struct pn_fem_desc {
     const pn_real *rest_m;       /* dim reals per node: the rest (and start) positions      */
     const int *elements;         /* dim + 1 node indices per element                        */
     const int *element_group;    /* per element, into groups [NULL: all group 0]            */
-    const pn_fem_group *groups;  /* materials; energy and pnet as for pn_mpm_group_set_energy */
+    const pn_group *groups;  /* materials; energy and pnet as for pn_mpm_group_set_energy */
     int n_groups;                /* 1 .. PN_FEM_MAX_GROUPS                                  */
     pn_real gravity[3];          /* m/s^2                                                   */
     pn_real contact_distance_m;  /* IPC's dhat: the barrier acts at distances below it
@@ -833,14 +838,14 @@ typedef struct pn_fem_desc {
                                     b(d) per node [0: 0.1 E l^(dim - 1) / dhat, E the
                                     stiffest material's, l the mean edge: docs/method.md]   */
     pn_real friction_velocity_m_s; /* IPC's epsilon_v: Coulomb friction (each obstacle's
-                                    pn_mpm_collider.friction) is smoothed below this sliding
+                                    pn_collider.friction) is smoothed below this sliding
                                     speed, a stick that creeps at most that fast [1e-3]      */
     pn_allocator allocator;
     double (*clock_s)(void *user); /* optional, as pn_mpm_desc.clock_s                       */
     void *clock_user;
 } pn_fem_desc;
 
-/* Obstacles: half-spaces and boxes of pn_mpm_collider (shape, center_m, normal,
+/* Obstacles: half-spaces and boxes of pn_collider (shape, center_m, normal,
    half_extent_m, velocity_m_s: translating at a constant velocity; friction: the Coulomb
    coefficient; boundary is not used: contact is the barrier's). */
 
@@ -848,11 +853,10 @@ typedef struct pn_fem_desc {
 typedef enum pn_fem_linear_solver {
     PN_FEM_LINEAR_DEFAULT = 0,   /* Cholesky while its factor is small (PN_FEM_CHOLESKY_MAX_MB of
                                     storage, PN_FEM_CHOLESKY_MAX_GFLOP_2D or _3D per
-                                    factorization), PCG beyond. On the metal frame Cholesky was
-                                    faster over whole runs in 2D up to 55,000 unknowns (0.9
-                                    GFLOP) and in 3D at 6,500 (0.12 GFLOP); the factorization's
-                                    cost grows as unknowns^7/3 in 3D, PCG's step about linearly
-                                    (docs/results.md)                                        */
+                                    factorization), PCG beyond: the factorization's cost
+                                    grows as unknowns^7/3 in 3D, PCG's step about linearly
+                                    (where each wins on the metal frame:
+                                    docs/results.md#against-the-issues-bars-make-bench-fem) */
     PN_FEM_LINEAR_CHOLESKY,      /* skyline Cholesky in a reverse Cuthill-McKee order: exact, its
                                     storage grows as unknowns x profile (3D: about n^5/3)   */
     PN_FEM_LINEAR_PCG            /* conjugate gradients preconditioned by a block incomplete
@@ -914,12 +918,12 @@ typedef struct pn_fem_mesh {
     int *elem, *egroup;
     pn_real *Dm_inv, *vol0;      /* per element: rest shape inverse (dim^2), rest volume    */
     pn_real *Fp_inv, *h;         /* per element: inverse plastic deformation, plastic state */
-    pn_fem_group groups[PN_FEM_MAX_GROUPS];
+    pn_group groups[PN_FEM_MAX_GROUPS];
     int n_groups;
     unsigned char *fixed;        /* per node: 0 free, 1 driven (held: velocity 0), 2 spun    */
     pn_real *drive;              /* per node: the driven velocity (dim reals)                */
     pn_real *spin;               /* per node: the spin's centre (3 reals), angular velocity (3) */
-    pn_mpm_collider obstacles[PN_FEM_MAX_OBSTACLES];
+    pn_collider obstacles[PN_FEM_MAX_OBSTACLES];
     int n_obstacles;
     pn_real time_s, dhat, kappa, edge_mean;
     long steps;
@@ -937,7 +941,7 @@ PN_API void pn_fem_destroy(pn_fem_mesh *m);
 PN_API const char *pn_fem_error(const pn_fem_mesh *m);
 
 /* The energy implicit steps use for group g (as pn_mpm_group_set_energy). */
-PN_API pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_mpm_energy energy, const pn_pnet *net);
+PN_API pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_energy energy, const pn_pnet *net);
 
 /* Nodes held (velocity NULL) or driven at a constant velocity (dim reals); n nodes by index. */
 PN_API pn_result pn_fem_fix_nodes(pn_fem_mesh *m, size_t n, const int *nodes, const pn_real *velocity_m_s);
@@ -957,7 +961,7 @@ PN_API pn_result pn_fem_release_nodes(pn_fem_mesh *m, size_t n, const int *nodes
    on nodes): PN_ERROR_INVALID_ARGUMENT names the node or element. A step after which a box
    reaches into an element (a coarse element over a small box) fails with
    PN_ERROR_UNSUPPORTED, the mesh unchanged. */
-PN_API pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, int *index);
+PN_API pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_collider *c, int *index);
 
 /* The largest explicit step the mesh allows: 0.5 l / c over the elements (l the smallest
    altitude, c the P-wave speed), and with obstacles: a quarter of each node's distance to
@@ -1051,9 +1055,9 @@ typedef struct pn_coupled_desc {
     pn_real contact_stiffness;   /* k (Pa) [0: 0.1 E, E the stiffest particle group's]      */
     pn_real friction;            /* the Coulomb coefficient at the interface [0]            */
     pn_real friction_velocity_m_s; /* IPC's epsilon_v: below this sliding speed friction is
-                                    smoothed (a stick creeps at most that fast) [1e-2: on
-                                    the drop scene Newton took 10-16 iterations a step at
-                                    1e-3, 5-9 at 1e-2 (docs/results.md)]                    */
+                                    smoothed (a stick creeps at most that fast) [1e-2: fewer
+                                    Newton iterations than 1e-3 on the drop scene;
+                                    docs/notebook.md, "the time gap"]                       */
 } pn_coupled_desc;
 
 typedef struct pn_coupled_implicit_desc {
@@ -1062,8 +1066,11 @@ typedef struct pn_coupled_implicit_desc {
                                     mesh nodes are below newton_tol dx / dt), cg_max,
                                     cg_rel_tol (CG on the coupled system), contact_rounds,
                                     linear_solver (the grid block's preconditioner),
-                                    max_halvings, pnet_double, trace: as for
-                                    pn_mpm_step_implicit; the energy formulation only       */
+                                    max_halvings, pnet_double, trace as for
+                                    pn_mpm_step_implicit, with other defaults where the
+                                    coupled system needs them: cg_max [1000], cg_rel_tol
+                                    [1e-4] (pn_mpm_step_implicit: 500, 1e-3); the energy
+                                    formulation only                                        */
     pn_fem_linear_solver fem_linear_solver; /* the mesh block's preconditioner: its exact
                                     factor (Cholesky) or block IC (PCG) [DEFAULT]            */
     pn_real theta;               /* the theta method: the forces taken at theta of the way
@@ -1187,18 +1194,18 @@ PN_API pn_result pn_coupled_min_distance(pn_coupled *c, pn_real *dist_m);
 
 /* A group's implicit energy (pn_mpm_group_set_energy, pn_fem_group_set_energy): checks net
    and the material; msg says why not. */
-static pn_result pn__group_set_energy(pn_mpm_group *gr, int g, int dim, pn_mpm_energy energy, const pn_pnet *net,
+static pn_result pn__group_set_energy(pn_group *gr, int g, int dim, pn_energy energy, const pn_pnet *net,
                                       char *msg, size_t cap) {
     msg[0] = 0;
 #define PN__MSG(...) pn__msg(msg, cap, __VA_ARGS__)
-    if (energy < PN_MPM_ENERGY_DEFAULT || energy > PN_MPM_ENERGY_DP) {
-        PN__MSG("energy %d is not a pn_mpm_energy", (int)energy);
+    if (energy < PN_ENERGY_DEFAULT || energy > PN_ENERGY_DP) {
+        PN__MSG("energy %d is not a pn_energy", (int)energy);
         return PN_ERROR_INVALID_ARGUMENT;
     }
-    if (energy == PN_MPM_ENERGY_PNET) {
+    if (energy == PN_ENERGY_PNET) {
         const pn_material *a, *b = &gr->material;
         if (!net || !net->energy) {
-            PN__MSG("PN_MPM_ENERGY_PNET needs a pn_pnet bound with pn_pnet_init");
+            PN__MSG("PN_ENERGY_PNET needs a pn_pnet bound with pn_pnet_init");
             return PN_ERROR_INVALID_ARGUMENT;
         }
         if (net->energy->dim != dim) {
@@ -1219,18 +1226,18 @@ static pn_result pn__group_set_energy(pn_mpm_group *gr, int g, int dim, pn_mpm_e
             return PN_ERROR_INVALID_PARAMETER;
         }
     }
-    if (energy == PN_MPM_ENERGY_EXACT_VM && (gr->material.plastic != PN_PLASTIC_VON_MISES ||
+    if (energy == PN_ENERGY_EXACT_VM && (gr->material.plastic != PN_PLASTIC_VON_MISES ||
                                              gr->material.elastic != PN_ELASTIC_STVK_HENCKY)) {
         PN__MSG("EXACT_VM needs group %d to be StVK-Hencky + von Mises", g);
         return PN_ERROR_UNSUPPORTED;
     }
-    if (energy == PN_MPM_ENERGY_DP && (gr->material.plastic != PN_PLASTIC_DRUCKER_PRAGER ||
+    if (energy == PN_ENERGY_DP && (gr->material.plastic != PN_PLASTIC_DRUCKER_PRAGER ||
                                        gr->material.elastic != PN_ELASTIC_STVK_HENCKY)) {
         PN__MSG("DP needs group %d to be StVK-Hencky + Drucker-Prager", g);
         return PN_ERROR_UNSUPPORTED;
     }
 #undef PN__MSG
-    if (energy == PN_MPM_ENERGY_PNET) gr->pnet = *net;
+    if (energy == PN_ENERGY_PNET) gr->pnet = *net;
     gr->energy = energy;
     return PN_OK;
 }
@@ -1303,7 +1310,7 @@ static void pn__mpm_slots(pn_mpm_world *w) {
         return PN_ERROR_INVALID_ARGUMENT;                                                   \
     } while (0)
 
-PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, const char **why) {
+static pn_result pn__mpm_create_why(const pn_mpm_desc *desc, pn_mpm_world **out, const char **why) {
     pn_mpm_world *w;
     int d, dd, i, fail = 0, wall;
     size_t cap, nodes = 1, k, nparts;
@@ -1322,8 +1329,8 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
         PN__MPM_REFUSE("pn_mpm_desc.advection_limit must be finite and >= 0 (0: 1 cell)");
     if (desc->max_particles == 0) PN__MPM_REFUSE("pn_mpm_desc.max_particles must be > 0");
     if (desc->wall_cells < 0) PN__MPM_REFUSE("pn_mpm_desc.wall_cells must be >= 0 (0: 3)");
-    if (desc->boundary < PN_MPM_BOUNDARY_STICKY || desc->boundary > PN_MPM_BOUNDARY_SEPARATE)
-        PN__MPM_REFUSE("pn_mpm_desc.boundary is not a pn_mpm_boundary");
+    if (desc->boundary < PN_BOUNDARY_STICKY || desc->boundary > PN_BOUNDARY_SEPARATE)
+        PN__MPM_REFUSE("pn_mpm_desc.boundary is not a pn_boundary");
     if ((desc->allocator.alloc == NULL) != (desc->allocator.free == NULL))
         PN__MPM_REFUSE("pn_mpm_desc.allocator needs both alloc and free, or neither");
     wall = desc->wall_cells ? desc->wall_cells : 3;
@@ -1348,7 +1355,7 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     w->s.wall = wall;
     w->cap = cap;
     w->s.nodes = nodes;
-    w->error_particle = (size_t)-1;
+    w->error_particle = -1;
     w->s.stride[d - 1] = 1;
     for (i = d - 2; i >= 0; --i) w->s.stride[i] = w->s.stride[i + 1] * (size_t)(desc->res[i + 1] + 1);
     w->s.nblocks = 1;
@@ -1427,12 +1434,16 @@ PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, con
     *out = w;
     return PN_OK;
 }
+
+PN__DEF pn_result pn_mpm_create(const pn_mpm_desc *desc, pn_mpm_world **out, char *why, size_t why_cap) {
+    const char *msg = NULL;
+    pn_result r = pn__mpm_create_why(desc, out, &msg);
+    if (r != PN_OK) pn__put(why, why_cap, msg ? msg : pn_result_string(r));
+    return r;
+}
 #undef PN__MPM_REFUSE
 
-PN__DEF const char *pn_mpm_error(const pn_mpm_world *w) {
-    PN_ASSERT(w);
-    return w->error;
-}
+PN__DEF const char *pn_mpm_error(const pn_mpm_world *w) { return w ? w->error : ""; }
 
 PN__DEF int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real density_kg_m3) {
     const char *why = "";
@@ -1448,7 +1459,7 @@ PN__DEF int pn_mpm_add_group(pn_mpm_world *w, const pn_material *m, pn_real dens
                      (double)density_kg_m3);
         return -1;
     }
-    if (pn_material_check(m, &why) != PN_OK) {
+    if (pn__material_check_why(m, &why) != PN_OK) {
         PN__FAIL(w, PN_ERROR_INVALID_PARAMETER, "pn_mpm_add_group: %s", why);
         return -1;
     }
@@ -1514,12 +1525,12 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
                             (unsigned long)n, (unsigned long)(w->n + n), (unsigned long)w->cap, (unsigned long)w->n);
     for (p = 0; p < n; ++p) {
         if (!pn__all_finite(d, x + p * (size_t)d) || (v && !pn__all_finite(d, v + p * (size_t)d))) {
-            w->error_particle = w->n + p;
+            w->error_particle = (long)(w->n + p);
             return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_add_particles: particle %lu of the call has a NaN or "
                                 "infinite %s", (unsigned long)p, pn__all_finite(d, x + p * (size_t)d) ? "velocity" : "position");
         }
         if (!pn__mpm_inside(w, x + p * (size_t)d)) {
-            w->error_particle = w->n + p;
+            w->error_particle = (long)(w->n + p);
             return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_particles: particle %lu of the call at "
                                 "(%g, %g, %g) m is outside the walls (origin_m + [%d dx, (res - %d) dx] on each axis)",
                                 (unsigned long)p, (double)x[p * (size_t)d], (double)x[p * (size_t)d + 1],
@@ -1554,7 +1565,7 @@ PN__DEF pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, cons
                             "(%lu particles)", (unsigned long)first, (unsigned long)first, (unsigned long)n, (unsigned long)w->n);
     for (p = 0; p < n; ++p)
         if (!pn__finite(h[p])) {
-            w->error_particle = first + p;
+            w->error_particle = (long)(first + p);
             return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_set_state: h of particle %lu is NaN or infinite",
                                 (unsigned long)(first + p));
         }
@@ -1563,8 +1574,8 @@ PN__DEF pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, cons
     return PN_OK;
 }
 
-PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c, int *index) {
-    pn_mpm_collider k;
+PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_collider *c, int *index) {
+    pn_collider k;
     pn_real nn = 0;
     int i, d;
     PN_ASSERT(w && c);
@@ -1574,24 +1585,24 @@ PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c,
     if (w->n_colliders >= PN_MPM_MAX_COLLIDERS)
         return PN__FAIL(w, PN_ERROR_CAPACITY, "pn_mpm_add_collider: all PN_MPM_MAX_COLLIDERS = %d are in use",
                             PN_MPM_MAX_COLLIDERS);
-    if (k.shape < PN_MPM_SHAPE_HALF_SPACE || k.shape > PN_MPM_SHAPE_SPHERE)
-        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: shape %d is not a pn_mpm_shape", (int)k.shape);
-    if (k.boundary < PN_MPM_BOUNDARY_STICKY || k.boundary > PN_MPM_BOUNDARY_SEPARATE)
-        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: boundary %d is not a pn_mpm_boundary",
+    if (k.shape < PN_SHAPE_HALF_SPACE || k.shape > PN_SHAPE_SPHERE)
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: shape %d is not a pn_shape", (int)k.shape);
+    if (k.boundary < PN_BOUNDARY_STICKY || k.boundary > PN_BOUNDARY_SEPARATE)
+        return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: boundary %d is not a pn_boundary",
                             (int)k.boundary);
     if (!pn__finite(k.friction) || !(k.friction >= 0))
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: friction must be finite and >= 0");
     if (!pn__all_finite(d, k.center_m) || !pn__all_finite(d, k.velocity_m_s))
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: center_m or velocity_m_s is not finite");
     for (i = d; i < 3; ++i) k.center_m[i] = k.normal[i] = k.half_extent_m[i] = k.velocity_m_s[i] = 0;
-    if (k.shape == PN_MPM_SHAPE_HALF_SPACE) {
+    if (k.shape == PN_SHAPE_HALF_SPACE) {
         if (pn__all_finite(d, k.normal))
             for (i = 0; i < d; ++i) nn += k.normal[i] * k.normal[i];
         nn = PN__SQRT(nn);
         if (!(nn > 0) || !pn__finite(nn))
             return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: the half-space normal is zero or not finite");
         for (i = 0; i < d; ++i) k.normal[i] /= nn;
-    } else if (k.shape == PN_MPM_SHAPE_BOX) {
+    } else if (k.shape == PN_SHAPE_BOX) {
         for (i = 0; i < d; ++i)
             if (!pn__finite(k.half_extent_m[i]) || !(k.half_extent_m[i] > 0))
                 return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_add_collider: half_extent_m must be finite and > 0");
@@ -1606,7 +1617,7 @@ PN__DEF pn_result pn_mpm_add_collider(pn_mpm_world *w, const pn_mpm_collider *c,
 
 PN__DEF pn_result pn_mpm_move_collider(pn_mpm_world *w, int index, const pn_real *center_m,
                                        const pn_real *velocity_m_s) {
-    pn_mpm_collider *c;
+    pn_collider *c;
     int i, d;
     PN_ASSERT(w && center_m);
     d = w->dim;
@@ -1671,7 +1682,7 @@ static pn_result pn__mpm_first_error(pn_mpm_world *w, pn_real dt) {
         for (p = 0; p < w->n; ++p) {
             pn_real far = 0;
             if (!w->active[p] || !(w->s.pstat[p] & bits[pass])) continue;
-            w->error_particle = p;
+            w->error_particle = (long)p;
             if (pass == 0)
                 return PN__FAIL(w, (pn_result)(w->s.pstat[p] & 0xff), "step of %g s: particle %lu (group %d): %s",
                                     (double)dt, (unsigned long)p, w->group[p],
@@ -1700,7 +1711,7 @@ static pn_result pn__mpm_check_state(pn_mpm_world *w) {
         if (!pn__all_finite(d, w->x + p * (size_t)d) || !pn__all_finite(d, w->v + p * (size_t)d) ||
             !pn__all_finite(dd, w->C + p * (size_t)dd) || !pn__all_finite(dd, w->F + p * (size_t)dd) ||
             !pn__finite(w->h[p])) {
-            w->error_particle = p;
+            w->error_particle = (long)p;
             return PN__FAIL(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x, v, C, F or h (was it "
                                 "written by hand?)", (unsigned long)p);
         }
@@ -1730,7 +1741,7 @@ static pn_result pn__mpm_list_check(pn_mpm_world *w, size_t n, const size_t *idx
     if (n == 0 || !idx) return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: no particles (n = 0 or NULL)", fn);
     for (k = 0; k < n; ++k) {
         if (idx[k] >= w->n || !w->active[idx[k]]) {
-            w->error_particle = idx[k] < w->n ? idx[k] : (size_t)-1;
+            w->error_particle = idx[k] < w->n ? (long)idx[k] : -1;
             return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu (entry %lu) %s", fn, (unsigned long)idx[k],
                                 (unsigned long)k, idx[k] >= w->n ? "does not exist" : "is not active");
         }
@@ -1742,7 +1753,7 @@ static pn_result pn__mpm_list_check(pn_mpm_world *w, size_t n, const size_t *idx
         for (k = 0; k < n; ++k)
             for (j = 0; j < D->n; ++j)
                 if (D->idx[j] == idx[k]) {
-                    w->error_particle = idx[k];
+                    w->error_particle = (long)idx[k];
                     return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "%s: particle %lu is already driven by drive %d "
                                         "(pn_mpm_release_drive it first)", fn, (unsigned long)idx[k], a);
                 }
@@ -1888,12 +1899,12 @@ PN__DEF pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, 
         else if (C && !pn__all_finite(dd, C + p * (size_t)dd)) bad = "C";
         else if (F && !pn__all_finite(dd, F + p * (size_t)dd)) bad = "F";
         if (bad) {
-            w->error_particle = first + p;
+            w->error_particle = (long)(first + p);
             return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_mpm_set_particles: %s of particle %lu is NaN or infinite", bad,
                                 (unsigned long)(first + p));
         }
         if (x && !pn__mpm_inside(w, x + p * (size_t)d)) {
-            w->error_particle = first + p;
+            w->error_particle = (long)(first + p);
             return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_set_particles: x of particle %lu is outside the walls",
                                 (unsigned long)(first + p));
         }
@@ -2263,7 +2274,7 @@ static pn_result pn__mpm_fill_do(const pn_mpm_desc *wd, const pn_mpm_fill_desc *
     return r;
 }
 
-PN__DEF pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, size_t *count, const char **why) {
+static pn_result pn__mpm_fill_count_why(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, size_t *count, const char **why) {
     pn_real bad[3];
     const char *w = "";
     pn_result r;
@@ -2275,6 +2286,13 @@ PN__DEF pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_des
     }
     r = pn__mpm_fill_do(wd, f, NULL, count, &w, bad);
     if (r != PN_OK && why) *why = *w ? w : "pn_mpm_fill_count: the shape reaches outside the walls (move it, or set clip)";
+    return r;
+}
+
+PN__DEF pn_result pn_mpm_fill_count(const pn_mpm_desc *wd, const pn_mpm_fill_desc *f, size_t *count, char *why, size_t why_cap) {
+    const char *msg = NULL;
+    pn_result r = pn__mpm_fill_count_why(wd, f, count, &msg);
+    if (r != PN_OK) pn__put(why, why_cap, msg ? msg : pn_result_string(r));
     return r;
 }
 
@@ -2357,7 +2375,7 @@ PN__DEF pn_result pn_mpm_stable_dt(const pn_mpm_world *w, pn_real *dt_s) {
     for (g = 0; g < w->n_groups; ++g) /* the materials at rest bound it from below */
         worst = PN__MAX(worst, PN__SQRT(pn__mpm_pwave(&w->groups[g].material, 0, 1) / w->groups[g].density_kg_m3));
     for (p = 0; p < w->n; ++p) {
-        const pn_mpm_group *gr = &w->groups[w->group[p]];
+        const pn_group *gr = &w->groups[w->group[p]];
         pn_real J, v2 = 0, c;
         int i;
         if (!w->active[p]) continue;
@@ -2602,7 +2620,7 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp) {
         size_t q = (size_t)lp;
-        const pn_mpm_group *g = &w->groups[w->group[q]];
+        const pn_group *g = &w->groups[w->group[q]];
         pn_real nv[3] = {0, 0, 0}, nm[3] = {0, 0, 0}, ov[3] = {0, 0, 0}, nC[9] = {0}, Fn[9], Z[9], hn;
         pn_real *xp = w->x + q * (size_t)d;
         int i, j, s, stat;
@@ -2709,7 +2727,7 @@ static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
     w->left_total += st->left_domain;
     w->time_s += dt;
     w->steps++;
-    w->error_particle = (size_t)-1;
+    w->error_particle = -1;
     w->error[0] = 0;
 }
 
@@ -2779,19 +2797,19 @@ static pn_result pn__mpm_energy_guard(pn_mpm_world *w, const pn_mpm_implicit_des
    ====================================================================================== */
 
 /* signed distance of x from collider c at time t (negative inside) and the outward normal */
-static pn_real pn__mpm_collider_phi(const pn_mpm_collider *c, int d, const pn_real *x, pn_real t, pn_real *n) {
+static pn_real pn__mpm_collider_phi(const pn_collider *c, int d, const pn_real *x, pn_real t, pn_real *n) {
     pn_real r[3], phi = 0, len = 0;
     int i, best = 0;
     for (i = 0; i < d; ++i) r[i] = x[i] - (c->center_m[i] + t * c->velocity_m_s[i]);
     for (i = 0; i < 3; ++i) n[i] = 0;
-    if (c->shape == PN_MPM_SHAPE_HALF_SPACE) {
+    if (c->shape == PN_SHAPE_HALF_SPACE) {
         for (i = 0; i < d; ++i) {
             phi += r[i] * c->normal[i];
             n[i] = c->normal[i];
         }
         return phi;
     }
-    if (c->shape == PN_MPM_SHAPE_SPHERE) {
+    if (c->shape == PN_SHAPE_SPHERE) {
         for (i = 0; i < d; ++i) len += r[i] * r[i];
         len = PN__SQRT(len);
         for (i = 0; i < d; ++i) n[i] = len > 0 ? r[i] / len : (i == d - 1);
@@ -2825,7 +2843,7 @@ static int pn__mpm_obstacle(const pn_mpm_world *w, const int *idx, pn_real m, pn
     if (cn == 0) {
         for (i = 0; i < d; ++i) xn[i] = w->desc.origin_m[i] + (pn_real)idx[i] * w->desc.dx_m;
         for (c = 0; c < w->n_colliders; ++c) {
-            const pn_mpm_collider *co = &w->colliders[c];
+            const pn_collider *co = &w->colliders[c];
             if (pn__mpm_collider_phi(co, d, xn, t, nrm) > 0) continue;
             cn = 1;
             for (i = 0; i < 3; ++i) {
@@ -2839,10 +2857,10 @@ static int pn__mpm_obstacle(const pn_mpm_world *w, const int *idx, pn_real m, pn
     }
     if (!(m > 0)) { /* no mass: nothing moves it */
         cn = d;
-        kind = PN_MPM_BOUNDARY_STICKY;
+        kind = PN_BOUNDARY_STICKY;
         for (i = 0; i < 3; ++i) vel[i] = 0;
     }
-    if (cn > 0 && kind == PN_MPM_BOUNDARY_STICKY) {
+    if (cn > 0 && kind == PN_BOUNDARY_STICKY) {
         cn = d;
         for (i = 0; i < 9; ++i) dir[i] = 0;
         for (j = 0; j < d; ++j) dir[3 * j + j] = 1;
@@ -2876,14 +2894,14 @@ static void pn__mpm_project(int d, int cn, int kind, const pn_real *dir, const p
     int b, i;
     pn_real u[3] = {0, 0, 0};
     if (cn == 0) return;
-    for (i = 0; i < d; ++i) u[i] = kind == PN_MPM_BOUNDARY_STICKY ? 0 : v[i] - vel[i];
-    for (b = 0; b < cn && kind != PN_MPM_BOUNDARY_STICKY; ++b) {
+    for (i = 0; i < d; ++i) u[i] = kind == PN_BOUNDARY_STICKY ? 0 : v[i] - vel[i];
+    for (b = 0; b < cn && kind != PN_BOUNDARY_STICKY; ++b) {
         const pn_real *n = dir + 3 * b;
         pn_real un = 0, ut = 0, sc;
         for (i = 0; i < d; ++i) un += u[i] * n[i];
-        if (kind == PN_MPM_BOUNDARY_SEPARATE && un >= 0) continue;
+        if (kind == PN_BOUNDARY_SEPARATE && un >= 0) continue;
         for (i = 0; i < d; ++i) u[i] -= un * n[i];
-        if (kind != PN_MPM_BOUNDARY_SEPARATE || !(mu > 0)) continue;
+        if (kind != PN_BOUNDARY_SEPARATE || !(mu > 0)) continue;
         for (i = 0; i < d; ++i) ut += u[i] * u[i];
         ut = PN__SQRT(ut);
         sc = ut > 0 ? PN__MAX(0, ut - mu * PN__FABS(un)) / ut : 0;
@@ -3891,7 +3909,7 @@ static pn_result pn__mpm_xrecords(pn_mpm_world *w, pn_real dt) {
         for (p = 0; p < w->n; ++p) { /* the first particle at fault */
             if (!w->active[p] || !w->s.pstat[p]) continue;
             if (w->s.pstat[p] < 0x1000) break;
-            w->error_particle = p;
+            w->error_particle = (long)p;
             if (w->s.pstat[p] == 0x2000)
                 return PN__FAIL(w, PN_ERROR_NONFINITE, "particle %lu has a NaN or infinite x (was it written by "
                                     "hand?)", (unsigned long)p);
@@ -3926,7 +3944,7 @@ static pn_result pn__mpm_xcheck(pn_mpm_world *w) {
     for (lp = 0; lp < (long)w->n; ++lp) {
         const pn_real *x = w->x + (size_t)lp * (size_t)d;
         if (!w->active[lp] || pn__mpm_in_grid(w, x)) continue;
-        w->error_particle = (size_t)lp;
+        w->error_particle = (long)lp;
         for (i = 0; i < d && pn__finite(x[i]); ++i) {
         }
         if (i < d)
@@ -4116,7 +4134,7 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
 }
 #undef PN__MPM_A
 
-PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy energy,
+PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_energy energy,
                                           const pn_pnet *net) {
     char msg[256];
     pn_result r;
@@ -4131,25 +4149,25 @@ PN__DEF pn_result pn_mpm_group_set_energy(pn_mpm_world *w, int g, pn_mpm_energy 
     return PN_OK;
 }
 
-static pn_mpm_energy pn__mpm_energy_of(const pn_mpm_group *g) {
-    if (g->energy != PN_MPM_ENERGY_DEFAULT) return g->energy;
-    return g->material.plastic == PN_PLASTIC_NONE ? PN_MPM_ENERGY_ELASTIC : PN_MPM_ENERGY_LAGGED;
+static pn_energy pn__mpm_energy_of(const pn_group *g) {
+    if (g->energy != PN_ENERGY_DEFAULT) return g->energy;
+    return g->material.plastic == PN_PLASTIC_NONE ? PN_ENERGY_ELASTIC : PN_ENERGY_LAGGED;
 }
 
 /* A group's implicit energy density at F (a particle's or an element's), with P and dP/dF
    when asked (PSD-projected under PN_EVAL_PROJECT_PSD in flags): h the plastic state, G and
    hG the lagged energy's, pt PlasticityNet's point, ty the frozen DP yield stress (each
    prepared at F0). */
-static pn_result pn__group_psi(const pn_mpm_group *g, int d, const pn_real *F, pn_real h, const pn_real *G, pn_real hG,
+static pn_result pn__group_psi(const pn_group *g, int d, const pn_real *F, pn_real h, const pn_real *G, pn_real hG,
                                const pn_pnet_point *pt, pn_real ty, pn_real *psi, pn_real *P, pn_real *H, unsigned flags) {
     switch (pn__mpm_energy_of(g)) {
-    case PN_MPM_ENERGY_LAGGED:
+    case PN_ENERGY_LAGGED:
         return pn_lagged_energy(&g->material, d, F, G, hG, psi, P, H, flags);
-    case PN_MPM_ENERGY_EXACT_VM:
+    case PN_ENERGY_EXACT_VM:
         return pn_von_mises_energy(&g->material, d, F, h, psi, P, H, flags);
-    case PN_MPM_ENERGY_PNET:
+    case PN_ENERGY_PNET:
         return pn_pnet_energy(&g->pnet, pt, F, psi, P, H, flags);
-    case PN_MPM_ENERGY_DP:
+    case PN_ENERGY_DP:
         return pn_dp_energy(&g->material, d, F, h, ty, psi, P, H, flags);
     default:
         return pn_elastic_energy(&g->material, d, F, h, psi, P, H, flags);
@@ -4172,7 +4190,7 @@ static pn_result pn__mpm_alloc_reuse(pn_mpm_world *w) {
     const pn_mpm_desc *desc = &w->desc;
     size_t cap = w->cap;
     int d = w->dim, dd = d * d, fail = 0, g, any = 0;
-    for (g = 0; g < w->n_groups; ++g) any |= pn__mpm_energy_of(&w->groups[g]) == PN_MPM_ENERGY_PNET;
+    for (g = 0; g < w->n_groups; ++g) any |= pn__mpm_energy_of(&w->groups[g]) == PN_ENERGY_PNET;
     if (w->s.tok || !any || !(w->s.reuse_tol > 0)) return PN_OK;
     PN__MPM_A(s.tF, cap * (size_t)dd, pn_real);
     PN__MPM_A(s.tpsi, cap, pn_real);
@@ -4396,7 +4414,7 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
                 w->s.pscal[p] = w->vol0[p] * psi; /* pH keeps the PSD dP/dF at tF */
                 continue;
             }
-            if (w->s.pnet_lanes && pn__mpm_energy_of(&w->groups[w->group[p]]) == PN_MPM_ENERGY_PNET &&
+            if (w->s.pnet_lanes && pn__mpm_energy_of(&w->groups[w->group[p]]) == PN_ENERGY_PNET &&
                 (gl < 0 || gl == w->group[p])) { /* one network per block's lanes */
                 gl = w->group[p];
                 lp[nl] = p;
@@ -4591,9 +4609,9 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
         pn_result stl[PN_MLP_LANES];
         int nl = 0, gl = -1, k;
         for (q = p0; q < p1; ++q) {
-            const pn_mpm_group *g = &w->groups[w->group[q]];
+            const pn_group *g = &w->groups[w->group[q]];
             pn_real F0[9], *old = w->s.pF0 + q * (size_t)dd, diff = 0;
-            pn_mpm_energy en;
+            pn_energy en;
             int i;
             w->s.pstat[q] = 0;
             w->s.pscal[q] = 0;
@@ -4604,7 +4622,7 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
             w->s.pscal[q] = diff;
             memcpy(old, F0, sizeof(pn_real) * (size_t)dd);
             en = pn__mpm_energy_of(g);
-            if (en == PN_MPM_ENERGY_PNET && w->s.tok && w->s.tok[q]) { /* keep a point F0 has not left */
+            if (en == PN_ENERGY_PNET && w->s.tok && w->s.tok[q]) { /* keep a point F0 has not left */
                 const pn_pnet_point *pt = &w->s.ppt[q];
                 int keep = w->s.reuse_tol > 0 && pt->h == w->h[q];
                 for (i = 0; keep && i < dd; ++i) keep = PN__FABS(F0[i] - pt->F0[i]) <= w->s.reuse_tol;
@@ -4612,17 +4630,17 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
                 pn__mpm_touch(w, q);
                 w->s.tok[q] = 0;
             }
-            if (en == PN_MPM_ENERGY_PNET && w->s.pnet_lanes && (gl < 0 || gl == w->group[q])) {
+            if (en == PN_ENERGY_PNET && w->s.pnet_lanes && (gl < 0 || gl == w->group[q])) {
                 gl = w->group[q]; /* one network per block's lanes */
                 lp[nl] = q;
                 hl[nl] = w->h[q];
                 memcpy(Fl + nl * dd, F0, sizeof(pn_real) * (size_t)dd);
                 nl++;
-            } else if (en == PN_MPM_ENERGY_LAGGED)
+            } else if (en == PN_ENERGY_LAGGED)
                 w->s.pstat[q] = (int)pn_lagged_prepare(&g->material, d, F0, w->h[q], w->s.pG + q * (size_t)dd, &w->s.phG[q]);
-            else if (en == PN_MPM_ENERGY_PNET)
+            else if (en == PN_ENERGY_PNET)
                 w->s.pstat[q] = (int)pn_pnet_prepare(&g->pnet, F0, w->h[q], &w->s.ppt[q], NULL, NULL);
-            else if (en == PN_MPM_ENERGY_DP)
+            else if (en == PN_ENERGY_DP)
                 w->s.pstat[q] = (int)pn_dp_prepare(&g->material, d, first ? w->F + q * (size_t)dd : F0, w->h[q],
                                                  &w->s.pty[q]);
         }
@@ -4672,7 +4690,7 @@ static void pn__mpm_force_error(pn_mpm_world *w, const pn_real *v, pn_real dt, p
     size_t p;
     double err = 0, reg = 0, tot = 0, n = 0, apex = 0;
     for (p = 0; p < w->n; ++p) {
-        const pn_mpm_group *g = &w->groups[w->group[p]];
+        const pn_group *g = &w->groups[w->group[p]];
         pn_real F[9], P[9], T[9], psi;
         double e = 0, r = 0, t = 0;
         if (!w->active[p] || g->material.plastic == PN_PLASTIC_NONE) continue;
@@ -4683,7 +4701,7 @@ static void pn__mpm_force_error(pn_mpm_world *w, const pn_real *v, pn_real dt, p
         for (i = 0; i < dd; ++i) {
             e += (double)((P[i] - T[i]) * (P[i] - T[i]));
             t += (double)(T[i] * T[i]);
-            if (pn__mpm_energy_of(g) == PN_MPM_ENERGY_PNET) {
+            if (pn__mpm_energy_of(g) == PN_ENERGY_PNET) {
                 double df = (double)(g->pnet.reg * (F[i] - w->s.ppt[p].F0[i]));
                 r += df * df;
             }
@@ -4780,7 +4798,7 @@ static pn_real pn__mpm_reaction(const pn_mpm_world *w, size_t k, const pn_real *
 }
 
 static int pn__mpm_has_friction(const pn_mpm_world *w, size_t k) {
-    return w->s.ckind[k] == PN_MPM_BOUNDARY_SEPARATE && (w->s.chold[k] & 0x7f) && w->s.cmu[k] > 0;
+    return w->s.ckind[k] == PN_BOUNDARY_SEPARATE && (w->s.chold[k] & 0x7f) && w->s.cmu[k] > 0;
 }
 
 /* node k with normal impulse L: stick (when lagged_stick, or for a new friction state when
@@ -4818,7 +4836,7 @@ static void pn__mpm_friction_start(pn_mpm_world *w, pn_real *v, pn_real dt) {
     }
     for (j = 0; j < w->s.n_lag; ++j) { /* the contact held at the end of the last step holds on, */
         long kk = w->s.dof[w->s.lnode[j] >> 3]; /* along the directions it held then */
-        if (kk < 0 || w->s.ckind[kk] != PN_MPM_BOUNDARY_SEPARATE || !w->s.cn[kk]) continue;
+        if (kk < 0 || w->s.ckind[kk] != PN_BOUNDARY_SEPARATE || !w->s.cn[kk]) continue;
         w->s.chold[kk] = (unsigned char)(w->s.chold[kk] | ((w->s.lnode[j] & 7) & ((1u << w->s.cn[kk]) - 1)));
         pn__mpm_hold(w, (size_t)kk, v + (size_t)kk * (size_t)d);
         if (pn__mpm_has_friction(w, (size_t)kk))
@@ -4862,7 +4880,7 @@ static void pn__mpm_friction_record(pn_mpm_world *w, pn_real dt) {
     w->s.n_lag = 0;
     for (k = 0; k < w->s.n_act; ++k) {
         pn_real L;
-        if (w->s.ckind[k] != PN_MPM_BOUNDARY_SEPARATE || !(w->s.chold[k] & 0x7f)) continue;
+        if (w->s.ckind[k] != PN_BOUNDARY_SEPARATE || !(w->s.chold[k] & 0x7f)) continue;
         L = pn__mpm_reaction(w, k, w->s.grad + k * (size_t)w->dim);
         if (!(L > 0)) continue;
         w->s.lnode[w->s.n_lag] = w->s.act[k] << 3 | (size_t)(w->s.chold[k] & 7); /* the node, its held directions */
@@ -4881,7 +4899,7 @@ static int pn__mpm_active_set(pn_mpm_world *w, pn_real *v, pn_real vtol) {
         const pn_real *dir = w->s.cdir + k * 9, *vel = w->s.cvel + k * 3, *g = w->s.grad + k * (size_t)d;
         pn_real *vk = v + k * (size_t)d, m = w->s.grid_m[k], f = w->s.cmu[k] * w->s.clam[k], gt[3], u[3], a = 0;
         int b, i, ch = 0, stick = (w->s.chold[k] & PN__MPM_STICK) != 0;
-        if (w->s.ckind[k] != PN_MPM_BOUNDARY_SEPARATE || w->s.cn[k] == 0) continue;
+        if (w->s.ckind[k] != PN_BOUNDARY_SEPARATE || w->s.cn[k] == 0) continue;
         for (b = 0; b < w->s.cn[k]; ++b) {
             pn_real gn = 0, un = 0;
             for (i = 0; i < d; ++i) {
@@ -5803,7 +5821,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         int plastic;
         rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->s.pF0 + j * (size_t)dd, &plastic);
         if (rr != PN_OK) {
-            w->error_particle = p;
+            w->error_particle = (long)p;
             return PN__FAIL(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
                                 (unsigned long)p, w->group[p], pn_result_string(rr));
         }
@@ -5873,7 +5891,7 @@ static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_impl
             size_t c = k * (size_t)d + (size_t)i;
             w->s.vstar[c] = m > 0 ? w->s.grid_v[c] / m + dt * w->desc.gravity[i] : 0;
         }
-        if (w->s.ckind[k] == PN_MPM_BOUNDARY_SEPARATE && w->s.cn[k]) {
+        if (w->s.ckind[k] == PN_BOUNDARY_SEPARATE && w->s.cn[k]) {
             int b;
             has_sep = 1;
             w->s.chold[k] = 0;
@@ -6024,6 +6042,81 @@ static const char *pn__mpm_negative_count(const pn_mpm_implicit_desc *o) {
     return NULL;
 }
 
+/* pn_mpm_step_implicit's tries for the kit's substep fallback (pn__halve) */
+typedef struct pn__mpm_retry {
+    pn_mpm_world *w;
+    const pn_mpm_implicit_desc *o;
+    pn_real dt, cfl, t0;
+    pn_mpm_stats *st, first;     /* the current try's stats; the first try's               */
+    long steps0, culprit;
+    size_t left0;
+    int stale0, rec0;
+    char why[sizeof ((pn_mpm_world *)0)->error];
+} pn__mpm_retry;
+
+static pn_result pn__mpm_try(void *ctx, int n_sub) {
+    pn__mpm_retry *t = (pn__mpm_retry *)ctx;
+    pn_mpm_world *w = t->w;
+    pn_mpm_stats *st = t->st;
+    pn_result r = PN_OK;
+    int s;
+    if (n_sub == 1) { /* the whole step: it builds the new state aside and swaps it in */
+        r = pn__mpm_once(w, t->dt, t->o, st);
+        st->dt_over_cfl = t->cfl;
+        return r;
+    }
+    pn__mpm_stats_clear(st, t->o->measure_force_error);
+    for (s = 0; s < n_sub; ++s) {
+        pn_mpm_stats sub;
+        pn__mpm_stats_clear(&sub, t->o->measure_force_error);
+        sub.solves = st->solves; /* numbered on through the substeps */
+        r = pn__mpm_once(w, t->dt / (pn_real)n_sub, t->o, &sub);
+        if (r != PN_OK) return r;
+        pn__mpm_stats_add(st, &sub);
+        st->solves = sub.solves;
+    }
+    st->substeps = n_sub;
+    st->dt_over_cfl = t->cfl;
+    w->time_s = t->t0 + t->dt;
+    w->steps = t->steps0 + 1;
+    return PN_OK;
+}
+
+static void pn__mpm_untry(void *ctx, int n_sub) {
+    pn__mpm_retry *t = (pn__mpm_retry *)ctx;
+    pn_mpm_world *w = t->w;
+    if (n_sub > 1) pn__mpm_backup(w, 1); /* a failed whole step changed nothing but the models */
+    pn__mpm_journal_undo(w);
+    w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0;
+    if (n_sub > 1) w->time_s = t->t0, w->steps = t->steps0, w->left_total = t->left0;
+}
+
+static void pn__mpm_keep_first(void *ctx) {
+    pn__mpm_retry *t = (pn__mpm_retry *)ctx;
+    t->first = *t->st;
+    t->culprit = t->w->error_particle;
+    memcpy(t->why, t->w->error, sizeof t->why);
+    pn__mpm_backup(t->w, 0); /* the substeps change the world: keep it (the whole step does not) */
+}
+
+static int pn__mpm_spent(void *ctx, int n_sub) { /* the Newton budget is spent */
+    return n_sub > 1 && ((pn__mpm_retry *)ctx)->w->s.newton_left < 0;
+}
+
+/* The defaults of an implicit desc (zero fields), resolved here for pn_mpm_step_implicit and
+   pn_coupled_step_implicit alike; the CG's differ (the coupled system needs more) */
+static void pn__mpm_implicit_defaults(pn_mpm_implicit_desc *o, int cg_max, pn_real cg_rel_tol) {
+    if (o->fixed_point_iters <= 0) o->fixed_point_iters = 1;
+    if (o->newton_max <= 0) o->newton_max = 50;
+    if (o->cg_max <= 0) o->cg_max = cg_max;
+    if (!(o->newton_tol > 0)) o->newton_tol = (pn_real)1e-5;
+    if (!(o->cg_rel_tol > 0)) o->cg_rel_tol = cg_rel_tol;
+    if (o->contact_rounds <= 0) o->contact_rounds = 1;
+    if (o->mg_levels == 0) o->mg_levels = PN__MPM_MG_MAX;
+    if (o->max_halvings == 0) o->max_halvings = 3;
+    if (o->max_halvings > 10) o->max_halvings = 10;
+}
+
 /* the first drive (*load = 0) or load (*load = 1) acting now, or -1: implicit steps refuse them */
 static int pn__mpm_drive_on(const pn_mpm_world *w, int *load) {
     int a;
@@ -6038,9 +6131,10 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                                        pn_mpm_stats *stats) {
     pn_mpm_implicit_desc o;
     pn_mpm_stats st;
-    pn_result r, first;
+    pn_result r;
     pn_real cfl; /* the explicit bound, then dt over it */
-    int level, stale0, rec0;
+    pn__mpm_retry t;
+    pn__halving h;
     PN_ASSERT(w);
     w->error[0] = 0;
     if (!pn__finite(dt) || !(dt > 0))
@@ -6060,18 +6154,12 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
         o.newton_tol < 0 || o.cg_rel_tol < 0 || o.cg_forcing_max < 0)
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: newton_tol, cg_rel_tol and cg_forcing_max "
                             "must be finite and >= 0 (0: the default)");
-    if (o.fixed_point_iters <= 0) o.fixed_point_iters = 1;
-    if (o.newton_max <= 0) o.newton_max = 50;
-    if (o.cg_max <= 0) o.cg_max = 500;
-    if (!(o.newton_tol > 0)) o.newton_tol = (pn_real)1e-5;
-    if (!(o.cg_rel_tol > 0)) o.cg_rel_tol = (pn_real)1e-3;
-    if (o.contact_rounds <= 0) o.contact_rounds = 1;
+    pn__mpm_implicit_defaults(&o, 500, (pn_real)1e-3);
     if (o.linear_solver < PN_MPM_LINEAR_DEFAULT || o.linear_solver > PN_MPM_LINEAR_MULTIGRID || o.mg_levels < 0 ||
         o.mg_rebuild < 0 || o.mg_rebuild > 1)
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: linear_solver %d is not a "
                             "pn_mpm_linear_solver, mg_levels %d < 0 or mg_rebuild %d not 0 or 1", (int)o.linear_solver,
                             o.mg_levels, o.mg_rebuild);
-    if (o.mg_levels == 0) o.mg_levels = PN__MPM_MG_MAX;
     if (o.formulation < PN_MPM_FORMULATION_ENERGY || o.formulation > PN_MPM_FORMULATION_STRESS ||
         !pn__finite(o.sweep_tol) || o.sweep_tol < 0)
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
@@ -6096,8 +6184,6 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                                     "StVK-Hencky groups (elastic or Drucker-Prager) and Neo-Hookean snow groups (elastic "
                                     "or Cam-Clay); group %d is not one", g);
     }
-    if (o.max_halvings == 0) o.max_halvings = 3;
-    if (o.max_halvings > 10) o.max_halvings = 10;
     if (o.newton_budget <= 0) { /* the deepest level's full work: half of every level's in full */
         double b = (double)o.newton_max * o.fixed_point_iters * o.contact_rounds * (double)(1 << PN__MAX(o.max_halvings, 0));
         o.newton_budget = b < 1e9 ? (int)b : 1000000000;
@@ -6112,64 +6198,26 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     else cfl = -1;
     pn__mpm_stats_clear(&st, o.measure_force_error);
     pn__mpm_journal_begin(w);
-    stale0 = w->s.mg_stale, rec0 = w->s.rec_ok; /* what a failed call must also leave as it was */
-    first = pn__mpm_once(w, dt, &o, &st);
-    st.dt_over_cfl = cfl;
-    if (first == PN_OK) {
+    memset(&t, 0, sizeof t);
+    t.w = w, t.o = &o, t.dt = dt, t.cfl = cfl, t.st = &st;
+    t.t0 = w->time_s, t.steps0 = w->steps, t.left0 = w->left_total;
+    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok; /* what a failed call must also leave as it was */
+    h.ctx = &t, h.try_step = pn__mpm_try, h.undo = pn__mpm_untry, h.keep_first = pn__mpm_keep_first;
+    h.stop = pn__mpm_spent;
+    r = pn__halve(&h, o.max_halvings);
+    if (r == PN_OK) {
         if (stats) *stats = st;
         return PN_OK;
     }
-    pn__mpm_journal_undo(w);
-    w->s.mg_stale = stale0, w->s.rec_ok = rec0;
-    /* fallback: the same step as 2, 4, ... substeps; the world is restored if none works,
-       and the stats are the first attempt's (how it failed: cg_capped, line searches) */
-    {
-        pn_mpm_stats st_first = st;
-        pn_real t0 = w->time_s;
-        long steps0 = w->steps;
-        size_t left0 = w->left_total, culprit = w->error_particle;
-        char why[sizeof w->error];
-        memcpy(why, w->error, sizeof why);
-        pn__mpm_backup(w, 0);
-        for (level = 1; level <= o.max_halvings; ++level) {
-            int s, n_sub = 1 << level;
-            pn__mpm_stats_clear(&st, o.measure_force_error);
-            for (s = 0; s < n_sub; ++s) {
-                pn_mpm_stats sub;
-                pn__mpm_stats_clear(&sub, o.measure_force_error);
-                sub.solves = st.solves; /* numbered on through the substeps */
-                r = pn__mpm_once(w, dt / (pn_real)n_sub, &o, &sub);
-                if (r != PN_OK) break;
-                pn__mpm_stats_add(&st, &sub);
-                st.solves = sub.solves;
-            }
-            if (r == PN_OK) {
-                st.substeps = n_sub;
-                st.dt_over_cfl = cfl;
-                w->time_s = t0 + dt;
-                w->steps = steps0 + 1;
-                if (stats) *stats = st;
-                return PN_OK;
-            }
-            pn__mpm_backup(w, 1);
-            pn__mpm_journal_undo(w);
-            w->s.mg_stale = stale0, w->s.rec_ok = rec0;
-            w->time_s = t0;
-            w->steps = steps0;
-            w->left_total = left0;
-            if (w->s.newton_left < 0) break; /* the budget is spent */
-        }
-        w->error_particle = culprit;
-        memcpy(w->error, why, sizeof why);
-        if (stats) *stats = st_first;
-        if (o.max_halvings > 0) { /* the first failure says why; add that halving did not help */
-            size_t len = strlen(w->error);
-            const char *tail = w->s.newton_left < 0 ? " [and substeps until newton_budget was spent]"
-                                                  : " [also as 2^max_halvings substeps]";
-            if (len + strlen(tail) < sizeof w->error) memcpy(w->error + len, tail, strlen(tail) + 1);
-        }
-    }
-    return first;
+    /* the world as it was; the message, culprit and stats of the first try (how it failed:
+       cg_capped, line searches), and whether halving was tried */
+    w->error_particle = t.culprit;
+    memcpy(w->error, t.why, sizeof w->error);
+    if (stats) *stats = t.first;
+    if (o.max_halvings > 0)
+        pn__append(w->error, sizeof w->error, w->s.newton_left < 0 ? " [and substeps until newton_budget was spent]"
+                                                                 : " [also as 2^max_halvings substeps]");
+    return r;
 }
 
 /* ======================================================================================
@@ -6826,7 +6874,7 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     }
     for (g = 0; g < desc->n_groups; ++g) {
         const char *mw = NULL;
-        if (pn_material_check(&desc->groups[g].material, &mw) != PN_OK) {
+        if (pn__material_check_why(&desc->groups[g].material, &mw) != PN_OK) {
             pn__msg(why, why_cap, "pn_fem_desc.groups[%d].material: %s", g, mw ? mw : "invalid");
             return PN_ERROR_INVALID_PARAMETER;
         }
@@ -6970,7 +7018,7 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     return PN_OK;
 }
 
-PN__DEF pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_mpm_energy energy, const pn_pnet *net) {
+PN__DEF pn_result pn_fem_group_set_energy(pn_fem_mesh *m, int g, pn_energy energy, const pn_pnet *net) {
     char msg[256];
     pn_result r;
     if (!m) return PN_ERROR_INVALID_ARGUMENT;
@@ -7088,11 +7136,11 @@ static void pn__fem_driven(const pn_fem_mesh *m, size_t k, pn_real dt, pn_real *
    ====================================================================================== */
 
 /* signed distance from x to obstacle c at time t (> 0 outside), and its gradient n */
-static pn_real pn__fem_obstacle_sd(const pn_mpm_collider *c, int d, pn_real t, const pn_real *u, const pn_real *x, pn_real *n) {
+static pn_real pn__fem_obstacle_sd(const pn_collider *c, int d, pn_real t, const pn_real *u, const pn_real *x, pn_real *n) {
     pn_real r[3], dist = 0;
     int i;
     for (i = 0; i < d; ++i) r[i] = x[i] - (c->center_m[i] + t * c->velocity_m_s[i] + (u ? u[i] : 0));
-    if (c->shape == PN_MPM_SHAPE_HALF_SPACE) {
+    if (c->shape == PN_SHAPE_HALF_SPACE) {
         pn_real nn = 0;
         for (i = 0; i < d; ++i) nn += c->normal[i] * c->normal[i];
         nn = 1 / PN__SQRT(nn);
@@ -7166,11 +7214,11 @@ static int pn__fem_box_meets_simplex(int d, const pn_real *lo, const pn_real *hi
 /* the first element whose interior a box obstacle's (at time t) meets, or -1: its nodes may
    all be outside the box (a small box inside a large element), where the nodes' barrier
    cannot see it */
-static long pn__fem_obstacle_in_element(const pn_fem_mesh *m, const pn_mpm_collider *c, pn_real t) {
+static long pn__fem_obstacle_in_element(const pn_fem_mesh *m, const pn_collider *c, pn_real t) {
     int d = m->dim, i, a;
     pn_real lo[3], hi[3], P[12];
     size_t e;
-    if (c->shape != PN_MPM_SHAPE_BOX) return -1; /* a half-space meets an element only where a node is inside */
+    if (c->shape != PN_SHAPE_BOX) return -1; /* a half-space meets an element only where a node is inside */
     for (i = 0; i < d; ++i) {
         pn_real ci = c->center_m[i] + t * c->velocity_m_s[i];
         lo[i] = ci - c->half_extent_m[i], hi[i] = ci + c->half_extent_m[i];
@@ -7190,7 +7238,7 @@ static long pn__fem_obstacle_in_element(const pn_fem_mesh *m, const pn_mpm_colli
     return -1;
 }
 
-PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, int *index) {
+PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_collider *c, int *index) {
     int i, d;
     size_t k;
     pn_real nn = 0, nrm[3];
@@ -7199,19 +7247,19 @@ PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_mpm_collider *c, 
     d = m->dim;
     if (m->n_obstacles >= PN_FEM_MAX_OBSTACLES)
         return PN__FAIL(m, PN_ERROR_CAPACITY, "pn_fem_add_obstacle: the mesh has its %d obstacles", PN_FEM_MAX_OBSTACLES);
-    if (c->shape != PN_MPM_SHAPE_HALF_SPACE && c->shape != PN_MPM_SHAPE_BOX)
+    if (c->shape != PN_SHAPE_HALF_SPACE && c->shape != PN_SHAPE_BOX)
         return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: shape %d: half-spaces and boxes only", (int)c->shape);
     for (i = 0; i < d; ++i) {
         if (!pn__finite(c->center_m[i]) || !pn__finite(c->normal[i]) || !pn__finite(c->velocity_m_s[i]) ||
             !pn__finite(c->half_extent_m[i]))
             return PN__FAIL(m, PN_ERROR_NONFINITE, "pn_fem_add_obstacle: a coordinate of axis %d is not finite", i);
         nn += c->normal[i] * c->normal[i];
-        if (c->shape == PN_MPM_SHAPE_BOX && !(c->half_extent_m[i] > 0 && pn__finite(c->friction)))
+        if (c->shape == PN_SHAPE_BOX && !(c->half_extent_m[i] > 0 && pn__finite(c->friction)))
             return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: half_extent_m[%d] must be > 0", i);
     }
     if (!(c->friction >= 0) || !pn__finite(c->friction))
         return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: friction must be finite and >= 0");
-    if (c->shape == PN_MPM_SHAPE_HALF_SPACE && !(nn > 0))
+    if (c->shape == PN_SHAPE_HALF_SPACE && !(nn > 0))
         return PN__FAIL(m, PN_ERROR_INVALID_ARGUMENT, "pn_fem_add_obstacle: the half-space's normal is zero");
     for (k = 0; k < m->n_nodes; ++k)
         if (!(pn__fem_obstacle_sd(c, d, m->time_s, NULL, m->x + k * (size_t)d, nrm) > 0)) {
@@ -8400,7 +8448,7 @@ static pn_real pn__fem_ccd(const pn_fem_mesh *m, const pn_real *x, const pn_real
     size_t k, nd = m->n_nodes * (size_t)d;
     pn_real amax = 1;
     for (o = 0; o < m->n_obstacles; ++o) {
-        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_collider *c = &m->obstacles[o];
         const pn_real *u = NULL, *du = NULL;
         pn_real t = s->t_end;
         for (j = 0; j < s->n_mov; ++j)
@@ -8413,7 +8461,7 @@ static pn_real pn__fem_ccd(const pn_fem_mesh *m, const pn_real *x, const pn_real
                 r0[i] = xk[i] - (c->center_m[i] + t * c->velocity_m_s[i] + (u ? u[i] : 0));
                 w[i] = dir[k * (size_t)d + (size_t)i] - (du ? du[i] : 0);
             }
-            if (c->shape == PN_MPM_SHAPE_HALF_SPACE) {
+            if (c->shape == PN_SHAPE_HALF_SPACE) {
                 pn_real d0 = 0, rate = 0;
                 for (i = 0; i < d; ++i) d0 += r0[i] * c->normal[i], rate += w[i] * c->normal[i];
                 if (rate < 0) hit = d0 / -rate;
@@ -8609,7 +8657,7 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
             }
     }
     for (o = 0; o < m->n_obstacles; ++o) { /* the barrier */
-        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_collider *c = &m->obstacles[o];
         const pn_real *u = NULL;
         size_t uo = 0;
         for (j = 0; j < s->n_mov; ++j)
@@ -8653,7 +8701,7 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
         }
     }
     for (o = 0; o < m->n_obstacles; ++o) { /* lagged smoothed Coulomb friction (IPC) */
-        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_collider *c = &m->obstacles[o];
         const pn_real *u = NULL, *ul = NULL;
         pn_real eps = m->desc.friction_velocity_m_s * s->dt;
         size_t uo = 0;
@@ -8751,7 +8799,7 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
     *plastic = 0;
     PN__FEM_OMP_FOR /* each element's own state on threads; counted and judged below in order */
     for (e = 0; e < m->n_elems; ++e) {
-        const pn_fem_group *g = &m->groups[m->egroup[e]];
+        const pn_group *g = &m->groups[m->egroup[e]];
         pn_real Fe[9], Z[9], Fi[9], T[9], hn, moved = 0;
         pn_result r;
         int i;
@@ -8762,7 +8810,7 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
             continue;
         }
         if (g->material.plastic == PN_PLASTIC_NONE) continue;
-        r = pn__mpm_energy_of(g) == PN_MPM_ENERGY_PNET && g->pnet.return_map
+        r = pn__mpm_energy_of(g) == PN_ENERGY_PNET && g->pnet.return_map
                 ? pn_learned_return_map(g->pnet.return_map, &g->material, d, Fe, m->h[e], Z, &hn, NULL)
                 : pn_return_map(&g->material, d, Fe, m->h[e], Z, &hn, NULL);
         if (r != PN_OK || !pn__finite(hn)) {
@@ -8805,7 +8853,7 @@ PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
     if (!m || !dt_s) return PN_ERROR_INVALID_ARGUMENT;
     d = m->dim, dp = d + 1;
     for (e = 0; e < m->n_elems; ++e) { /* the smallest altitude over the P-wave speed */
-        const pn_fem_group *g = &m->groups[m->egroup[e]];
+        const pn_group *g = &m->groups[m->egroup[e]];
         const int *el = m->elem + e * (size_t)dp;
         pn_real Ds[9], vol, fmax = 0, cp, alt;
         pn__fem_ds(m, e, m->x, Ds);
@@ -8959,7 +9007,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     }
     for (o = 0; o < m->n_obstacles; ++o) { /* Coulomb friction on the new velocities: slows the
                                                 sliding by at most dt mu lambda / m, never reverses it */
-        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_collider *c = &m->obstacles[o];
         if (!(c->friction > 0)) continue;
         for (k = 0; k < m->n_nodes; ++k) {
             pn_real nrm[3], vt[3], vn = 0, sp = 0, bb, b1, b2, cut, dist;
@@ -9139,16 +9187,16 @@ static pn_result pn__fem_prepare(pn_fem_mesh *m, const pn_real *x) {
     size_t e;
     PN__FEM_OMP_FOR
     for (e = 0; e < m->n_elems; ++e) {
-        const pn_fem_group *g = &m->groups[m->egroup[e]];
+        const pn_group *g = &m->groups[m->egroup[e]];
         pn_real F0[9];
         pn_result r = PN_OK;
-        pn_mpm_energy en = pn__mpm_energy_of(g);
+        pn_energy en = pn__mpm_energy_of(g);
         s->estat[e] = 0;
-        if (en != PN_MPM_ENERGY_LAGGED && en != PN_MPM_ENERGY_PNET && en != PN_MPM_ENERGY_DP) continue;
+        if (en != PN_ENERGY_LAGGED && en != PN_ENERGY_PNET && en != PN_ENERGY_DP) continue;
         pn__fem_fe(m, e, x, F0);
         if (!(pn_mat_det(d, F0) > 0)) pn__fem_fe(m, e, m->x, F0);
-        if (en == PN_MPM_ENERGY_LAGGED) r = pn_lagged_prepare(&g->material, d, F0, m->h[e], s->pG + e * (size_t)dd, &s->phG[e]);
-        else if (en == PN_MPM_ENERGY_PNET) r = pn_pnet_prepare(&g->pnet, F0, m->h[e], &s->ppt[e], NULL, NULL);
+        if (en == PN_ENERGY_LAGGED) r = pn_lagged_prepare(&g->material, d, F0, m->h[e], s->pG + e * (size_t)dd, &s->phG[e]);
+        else if (en == PN_ENERGY_PNET) r = pn_pnet_prepare(&g->pnet, F0, m->h[e], &s->ppt[e], NULL, NULL);
         else r = pn_dp_prepare(&g->material, d, F0, m->h[e], &s->pty[e]);
         s->estat[e] = (int)r;
     }
@@ -9191,7 +9239,7 @@ static int pn__fem_new_friction(const pn_fem_mesh *m) {
     int o, j, d = m->dim;
     size_t k, nd = m->n_nodes * (size_t)d;
     for (o = 0; o < m->n_obstacles; ++o) {
-        const pn_mpm_collider *c = &m->obstacles[o];
+        const pn_collider *c = &m->obstacles[o];
         const pn_real *u = NULL, *ul = NULL;
         if (!(c->friction > 0)) continue;
         for (j = 0; j < s->n_mov; ++j)
@@ -9289,11 +9337,51 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
     return PN_OK;
 }
 
+/* pn_fem_step_implicit's tries for the kit's substep fallback (pn__halve) */
+typedef struct pn__fem_retry {
+    pn_fem_mesh *m;
+    const pn_fem_implicit_desc *o;
+    pn_real dt;
+    pn_fem_stats *st, first;     /* the current try's stats; the first try's               */
+    long element, node;
+    int stopped;                 /* a step that worked left an obstacle inside: halving will not help */
+    char why[sizeof ((pn_fem_mesh *)0)->error];
+} pn__fem_retry;
+
+static pn_result pn__fem_try(void *ctx, int n_sub) {
+    pn__fem_retry *t = (pn__fem_retry *)ctx;
+    pn_result r = PN_OK;
+    int sub;
+    memset(t->st, 0, sizeof *t->st);
+    t->st->substeps = n_sub;
+    for (sub = 0; sub < n_sub && r == PN_OK; ++sub) r = pn__fem_implicit_once(t->m, t->dt / n_sub, t->o, t->st);
+    if (r == PN_OK && (r = pn__fem_obstacles_clear(t->m, "pn_fem_step_implicit")) != PN_OK) t->stopped = 1;
+    return r;
+}
+
+static void pn__fem_untry(void *ctx, int n_sub) {
+    (void)n_sub;
+    pn__fem_restore(((pn__fem_retry *)ctx)->m);
+}
+
+static void pn__fem_keep_first(void *ctx) {
+    pn__fem_retry *t = (pn__fem_retry *)ctx;
+    t->first = *t->st;
+    memcpy(t->why, t->m->error, sizeof t->why);
+    t->element = t->m->error_element, t->node = t->m->error_node;
+}
+
+static int pn__fem_stop(void *ctx, int n_sub) {
+    (void)n_sub;
+    return ((pn__fem_retry *)ctx)->stopped;
+}
+
 PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_implicit_desc *desc, pn_fem_stats *stats) {
     pn_fem_implicit_desc o;
     pn_fem_stats st;
     pn_result r;
-    int level;
+    pn__fem_retry t;
+    pn__halving h;
     if (!m) return PN_ERROR_INVALID_ARGUMENT;
     m->error[0] = 0;
     m->error_element = m->error_node = -1;
@@ -9315,31 +9403,26 @@ PN__DEF pn_result pn_fem_step_implicit(pn_fem_mesh *m, pn_real dt, const pn_fem_
     if (!o.cg_max) o.cg_max = 5000;
     if ((r = pn__fem_linear_setup(m, o.linear_solver)) != PN_OK) return r;
     pn__fem_backup(m);
-    for (level = 0; level <= (o.max_halvings < 0 ? 0 : o.max_halvings); ++level) {
-        int sub, nsub = 1 << level;
-        memset(&st, 0, sizeof st);
-        st.substeps = nsub;
-        for (sub = 0, r = PN_OK; sub < nsub && r == PN_OK; ++sub) r = pn__fem_implicit_once(m, dt / nsub, &o, &st);
-        if (r == PN_OK && (r = pn__fem_obstacles_clear(m, "pn_fem_step_implicit")) != PN_OK) { /* substeps will not help */
-            pn__fem_restore(m);
-            return r;
+    memset(&t, 0, sizeof t);
+    t.m = m, t.o = &o, t.dt = dt, t.st = &st;
+    h.ctx = &t, h.try_step = pn__fem_try, h.undo = pn__fem_untry, h.keep_first = pn__fem_keep_first, h.stop = pn__fem_stop;
+    if ((r = pn__halve(&h, o.max_halvings)) == PN_OK) {
+        m->steps++;
+        st.linear_solver = ((pn__fem *)m->impl)->sparse ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY;
+        st.min_distance_m = m->n_obstacles ? pn__fem_min_distance(m, m->time_s) : -1;
+        st.kappa = m->kappa;
+        {
+            pn_real sdt;
+            pn_fem_stable_dt(m, &sdt);
+            st.dt_over_cfl = dt / sdt;
         }
-        if (r == PN_OK) {
-            m->steps++;
-            st.linear_solver = ((pn__fem *)m->impl)->sparse ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY;
-            st.min_distance_m = m->n_obstacles ? pn__fem_min_distance(m, m->time_s) : -1;
-            st.kappa = m->kappa;
-            {
-                pn_real sdt;
-                pn_fem_stable_dt(m, &sdt);
-                st.dt_over_cfl = dt / sdt;
-            }
-            if (stats) *stats = st;
-            return PN_OK;
-        }
-        pn__fem_restore(m);
-        if (stats && !level) *stats = st;
+        if (stats) *stats = st;
+        return PN_OK;
     }
+    memcpy(m->error, t.why, sizeof m->error); /* the first try's message and stats */
+    m->error_element = t.element, m->error_node = t.node;
+    if (stats) *stats = t.first;
+    if (o.max_halvings > 0 && !t.stopped) pn__append(m->error, sizeof m->error, " [also as 2^max_halvings substeps]");
     return r;
 }
 
@@ -10511,8 +10594,8 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         r = pn__cpl_objective(c, k->z, 2, &E0);
         if (r != PN_OK)
             return PN__FAIL(c, r, "coupled implicit step of %g s: the energy at an accepted iterate failed (%s; "
-                                "particle %lu, element %ld)", (double)dt, pn_result_string(r),
-                                (unsigned long)w->error_particle, m->error_element);
+                                "particle %ld, element %ld)", (double)dt, pn_result_string(r),
+                                w->error_particle, m->error_element);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
         fresh = it == 0 || o->mg_rebuild || stale; /* the grid's hierarchy lagged as its own step does */
         if (w->s.mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
@@ -10749,6 +10832,72 @@ static pn_result pn__cpl_once(pn_coupled *c, pn_real dt, const pn_coupled_implic
     return PN_OK;
 }
 
+/* pn_coupled_step_implicit's tries for the kit's substep fallback (pn__halve) */
+typedef struct pn__cpl_retry {
+    pn_coupled *c;
+    const pn_coupled_implicit_desc *od;
+    pn_real dt, t0;
+    pn_coupled_stats *st, first; /* the current try's stats; the first try's               */
+    long steps0, fsteps0;
+    size_t left0;
+    int stale0, rec0;
+    int stopped;                 /* a step that worked failed a check halving cannot pass   */
+    char why[sizeof ((pn_coupled *)0)->error];
+} pn__cpl_retry;
+
+static pn_result pn__cpl_try(void *ctx, int n_sub) {
+    pn__cpl_retry *t = (pn__cpl_retry *)ctx;
+    pn_coupled *c = t->c;
+    pn_mpm_world *w = c->mpm;
+    pn_fem_mesh *m = c->fem;
+    pn_coupled_stats *st = t->st;
+    pn_result r = PN_OK;
+    pn_real dmin;
+    int sub;
+    memset(st, 0, sizeof *st);
+    st->min_distance_m = PN__FEM_FAR;
+    st->substeps = n_sub;
+    for (sub = 0; sub < n_sub && r == PN_OK; ++sub) r = pn__cpl_once(c, t->dt / (pn_real)n_sub, t->od, st);
+    if (r != PN_OK) return r;
+    w->time_s = t->t0 + t->dt, w->steps = t->steps0 + 1, m->steps = t->fsteps0 + 1;
+    pn__cpl_here(c);
+    if ((r = pn__cpl_find(c, 0)) != PN_OK) {
+        t->stopped = 1;
+        return r;
+    }
+    if ((r = pn__fem_obstacles_clear(m, "pn_coupled_step_implicit")) != PN_OK) {
+        t->stopped = 1;
+        return PN__FAIL(c, r, "%s", m->error);
+    }
+    dmin = pn__cpl_closest_pair(c, &st->pairs);
+    st->min_distance_m = PN__MIN(st->min_distance_m, dmin);
+    return PN_OK;
+}
+
+static void pn__cpl_untry(void *ctx, int n_sub) {
+    pn__cpl_retry *t = (pn__cpl_retry *)ctx;
+    pn_mpm_world *w = t->c->mpm;
+    pn_fem_mesh *m = t->c->fem;
+    (void)n_sub;
+    pn__mpm_backup(w, 1);
+    pn__mpm_journal_undo(w);
+    pn__fem_restore(m);
+    w->time_s = t->t0, w->steps = t->steps0, w->left_total = t->left0, m->steps = t->fsteps0;
+    w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0;
+}
+
+static void pn__cpl_keep_first(void *ctx) {
+    pn__cpl_retry *t = (pn__cpl_retry *)ctx;
+    pn_coupled *c = t->c;
+    t->first = *t->st;
+    memcpy(t->why, c->error[0] ? c->error : c->mpm->error[0] ? c->mpm->error : c->fem->error, sizeof t->why);
+}
+
+static int pn__cpl_stop(void *ctx, int n_sub) {
+    (void)n_sub;
+    return ((pn__cpl_retry *)ctx)->stopped;
+}
+
 PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_coupled_implicit_desc *desc,
                                            pn_coupled_stats *stats) {
     pn_coupled_implicit_desc od;
@@ -10756,12 +10905,10 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     pn_coupled_stats st;
     pn_mpm_world *w;
     pn_fem_mesh *m;
-    pn_result r, first = PN_OK;
-    pn_real t0;
-    long steps0, fsteps0;
-    size_t left0;
-    int level, a, load, stale0, rec0;
-    char why[sizeof c->error];
+    pn_result r;
+    int a, load;
+    pn__cpl_retry t;
+    pn__halving h;
     if (!c) return PN_ERROR_INVALID_ARGUMENT;
     w = c->mpm, m = c->fem;
     c->error[0] = 0, c->error_particle = c->error_node = -1;
@@ -10795,15 +10942,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     if (!(od.theta >= (pn_real)0.5 && od.theta <= 1))
         return PN__FAIL(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: theta %g is not in [0.5, 1] (0: 1, "
                             "backward Euler)", (double)od.theta);
-    if (o->fixed_point_iters <= 0) o->fixed_point_iters = 1;
-    if (o->newton_max <= 0) o->newton_max = 50;
-    if (o->cg_max <= 0) o->cg_max = 1000;
-    if (!(o->newton_tol > 0)) o->newton_tol = (pn_real)1e-5;
-    if (!(o->cg_rel_tol > 0)) o->cg_rel_tol = (pn_real)1e-4;
-    if (o->contact_rounds <= 0) o->contact_rounds = 1;
-    if (o->mg_levels == 0) o->mg_levels = PN__MPM_MG_MAX;
-    if (o->max_halvings == 0) o->max_halvings = 3;
-    if (o->max_halvings > 10) o->max_halvings = 10;
+    pn__mpm_implicit_defaults(o, 1000, (pn_real)1e-4); /* the coupled system's CG defaults */
     if ((r = pn__mpm_check_state(w)) != PN_OK) return PN__FAIL(c, r, "pn_coupled_step_implicit: %s", w->error);
     if ((r = pn__cpl_check_mesh(c, "pn_coupled_step_implicit")) != PN_OK) return r;
     if ((r = pn__mpm_alloc_implicit(w)) != PN_OK || (r = pn__mpm_reuse_on(w, o)) != PN_OK)
@@ -10811,57 +10950,23 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     if ((r = pn__fem_linear_setup(m, od.fem_linear_solver)) != PN_OK)
         return PN__FAIL(c, r, "pn_coupled_step_implicit: %s", m->error);
     if ((r = pn__cpl_alloc(c)) != PN_OK) return r;
-    t0 = w->time_s, steps0 = w->steps, fsteps0 = m->steps, left0 = w->left_total;
-    stale0 = w->s.mg_stale, rec0 = w->s.rec_ok;
+    memset(&t, 0, sizeof t);
+    t.c = c, t.od = &od, t.dt = dt, t.st = &st;
+    t.t0 = w->time_s, t.steps0 = w->steps, t.fsteps0 = m->steps, t.left0 = w->left_total;
+    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok;
     pn__mpm_backup(w, 0);
     pn__mpm_journal_begin(w);
     pn__fem_backup(m);
-    why[0] = 0;
-    for (level = 0; level <= PN__MAX(o->max_halvings, 0); ++level) {
-        int sub, nsub = 1 << level;
-        memset(&st, 0, sizeof st);
-        st.min_distance_m = PN__FEM_FAR;
-        st.substeps = nsub;
-        for (sub = 0, r = PN_OK; sub < nsub && r == PN_OK; ++sub) r = pn__cpl_once(c, dt / (pn_real)nsub, &od, &st);
-        if (r == PN_OK) {
-            pn_real dmin;
-            w->time_s = t0 + dt, w->steps = steps0 + 1, m->steps = fsteps0 + 1;
-            pn__cpl_here(c);
-            if ((r = pn__cpl_find(c, 0)) != PN_OK) break;
-            if ((r = pn__fem_obstacles_clear(m, "pn_coupled_step_implicit")) != PN_OK) {
-                memcpy(why, m->error, sizeof why);
-                first = r;
-                break;
-            }
-            dmin = pn__cpl_closest_pair(c, &st.pairs);
-            st.min_distance_m = PN__MIN(st.min_distance_m, dmin);
-            c->error[0] = 0, c->error_particle = -1;
-            if (stats) *stats = st;
-            return PN_OK;
-        }
-        if (level == 0) {
-            first = r;
-            memcpy(why, c->error[0] ? c->error : w->error[0] ? w->error : m->error, sizeof why);
-            if (stats) *stats = st;
-        }
-        pn__mpm_backup(w, 1);
-        pn__mpm_journal_undo(w);
-        pn__fem_restore(m);
-        w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
-        w->s.mg_stale = stale0, w->s.rec_ok = rec0;
+    h.ctx = &t, h.try_step = pn__cpl_try, h.undo = pn__cpl_untry, h.keep_first = pn__cpl_keep_first, h.stop = pn__cpl_stop;
+    if ((r = pn__halve(&h, o->max_halvings)) == PN_OK) {
+        c->error[0] = 0, c->error_particle = -1;
+        if (stats) *stats = st;
+        return PN_OK;
     }
-    pn__mpm_backup(w, 1); /* (again, after a break: a step that succeeded but failed a check) */
-    pn__mpm_journal_undo(w);
-    pn__fem_restore(m);
-    w->time_s = t0, w->steps = steps0, w->left_total = left0, m->steps = fsteps0;
-    w->s.mg_stale = stale0, w->s.rec_ok = rec0;
-    memcpy(c->error, why, sizeof why);
-    if (o->max_halvings > 0) {
-        const char *tail = " [also as 2^max_halvings substeps]";
-        size_t len = strlen(c->error);
-        if (len + strlen(tail) < sizeof c->error) memcpy(c->error + len, tail, strlen(tail) + 1);
-    }
-    return first != PN_OK ? first : r;
+    memcpy(c->error, t.why, sizeof c->error); /* the first try's message and stats */
+    if (stats) *stats = t.first;
+    if (o->max_halvings > 0 && !t.stopped) pn__append(c->error, sizeof c->error, " [also as 2^max_halvings substeps]");
+    return r;
 }
 
 /* ======================================================================================
@@ -10949,7 +11054,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
     r = pn_mpm_step_explicit(w, dt, &mst);
     w->s.xf_idx = NULL, w->s.xf = NULL, w->s.xf_n = 0;
     if (r != PN_OK) {
-        c->error_particle = (long)w->error_particle;
+        c->error_particle = w->error_particle;
         return PN__FAIL(c, r, "pn_coupled_step_explicit: %s", w->error);
     }
     s->fext = k->pa;

@@ -227,11 +227,11 @@ typedef struct pn_rom_stats {
     size_t quad_points;            /* quadrature points used                                 */
     size_t nodes;                  /* grid nodes of the full-space update                    */
     size_t inverse_failed;         /* EULERIAN: lattice points whose X Newton did not find   */
-    int gn_iterations;             /* NONLINEAR                                              */
+    int gn_iters;             /* NONLINEAR                                              */
     double residual_m;             /* RMS distance of the projected samples to their trial   */
     size_t cubature_points;        /* IMPLICIT                                                */
-    int newton_iterations;         /* IMPLICIT                                                */
-    double energy_J;               /* IMPLICIT: the incremental potential at the new latent   */
+    int newton_iters;         /* IMPLICIT                                                */
+    double energy_j;               /* IMPLICIT: the incremental potential at the new latent   */
 } pn_rom_stats;
 
 typedef struct pn_rom_world pn_rom_world; /* below; read the public part, do not write it */
@@ -853,7 +853,7 @@ static void pn__rom_map(const pn_rom_world *w, const double *xhat, size_t n, con
 /* the const calls' failure message: the world's error text is the one thing they write */
 #define PN__ROM_CFAIL(w, r, ...) PN__FAIL((pn_rom_world *)(w), r, __VA_ARGS__) /* >>kit */
 
-PN__DEF const char *pn_rom_error(const pn_rom_world *w) { return w ? w->error : "no world"; }
+PN__DEF const char *pn_rom_error(const pn_rom_world *w) { return w ? w->error : ""; }
 
 static void *pn__rom_alloc(const pn_rom_world *w, size_t count, size_t size, int *fail) {
     void *p;
@@ -1004,7 +1004,7 @@ PN__DEF pn_result pn_rom_create(const pn_rom_desc *desc, pn_rom_world **out, cha
     w->desc = d;
     w->model = *m;
     w->dim = dim, w->latent = m->latent;
-    if ((r = pn_material_init(&w->material, &md, &bad)) != PN_OK) {
+    if ((r = pn__material_init_why(&w->material, &md, &bad)) != PN_OK) {
         pn__msg(why, cap, "pn_rom_desc: youngs_pa / poisson: %s", bad ? bad : "invalid");
         pn_rom_destroy(w);
         return PN_ERROR_INVALID_PARAMETER;
@@ -1922,7 +1922,7 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
             }
             if (!pn__rom_lsq(d, K, ns, w->tG, w->tX, dlt)) break;
             for (i = 0; i < K; ++i) dn += dlt[i] * dlt[i], xn += xh[i] * xh[i];
-            st.gn_iterations = it + 1;
+            st.gn_iters = it + 1;
             for (;;) { /* backtracking: halve until the misfit decreases */
                 double xt[PN_ROM_MAX_LATENT];
                 for (i = 0; i < K; ++i) xt[i] = xh[i] + step * dlt[i];
@@ -2257,7 +2257,7 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
         if (tries == 30 || !(gd < 0)) break; /* no descent left (the float path's noise floor) */
         if (big < w->desc.newton_tol) { /* converged: the last, small step needs no line search */
             for (i = 0; i < K; ++i) z[i] += dz[i];
-            st->newton_iterations = it + 1;
+            st->newton_iters = it + 1;
             break;
         }
         for (;;) { /* Armijo backtracking */
@@ -2270,7 +2270,7 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
         if (alpha < 1e-4) break;
         for (i = 0; i < K; ++i) z[i] += alpha * dz[i];
         E = Et;
-        st->newton_iterations = it + 1;
+        st->newton_iters = it + 1;
     }
     if (!pn__rom_all_finite((size_t)K, z))
         return PN__FAIL(w, PN_ERROR_NONFINITE, "pn_rom_step: the latent would not be finite (dt = %g s)", h);
@@ -2293,7 +2293,7 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
     w->steps++;
     for (a = 0; a < w->n_loads; ++a)
         if (w->loads[a].on && w->loads[a].t_end <= w->time_s) w->loads[a].on = 0;
-    st->cubature_points = C, st->energy_J = E;
+    st->cubature_points = C, st->energy_j = E;
     return PN_OK;
 }
 

@@ -27,7 +27,7 @@ static int failures = 0;
 static void smoke(int d) {
     pn_material_desc desc;
     pn_material m;
-    const char *why = NULL;
+    char why[256] = "";
     pn_real F[9], U[9] = {0}, s[3] = {0}, V[9], R[9], S[9] = {0}, E[9], Z[9], T[9] = {0}, G[9] = {0};
     pn_real P[9] = {0}, H[81], psi = 0, h = 0, hg = 0, y = 0, sc = 1;
     pn_real Fi[9] = {0}, I[9];
@@ -49,7 +49,7 @@ static void smoke(int d) {
     desc.youngs_modulus_pa = 1000;
     desc.poisson_ratio = (pn_real)0.3;
     desc.yield_stress_pa = 10;
-    CHECK(pn_material_init(&m, &desc, &why) == PN_OK);
+    CHECK(pn_material_init(&m, &desc, why, sizeof why) == PN_OK);
     CHECK(pn_elastic_energy(&m, d, F, 0, &psi, P, H, PN_EVAL_PROJECT_PSD) == PN_OK && psi > 0);
     CHECK(pn_kirchhoff_stress(&m, d, F, 0, S) == PN_OK);
     CHECK(pn_return_map(&m, d, F, 0, Z, &h, T) == PN_OK && h > 0);
@@ -59,7 +59,7 @@ static void smoke(int d) {
     CHECK(pn_lagged_energy(&m, d, F, G, hg, &psi, P, H, 0) == PN_OK);
     for (i = 0; i < d * d; ++i) CHECK(fabs((double)(P[i] - T[i])) <= 1e-4 * fabs((double)T[0]) + 1e-3);
     desc.youngs_modulus_pa = -1;
-    CHECK(pn_material_init(&m, &desc, &why) == PN_ERROR_INVALID_PARAMETER && why != NULL);
+    CHECK(pn_material_init(&m, &desc, why, sizeof why) == PN_ERROR_INVALID_PARAMETER && why[0] != 0);
     F[0] = (pn_real)NAN;
     CHECK(pn_svd(d, F, U, s, V) == PN_ERROR_NONFINITE);
 }
@@ -72,7 +72,7 @@ static void smoke_models(void) {
         const pn_model *mo = pn_models_all[k]();
         pn_material m;
         pn_real F[9] = {0}, T[9] = {0}, P[9] = {0}, H[81], psi = 0, hn = 0;
-        const char *why = NULL;
+        char why[256] = "";
         int d = mo->dim, ok_dim;
 #if defined(PN_NO_2D)
         ok_dim = d != 2;
@@ -81,14 +81,14 @@ static void smoke_models(void) {
 #else
         ok_dim = 1;
 #endif
-        CHECK(pn_model_check(mo, 0, &why) == (ok_dim ? PN_OK : PN_ERROR_DIMENSION));
+        CHECK(pn_model_check(mo, 0, why, sizeof why) == (ok_dim ? PN_OK : PN_ERROR_DIMENSION));
         if (!ok_dim) continue;
-        CHECK(pn_model_material(mo, 1e6, &m, NULL) == PN_OK);
+        CHECK(pn_model_material(mo, 1e6, &m, NULL, 0) == PN_OK);
         if (mo->n_params) { /* a conditioned model: another material inside its ranges */
             pn_material_desc md;
             pn_model_material_desc(mo, 1e6, &md);
             for (i = 0; i < mo->n_params; ++i) pn_model_param_set(&md, mo->param[i].kind, mo->param[i].hi);
-            CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+            CHECK(pn_material_init(&m, &md, NULL, 0) == PN_OK);
         }
         for (i = 0; i < d; ++i) F[i * d + i] = (pn_real)(1 + 0.05 * i);
         F[1] = (pn_real)0.02;
@@ -105,7 +105,7 @@ static void smoke_models(void) {
             nd.energy = mo;
             for (j = 0; mo->return_map && pn_models_all[j]; ++j)
                 if (!strcmp(pn_models_all[j]()->name, mo->return_map)) nd.return_map = pn_models_all[j]();
-            CHECK(pn_pnet_init(&net, &nd, &m, d, &why) == PN_OK);
+            CHECK(pn_pnet_init(&net, &nd, &m, d, why, sizeof why) == PN_OK);
             CHECK(pn_pnet_prepare(&net, F, (pn_real)mo->h_min, &pt, &hn, T) == PN_OK);
             CHECK(pn_pnet_energy(&net, &pt, F, &psi, P, H, PN_EVAL_PROJECT_PSD) == PN_OK);
             for (i = 0; i < d * d; ++i) /* exact at F0 (Eq. 8) */
@@ -144,22 +144,22 @@ static void smoke_mpm(int d) {
     wd.dx_m = (pn_real)(1.0 / 16);
     wd.gravity[1] = (pn_real)-9.81;
     wd.max_particles = 4;
-    CHECK(pn_mpm_create(&wd, &w, NULL) == PN_OK);
+    CHECK(pn_mpm_create(&wd, &w, NULL, 0) == PN_OK);
     if (!w) return;
     memset(&md, 0, sizeof md);
     md.plastic = PN_PLASTIC_DRUCKER_PRAGER;
     md.youngs_modulus_pa = 1e4;
     md.poisson_ratio = (pn_real)0.3;
     md.friction_angle_deg = 30;
-    CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+    CHECK(pn_material_init(&m, &md, NULL, 0) == PN_OK);
     g = pn_mpm_add_group(w, &m, 1000);
     CHECK(pn_mpm_add_particles(w, g, 1, x, NULL, (pn_real)1e-4) == PN_OK);
     {
         pn_real h0 = 0;
-        pn_mpm_collider c;
+        pn_collider c;
         memset(&c, 0, sizeof c);
-        c.shape = PN_MPM_SHAPE_HALF_SPACE;
-        c.boundary = PN_MPM_BOUNDARY_SEPARATE;
+        c.shape = PN_SHAPE_HALF_SPACE;
+        c.boundary = PN_BOUNDARY_SEPARATE;
         c.center_m[1] = (pn_real)0.25;
         c.normal[1] = 1;
         CHECK(pn_mpm_set_state(w, 0, 1, &h0) == PN_OK);
@@ -170,20 +170,20 @@ static void smoke_mpm(int d) {
         pn_mpm_fill_desc f;
         pn_real dt = 0, at[3] = {(pn_real)0.3, (pn_real)0.3, (pn_real)0.3};
         size_t n = 0;
-        const char *why = NULL;
+        char why[256] = "";
         memset(&f, 0, sizeof f);
         f.shape = PN_MPM_FILL_SPHERE;
         f.center_m[0] = f.center_m[1] = f.center_m[2] = (pn_real)0.5;
         f.radius_m = (pn_real)0.01;
         f.group = g;
-        CHECK(pn_mpm_fill_count(&w->desc, &f, &n, &why) == PN_OK && n == 0);
+        CHECK(pn_mpm_fill_count(&w->desc, &f, &n, why, sizeof why) == PN_OK && n == 0);
         CHECK(pn_mpm_fill(w, &f, &n) == PN_OK && n == 0);
         CHECK(pn_mpm_stable_dt(w, &dt) == PN_OK && dt > 0);
         CHECK(pn_mpm_advance(w, (pn_real)1e-3, NULL, &st) == PN_OK && pn_mpm_error(w)[0] == 0);
         CHECK(pn_mpm_move_collider(w, 0, at, NULL) == PN_OK);
-        CHECK(pn_material_check(&m, &why) == PN_OK);
+        CHECK(pn_material_check(&m, why, sizeof why) == PN_OK);
     }
-    CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_LAGGED, NULL) == PN_OK);
+    CHECK(pn_mpm_group_set_energy(w, g, PN_ENERGY_LAGGED, NULL) == PN_OK);
     CHECK(pn_mpm_step_implicit(w, (pn_real)1e-3, NULL, &st) == PN_OK);
     pn_mpm_totals(w, &mass, mom);
     CHECK(mass > 0 && mom[1] < 0);
@@ -245,11 +245,11 @@ static void smoke_rom(int d) {
    implicit steps. */
 static void smoke_fem(int d) {
     pn_fem_grid g;
-    pn_fem_group grp;
+    pn_group grp;
     pn_fem_desc fd;
     pn_fem_mesh *m = NULL;
     pn_material_desc md;
-    pn_mpm_collider c;
+    pn_collider c;
     pn_fem_stats st;
     pn_real X[8 * 3], dt = 0, el_j = 0, kin_j = 0;
     int el[6 * 4], fix = 0;
@@ -263,7 +263,7 @@ static void smoke_fem(int d) {
     md.youngs_modulus_pa = 1e5;
     md.poisson_ratio = (pn_real)0.3;
     memset(&grp, 0, sizeof grp);
-    CHECK(pn_material_init(&grp.material, &md, NULL) == PN_OK);
+    CHECK(pn_material_init(&grp.material, &md, NULL, 0) == PN_OK);
     grp.density_kg_m3 = 1000;
     memset(&fd, 0, sizeof fd);
     fd.dim = d, fd.n_nodes = nn, fd.n_elements = ne, fd.rest_m = X, fd.elements = el, fd.groups = &grp, fd.n_groups = 1;
@@ -271,9 +271,9 @@ static void smoke_fem(int d) {
     CHECK(pn_fem_create(&fd, &m, why, sizeof why) == PN_OK);
     if (!m) return;
     memset(&c, 0, sizeof c);
-    c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+    c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1;
     CHECK(pn_fem_add_obstacle(m, &c, NULL) == PN_OK);
-    CHECK(pn_fem_group_set_energy(m, 0, PN_MPM_ENERGY_ELASTIC, NULL) == PN_OK);
+    CHECK(pn_fem_group_set_energy(m, 0, PN_ENERGY_ELASTIC, NULL) == PN_OK);
     CHECK(pn_fem_stable_dt(m, &dt) == PN_OK && dt > 0);
     CHECK(pn_fem_step_explicit(m, dt / 2, &st) == PN_OK);
     CHECK(pn_fem_step_implicit(m, (pn_real)1e-3, NULL, &st) == PN_OK && pn_fem_error(m)[0] == 0);
@@ -295,9 +295,9 @@ static void smoke_fem(int d) {
         memset(&wd, 0, sizeof wd);
         wd.dim = d, wd.dx_m = (pn_real)0.02, wd.max_particles = 4096, wd.gravity[1] = (pn_real)-9.81;
         for (i = 0; i < d; ++i) wd.res[i] = 20, wd.origin_m[i] = (pn_real)-0.2; /* the mesh within the walls */
-        CHECK(pn_mpm_create(&wd, &w, NULL) == PN_OK);
+        CHECK(pn_mpm_create(&wd, &w, NULL, 0) == PN_OK);
         md.plastic = PN_PLASTIC_DRUCKER_PRAGER, md.elastic = PN_ELASTIC_STVK_HENCKY;
-        CHECK(pn_material_init(&sand, &md, NULL) == PN_OK);
+        CHECK(pn_material_init(&sand, &md, NULL, 0) == PN_OK);
         memset(&f, 0, sizeof f);
         f.shape = PN_MPM_FILL_BOX, f.group = pn_mpm_add_group(w, &sand, 1600);
         for (i = 0; i < d; ++i) f.center_m[i] = (pn_real)0.05, f.half_extent_m[i] = (pn_real)0.05;
@@ -335,7 +335,7 @@ int main(void) {
     pn_material_desc desc;
     memset(&desc, 0, sizeof desc);
     desc.youngs_modulus_pa = 1;
-    CHECK(pn_material_init(&m, &desc, NULL) == PN_OK);
+    CHECK(pn_material_init(&m, &desc, NULL, 0) == PN_OK);
 #ifndef PN_NO_STDIO
     CHECK(pn_material_describe(&m, buf, sizeof buf) > 0);
 #else
