@@ -26,8 +26,8 @@
    the implicit runs at 1e-2 s only unless --dts is given. --ref-cache DIR: keep the reference's frames in
    DIR and read them on a rerun with the same scene. */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
-#include "../examples/pn_drop.h"
+#include "../examples/common/pn_example.h"
+#include "../examples/common/pn_drop.h"
 
 #define FRAME_DT 0.025
 #define MAX_FRAMES 64

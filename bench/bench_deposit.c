@@ -28,7 +28,7 @@
    --quick: res 32, 64, 128 and shorter runs (a smoke test). */
 #define PLASTINET_IMPLEMENTATION
 #define PLASTINET_MPM_IMPLEMENTATION
-#include "../examples/pn_example.h"
+#include "../examples/common/pn_example.h"
 
 typedef struct deposit {
     double front1, front2, summit, core; /* m */

@@ -28,8 +28,8 @@
    the frame's yield stress over E [3e-3] (pnet and pnet_nh serve 3e-3 only, pnet_nh_any its
    range: they are left out elsewhere). */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
-#include "../examples/pn_frame.h"
+#include "../examples/common/pn_example.h"
+#include "../examples/common/pn_frame.h"
 
 #define FRAME_DT 0.02
 #define MAX_FRAMES 64

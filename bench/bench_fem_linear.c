@@ -14,8 +14,8 @@
    two solvers' final node positions over the mesh's edge (both solve to newton_tol). Writes DIR/bench_fem_linear.md and .csv;
    progress on stderr. */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
-#include "../examples/pn_frame.h"
+#include "../examples/common/pn_example.h"
+#include "../examples/common/pn_frame.h"
 
 #define MAX_SIZES 16
 

@@ -71,7 +71,7 @@
    for the README); progress on stderr. A run that fails (step error, unbounded, over the time
    limit) is a row that says so, with the figures of the frames it completed. */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
+#include "../examples/common/pn_example.h"
 #include "../models/pn_model_sand_any_2d.h"
 
 #define BENCH_FPS 25 /* 0.04 s frames: 1e-4, 1e-3 and 1e-2 s all divide them */

@@ -13,7 +13,7 @@
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
-#include "pn_render.h"
+#include "common/pn_render.h"
 
 #include <chrono>
 #include <cmath>

@@ -17,8 +17,8 @@
    ParaView), DIR/frame_NNNN.obj (--obj: the surface, for Blender); a progress line on stderr;
    a one-line JSON summary on stdout. */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
-#include "pn_frame.h"
+#include "common/pn_example.h"
+#include "common/pn_frame.h"
 
 /* order of sorted vertex triples (qsort) */
 

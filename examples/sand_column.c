@@ -27,7 +27,7 @@
    fixed-point residual; and the reference's runout, height, steps and wall seconds, the
    ratios run / reference, and the min/max mass IoU of the two deposits (pn_example.h). */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
+#include "common/pn_example.h"
 
 static void usage(FILE *f, const pn_ex_cli *d) {
     fprintf(f, "usage: sand_column [flags]   a sand column collapsing on a frictional floor, and its explicit reference\n"

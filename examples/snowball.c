@@ -17,7 +17,7 @@
    iterations per step, spread (extent of the snow along the throw), runout (how far its front
    moved), final height above the floor, largest fixed-point residual. */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
+#include "common/pn_example.h"
 
 static void usage(FILE *f, const pn_ex_cli *d) {
     fprintf(f, "usage: snowball [flags]   a snowball thrown at a frictional floor\n"

@@ -17,7 +17,7 @@
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
-#include "../examples/pn_rom_scenes.h"
+#include "../examples/common/pn_rom_scenes.h"
 #include <errno.h>
 #include <stdlib.h>
 #include <sys/stat.h>

@@ -8,7 +8,7 @@
    Usage: cross_compiler_driver [name-filter]   (a name: dim2_implicit_pnet, ...)
    Build: cc -std=c99 -O2 -ffp-contract=off tests/cross_compiler_driver.c -lm   (also as C++) */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
+#include "../examples/common/pn_example.h"
 #include "../models/pn_model_metal_2d.h"
 #include "../models/pn_model_metal_nh_2d.h"
 #include "../models/pn_model_metal_nh_return_2d.h"

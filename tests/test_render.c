@@ -10,7 +10,7 @@
 #if !defined(_POSIX_C_SOURCE) && !defined(_WIN32)
 #define _POSIX_C_SOURCE 200112L /* mkdir, clock_gettime */
 #endif
-#include "../examples/pn_render.h"
+#include "../examples/common/pn_render.h"
 #include "pn_test.h"
 #include <time.h>
 #if !defined(_WIN32)

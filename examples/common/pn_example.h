@@ -12,12 +12,12 @@
 #if !defined(_POSIX_C_SOURCE) && !defined(_WIN32)
 #define _POSIX_C_SOURCE 199309L
 #endif
-#include "../plastinet.h"
-#include "../plastinet_mpm.h"
-#include "../models/pn_model_sand_2d.h"
-#include "../models/pn_model_sand_3d.h"
-#include "../models/pn_model_snow_2d.h"
-#include "../models/pn_model_snow_3d.h"
+#include "../../plastinet.h"
+#include "../../plastinet_mpm.h"
+#include "../../models/pn_model_sand_2d.h"
+#include "../../models/pn_model_sand_3d.h"
+#include "../../models/pn_model_snow_2d.h"
+#include "../../models/pn_model_snow_3d.h"
 #include "pn_render.h"
 #include <errno.h>
 #include <math.h>

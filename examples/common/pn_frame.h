@@ -4,14 +4,14 @@
    PLASTINET_IMPLEMENTATION. */
 #ifndef PN_FRAME_H
 #define PN_FRAME_H
-#include "../models/pn_model_metal_2d.h"
-#include "../models/pn_model_metal_3d.h"
-#include "../models/pn_model_metal_nh_2d.h"
-#include "../models/pn_model_metal_nh_3d.h"
-#include "../models/pn_model_metal_nh_return_2d.h"
-#include "../models/pn_model_metal_nh_return_3d.h"
-#include "../models/pn_model_metal_nh_any_2d.h"
-#include "../models/pn_model_metal_nh_any_3d.h"
+#include "../../models/pn_model_metal_2d.h"
+#include "../../models/pn_model_metal_3d.h"
+#include "../../models/pn_model_metal_nh_2d.h"
+#include "../../models/pn_model_metal_nh_3d.h"
+#include "../../models/pn_model_metal_nh_return_2d.h"
+#include "../../models/pn_model_metal_nh_return_3d.h"
+#include "../../models/pn_model_metal_nh_any_2d.h"
+#include "../../models/pn_model_metal_nh_any_3d.h"
 
 /* the implicit energies: exact StVK-Hencky + von Mises, PlasticityNet, lagged; PlasticityNet
    Neo-Hookean metal with its learned return mapping, Neo-Hookean (lagged energy) with the
