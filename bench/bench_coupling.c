@@ -1,5 +1,5 @@
 /* bench_coupling: the MPM-FEM coupling (plastinet_mpm.h >>couple) on the drop scene of
-   examples/pn_drop.h: a tilted block (E 1e9 Pa) dropped onto a sand bed.
+   examples/common/pn_drop.h: a tilted block (E 1e9 Pa) dropped onto a sand bed.
    Build: cc -std=c99 -O2 bench/bench_coupling.c -lm -o bench_coupling   (or: make bench-coupling)
    Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--tilt DEG] [--friction MU] [--out DIR] [--ref-cache DIR]
                          [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--theta T] [--window S] [--quick]

@@ -1,4 +1,4 @@
-/* cross_compiler_driver: steps the sand column of examples/pn_example.h a few steps with each
+/* cross_compiler_driver: steps the sand column of examples/common/pn_example.h a few steps with each
    integrator and energy (2D, and 3D implicit PlasticityNet), the snowball (Neo-Hookean snow,
    Cam-Clay) and the column made of metal (von Mises: the exact energy, the metal network) and
    prints one line per combination: its name and a 64-bit FNV-1a hash of the particle state's

@@ -1,7 +1,7 @@
 /* pn_example.h: what the examples and the MPM benchmark share, so each stays one .c file and a
    one-line build. Include it once, first, in a file that defines PLASTINET_IMPLEMENTATION:
        #define PLASTINET_IMPLEMENTATION
-       #include "pn_example.h"      // plastinet.h, plastinet_mpm.h, the sand and snow models
+       #include "common/pn_example.h"  // from examples/: plastinet.h, plastinet_mpm.h, the sand and snow models
    Here: a monotonic clock, frames (PNG, animated PNG, PLY points, OBJ surfaces: pn_render.h),
    the scenes of docs/validation.md (sand column, snowball), a stepping helper that tallies
    solver statistics, the command line the examples share, and the mass IoU metric.
@@ -242,7 +242,9 @@ PN_EX_UNUSED static const pn_model *pn_ex_scene_model(const pn_ex_scene *s) {
 }
 
 /* The scene's world description and its particles as a pn_mpm_fill (group 0). The column
-   is snapped to whole lattice cells, so it holds floor(W / spacing) particles across. */
+   is snapped to whole lattice cells, so it holds floor(W / spacing) particles across.
+   examples/sand_column.c makes the same column with the library's calls (column_world): a
+   change to the sand column goes into both. */
 static void pn_ex__scene_setup(const pn_ex_scene *s, pn_mpm_desc *wd, pn_mpm_fill_desc *f) {
     int d = s->dim, i;
     double dx = pn_ex_scene_dx(s), sp = dx / 2, fl = pn_ex_scene_floor(s);
