@@ -27,8 +27,8 @@ run: build/sand_column
 	build/sand_column --png --apng --frames 30 --out build/sand_column_frames
 	@echo "# frames: build/sand_column_frames/frame_0001.png ... frame_0030.png, animated: preview.png"
 
-# What the MPM examples and bench/bench_mpm.c share: PNG/PLY output, the scenes, the mass IoU.
-EXAMPLE_DEPS = examples/pn_example.h examples/pn_render.h plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h \
+# What the MPM examples and bench/bench_mpm.c share (examples/common/): PNG/PLY output, the scenes, the mass IoU.
+EXAMPLE_DEPS = examples/common/pn_example.h examples/common/pn_render.h examples/common/pn_png.h plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h \
     models/pn_model_sand_3d.h models/pn_model_snow_2d.h models/pn_model_snow_3d.h
 
 build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
@@ -36,7 +36,7 @@ build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
 	$(CC) $(CFLAGS) examples/sand_column.c $(LDLIBS) -o $@
 
 # FEM: a steel frame crushed by a plate (build/metal_frame --help; --png --vtu --obj).
-build/metal_frame: examples/metal_frame.c examples/pn_frame.h $(EXAMPLE_DEPS) models/pn_model_metal_2d.h models/pn_model_metal_3d.h \
+build/metal_frame: examples/metal_frame.c examples/common/pn_frame.h $(EXAMPLE_DEPS) models/pn_model_metal_2d.h models/pn_model_metal_3d.h \
     models/pn_model_metal_nh_2d.h models/pn_model_metal_nh_3d.h models/pn_model_metal_nh_return_2d.h \
     models/pn_model_metal_nh_return_3d.h models/pn_model_metal_nh_any_2d.h models/pn_model_metal_nh_any_3d.h
 	@mkdir -p build
@@ -44,7 +44,7 @@ build/metal_frame: examples/metal_frame.c examples/pn_frame.h $(EXAMPLE_DEPS) mo
 
 # MPM-FEM coupling: a stiff block (E 1e9 Pa) dropped onto a sand bed, one implicit solve for
 # both (build/drop_on_sand --help; --png --apng, --ply --vtu --obj).
-build/drop_on_sand: examples/drop_on_sand.c examples/pn_drop.h $(EXAMPLE_DEPS)
+build/drop_on_sand: examples/drop_on_sand.c examples/common/pn_drop.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/drop_on_sand.c $(LDLIBS) -o $@
 
@@ -59,7 +59,7 @@ build/materials: examples/materials.c $(EXAMPLE_DEPS)
 	$(CC) $(CFLAGS) examples/materials.c $(LDLIBS) -o $@
 
 # C++17: a 3D sandbox stepped once per 60 Hz frame with pn_mpm_advance; prints ms per frame.
-build/game_loop: examples/game_loop.cpp examples/pn_render.h plastinet.h plastinet_mpm.h
+build/game_loop: examples/game_loop.cpp examples/common/pn_render.h examples/common/pn_png.h plastinet.h plastinet_mpm.h
 	@mkdir -p build
 	$(CXX) $(CXXFLAGS) examples/game_loop.cpp -o $@
 
@@ -117,15 +117,15 @@ bench-coupling: build/bench_coupling
 	build/bench_coupling --dim 3 --res 24 --T 0.05 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)
 	@cat build/bench_coupling_2d.md build/bench_coupling_3d.md
 
-build/bench_coupling: bench/bench_coupling.c examples/pn_drop.h $(EXAMPLE_DEPS)
+build/bench_coupling: bench/bench_coupling.c examples/common/pn_drop.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_coupling.c $(LDLIBS) -o $@
 
-build/bench_fem: bench/bench_fem.c examples/pn_frame.h $(EXAMPLE_DEPS)
+build/bench_fem: bench/bench_fem.c examples/common/pn_frame.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_fem.c $(LDLIBS) -o $@
 
-build/bench_fem_linear: bench/bench_fem_linear.c examples/pn_frame.h $(EXAMPLE_DEPS)
+build/bench_fem_linear: bench/bench_fem_linear.c examples/common/pn_frame.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_fem_linear.c $(LDLIBS) -o $@
 
@@ -170,13 +170,13 @@ build/bench_deposit: bench/bench_deposit.c $(EXAMPLE_DEPS)
 # ---- reduced-order MPM (plastinet_rom.h; docs/rom.md) ------------------------------------------
 # A jelly cylinder poked ten times from random directions, on the shipped reduced model
 # (build/rom_poke --help; --png for frames).
-build/rom_poke: examples/rom_poke.c examples/pn_rom_scenes.h plastinet_rom.h models/rom_poke.h $(EXAMPLE_DEPS)
+build/rom_poke: examples/rom_poke.c examples/common/pn_rom_scenes.h plastinet_rom.h models/rom_poke.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/rom_poke.c $(LDLIBS) -o $@
 
 # The reduced tower, one implicit step per frame, drawn at any resolution
 # (build/rom_tower --refine 3 --png: 1.56 million points; --help).
-build/rom_tower: examples/rom_tower.c examples/pn_rom_scenes.h plastinet_rom.h models/rom_tower.h $(EXAMPLE_DEPS)
+build/rom_tower: examples/rom_tower.c examples/common/pn_rom_scenes.h plastinet_rom.h models/rom_tower.h $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/rom_tower.c $(LDLIBS) -o $@
 
@@ -184,7 +184,7 @@ build/rom_tower: examples/rom_tower.c examples/pn_rom_scenes.h plastinet_rom.h m
 # data/rom/; resumable: run it again after a cut and it continues). About 3 hours on 2 cores,
 # most of it the tower; gen/README.md shows how to spread the instances over machines.
 ROM_SCENES ?= cylinder cuboid poke poke_seq tower
-build/rom_data: gen/rom_data.c examples/pn_rom_scenes.h plastinet.h plastinet_mpm.h
+build/rom_data: gen/rom_data.c examples/common/pn_rom_scenes.h plastinet.h plastinet_mpm.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) -fopenmp gen/rom_data.c $(LDLIBS) -o $@
 
@@ -198,7 +198,7 @@ bench-rom: build/bench_rom
 	build/bench_rom --out build $(BENCH_ROM_FLAGS)
 	@cat build/bench_rom.md
 
-build/bench_rom: bench/bench_rom.c examples/pn_rom_scenes.h plastinet_rom.h $(EXAMPLE_DEPS) $(wildcard models/rom_*.h) models/pn_rom_models.h
+build/bench_rom: bench/bench_rom.c examples/common/pn_rom_scenes.h plastinet_rom.h $(EXAMPLE_DEPS) $(wildcard models/rom_*.h) models/pn_rom_models.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) -fopenmp bench/bench_rom.c $(LDLIBS) -o $@
 

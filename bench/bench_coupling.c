@@ -1,5 +1,5 @@
 /* bench_coupling: the MPM-FEM coupling (plastinet_mpm.h >>couple) on the drop scene of
-   examples/pn_drop.h: a tilted block (E 1e9 Pa) dropped onto a sand bed.
+   examples/common/pn_drop.h: a tilted block (E 1e9 Pa) dropped onto a sand bed.
    Build: cc -std=c99 -O2 bench/bench_coupling.c -lm -o bench_coupling   (or: make bench-coupling)
    Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--tilt DEG] [--friction MU] [--out DIR] [--ref-cache DIR]
                          [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--theta T] [--window S] [--quick]
@@ -26,8 +26,8 @@
    the implicit runs at 1e-2 s only unless --dts is given. --ref-cache DIR: keep the reference's frames in
    DIR and read them on a rerun with the same scene. */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
-#include "../examples/pn_drop.h"
+#include "../examples/common/pn_example.h"
+#include "../examples/common/pn_drop.h"
 
 #define FRAME_DT 0.025
 #define MAX_FRAMES 64

@@ -1,6 +1,6 @@
 /* bench_deposit: is the explicit reference converged? (docs/results.md, "The explicit reference")
 
-   1. The 2D sand column of docs/validation.md (examples/pn_example.h), on a rough floor
+   1. The 2D sand column of docs/validation.md (examples/common/pn_example.h), on a rough floor
       (--friction), collapses for --end seconds [1]; then its deposit is measured by its
       thickness profile: mass per unit length over the initial density (what the deposit
       would be at the packing it started with; a particle's height would move by the
@@ -28,7 +28,7 @@
    --quick: res 32, 64, 128 and shorter runs (a smoke test). */
 #define PLASTINET_IMPLEMENTATION
 #define PLASTINET_MPM_IMPLEMENTATION
-#include "../examples/pn_example.h"
+#include "../examples/common/pn_example.h"
 
 typedef struct deposit {
     double front1, front2, summit, core; /* m */

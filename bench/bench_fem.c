@@ -1,4 +1,4 @@
-/* bench_fem: where implicit integration pays in FEM, on the metal frame of examples/pn_frame.h
+/* bench_fem: where implicit integration pays in FEM, on the metal frame of examples/common/pn_frame.h
    (a steel frame crushed by a plate; plastinet_mpm.h >>fem).
    Build: cc -std=c99 -O2 bench/bench_fem.c -lm -o bench_fem        (or: make bench-fem)
    Usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR]
@@ -28,8 +28,8 @@
    the frame's yield stress over E [3e-3] (pnet and pnet_nh serve 3e-3 only, pnet_nh_any its
    range: they are left out elsewhere). */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
-#include "../examples/pn_frame.h"
+#include "../examples/common/pn_example.h"
+#include "../examples/common/pn_frame.h"
 
 #define FRAME_DT 0.02
 #define MAX_FRAMES 64
@@ -346,7 +346,7 @@ int main(int argc, char **argv) {
         if (!csv || !md) return 1;
         fprintf(csv, "dim,role,integrator,energy,E,dt,courant,error_mean,error_max,wall_s,sim_s,wall_per_sim_s,x_fair,newton_per_step,"
                      "min_distance_m,max_plastic_strain,ok\n");
-        fprintf(md, "<!-- written by bench/bench_fem.c (make bench-fem) -->\n**Metal frame %dD** (examples/pn_frame.h), yield "
+        fprintf(md, "<!-- written by bench/bench_fem.c (make bench-fem) -->\n**Metal frame %dD** (examples/common/pn_frame.h), yield "
                     "stress %g E: plate at %g m/s for %g s. Error: mean over frames (every %g s) and nodes of the nodal position error over the rest "
                     "bounding-box diagonal, against the explicit reference of the same material at E = %g Pa. *x fair*: wall time "
                     "per simulated second over the fair explicit baseline's at 200 GPa%s.\n\n",

@@ -1,5 +1,5 @@
 /* bench_fem_linear: the implicit FEM step's two linear solvers against the mesh size, on the
-   3D metal frame of examples/pn_frame.h (steel, E = 200 GPa, exact von Mises energy) refined
+   3D metal frame of examples/common/pn_frame.h (steel, E = 200 GPa, exact von Mises energy) refined
    from 5 mm to finer elements.
    Build: cc -std=c99 -O2 bench/bench_fem_linear.c -lm -o bench_fem_linear   (or: make bench-fem)
    Usage: bench_fem_linear [--sizes 5e-3,3.333e-3,...] [--window S] [--max-gflop G] [--one-level]
@@ -14,8 +14,8 @@
    two solvers' final node positions over the mesh's edge (both solve to newton_tol). Writes DIR/bench_fem_linear.md and .csv;
    progress on stderr. */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
-#include "../examples/pn_frame.h"
+#include "../examples/common/pn_example.h"
+#include "../examples/common/pn_frame.h"
 
 #define MAX_SIZES 16
 
@@ -133,7 +133,7 @@ int main(int argc, char **argv) {
         return 1;
     }
     fprintf(md, "<!-- written by bench/bench_fem_linear.c (make bench-fem) -->\n"
-                "**Linear solvers of the implicit FEM step** against the mesh size: the 3D metal frame (examples/pn_frame.h), "
+                "**Linear solvers of the implicit FEM step** against the mesh size: the 3D metal frame (examples/common/pn_frame.h), "
                 "steel at 200 GPa, exact von Mises energy, dt 1e-2 s, the first %g s (the plate's first contact). Cholesky: "
                 "skyline in reverse Cuthill-McKee order; PCG: conjugate gradients preconditioned by a two-grid cycle (block IC(0) smoothing, "
                 "a coarse level of rigid motions of node aggregates); *one level*: block IC(0) alone. *Storage*: the solver's "

@@ -1,5 +1,5 @@
 /* bench_mpm: speed against accuracy of the MPM integrators of plastinet_mpm.h on the sand column
-   and the snow press of docs/validation.md (scenes in examples/pn_example.h), or the snowball
+   and the snow press of docs/validation.md (scenes in examples/common/pn_example.h), or the snowball
    (--snowball: its fracture is chaotic, so its reference is not converged).
    Build: cc -std=c99 -O2 bench/bench_mpm.c -lm -o bench_mpm        (or: make bench-mpm)
    Usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]
@@ -50,7 +50,7 @@
       Drucker-Prager energy (pn_dp_energy); and the stress formulation (one run per dt: it has
       no fixed point).
    Every run is compared with the reference frame by frame (25 fps, so that every dt above
-   divides a frame) by the mass IoUs of examples/pn_example.h: soft (the formula of
+   divides a frame) by the mass IoUs of examples/common/pn_example.h: soft (the formula of
    docs/validation.md; below 1 even for identical fields, so the reference's score against itself
    is its ceiling), min/max (1 for identical fields; the plots use it) and binary occupancy.
    Then a Young's-modulus sweep of the sand column (1e6 to 1e10 Pa; --sweep-E, at --sweep-res
@@ -71,7 +71,7 @@
    for the README); progress on stderr. A run that fails (step error, unbounded, over the time
    limit) is a row that says so, with the figures of the frames it completed. */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
+#include "../examples/common/pn_example.h"
 #include "../models/pn_model_sand_any_2d.h"
 
 #define BENCH_FPS 25 /* 0.04 s frames: 1e-4, 1e-3 and 1e-2 s all divide them */
@@ -943,7 +943,7 @@ static void write_md(const char *path, const bench_cfg *cfg, const bench_scene *
         return;
     }
     fprintf(f, "<!-- written by bench/bench_mpm.c (make bench-mpm)%s -->\n", cfg->quick ? ", --quick" : "");
-    fprintf(f, "Scenes of docs/validation.md (examples/pn_example.h): the sand column and the %s; 2D res %d over 1 m, "
+    fprintf(f, "Scenes of docs/validation.md (examples/common/pn_example.h): the sand column and the %s; 2D res %d over 1 m, "
                "3D res %d over 0.5 m; %.2f s (2D) and %.2f s (3D) simulated (the snow press at most 0.2 s), compared at %d "
                "frames per second. Mass IoU against the "
                "explicit reference, mean / min over frames: *soft* is sum(ab) / sum(a + b - ab) of the max-normalized "

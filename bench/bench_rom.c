@@ -26,10 +26,10 @@
    Writes OUT/bench_rom.md, .csv and .svg (error against wall time, with the real-time line).
    Needs the snapshots of make rom-data. */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
+#include "../examples/common/pn_example.h"
 #include "../plastinet_rom.h"
 #include "../models/pn_rom_models.h"
-#include "../examples/pn_rom_scenes.h"
+#include "../examples/common/pn_rom_scenes.h"
 
 #define QUAD(kind) ((kind) == 4 ? 2 : (kind) >= 2) /* rom_run's quad: 0 L, 1 E, 2 the implicit integrator */
 

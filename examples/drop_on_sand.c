@@ -11,8 +11,8 @@
    step, the smallest particle-block distance over the run, the block's final centre and
    tilt, the deepest point it reached below the bed's surface. */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
-#include "pn_drop.h"
+#include "common/pn_example.h"
+#include "common/pn_drop.h"
 
 static void usage(FILE *f) {
     fprintf(f, "usage: drop_on_sand [flags]   a stiff block dropped onto a sand bed (MPM-FEM coupling)\n"

@@ -9,11 +9,11 @@
 //   --stress     the same with the stress formulation (PN_MPM_FORMULATION_STRESS)
 //   --stress-cells, --stress-cells-first: the stress formulation with a stress per cell, or
 //                per cell then per particle (pn_mpm_implicit_desc.stress_unknowns)
-//   --png DIR    a picture of every 10th frame into DIR (created; examples/pn_render.h)
+//   --png DIR    a picture of every 10th frame into DIR (created; examples/common/pn_render.h)
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
-#include "pn_render.h"
+#include "common/pn_render.h"
 
 #include <chrono>
 #include <cmath>

@@ -8,7 +8,7 @@
    Writes DIR/frame_NNNN.png (--png) and DIR/preview.png (--apng, every second frame) [DIR:
    build/materials_frames]; prints per material its particle count and final centre. */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
+#include "common/pn_example.h"
 
 enum { SAND, RUBBER, METAL, SNOW, KINDS };
 static const char *const names[KINDS] = {"sand", "rubber", "steel", "snow"};

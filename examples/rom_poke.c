@@ -12,10 +12,10 @@
    poke, wall milliseconds per step and wall seconds per simulated second. --help lists every
    flag. Build: cc -O2 examples/rom_poke.c -lm */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
+#include "common/pn_example.h"
 #include "../plastinet_rom.h"
 #include "../models/rom_poke.h"
-#include "pn_rom_scenes.h"
+#include "common/pn_rom_scenes.h"
 
 static void usage(FILE *f, const char *prog) {
     fprintf(f,

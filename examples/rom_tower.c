@@ -15,10 +15,10 @@
    the dynamics (<= 1: real time) and the cost of reconstructing the drawn points. --help lists
    every flag. Build: cc -O2 examples/rom_tower.c -lm */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
+#include "common/pn_example.h"
 #include "../plastinet_rom.h"
 #include "../models/rom_tower.h"
-#include "pn_rom_scenes.h"
+#include "common/pn_rom_scenes.h"
 
 /* binary little-endian PLY of n points (float x y z) */
 static int write_ply(const char *path, size_t n, const float *x) {

@@ -1,8 +1,14 @@
 /* sand_column: a column of sand (aspect ratio a = H / W) collapsing on a frictional floor,
    simulated by plastinet_mpm.h, implicit or explicit, beside the explicit reference it is
-   measured against. The scene is the one of docs/validation.md (examples/pn_example.h).
+   measured against. The scene is the one of docs/validation.md.
    Build: cc -std=c99 -O2 examples/sand_column.c -lm -o sand_column
    Usage: sand_column [flags]      (sand_column --help lists them)
+
+   The simulation itself is column_world() and main(): make a world, add the sand, fill the
+   column, bind what implicit steps minimize, step frame by frame, read the deposit, destroy.
+   examples/common/pn_example.h does the rest: the shared flags, pictures and point files,
+   the mass IoU and the JSON line's tail.
+
    Defaults (`make run`): 2D, implicit at dt 1e-3 s in the stress formulation (Drucker-Prager
    plasticity as the stress's return mapping, exact within the step), particles jittered in
    their lattice cells, 30 frames at 30 fps, a = 2, E = 1e7 Pa, res 64 (2D) / 24 (3D) cells
@@ -15,19 +21,101 @@
    (runout 0.139 m, 39% of the reference's), at 2.5e-4 s is still 22% short after 14 s of
    steps, and comes within 6% only at 1e-4 s, below the explicit stable step (1.5e-4 s),
    after 21 s: `--energy pnet` runs it (the energy formulation with the embedded model;
-   PlasticityNet's regularizer w = 1, --regularizer -1: off). Particles on
-   the lattice (--lattice) collapse in vertical strands with every integrator, the
-   reference's included (seen at res 64); jittered, none of them does. The old demo:
-   --energy pnet --lattice.
+   PlasticityNet's regularizer w = 1, --regularizer -1: off). Particles on the lattice
+   (--lattice) collapse in vertical strands with every integrator, the reference's included
+   (seen at res 64); jittered, none of them does. The old demo: --energy pnet --lattice.
    Writes DIR/frame_NNNN.png (--png), DIR/preview.png (--apng, animated), DIR/frame_NNNN.ply
    (--ply, points) and DIR/frame_NNNN.obj (--obj, 3D surfaces); a progress line on stderr; a
    one-line JSON summary on stdout: frames, wall seconds of the steps (monotonic clock),
    iterations per step, runout (how far the front moved past the column's initial edge, the
    farthest particle), final height above the floor (the highest particle), largest
    fixed-point residual; and the reference's runout, height, steps and wall seconds, the
-   ratios run / reference, and the min/max mass IoU of the two deposits (pn_example.h). */
+   ratios run / reference, and the min/max mass IoU of the two deposits. */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
+#include "common/pn_example.h" /* plastinet.h, plastinet_mpm.h, the sand models, the plumbing */
+
+/* The column's world, with the library's calls: s holds the numbers the flags set (res, E,
+   walls, jitter, aspect; pn_ex_scene_default gives the rest), energy what implicit steps
+   minimize. NULL after a failure, said on stderr. Made twice: the run and its reference. */
+static pn_mpm_world *column_world(const char *prog, const pn_ex_scene *s, pn_mpm_energy energy) {
+    const pn_model *model = s->dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
+    double dx = s->domain_m / s->res, sp = dx / 2, floor_m = PN_EX_WALL_CELLS * dx;
+    int across = (int)(s->width_m / sp), up = (int)(s->aspect * s->width_m / sp), d = s->dim, i, g;
+    double left = floor((s->domain_m / 2 - across * sp / 2) / sp + 0.5) * sp; /* on a lattice line */
+    const char *why = "";
+    pn_material_desc md;
+    pn_material sand;
+    pn_mpm_desc wd;
+    pn_mpm_fill_desc fill;
+    pn_mpm_world *w = NULL;
+    size_t n = 0;
+    pn_result r;
+    /* the sand the embedded PlasticityNet model was trained on (StVK-Hencky, Drucker-Prager), at E */
+    pn_model_material_desc(model, (pn_real)s->E_pa, &md);
+    if ((r = pn_material_init(&sand, &md, &why)) != PN_OK) goto failed;
+    /* the world: res cells per axis, walls PN_EX_WALL_CELLS thick (the floor is their top), gravity */
+    memset(&wd, 0, sizeof wd);
+    wd.dim = d;
+    for (i = 0; i < d; ++i) wd.res[i] = s->res;
+    wd.dx_m = (pn_real)dx;
+    wd.gravity[1] = (pn_real)-9.81;
+    wd.boundary = s->boundary;
+    wd.friction = (pn_real)s->friction;
+    wd.filter_time_s = (pn_real)s->filter_s;
+    wd.wall_cells = PN_EX_WALL_CELLS;
+    /* the particles: 2 per cell per axis in a box W wide (a square prism in 3D), a W tall, on the floor */
+    memset(&fill, 0, sizeof fill);
+    fill.shape = PN_MPM_FILL_BOX;
+    fill.per_axis = 2;
+    fill.jitter = s->jitter;
+    fill.seed = 1;
+    for (i = 0; i < d; ++i) {
+        fill.center_m[i] = (pn_real)(left + across * sp / 2);
+        fill.half_extent_m[i] = (pn_real)(across * sp / 2);
+    }
+    fill.center_m[1] = (pn_real)(floor_m + up * sp / 2);
+    fill.half_extent_m[1] = (pn_real)(up * sp / 2);
+    if ((r = pn_mpm_fill_count(&wd, &fill, &n, &why)) != PN_OK) goto failed;
+    if (n == 0) {
+        fprintf(stderr, "%s: the column has no particles (narrower than half a cell)\n", prog);
+        return NULL;
+    }
+    wd.max_particles = n;
+    if ((r = pn_mpm_create(&wd, &w, &why)) != PN_OK) goto failed;
+    if ((g = pn_mpm_add_group(w, &sand, (pn_real)s->density_kg_m3)) < 0) r = PN_ERROR_INVALID_ARGUMENT;
+    else {
+        fill.group = g;
+        r = pn_mpm_fill(w, &fill, NULL);
+    }
+    if (r == PN_OK && energy == PN_MPM_ENERGY_PNET) { /* the network: the world keeps its own copy */
+        pn_pnet net;
+        pn_pnet_desc nd;
+        memset(&nd, 0, sizeof nd);
+        nd.energy = model;
+        nd.regularizer = (pn_real)s->regularizer;
+        if ((r = pn_pnet_init(&net, &nd, &sand, d, &why)) != PN_OK) goto failed;
+        r = pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net);
+    } else if (r == PN_OK) r = pn_mpm_group_set_energy(w, g, energy, NULL);
+    if (r == PN_OK) return w;
+    why = pn_mpm_error(w);
+failed:
+    fprintf(stderr, "%s: %s (%s)\n", prog, why, pn_result_string(r));
+    pn_mpm_destroy(w);
+    return NULL;
+}
+
+/* the deposit: how far the front moved past the column's initial edge (either side, along
+   the horizontal axes), and the height of the highest particle above the floor */
+static void deposit(const pn_mpm_world *w, const pn_ex_scene *s, const double *lo0, const double *hi0, double *runout,
+                    double *height) {
+    double lo[3], hi[3];
+    int i;
+    *runout = *height = 0;
+    if (!pn_ex_bounds(w, lo, hi)) return;
+    for (i = 0; i < w->dim; ++i)
+        if (i != 1) *runout = fmax(*runout, fmax(hi[i] - hi0[i], lo0[i] - lo[i]));
+    *height = hi[1] - pn_ex_scene_floor(s);
+}
 
 static void usage(FILE *f, const pn_ex_cli *d) {
     fprintf(f, "usage: sand_column [flags]   a sand column collapsing on a frictional floor, and its explicit reference\n"
@@ -46,36 +134,16 @@ static void usage(FILE *f, const pn_ex_cli *d) {
     pn_ex_cli_usage(f, d);
 }
 
-/* the deposit: how far the front moved past the column's initial edge (either side, along
-   the horizontal axes), and the height of the highest particle above the floor */
-static void deposit(const pn_mpm_world *w, const pn_ex_scene *s, const double *lo0, const double *hi0, double *runout,
-                    double *height) {
-    double lo[3], hi[3];
-    int i;
-    *runout = *height = 0;
-    if (!pn_ex_bounds(w, lo, hi)) return;
-    for (i = 0; i < w->dim; ++i)
-        if (i != 1) *runout = fmax(*runout, fmax(hi[i] - hi0[i], lo0[i] - lo[i]));
-    *height = hi[1] - pn_ex_scene_floor(s);
-}
-
-int main(int argc, char **argv) {
-    static const char *const energies[] = {"pnet", "lagged", "dp", "elastic"};
-    static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP,
-                                              PN_MPM_ENERGY_ELASTIC};
+/* The command line into c, *aspect, *reference (-1: not given) and *energy_given. Returns -1
+   to go on, else the exit code (0 after --help, 2 for a bad flag, said on stderr). */
+static int flags(int argc, char **argv, pn_ex_cli *c, double *aspect, int *reference, int *energy_given) {
     const char *prog = "sand_column";
-    int energy, k, energy_given = 0, formulation_given = 0, reference = -1, stress;
-    double aspect = 2, runout = 0, height = 0, ref_runout = 0, ref_height = 0, ref_wall = 0;
-    pn_ex_cli c, d;
-    pn_ex_scene sc;
-    pn_ex_outcome o;
-    pn_ex_tally ref_tally;
-    pn_mpm_world *ref = NULL;
-    pn_ex_iou_scores iou = {0, 0, 0};
-    pn_ex_cli_default(&c, "build/sand_column_frames");
-    c.solver.formulation = PN_MPM_FORMULATION_STRESS;
-    c.jitter = 1;
-    d = c;
+    pn_ex_cli d;
+    int k, formulation_given = 0;
+    pn_ex_cli_default(c, "build/sand_column_frames");
+    c->solver.formulation = PN_MPM_FORMULATION_STRESS;
+    c->jitter = 1;
+    d = *c;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         int used;
@@ -83,13 +151,13 @@ int main(int argc, char **argv) {
             usage(stdout, &d);
             return 0;
         }
-        energy_given |= !strcmp(a, "--energy");
+        *energy_given |= !strcmp(a, "--energy");
         formulation_given |= !strcmp(a, "--formulation");
-        used = pn_ex_cli_flag(prog, &c, a, v);
+        used = pn_ex_cli_flag(prog, c, a, v);
         if (used < 0) return 2;
-        if (used == 0 && !strcmp(a, "--aspect")) used = pn_ex_number(prog, a, v, &aspect) ? 2 : -1;
-        if (used == 0 && !strcmp(a, "--reference")) used = 1, reference = 1;
-        if (used == 0 && !strcmp(a, "--no-reference")) used = 1, reference = 0;
+        if (used == 0 && !strcmp(a, "--aspect")) used = pn_ex_number(prog, a, v, aspect) ? 2 : -1;
+        if (used == 0 && !strcmp(a, "--reference")) used = 1, *reference = 1;
+        if (used == 0 && !strcmp(a, "--no-reference")) used = 1, *reference = 0;
         if (used < 0) return 2;
         if (used == 0) {
             fprintf(stderr, "%s: unknown flag '%s' (--help lists them)\n", prog, a);
@@ -97,8 +165,27 @@ int main(int argc, char **argv) {
         }
         k += used - 1;
     }
+    if (*energy_given && !formulation_given) c->solver.formulation = PN_MPM_FORMULATION_ENERGY;
+    return -1;
+}
+
+int main(int argc, char **argv) {
+    static const char *const energies[] = {"pnet", "lagged", "dp", "elastic"};
+    static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP,
+                                              PN_MPM_ENERGY_ELASTIC};
+    const char *prog = "sand_column";
+    int energy, energy_given = 0, reference = -1, stress, stable, frame, ok = 1, exit_code;
+    long k, per_frame;
+    double aspect = 2, dt, wall_s = 0, lo0[3], hi0[3], runout, height, ref_runout = 0, ref_height = 0, ref_wall = 0;
+    pn_ex_cli c;
+    pn_ex_scene sc;
+    pn_ex_view view;
+    pn_ex_output out;
+    pn_ex_tally tally, ref_tally;
+    pn_ex_iou_scores iou = {0, 0, 0};
+    pn_mpm_world *w, *ref = NULL;
+    if ((exit_code = flags(argc, argv, &c, &aspect, &reference, &energy_given)) >= 0) return exit_code;
     if ((energy = pn_ex_choice(prog, "--energy", c.energy, energies, 4)) < 0) return 2;
-    if (energy_given && !formulation_given) c.solver.formulation = PN_MPM_FORMULATION_ENERGY;
     stress = c.implicit && c.solver.formulation == PN_MPM_FORMULATION_STRESS;
     if (reference < 0) reference = c.implicit || c.dt > 0;
     pn_ex_scene_default(&sc, PN_EX_SAND_COLUMN, c.dim == 3 ? 3 : 2);
@@ -108,31 +195,72 @@ int main(int argc, char **argv) {
         return 2;
     }
     sc.aspect = aspect;
+    pn_ex_scene_view(&sc, &view);
+    if (!pn_ex_output_open(prog, &c, &view, &out)) return 1;
     /* the stress formulation has no energy: bind one that needs no network */
-    sc.energy = stress ? PN_MPM_ENERGY_DP : energy_of[energy];
-    if (!pn_ex_simulate(prog, &c, &sc, &o)) return 1;
-    deposit(o.w, &sc, o.lo0, o.hi0, &runout, &height);
+    if (!(w = column_world(prog, &sc, stress ? PN_MPM_ENERGY_DP : energy_of[energy]))) {
+        pn_ex_output_close(prog, &out, 0);
+        return 1;
+    }
+    pn_ex_bounds(w, lo0, hi0);
+
+    /* frames of 1/fps s: steps of dt (implicit: 1e-3 s unless --dt), or explicit ones of
+       pn_mpm_stable_dt each (pn_mpm_advance) when no --dt is given */
+    stable = !c.implicit && !(c.dt > 0);
+    dt = c.implicit && !(c.dt > 0) ? 1e-3 : c.dt;
+    per_frame = stable ? 1 : (long)(1.0 / c.fps / dt + 0.5);
+    if (per_frame < 1) per_frame = 1;
+    memset(&tally, 0, sizeof tally);
+    for (frame = 1; frame <= c.frames && ok; ++frame) {
+        double t0 = pn_ex_seconds();
+        pn_mpm_stats st;
+        pn_result r = PN_OK;
+        if (stable) {
+            pn_mpm_advance_desc adv;
+            memset(&adv, 0, sizeof adv);
+            adv.integrator = PN_MPM_EXPLICIT;
+            if ((r = pn_mpm_advance(w, (pn_real)(1.0 / c.fps), &adv, &st)) == PN_OK) tally.steps += st.substeps;
+        } else
+            for (k = 0; k < per_frame && r == PN_OK; ++k) {
+                r = c.implicit ? pn_mpm_step_implicit(w, (pn_real)dt, &c.solver, &st) : pn_mpm_step_explicit(w, (pn_real)dt, &st);
+                if (r == PN_OK) pn_ex_tally_step(&tally, &st, c.implicit);
+            }
+        wall_s += pn_ex_seconds() - t0;
+        if (r != PN_OK) {
+            fprintf(stderr, "\n%s: step %ld failed: %s (%s)\n", prog, tally.steps + 1, pn_mpm_error(w), pn_result_string(r));
+            ok = 0;
+        } else if (!pn_ex_outputs(prog, w, &out, frame))
+            ok = 0;
+        else if (!c.quiet)
+            fprintf(stderr, "\rframe %d/%d  t = %.3f s  wall %.1f s  Newton/step %.1f  CG/step %.0f   ", frame, c.frames,
+                    (double)w->time_s, wall_s, c.implicit ? (double)tally.newton / (double)tally.steps : 0.0,
+                    c.implicit ? (double)tally.cg / (double)tally.steps : 0.0);
+    }
+    if (ok && !c.quiet) fprintf(stderr, "\n");
+    if (!pn_ex_output_close(prog, &out, ok)) {
+        pn_mpm_destroy(w);
+        return 1;
+    }
+    deposit(w, &sc, lo0, hi0, &runout, &height);
+
+    /* the reference: the same particles, explicit at the stable step, to the same time */
     if (reference) {
-        double *fa, *fb;
-        size_t nodes = pn_ex_field_size(o.w);
-        if (!c.quiet) fprintf(stderr, "the explicit reference to t = %.3f s ...", (double)o.w->time_s);
-        if (!pn_ex_reference(prog, &sc, (double)o.w->time_s, c.frames, &ref, &ref_tally, &ref_wall)) {
-            pn_mpm_destroy(o.w);
+        if (!c.quiet) fprintf(stderr, "the explicit reference to t = %.3f s ...", (double)w->time_s);
+        /* explicit steps use no energy: the lagged one needs no network */
+        ref = column_world(prog, &sc, PN_MPM_ENERGY_LAGGED);
+        if (!ref || !pn_ex_reference(prog, ref, (double)w->time_s, c.frames, &ref_tally, &ref_wall)) {
+            pn_mpm_destroy(ref);
+            pn_mpm_destroy(w);
             return 1;
         }
         if (!c.quiet) fprintf(stderr, " %ld steps, %.1f s\n", ref_tally.steps, ref_wall);
-        deposit(ref, &sc, o.lo0, o.hi0, &ref_runout, &ref_height);
-        fa = (double *)malloc(sizeof(double) * nodes);
-        fb = (double *)malloc(sizeof(double) * nodes);
-        if (!fa || !fb) {
+        deposit(ref, &sc, lo0, hi0, &ref_runout, &ref_height);
+        if (!pn_ex_iou_worlds(w, ref, &iou)) {
             fprintf(stderr, "%s: out of memory\n", prog);
+            pn_mpm_destroy(ref);
+            pn_mpm_destroy(w);
             return 1;
         }
-        pn_ex_mass_field(o.w, fa);
-        pn_ex_mass_field(ref, fb);
-        iou = pn_ex_iou(fa, fb, nodes);
-        free(fa);
-        free(fb);
     }
     printf("{\"scene\": \"sand_column\", \"dim\": %d, \"integrator\": \"%s\", \"formulation\": \"%s\", \"energy\": \"%s\", "
            "\"dt\": %g, \"dt_rule\": \"%s\", \"jitter\": %s, "
@@ -143,22 +271,21 @@ int main(int argc, char **argv) {
            "\"final_height_m\": %.4f, \"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
            c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "explicit" : stress ? "stress" : "energy",
            !c.implicit || stress ? "return_mapping" : energies[energy],
-           o.tally.steps ? (double)o.w->time_s / (double)o.tally.steps : 0.0, c.dt > 0 ? "fixed" : c.implicit ? "default" : "stable",
+           tally.steps ? (double)w->time_s / (double)tally.steps : 0.0, c.dt > 0 ? "fixed" : c.implicit ? "default" : "stable",
            c.jitter ? "true" : "false", c.solver.fixed_point_iters, c.solver.contact_rounds,
-           sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)o.w->n, c.frames,
-           (double)o.w->time_s, o.wall_s, o.tally.steps, (double)o.tally.newton / (double)o.tally.steps,
-           (double)o.tally.cg / (double)o.tally.steps, (double)o.tally.fixed_point / (double)o.tally.steps,
-           (double)o.tally.sweeps / (double)o.tally.steps,
-           o.tally.line_search_failures, runout, height, o.tally.max_fixed_point_residual,
-           (unsigned long)o.w->left_total);
+           sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)w->n, c.frames,
+           (double)w->time_s, wall_s, tally.steps, (double)tally.newton / (double)tally.steps,
+           (double)tally.cg / (double)tally.steps, (double)tally.fixed_point / (double)tally.steps,
+           (double)tally.sweeps / (double)tally.steps,
+           tally.line_search_failures, runout, height, tally.max_fixed_point_residual, (unsigned long)w->left_total);
     if (reference)
         printf(", \"reference_integrator\": \"explicit at pn_mpm_stable_dt\", \"reference_steps\": %ld, "
                "\"reference_wall_s\": %.3f, \"reference_runout_m\": %.4f, \"reference_final_height_m\": %.4f, "
                "\"runout_ratio\": %.3f, \"height_ratio\": %.3f, \"mass_iou_minmax\": %.3f, \"mass_iou_binary\": %.3f",
                ref_tally.steps, ref_wall, ref_runout, ref_height, ref_runout > 0 ? runout / ref_runout : 0.0,
                ref_height > 0 ? height / ref_height : 0.0, iou.minmax, iou.binary);
-    pn_ex_json_end(&o.tally, c.solver.measure_force_error && c.implicit);
+    pn_ex_json_end(&tally, c.solver.measure_force_error && c.implicit);
     pn_mpm_destroy(ref);
-    pn_mpm_destroy(o.w);
+    pn_mpm_destroy(w);
     return 0;
 }

@@ -1,7 +1,7 @@
 /* snowball: a ball of snow (Neo-Hookean + Cam-Clay with hardening) thrown at a frictional
    floor at an angle; it breaks and spreads. Simulated by plastinet_mpm.h, explicit (the
    reference) or implicit with the PlasticityNet snow model or the lagged energy (Cam-Clay has
-   no exact energy). The scene is the one of docs/validation.md (examples/pn_example.h).
+   no exact energy). The scene is the one of docs/validation.md (examples/common/pn_example.h).
    Build: cc -std=c99 -O2 examples/snowball.c -lm -o snowball
    Usage: snowball [flags]      (snowball --help lists them)
    Defaults: 2D, implicit, pnet, dt 1e-3 s, 1 fixed-point pass, 30 frames at 30 fps,
@@ -17,7 +17,7 @@
    iterations per step, spread (extent of the snow along the throw), runout (how far its front
    moved), final height above the floor, largest fixed-point residual. */
 #define PLASTINET_IMPLEMENTATION
-#include "pn_example.h"
+#include "common/pn_example.h"
 
 static void usage(FILE *f, const pn_ex_cli *d) {
     fprintf(f, "usage: snowball [flags]   a snowball thrown at a frictional floor\n"

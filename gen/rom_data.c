@@ -4,7 +4,7 @@
                         [--frames N]
 
    Runs the explicit MPM of plastinet_mpm.h (APIC, fixed corotated) on the instances of a scene
-   of examples/pn_rom_scenes.h and writes one snapshot file per instance into OUT/SCENE/ (with
+   of examples/common/pn_rom_scenes.h and writes one snapshot file per instance into OUT/SCENE/ (with
    --fine F > 1: the same scene on an F times finer grid and lattice, into OUT/SCENE_fF/), and
    OUT/SCENE/manifest.json listing every instance, its parameters and its split. The format is
    in gen/README.md. A run cut off continues where it stopped: each instance keeps a checkpoint
@@ -17,7 +17,7 @@
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
-#include "../examples/pn_rom_scenes.h"
+#include "../examples/common/pn_rom_scenes.h"
 #include <errno.h>
 #include <stdlib.h>
 #include <sys/stat.h>

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent check of the PNG and APNG files written by examples/pn_render.h (used by
+"""Independent check of the PNG and APNG files written by examples/common/pn_png.h (used by
 tests/test_render.c). Standard library only: the chunks are parsed here, every CRC is checked
 with zlib.crc32, image data is inflated by zlib (which also checks the Adler-32) and the PNG
 filters are undone here, then the pixels are compared with the raw RGB the test wrote.

@@ -1,4 +1,4 @@
-/* cross_compiler_driver: steps the sand column of examples/pn_example.h a few steps with each
+/* cross_compiler_driver: steps the sand column of examples/common/pn_example.h a few steps with each
    integrator and energy (2D, and 3D implicit PlasticityNet), the snowball (Neo-Hookean snow,
    Cam-Clay) and the column made of metal (von Mises: the exact energy, the metal network) and
    prints one line per combination: its name and a 64-bit FNV-1a hash of the particle state's
@@ -8,7 +8,7 @@
    Usage: cross_compiler_driver [name-filter]   (a name: dim2_implicit_pnet, ...)
    Build: cc -std=c99 -O2 -ffp-contract=off tests/cross_compiler_driver.c -lm   (also as C++) */
 #define PLASTINET_IMPLEMENTATION
-#include "../examples/pn_example.h"
+#include "../examples/common/pn_example.h"
 #include "../models/pn_model_metal_2d.h"
 #include "../models/pn_model_metal_nh_2d.h"
 #include "../models/pn_model_metal_nh_return_2d.h"

@@ -221,7 +221,7 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -x build/sand_column ]; then
         dup=$(grep -E '^ *--' build/example_help.txt | while read -r line; do
             echo "$line" | grep -oE -- '--[A-Za-z0-9-]+' | sort -u; done | sort | uniq -d | tr '\n' ' ')
         # a flag the source takes that the help does not name
-        case $e in sand_column|snowball) src="examples/$e.c examples/pn_example.h";; game_loop) src=examples/$e.cpp;; *) src=examples/$e.c;; esac
+        case $e in sand_column|snowball) src="examples/$e.c examples/common/pn_example.h";; metal_frame) src="examples/$e.c examples/common/pn_frame.h";; game_loop) src=examples/$e.cpp;; *) src=examples/$e.c;; esac
         # shellcheck disable=SC2086
         miss=$(grep -ohE '"--[A-Za-z0-9-]+"' $src | tr -d '"' | sort -u | while read -r f; do
             grep -qE -- "(^|[^A-Za-z0-9-])$f([^A-Za-z0-9-]|$)" build/example_help.txt || echo "$f"; done | tr '\n' ' ')

@@ -8,7 +8,7 @@
 #include "../plastinet_rom.h"
 #ifdef PN_TEST_HAVE_ROM_MODELS
 #include "../models/pn_rom_models.h" /* the shipped reduced-order models */
-#include "../examples/pn_rom_scenes.h" /* their scenes */
+#include "../examples/common/pn_rom_scenes.h" /* their scenes */
 #endif
 #include "pn_test.h"
 #ifdef _OPENMP

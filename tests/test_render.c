@@ -1,4 +1,4 @@
-/* test_render: examples/pn_render.h - the PNG/APNG encoder (checked by an independent decoder,
+/* test_render: examples/common/pn_render.h and pn_png.h - the PNG/APNG encoder (checked by an independent decoder,
    tests/check_png.py: Python's zlib and its own unfiltering), the Huffman code builder, the
    iso-surface mesher (closed, manifold, outward, volumes against closed forms), the mesh
    files and the particle renderer (occlusion, overlays, mask, NaN, bad arguments, speed).
@@ -10,7 +10,7 @@
 #if !defined(_POSIX_C_SOURCE) && !defined(_WIN32)
 #define _POSIX_C_SOURCE 200112L /* mkdir, clock_gettime */
 #endif
-#include "../examples/pn_render.h"
+#include "../examples/common/pn_render.h"
 #include "pn_test.h"
 #include <time.h>
 #if !defined(_WIN32)

@@ -1,7 +1,7 @@
 /* pn_example.h: what the examples and the MPM benchmark share, so each stays one .c file and a
    one-line build. Include it once, first, in a file that defines PLASTINET_IMPLEMENTATION:
        #define PLASTINET_IMPLEMENTATION
-       #include "pn_example.h"      // plastinet.h, plastinet_mpm.h, the sand and snow models
+       #include "common/pn_example.h"  // from examples/: plastinet.h, plastinet_mpm.h, the sand and snow models
    Here: a monotonic clock, frames (PNG, animated PNG, PLY points, OBJ surfaces: pn_render.h),
    the scenes of docs/validation.md (sand column, snowball), a stepping helper that tallies
    solver statistics, the command line the examples share, and the mass IoU metric.
@@ -12,12 +12,12 @@
 #if !defined(_POSIX_C_SOURCE) && !defined(_WIN32)
 #define _POSIX_C_SOURCE 199309L
 #endif
-#include "../plastinet.h"
-#include "../plastinet_mpm.h"
-#include "../models/pn_model_sand_2d.h"
-#include "../models/pn_model_sand_3d.h"
-#include "../models/pn_model_snow_2d.h"
-#include "../models/pn_model_snow_3d.h"
+#include "../../plastinet.h"
+#include "../../plastinet_mpm.h"
+#include "../../models/pn_model_sand_2d.h"
+#include "../../models/pn_model_sand_3d.h"
+#include "../../models/pn_model_snow_2d.h"
+#include "../../models/pn_model_snow_3d.h"
 #include "pn_render.h"
 #include <errno.h>
 #include <math.h>
@@ -242,7 +242,9 @@ PN_EX_UNUSED static const pn_model *pn_ex_scene_model(const pn_ex_scene *s) {
 }
 
 /* The scene's world description and its particles as a pn_mpm_fill (group 0). The column
-   is snapped to whole lattice cells, so it holds floor(W / spacing) particles across. */
+   is snapped to whole lattice cells, so it holds floor(W / spacing) particles across.
+   examples/sand_column.c makes the same column with the library's calls (column_world): a
+   change to the sand column goes into both. */
 static void pn_ex__scene_setup(const pn_ex_scene *s, pn_mpm_desc *wd, pn_mpm_fill_desc *f) {
     int d = s->dim, i;
     double dx = pn_ex_scene_dx(s), sp = dx / 2, fl = pn_ex_scene_floor(s);
@@ -409,13 +411,35 @@ typedef struct pn_ex_tally {
     double force_error, force_error_regularizer, apex_fraction;
 } pn_ex_tally;
 
+/* Adds one step's statistics st (pn_mpm_step_implicit's when implicit, else
+   pn_mpm_step_explicit's) to *t. */
+PN_EX_UNUSED static void pn_ex_tally_step(pn_ex_tally *t, const pn_mpm_stats *st, int implicit) {
+    int i;
+    if (implicit && (double)st->dt_over_cfl > t->max_dt_over_cfl) t->max_dt_over_cfl = (double)st->dt_over_cfl;
+    t->cg_capped += st->cg_capped;
+    t->sweeps += st->sweeps;
+    if (implicit)
+        for (i = 0; i < PN_MPM_STAGES; ++i) t->stage_s[i] += st->stage_s[i];
+    t->steps++;
+    t->newton += st->newton_iters;
+    t->cg += st->cg_iters;
+    t->fixed_point += st->fixed_point_iters;
+    t->line_search_failures += st->line_search_failures;
+    t->halved += implicit && st->substeps > 1;
+    if ((double)st->fixed_point_residual > t->max_fixed_point_residual)
+        t->max_fixed_point_residual = (double)st->fixed_point_residual;
+    if ((double)st->max_speed_m_s > t->max_speed_m_s) t->max_speed_m_s = (double)st->max_speed_m_s;
+    t->force_error += (double)st->force_error;
+    t->force_error_regularizer += (double)st->force_error_regularizer;
+    t->apex_fraction += (double)st->apex_fraction;
+}
+
 /* n steps of dt_s seconds, implicit (with id, which may be NULL for its defaults) or explicit;
    adds to *t. Stops at the first failed step and returns its code (pn_mpm_error says why;
    the world stays as before that step). */
 PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double dt_s,
                                           const pn_mpm_implicit_desc *id, long n, pn_ex_tally *t) {
     long k;
-    int i;
     for (k = 0; k < n; ++k) {
         pn_mpm_stats st;
         pn_real cfl = 0;
@@ -425,23 +449,7 @@ PN_EX_UNUSED static pn_result pn_ex_steps(pn_mpm_world *w, int implicit, double 
             t->max_dt_over_cfl = dt_s / (double)cfl;
         r = implicit ? pn_mpm_step_implicit(w, (pn_real)dt_s, id, &st) : pn_mpm_step_explicit(w, (pn_real)dt_s, &st);
         if (r != PN_OK) return r;
-        if (implicit && (double)st.dt_over_cfl > t->max_dt_over_cfl) t->max_dt_over_cfl = (double)st.dt_over_cfl;
-        t->cg_capped += st.cg_capped;
-        t->sweeps += st.sweeps;
-        if (implicit)
-            for (i = 0; i < PN_MPM_STAGES; ++i) t->stage_s[i] += st.stage_s[i];
-        t->steps++;
-        t->newton += st.newton_iters;
-        t->cg += st.cg_iters;
-        t->fixed_point += st.fixed_point_iters;
-        t->line_search_failures += st.line_search_failures;
-        t->halved += implicit && st.substeps > 1;
-        if ((double)st.fixed_point_residual > t->max_fixed_point_residual)
-            t->max_fixed_point_residual = (double)st.fixed_point_residual;
-        if ((double)st.max_speed_m_s > t->max_speed_m_s) t->max_speed_m_s = (double)st.max_speed_m_s;
-        t->force_error += (double)st.force_error;
-        t->force_error_regularizer += (double)st.force_error_regularizer;
-        t->apex_fraction += (double)st.apex_fraction;
+        pn_ex_tally_step(t, &st, implicit);
     }
     return PN_OK;
 }
@@ -688,6 +696,47 @@ typedef struct pn_ex_output {
     pn_ex_view view;
 } pn_ex_output;
 
+/* Get ready to write the frames the command line c asks for, framed as view v: the folder,
+   the picture buffer, the animated preview. Returns 0 after a failure (said on stderr;
+   nothing to close). */
+PN_EX_UNUSED static int pn_ex_output_open(const char *prog, const pn_ex_cli *c, const pn_ex_view *v, pn_ex_output *o) {
+    char path[1024];
+    memset(o, 0, sizeof *o);
+    o->out = c->out;
+    o->png = c->png;
+    o->ply = c->ply;
+    o->obj = c->obj;
+    o->view = *v;
+    if ((c->png || c->apng || c->ply || c->obj) && !pn_ex_mkdirs(c->out)) {
+        fprintf(stderr, "%s: cannot create the folder %s\n", prog, c->out);
+        return 0;
+    }
+    if (c->png || c->apng) {
+        o->rgb = (unsigned char *)malloc((size_t)v->width * (size_t)v->height * 3);
+        snprintf(path, sizeof path, "%s/preview.png", c->out);
+        if (!o->rgb || (c->apng && !(o->apng = pn_apng_open(path, v->width, v->height, c->fps)))) {
+            fprintf(stderr, "%s: cannot start %s\n", prog, c->apng ? path : "the pictures");
+            free(o->rgb);
+            o->rgb = NULL;
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Finish the animated preview and free the picture buffer. Returns ok, or 0 when the
+   preview cannot be finished (said on stderr). */
+PN_EX_UNUSED static int pn_ex_output_close(const char *prog, pn_ex_output *o, int ok) {
+    if (o->apng && !pn_apng_close(o->apng) && ok) {
+        fprintf(stderr, "%s: cannot finish %s/preview.png\n", prog, o->out);
+        ok = 0;
+    }
+    o->apng = NULL;
+    free(o->rgb);
+    o->rgb = NULL;
+    return ok;
+}
+
 /* ---- FEM meshes: VTU (ParaView) with per-element fields, OBJ surfaces (Blender) ---- */
 
 /* VTK unstructured grid of mesh m at its positions, n_fields per-element arrays (names[f],
@@ -877,43 +926,21 @@ typedef struct pn_ex_outcome {
 PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, const pn_ex_scene *sc,
                                        pn_ex_outcome *o) {
     const char *why = "";
-    char path[1024];
+    pn_ex_view view;
     pn_ex_output out;
     pn_result r;
     int ok;
     memset(o, 0, sizeof *o);
-    memset(&out, 0, sizeof out);
-    out.out = c->out;
-    out.png = c->png;
-    out.ply = c->ply;
-    out.obj = c->obj;
-    pn_ex_scene_view(sc, &out.view);
-    if ((c->png || c->apng || c->ply || c->obj) && !pn_ex_mkdirs(c->out)) {
-        fprintf(stderr, "%s: cannot create the folder %s\n", prog, c->out);
-        return 0;
-    }
-    if (c->png || c->apng) {
-        out.rgb = (unsigned char *)malloc((size_t)out.view.width * (size_t)out.view.height * 3);
-        snprintf(path, sizeof path, "%s/preview.png", c->out);
-        if (!out.rgb || (c->apng && !(out.apng = pn_apng_open(path, out.view.width, out.view.height, c->fps)))) {
-            fprintf(stderr, "%s: cannot start %s\n", prog, c->apng ? path : "the pictures");
-            free(out.rgb);
-            return 0;
-        }
-    }
+    pn_ex_scene_view(sc, &view);
+    if (!pn_ex_output_open(prog, c, &view, &out)) return 0;
     if ((r = pn_ex_scene_create(sc, &o->w, &why)) != PN_OK) {
         fprintf(stderr, "%s: %s (%s)\n", prog, why, pn_result_string(r));
-        if (out.apng) pn_apng_close(out.apng);
-        free(out.rgb);
+        pn_ex_output_close(prog, &out, 0);
         return 0;
     }
     pn_ex_bounds(o->w, o->lo0, o->hi0);
     ok = pn_ex_run(prog, o->w, c->implicit, c->dt, &c->solver, c->frames, c->fps, &out, c->quiet, &o->tally, &o->wall_s);
-    if (out.apng && !pn_apng_close(out.apng) && ok) {
-        fprintf(stderr, "%s: cannot finish %s/preview.png\n", prog, c->out);
-        ok = 0;
-    }
-    free(out.rgb);
+    ok = pn_ex_output_close(prog, &out, ok);
     if (!ok) {
         pn_mpm_destroy(o->w);
         o->w = NULL;
@@ -923,33 +950,23 @@ PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, con
     return 1;
 }
 
-/* The explicit reference of scene s (docs/validation.md): the same particles, run to t_end_s
-   in `frames` equal frames of explicit steps at pn_mpm_stable_dt, with no outputs. *out gets
-   the world (the caller destroys it), *t the steps, *wall_s their wall seconds. Returns 0
-   after a failure (said on stderr; nothing left to destroy). */
-PN_EX_UNUSED static int pn_ex_reference(const char *prog, const pn_ex_scene *s, double t_end_s, int frames,
-                                        pn_mpm_world **out, pn_ex_tally *t, double *wall_s) {
-    pn_ex_scene ref = *s;
-    const char *why = "";
+/* The explicit reference (docs/validation.md): ref, a world made as the run's was (the same
+   particles), run to t_end_s in `frames` equal frames of explicit steps at pn_mpm_stable_dt,
+   with no outputs. *t gets the steps, *wall_s their wall seconds. Returns 0 after a failure
+   (said on stderr; the caller still destroys ref). */
+PN_EX_UNUSED static int pn_ex_reference(const char *prog, pn_mpm_world *ref, double t_end_s, int frames, pn_ex_tally *t,
+                                        double *wall_s) {
     pn_result r;
     int k;
-    *out = NULL;
     *wall_s = 0;
     memset(t, 0, sizeof *t);
-    ref.energy = PN_MPM_ENERGY_LAGGED; /* explicit steps ignore it; no network to set up */
-    if ((r = pn_ex_scene_create(&ref, out, &why)) != PN_OK) {
-        fprintf(stderr, "%s: the reference: %s (%s)\n", prog, why, pn_result_string(r));
-        return 0;
-    }
     for (k = 0; k < frames && t_end_s > 0; ++k) {
         double t0 = pn_ex_seconds();
-        r = pn_ex_advance_explicit(*out, t_end_s / frames, t);
+        r = pn_ex_advance_explicit(ref, t_end_s / frames, t);
         *wall_s += pn_ex_seconds() - t0;
         if (r != PN_OK) {
-            fprintf(stderr, "%s: the reference failed at t = %g s: %s (%s)\n", prog, (double)(*out)->time_s,
-                    pn_mpm_error(*out), pn_result_string(r));
-            pn_mpm_destroy(*out);
-            *out = NULL;
+            fprintf(stderr, "%s: the reference failed at t = %g s: %s (%s)\n", prog, (double)ref->time_s,
+                    pn_mpm_error(ref), pn_result_string(r));
             return 0;
         }
     }
@@ -1034,6 +1051,21 @@ PN_EX_UNUSED static pn_ex_iou_scores pn_ex_iou(const double *a, const double *b,
     r.minmax = hi > 0 ? lo / hi : 1.0;
     r.binary = bu ? (double)bi / (double)bu : 1.0;
     return r;
+}
+
+/* The scores of the mass fields of two worlds on the same grid; 0 when out of memory. */
+PN_EX_UNUSED static int pn_ex_iou_worlds(const pn_mpm_world *a, const pn_mpm_world *b, pn_ex_iou_scores *s) {
+    size_t nodes = pn_ex_field_size(a);
+    double *fa = (double *)malloc(sizeof(double) * nodes), *fb = (double *)malloc(sizeof(double) * nodes);
+    int ok = fa && fb;
+    if (ok) {
+        pn_ex_mass_field(a, fa);
+        pn_ex_mass_field(b, fb);
+        *s = pn_ex_iou(fa, fb, nodes);
+    }
+    free(fa);
+    free(fb);
+    return ok;
 }
 
 #endif /* PN_EXAMPLE_H */
