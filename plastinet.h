@@ -1,4 +1,4 @@
-/* plastinet.h - v0.9 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.10 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -47,7 +47,7 @@
      >>config   every option resolved in one place
      >>kit      the private helpers every module shares (plastinet_mpm.h and plastinet_rom.h
                 too): messages, a hash, B-spline weights, dense Cholesky, the backtracking
-                line search, preconditioned CG
+                line search, preconditioned CG, a rigid drive's motion, the substep fallback
      >>matrix   small dense 2D/3D matrix helpers
      >>svd      SVD with rotation-valued U and V (det +1), the sign of an inverted F carried
                 by the smallest singular value; polar decomposition; Hencky strain
@@ -172,7 +172,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 9
+#define PN_VERSION_MINOR 10
 
 #ifdef __cplusplus
 extern "C" {
@@ -774,7 +774,9 @@ PN__DEF void pn_free(const pn_allocator *a, void *ptr) {
 /* ======================================================================================
    >>kit: the private helpers every module shares (plastinet_mpm.h and plastinet_rom.h call
    them too): messages, a hash, quadratic B-spline weights, dense Cholesky, the
-   backtracking line search and preconditioned conjugate gradients. Written once, here.
+   backtracking line search, a rigid drive's motion, the substep fallback of implicit
+   steps and preconditioned conjugate gradients. Written once, here; where a module needs
+   one in double as well as pn_real, a PN__*_DEF macro defines it for each type.
    ====================================================================================== */
 #include <stdarg.h>
 #if defined(__GNUC__) || defined(__clang__)
@@ -889,24 +891,62 @@ PN__CHOLESKY_DEF(pn__cholesky, pn__cholesky_solve, pn_real, PN__SQRT, PN__KIT_FI
 typedef pn_result (*pn__objective_fn)(void *ctx, const pn_real *x, pn_real *E);
 
 /* Backtracking along dir from x (Armijo): x + alpha dir for alpha = alpha0, alpha0 / 2, ..
-   until f <= E0 + 1e-4 alpha gd (gd = grad . dir < 0). Returns alpha, with xt and *E1 the
-   accepted point, or 0 when no step down to 1e-10 decreases f. A try where f fails (an
-   element turned inside out, a node in an obstacle, a non-finite energy) is no decrease. */
-PN__KIT pn_real pn__armijo(pn__objective_fn f, void *ctx, size_t n, const pn_real *x, const pn_real *dir, pn_real E0,
-                          pn_real gd, pn_real alpha0, pn_real *xt, pn_real *E1) {
-    pn_real alpha = alpha0;
-    while (alpha >= (pn_real)1e-10) {
-        pn_real e = 0;
-        size_t k;
-        for (k = 0; k < n; ++k) xt[k] = x[k] + alpha * dir[k];
-        if (f(ctx, xt, &e) == PN_OK && e <= E0 + (pn_real)1e-4 * alpha * gd) {
-            *E1 = e;
-            return alpha;
-        }
-        alpha /= 2;
+   down to alpha_min, until f <= E0 + 1e-4 alpha gd (gd = grad . dir < 0; gd = 0: until f
+   does not rise). Returns alpha, with xt and *E1 the accepted point, or 0 when no step
+   decreases f. A try where f fails (an element turned inside out, a node in an obstacle, a
+   non-finite energy) is no decrease. Defined for pn_real (pn__armijo) and, for the reduced
+   models, double (PN__ARMIJO_DEF). */
+#define PN__ARMIJO_DEF(NAME, T)                                                                \
+    PN__KIT T NAME(pn_result (*f)(void *ctx, const T *x, T *E), void *ctx, size_t n, const T *x,  \
+                   const T *dir, T E0, T gd, T alpha0, T alpha_min, T *xt, T *E1) {              \
+        T alpha = alpha0;                                                                      \
+        while (alpha >= alpha_min) {                                                           \
+            T e = 0;                                                                           \
+            size_t k;                                                                          \
+            for (k = 0; k < n; ++k) xt[k] = x[k] + alpha * dir[k];                             \
+            if (f(ctx, xt, &e) == PN_OK && e <= E0 + (T)1e-4 * alpha * gd) {                   \
+                *E1 = e;                                                                       \
+                return alpha;                                                                  \
+            }                                                                                  \
+            alpha /= 2;                                                                        \
+        }                                                                                      \
+        return 0;                                                                              \
     }
-    return 0;
-}
+PN__ARMIJO_DEF(pn__armijo, pn_real)
+
+/* A rigid drive's motion (particles held, translated and spun; MPM's and the reduced models'
+   drives, whose struct D has center, vel, omega and t0): at(D, d, t, x0, c, x) gives the
+   centre c(t) = center + (t - t0) vel and, unless x is NULL, where a point that was at x0 at
+   t0 is at t (Rodrigues: rotation by |omega| (t - t0) about omega); vel(D, d, c, x, v) the
+   velocity vel + omega x (x - c) at x. Defined per drive and real type (PN__RIGID_DEF). */
+#define PN__RIGID_DEF(AT, VEL, D_T, T, SQRT, COS, SIN)                                         \
+    PN__KIT void AT(const D_T *D, int d, T t, const T *x0, T *c, T *x) {                      \
+        T s = t - D->t0, r[3] = {0, 0, 0}, wn = 0, k[3] = {0, 0, 0}, th, cs, sn, kr, kx[3];    \
+        int i;                                                                                 \
+        for (i = 0; i < 3; ++i) c[i] = D->center[i] + s * D->vel[i];                           \
+        if (!x) return;                                                                        \
+        for (i = 0; i < d; ++i) r[i] = x0[i] - D->center[i];                                   \
+        for (i = 0; i < 3; ++i) wn += D->omega[i] * D->omega[i];                               \
+        wn = SQRT(wn);                                                                         \
+        if (!(wn > 0)) {                                                                       \
+            for (i = 0; i < d; ++i) x[i] = c[i] + r[i];                                        \
+            return;                                                                            \
+        }                                                                                      \
+        for (i = 0; i < 3; ++i) k[i] = D->omega[i] / wn;                                       \
+        th = wn * s, cs = COS(th), sn = SIN(th);                                               \
+        kr = k[0] * r[0] + k[1] * r[1] + k[2] * r[2];                                          \
+        kx[0] = k[1] * r[2] - k[2] * r[1], kx[1] = k[2] * r[0] - k[0] * r[2];                  \
+        kx[2] = k[0] * r[1] - k[1] * r[0];                                                     \
+        for (i = 0; i < d; ++i) x[i] = c[i] + r[i] * cs + kx[i] * sn + k[i] * kr * (1 - cs);   \
+    }                                                                                          \
+    PN__KIT void VEL(const D_T *D, int d, const T *c, const T *x, T *v) {                     \
+        T r[3] = {0, 0, 0};                                                                    \
+        int i;                                                                                 \
+        for (i = 0; i < d; ++i) r[i] = x[i] - c[i];                                            \
+        v[0] = D->vel[0] + D->omega[1] * r[2] - D->omega[2] * r[1];                            \
+        v[1] = D->vel[1] + D->omega[2] * r[0] - D->omega[0] * r[2];                            \
+        if (d == 3) v[2] = D->vel[2] + D->omega[0] * r[1] - D->omega[1] * r[0];                \
+    }
 
 /* The substep fallback of every implicit step, with one rule. try_step(ctx, n) takes the step
    as n equal substeps: 1, then 2, 4, .. 2^max_halvings (max_halvings <= 0: the whole step

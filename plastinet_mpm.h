@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.9 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.10 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -16,8 +16,8 @@
      room            public functions                what else
      >>group         (shared)                        a group's implicit energy, checked the
                                                      same way for worlds and meshes (the line
-                                                     search, PCG and messages: plastinet.h's
-                                                     >>kit)
+                                                     search, PCG, messages, the substep
+                                                     fallback: plastinet.h's >>kit)
      >>world         pn_mpm_create, _destroy,        the world's arrays, groups, particles,
                      _error, _add_group,             colliders, walls, a step's statistics,
                      _add_particles, _set_state,     the checks of a state
@@ -1919,36 +1919,8 @@ PN__DEF pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, 
     return PN_OK;
 }
 
-/* the rigid motion of drive D at time t: its centre c(t), and x(t) of a point that was at x0
-   at t0 (Rodrigues: rotation by |omega| (t - t0) about omega) */
-static void pn__mpm_drive_at(const pn__mpm_drive *D, int d, pn_real t, const pn_real *x0, pn_real *c, pn_real *x) {
-    pn_real s = t - D->t0, r[3] = {0, 0, 0}, wn = 0, k[3] = {0, 0, 0}, th, cs, sn, kr, kx[3];
-    int i;
-    for (i = 0; i < 3; ++i) c[i] = D->center[i] + s * D->vel[i];
-    if (!x) return;
-    for (i = 0; i < d; ++i) r[i] = x0[i] - D->center[i];
-    for (i = 0; i < 3; ++i) wn += D->omega[i] * D->omega[i];
-    wn = PN__SQRT(wn);
-    if (!(wn > 0)) {
-        for (i = 0; i < d; ++i) x[i] = c[i] + r[i];
-        return;
-    }
-    for (i = 0; i < 3; ++i) k[i] = D->omega[i] / wn;
-    th = wn * s, cs = PN__COS(th), sn = PN__SIN(th);
-    kr = k[0] * r[0] + k[1] * r[1] + k[2] * r[2];
-    kx[0] = k[1] * r[2] - k[2] * r[1], kx[1] = k[2] * r[0] - k[0] * r[2], kx[2] = k[0] * r[1] - k[1] * r[0];
-    for (i = 0; i < d; ++i) x[i] = c[i] + r[i] * cs + kx[i] * sn + k[i] * kr * (1 - cs);
-}
-
-/* the rigid velocity at a point x when the centre is at c: vel + omega x (x - c) */
-static void pn__mpm_drive_vel(const pn__mpm_drive *D, int d, const pn_real *c, const pn_real *x, pn_real *v) {
-    pn_real r[3] = {0, 0, 0};
-    int i;
-    for (i = 0; i < d; ++i) r[i] = x[i] - c[i];
-    v[0] = D->vel[0] + D->omega[1] * r[2] - D->omega[2] * r[1];
-    v[1] = D->vel[1] + D->omega[2] * r[0] - D->omega[0] * r[2];
-    if (d == 3) v[2] = D->vel[2] + D->omega[0] * r[1] - D->omega[1] * r[0];
-}
+/* the rigid motion of drive D (pn__mpm_drive_at, pn__mpm_drive_vel): the kit's */
+PN__RIGID_DEF(pn__mpm_drive_at, pn__mpm_drive_vel, pn__mpm_drive, pn_real, PN__SQRT, PN__COS, PN__SIN)
 
 #define PN__MPM_FLOOR(x) ((pn_real)floor((double)(x)))
 
@@ -5974,7 +5946,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 {
                     pn__mpm_cg c;
                     c.w = w, c.dt = dt;
-                    alpha = pn__armijo(pn__mpm_value, &c, nd, w->s.vsol, w->s.dir, E0, gd, 1, w->s.vtry, &E1);
+                    alpha = pn__armijo(pn__mpm_value, &c, nd, w->s.vsol, w->s.dir, E0, gd, 1, (pn_real)1e-10, w->s.vtry, &E1);
                 }
                 pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
                 if (alpha == 0) { /* no decrease: keep v, count it, stop this round */
@@ -9149,7 +9121,7 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
         if (it == 0) gfloor = PN__MAX(tol, (pn_real)1e-6 * gres); /* or 1e-6 of the first residual */
         if (res <= tol && gres <= gfloor && it > 0 && !capped) return PN_OK; /* (a solve cut short proves nothing) */
         a0 = pn__fem_self_ccd(m, s->xs, s->dir, pn__fem_ccd(m, s->xs, s->dir));
-        alpha = pn__armijo(pn__fem_objective_value, m, nu, s->xs, s->dir, E0, gd, a0, s->xtry, &E1);
+        alpha = pn__armijo(pn__fem_objective_value, m, nu, s->xs, s->dir, E0, gd, a0, (pn_real)1e-10, s->xtry, &E1);
         if (alpha == 0 && -gd <= (pn_real)1e3 * PN__EPS * PN__FABS(E0) && a0 == 1) {
             /* the decrease Newton predicts is below the energy's rounding (near a minimum of
                a large energy): the values cannot judge the step; take it if it is feasible,
@@ -10629,7 +10601,7 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         pn__cpl_positions(c, 1, k->z, k->dir);
         if ((r = pn__cpl_find(c, 1)) != PN_OK) return r;
         a0 = pn__cpl_ccd(c);
-        alpha = a0 > 0 ? pn__armijo(pn__cpl_value, c, nz, k->z, k->dir, E0, gd, a0, k->zt, &E1) : 0;
+        alpha = a0 > 0 ? pn__armijo(pn__cpl_value, c, nz, k->z, k->dir, E0, gd, a0, (pn_real)1e-10, k->zt, &E1) : 0;
         if (alpha == 0) {
             st->line_search_failures++;
             break;

@@ -1,4 +1,4 @@
-/* plastinet_rom.h - v0.9 - reduced-order MPM on a learned deformation map, on plastinet.h.
+/* plastinet_rom.h - v0.10 - reduced-order MPM on a learned deformation map, on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -48,7 +48,8 @@
                  pn_rom_map                       points
      >>embed     pn_rom_embed, _embed_positions,  a render lattice, points drawn by a
                  _embed_destroy                   Taylor step from their nearest node
-   Messages, the hash, B-spline weights and the dense Cholesky come from plastinet.h's >>kit.
+   Messages, the hash, B-spline weights, dense Cholesky, the line search and the drives'
+   rigid motion come from plastinet.h's >>kit.
 
    OPTIONS: those of plastinet.h (PN_REAL does not change the ROM's own arithmetic, which
    is double, with the networks in float lanes; PN_NO_STDIO shortens its messages to their
@@ -846,6 +847,26 @@ static void pn__rom_map(const pn_rom_world *w, const double *xhat, size_t n, con
     }
 }
 
+/* the kit's line search in double, and the misfit it halves on in the Gauss-Newton
+   projections: sum over the n points of |target - g(X, xhat)|^2 (x: scratch for g) */
+PN__ARMIJO_DEF(pn__rom_armijo, double)
+typedef struct pn__rom_misfit_ctx {
+    const pn_rom_world *w;
+    size_t n;
+    const double *X, *target;
+    double *x;
+} pn__rom_misfit_ctx;
+
+static pn_result pn__rom_misfit(void *ctx, const double *xhat, double *E) {
+    const pn__rom_misfit_ctx *c = (const pn__rom_misfit_ctx *)ctx;
+    size_t s, nd = c->n * (size_t)c->w->dim;
+    double e = 0;
+    pn__rom_map(c->w, xhat, c->n, c->X, c->x, NULL, NULL);
+    for (s = 0; s < nd; ++s) e += (c->target[s] - c->x[s]) * (c->target[s] - c->x[s]);
+    *E = e;
+    return PN_OK;
+}
+
 /* ======================================================================================
    >>world: creation, drives, loads, the latent
    ====================================================================================== */
@@ -1377,35 +1398,13 @@ static int pn__rom_solve_F(int d, const double *F, const double *r, double *y) {
 }
 
 /* the rigid motion of drive D: its centre at time t, and the velocity there at x */
-static void pn__rom_drive_center(const pn__rom_drive *D, double t, double *c) {
-    int i;
-    for (i = 0; i < 3; ++i) c[i] = D->center[i] + (t - D->t0) * D->vel[i];
-}
-static void pn__rom_drive_vel(const pn__rom_drive *D, int d, const double *c, const double *x, double *v) {
-    double r[3] = {0, 0, 0};
-    int i;
-    for (i = 0; i < d; ++i) r[i] = x[i] - c[i];
-    v[0] = D->vel[0] + D->omega[1] * r[2] - D->omega[2] * r[1];
-    v[1] = D->vel[1] + D->omega[2] * r[0] - D->omega[0] * r[2];
-    if (d == 3) v[2] = D->vel[2] + D->omega[0] * r[1] - D->omega[1] * r[0];
-}
-/* where drive D puts at time t a point that was at x0 at t0 (Rodrigues) */
+/* a drive's rigid motion: the kit's (pn__rom_drive_at: its centre at t and where a point
+   that was at x0 at t0 is; pn__rom_drive_vel: the velocity at x) */
+PN__RIGID_DEF(pn__rom_drive_at, pn__rom_drive_vel, pn__rom_drive, double, sqrt, cos, sin)
+static void pn__rom_drive_center(const pn__rom_drive *D, double t, double *c) { pn__rom_drive_at(D, 3, t, NULL, c, NULL); }
 static void pn__rom_drive_pos(const pn__rom_drive *D, int d, double t, const double *x0, double *x) {
-    double c[3], r[3] = {0, 0, 0}, wn = 0, k[3], th, cs, sn, kr, kx[3];
-    int i;
-    pn__rom_drive_center(D, t, c);
-    for (i = 0; i < d; ++i) r[i] = x0[i] - D->center[i];
-    for (i = 0; i < 3; ++i) wn += D->omega[i] * D->omega[i];
-    wn = sqrt(wn);
-    if (!(wn > 0)) {
-        for (i = 0; i < d; ++i) x[i] = c[i] + r[i];
-        return;
-    }
-    for (i = 0; i < 3; ++i) k[i] = D->omega[i] / wn;
-    th = wn * (t - D->t0), cs = cos(th), sn = sin(th);
-    kr = k[0] * r[0] + k[1] * r[1] + k[2] * r[2];
-    kx[0] = k[1] * r[2] - k[2] * r[1], kx[1] = k[2] * r[0] - k[0] * r[2], kx[2] = k[0] * r[1] - k[1] * r[0];
-    for (i = 0; i < d; ++i) x[i] = c[i] + r[i] * cs + kx[i] * sn + k[i] * kr * (1 - cs);
+    double c[3];
+    pn__rom_drive_at(D, d, t, x0, c, x);
 }
 
 /* the first live drive whose region holds X, or -1 */
@@ -1923,15 +1922,13 @@ PN__DEF pn_result pn_rom_step(pn_rom_world *w, double dt, pn_rom_stats *stats) {
             if (!pn__rom_lsq(d, K, ns, w->tG, w->tX, dlt)) break;
             for (i = 0; i < K; ++i) dn += dlt[i] * dlt[i], xn += xh[i] * xh[i];
             st.gn_iters = it + 1;
-            for (;;) { /* backtracking: halve until the misfit decreases */
+            { /* backtracking (the kit's): halve until the misfit does not rise, down to 2^-14 */
                 double xt[PN_ROM_MAX_LATENT];
-                for (i = 0; i < K; ++i) xt[i] = xh[i] + step * dlt[i];
-                pn__rom_map(w, xt, ns, w->sX, w->tx, NULL, NULL);
-                for (nobj = 0, s = 0; s < ns * (size_t)d; ++s) nobj += (w->sxt[s] - w->tx[s]) * (w->sxt[s] - w->tx[s]);
-                if (nobj <= obj || step < 1e-4) break;
-                step /= 2;
+                pn__rom_misfit_ctx mc;
+                mc.w = w, mc.n = ns, mc.X = w->sX, mc.target = w->sxt, mc.x = w->tx;
+                step = pn__rom_armijo(pn__rom_misfit, &mc, (size_t)K, xh, dlt, obj, 0, 1, 1.0 / 16384, xt, &nobj);
             }
-            if (!(nobj <= obj)) break;
+            if (step == 0) break;
             for (i = 0; i < K; ++i) xh[i] += step * dlt[i];
             obj = nobj;
             if (step * step * dn <= 1e-24 * (xn + 1)) break;
@@ -2167,6 +2164,11 @@ static int pn__rom_ip(pn_rom_world *w, const double *z, double *E, double *grad,
     return pn__rom_finite(e) && (!grad || pn__rom_all_finite((size_t)K, grad));
 }
 
+/* the incremental potential's value for the kit's line search */
+static pn_result pn__rom_ip_value(void *ctx, const double *z, double *E) {
+    return pn__rom_ip((pn_rom_world *)ctx, z, E, NULL, NULL) ? PN_OK : PN_ERROR_NONFINITE;
+}
+
 static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *st) {
     int d = w->dim, K = w->latent, i, it, a, mode = (int)w->desc.integrator;
     size_t C, c, dK = (size_t)(d * K);
@@ -2260,14 +2262,11 @@ static pn_result pn__rom_step_implicit(pn_rom_world *w, double h, pn_rom_stats *
             st->newton_iters = it + 1;
             break;
         }
-        for (;;) { /* Armijo backtracking */
+        { /* Armijo backtracking (the kit's) */
             double zt[PN_ROM_MAX_LATENT];
-            for (i = 0; i < K; ++i) zt[i] = z[i] + alpha * dz[i];
-            if (pn__rom_ip(w, zt, &Et, NULL, NULL) && Et <= E + 1e-4 * alpha * gd) break;
-            alpha /= 2;
-            if (alpha < 1e-4) break;
+            alpha = pn__rom_armijo(pn__rom_ip_value, w, (size_t)K, z, dz, E, gd, 1, 1e-4, zt, &Et);
         }
-        if (alpha < 1e-4) break;
+        if (alpha == 0) break;
         for (i = 0; i < K; ++i) z[i] += alpha * dz[i];
         E = Et;
         st->newton_iters = it + 1;
@@ -2323,15 +2322,13 @@ PN__DEF pn_result pn_rom_fit(pn_rom_world *w, const double *x, const double *v, 
         for (obj = 0, p = 0; p < nd; ++p) r[p] = x[p] - gx[p], obj += r[p] * r[p];
         if (!pn__rom_lsq(d, K, n, G, r, dl)) break;
         for (i = 0; i < K; ++i) dn += dl[i] * dl[i], xn += xh[i] * xh[i];
-        for (;;) {
+        { /* backtracking (the kit's): halve until the misfit does not rise, down to 2^-20 */
             double xt[PN_ROM_MAX_LATENT];
-            for (i = 0; i < K; ++i) xt[i] = xh[i] + step * dl[i];
-            pn__rom_map(w, xt, n, w->X, gx, NULL, NULL);
-            for (nobj = 0, p = 0; p < nd; ++p) nobj += (x[p] - gx[p]) * (x[p] - gx[p]);
-            if (nobj <= obj || step < 1e-6) break;
-            step /= 2;
+            pn__rom_misfit_ctx mc;
+            mc.w = w, mc.n = n, mc.X = w->X, mc.target = x, mc.x = gx;
+            step = pn__rom_armijo(pn__rom_misfit, &mc, (size_t)K, xh, dl, obj, 0, 1, 1.0 / 1048576, xt, &nobj);
         }
-        if (!(nobj <= obj)) break;
+        if (step == 0) break;
         for (i = 0; i < K; ++i) xh[i] += step * dl[i];
         obj = nobj;
         if (step * step * dn <= 1e-28 * (xn + 1)) break;

@@ -107,7 +107,7 @@ int main(int argc, char **argv) {
             desc.snow_theta_c = 0.025;
             desc.snow_theta_s = 0.0075;
             desc.snow_xi = 10;
-            if (pn_material_init(&m, &desc, NULL) != PN_OK) return 1;
+            if (pn_material_init(&m, &desc, NULL, 0) != PN_OK) return 1;
             for (op = 0; op < 6; ++op) {
                 int vm = m.plastic == PN_PLASTIC_VON_MISES && m.elastic == PN_ELASTIC_STVK_HENCKY;
                 ns[op] = (op == OP_VM_ENERGY && !vm) ? -1 : bench_op(op, &m, d, Fs[d - 2], reps, &sink);
@@ -138,11 +138,11 @@ int main(int argc, char **argv) {
         long it, n;
         int k, a;
         clock_t t0;
-        if (mo->kind != PN_MODEL_ENERGY || pn_model_material(mo, 1e7, &m, NULL) != PN_OK) continue;
+        if (mo->kind != PN_MODEL_ENERGY || pn_model_material(mo, 1e7, &m, NULL, 0) != PN_OK) continue;
         d = mo->dim;
         memset(&pd, 0, sizeof pd);
         pd.energy = mo;
-        if (pn_pnet_init(&net, &pd, &m, d, NULL) != PN_OK) continue;
+        if (pn_pnet_init(&net, &pd, &m, d, NULL, 0) != PN_OK) continue;
         for (k = 0; k < NF; ++k) {
             const pn_real *F0 = Fs[d - 2] + 9 * k;
             pn_pnet_prepare(&net, F0, 0, &pts[k], NULL, NULL);

@@ -84,14 +84,14 @@ static int column(int res, double courant, double end, double settle, deposit *a
     pn_ex_scene s;
     pn_mpm_world *w = NULL;
     pn_mpm_advance_desc a;
-    const char *why = "";
+    char why[256] = "";
     double t = 0, t0 = pn_ex_seconds();
     pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
     s.res = res;
-    s.energy = PN_MPM_ENERGY_LAGGED; /* explicit runs ignore it; no network to set up */
+    s.energy = PN_ENERGY_LAGGED; /* explicit runs ignore it; no network to set up */
     if (filter_s >= 0) s.filter_s = filter_s;
     s.friction = friction;
-    if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+    if (pn_ex_scene_create(&s, &w, why, sizeof why) != PN_OK) {
         fprintf(stderr, "bench_deposit: %s\n", why);
         return 0;
     }
@@ -127,7 +127,7 @@ static int press(int res, double courant, double perturb, int frames, double *f,
     pn_ex_scene s;
     pn_mpm_world *w = NULL;
     pn_mpm_advance_desc a;
-    const char *why = "";
+    char why[256] = "";
     double t0 = pn_ex_seconds();
     size_t p;
     int k;
@@ -135,8 +135,8 @@ static int press(int res, double courant, double perturb, int frames, double *f,
     s.res = res;
     if (filter_s >= 0) s.filter_s = filter_s;
     s.E_pa *= 1 + perturb;
-    s.energy = PN_MPM_ENERGY_LAGGED;
-    if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+    s.energy = PN_ENERGY_LAGGED;
+    if (pn_ex_scene_create(&s, &w, why, sizeof why) != PN_OK) {
         fprintf(stderr, "bench_deposit: %s\n", why);
         return 0;
     }

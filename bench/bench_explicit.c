@@ -82,7 +82,7 @@ static pn_mpm_world *scene(int dim, int n, long per_block, int jelly, double per
     pn_mpm_world *w = NULL;
     pn_real *x;
     unsigned long long seed = 88;
-    const char *why = "";
+    char why[256] = "";
     size_t p, np = (size_t)(3 * per_block);
     int g, b, i;
     memset(&d, 0, sizeof d);
@@ -90,7 +90,7 @@ static pn_mpm_world *scene(int dim, int n, long per_block, int jelly, double per
     d.res[0] = d.res[1] = d.res[2] = n;
     d.dx_m = (pn_real)(1.0 / n);
     d.gravity[1] = -200;
-    d.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    d.boundary = PN_BOUNDARY_SEPARATE;
     d.wall_cells = (int)(0.05 * n + 0.999) - 1; /* the program holds nodes below 0.05: rows 0..wall */
     d.max_particles = np;
     d.parallel_min_particles = 1;
@@ -104,7 +104,7 @@ static pn_mpm_world *scene(int dim, int n, long per_block, int jelly, double per
     md.snow_xi = 10;
     md.snow_jp_min = (pn_real)0.6; /* the program clamps J_p to [0.6, 20] */
     md.snow_jp_max = 20;
-    if (pn_material_init(&mat, &md, &why) != PN_OK || pn_mpm_create(&d, &w, &why) != PN_OK) {
+    if (pn_material_init(&mat, &md, why, sizeof why) != PN_OK || pn_mpm_create(&d, &w, why, sizeof why) != PN_OK) {
         fprintf(stderr, "bench_explicit: %s\n", why);
         return NULL;
     }

@@ -86,7 +86,7 @@ typedef enum { RUN_OK = 0, RUN_STEP_FAILED, RUN_UNBOUNDED, RUN_TIMEOUT } run_sta
 typedef struct bench_run {
     char role[16];        /* reference, ref_check, ref_perturbed, fair, implicit    */
     int implicit, fp;     /* fixed-point passes (implicit)                          */
-    pn_mpm_energy energy; /* implicit only                                          */
+    pn_energy energy; /* implicit only                                          */
     int stress;           /* implicit in the stress formulation (energy: the group's law) */
     double dt;
     run_status status;
@@ -144,9 +144,9 @@ static int bench_frames(const bench_cfg *cfg, const pn_ex_scene *s) {
 static const char *energy_name(const bench_run *r) {
     if (!r->implicit) return "return_mapping";
     if (r->stress) return "stress";
-    return r->energy == PN_MPM_ENERGY_PNET     ? "pnet"
-           : r->energy == PN_MPM_ENERGY_LAGGED ? "lagged"
-           : r->energy == PN_MPM_ENERGY_DP     ? "dp"
+    return r->energy == PN_ENERGY_PNET     ? "pnet"
+           : r->energy == PN_ENERGY_LAGGED ? "lagged"
+           : r->energy == PN_ENERGY_DP     ? "dp"
                                                : "other";
 }
 
@@ -209,7 +209,7 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     pn_ex_scene s = *s0;
     pn_mpm_world *w;
     pn_mpm_implicit_desc id;
-    const char *why;
+    char why[256] = "";
     double frame_dt = 1.0 / BENCH_FPS, kin0, pot0, kin, pot, vmax, *field;
     long per_frame = (long)floor(frame_dt / r->dt + 0.5);
     size_t nodes;
@@ -220,7 +220,7 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     r->wall = r->cpu = r->sim = 0;
     memset(&r->tally, 0, sizeof r->tally);
     if (r->implicit) s.energy = r->energy;
-    if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+    if (pn_ex_scene_create(&s, &w, why, sizeof why) != PN_OK) {
         fprintf(stderr, "bench_mpm: %s\n", why);
         exit(1);
     }
@@ -444,13 +444,13 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     size_t nodes;
     double *ref, *tmp, fair_wps;
     pn_mpm_world *w;
-    const char *why;
+    char why[256] = "";
     bench_run *r;
     /* the last is the stress formulation (its law is the group's: the DP energy's entry only
        selects sand's Drucker-Prager groups); fixed-point passes do not apply to it, so it runs
        at the first of them only */
-    static const pn_mpm_energy energies_run[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP,
-                                                 PN_MPM_ENERGY_DP};
+    static const pn_energy energies_run[] = {PN_ENERGY_PNET, PN_ENERGY_LAGGED, PN_ENERGY_DP,
+                                                 PN_ENERGY_DP};
     int n_energies = 4;
     pn_ex_scene_default(&s, kind, dim);
     s.res = cfg->res[dim];
@@ -460,7 +460,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     memset(out, 0, sizeof *out);
     out->name = kind == PN_EX_SAND_COLUMN ? "sand" : "snow";
     out->dim = dim;
-    if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+    if (pn_ex_scene_create(&s, &w, why, sizeof why) != PN_OK) {
         fprintf(stderr, "bench_mpm: %s\n", why);
         exit(1);
     }
@@ -517,7 +517,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
                 strcpy(r->role, "implicit");
                 r->implicit = 1;
                 r->stress = e == 3;
-                r->energy = e == 3 && kind != PN_EX_SAND_COLUMN ? PN_MPM_ENERGY_LAGGED : energies_run[e];
+                r->energy = e == 3 && kind != PN_EX_SAND_COLUMN ? PN_ENERGY_LAGGED : energies_run[e];
                 r->dt = cfg->dts[i];
                 r->fp = cfg->fps_iters[j];
                 bench_run_scene(&s, r, frames, cfg->max_run_s, &cfg->solver, NULL, ref);
@@ -564,7 +564,7 @@ static double cost_ms(pn_mpm_world *w, int implicit, double dt, const pn_mpm_imp
    explicit stepping (the column collapsing, the plate pressing the snow, or the ball hitting
    the floor), 0.4 of the run. */
 static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FILE *md) {
-    static const pn_mpm_energy en[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP};
+    static const pn_energy en[] = {PN_ENERGY_PNET, PN_ENERGY_LAGGED, PN_ENERGY_DP};
     static const char *const names[] = {"pnet", "lagged", "dp"};
     pn_ex_scene s;
     bench_run fair;
@@ -590,12 +590,12 @@ static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FIL
         pn_mpm_world *w;
         pn_mpm_implicit_desc id;
         pn_ex_tally t;
-        const char *why;
+        char why[256] = "";
         double one, more, real;
         long k;
         if (!(cfg->energy_mask >> e & 1)) continue;
         s.energy = en[e];
-        if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+        if (pn_ex_scene_create(&s, &w, why, sizeof why) != PN_OK) {
             fprintf(stderr, "bench_mpm: %s\n", why);
             exit(1);
         }
@@ -630,7 +630,7 @@ static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FIL
 /* the sweep's implicit runs at every E: energy, step, passes, linear solver */
 typedef struct sweep_cfg {
     const char *name;
-    pn_mpm_energy energy;
+    pn_energy energy;
     double dt;
     int fp;
     pn_mpm_linear_solver linear;
@@ -638,27 +638,27 @@ typedef struct sweep_cfg {
     pn_mpm_stress_unknowns where; /* stress: pn_mpm_implicit_desc.stress_unknowns */
 } sweep_cfg;
 static const sweep_cfg sweep_cfgs[] = {
-    {"lagged, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
-    {"lagged, dt 1e-3, Jacobi", PN_MPM_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_JACOBI, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
-    {"lagged, dt 4e-3, multigrid", PN_MPM_ENERGY_LAGGED, 4e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
-    {"lagged 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_LAGGED, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
-    {"DP 4 passes, dt 1e-3, multigrid", PN_MPM_ENERGY_DP, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"lagged, dt 1e-3, multigrid", PN_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"lagged, dt 1e-3, Jacobi", PN_ENERGY_LAGGED, 1e-3, 1, PN_MPM_LINEAR_JACOBI, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"lagged, dt 4e-3, multigrid", PN_ENERGY_LAGGED, 4e-3, 1, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"lagged 4 passes, dt 1e-3, multigrid", PN_ENERGY_LAGGED, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
+    {"DP 4 passes, dt 1e-3, multigrid", PN_ENERGY_DP, 1e-3, 4, PN_MPM_LINEAR_MULTIGRID, PN_MPM_FORMULATION_ENERGY, PN_MPM_STRESS_PARTICLES},
     /* the stress formulation (Gauss-Seidel; no linear solver); 2e-2 s: one step per frame
        of these 25 fps frames' half (1/60 s does not divide them) */
-    {"stress, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
-    {"stress, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
-    {"stress, dt 2e-2", PN_MPM_ENERGY_DP, 2e-2, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
-    {"stress by cell, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
+    {"stress, dt 1e-3", PN_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
+    {"stress, dt 4e-3", PN_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
+    {"stress, dt 2e-2", PN_ENERGY_DP, 2e-2, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_PARTICLES},
+    {"stress by cell, dt 1e-3", PN_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
      PN_MPM_STRESS_CELLS},
-    {"stress by cell, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
+    {"stress by cell, dt 4e-3", PN_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
      PN_MPM_STRESS_CELLS},
-    {"stress, cells then particles, dt 1e-3", PN_MPM_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT,
+    {"stress, cells then particles, dt 1e-3", PN_ENERGY_DP, 1e-3, 1, PN_MPM_LINEAR_DEFAULT,
      PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_CELLS_THEN_PARTICLES},
-    {"stress, cells then particles, dt 4e-3", PN_MPM_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT,
+    {"stress, cells then particles, dt 4e-3", PN_ENERGY_DP, 4e-3, 1, PN_MPM_LINEAR_DEFAULT,
      PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_CELLS_THEN_PARTICLES},
-    {"stress, dt 5e-4", PN_MPM_ENERGY_DP, 5e-4, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
+    {"stress, dt 5e-4", PN_ENERGY_DP, 5e-4, 1, PN_MPM_LINEAR_DEFAULT, PN_MPM_FORMULATION_STRESS,
      PN_MPM_STRESS_PARTICLES},
-    {"stress, cells then particles, dt 5e-4", PN_MPM_ENERGY_DP, 5e-4, 1, PN_MPM_LINEAR_DEFAULT,
+    {"stress, cells then particles, dt 5e-4", PN_ENERGY_DP, 5e-4, 1, PN_MPM_LINEAR_DEFAULT,
      PN_MPM_FORMULATION_STRESS, PN_MPM_STRESS_CELLS_THEN_PARTICLES},
 };
 #define SWEEP_RUNS ((int)(sizeof sweep_cfgs / sizeof sweep_cfgs[0]))
@@ -666,7 +666,7 @@ static const sweep_cfg sweep_cfgs[] = {
 /* run c of the sweep on its scene: the frozen-yield DP energy is for Drucker-Prager sand */
 static int sweep_applies(const bench_cfg *cfg, int c) {
     return cfg->sweep_kind == PN_EX_SAND_COLUMN || sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS ||
-           sweep_cfgs[c].energy != PN_MPM_ENERGY_DP;
+           sweep_cfgs[c].energy != PN_ENERGY_DP;
 }
 
 /* the IoU an implicit run must reach for the crossover: docs/validation.md's bars */
@@ -727,8 +727,8 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             strcpy(r->role, "implicit");
             r->implicit = 1;
             r->energy = sweep_cfgs[c].energy;
-            if (cfg->sweep_kind != PN_EX_SAND_COLUMN && r->energy == PN_MPM_ENERGY_DP)
-                r->energy = PN_MPM_ENERGY_LAGGED; /* the stress runs use none; DP is sand's */
+            if (cfg->sweep_kind != PN_EX_SAND_COLUMN && r->energy == PN_ENERGY_DP)
+                r->energy = PN_ENERGY_LAGGED; /* the stress runs use none; DP is sand's */
             r->dt = sweep_cfgs[c].dt;
             r->fp = sweep_cfgs[c].fp;
             id.linear_solver = sweep_cfgs[c].linear;
@@ -857,8 +857,8 @@ static void write_svg(const char *path, const bench_scene *sc, int n_sc) {
             char label[64];
             const char *color = !r->implicit                       ? "#111"
                                 : r->stress                       ? "#b0249a"
-                                : r->energy == PN_MPM_ENERGY_PNET ? "#1f5fbf"
-                                : r->energy == PN_MPM_ENERGY_DP   ? "#2a9d3a"
+                                : r->energy == PN_ENERGY_PNET ? "#1f5fbf"
+                                : r->energy == PN_ENERGY_DP   ? "#2a9d3a"
                                                                   : "#e07b00";
             if (wall_per_sim(r) <= 0 || !r->frames_done) continue;
             if (r->implicit) snprintf(label, sizeof label, "%g x%d%s", r->dt, r->fp, r->status == RUN_OK ? "" : " (!)");
@@ -1014,13 +1014,13 @@ static void bench_materials(const bench_cfg *cfg, int n_dts, const double *dts, 
             double *fields, ref_run;
             size_t nodes;
             pn_mpm_world *w;
-            const char *why;
+            char why[256] = "";
             pn_ex_scene_default(&s, PN_EX_SAND_COLUMN, 2);
             s.res = cfg->res[2];
             s.model = pn_model_sand_any_2d();
             s.nu = nus[b], s.friction_deg = phis[a];
             frames = bench_frames(cfg, &s);
-            if (pn_ex_scene_create(&s, &w, &why) != PN_OK) {
+            if (pn_ex_scene_create(&s, &w, why, sizeof why) != PN_OK) {
                 fprintf(stderr, "bench_mpm: %s\n", why);
                 exit(1);
             }
@@ -1047,7 +1047,7 @@ static void bench_materials(const bench_cfg *cfg, int n_dts, const double *dts, 
                 memset(&r, 0, sizeof r);
                 strcpy(r.role, "implicit");
                 r.implicit = 1, r.dt = dts[k / 3], r.fp = fps[k / 3];
-                r.energy = which == 1 ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_PNET;
+                r.energy = which == 1 ? PN_ENERGY_LAGGED : PN_ENERGY_PNET;
                 if (which == 2) sk.model = pn_model_sand_2d(), sk.nu = sk.friction_deg = 0;
                 bench_run_scene(&sk, &r, frames, 0, NULL, NULL, fields);
                 ro = r.status == RUN_OK ? r.runout : 0;

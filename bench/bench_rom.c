@@ -140,7 +140,7 @@ static int fom_substeps(const pn_rs_scene *s) {
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE;
     md.youngs_modulus_pa = s->youngs_pa, md.poisson_ratio = s->poisson;
-    if (pn_mpm_create(&wd, &w, NULL) == PN_OK && pn_material_init(&mat, &md, NULL) == PN_OK &&
+    if (pn_mpm_create(&wd, &w, NULL, 0) == PN_OK && pn_material_init(&mat, &md, NULL, 0) == PN_OK &&
         pn_mpm_add_group(w, &mat, s->density) >= 0 && pn_mpm_stable_dt(w, &dts) == PN_OK && dts > 0)
         n = (int)ceil(s->frame_dt / (0.7 * (double)dts));
     pn_mpm_destroy(w);
@@ -166,12 +166,12 @@ static double fom_speed_steps(const pn_rs_scene *s, const pn_rs_instance *in, in
     pn_real dts;
     int g, i, f, j, nsub, next = 0, done = 0;
     memset(&wd, 0, sizeof wd);
-    wd.dim = 3, wd.dx_m = s->dx, wd.boundary = PN_MPM_BOUNDARY_STICKY, wd.max_particles = cap;
+    wd.dim = 3, wd.dx_m = s->dx, wd.boundary = PN_BOUNDARY_STICKY, wd.max_particles = cap;
     for (i = 0; i < 3; ++i) wd.res[i] = s->res[i], wd.gravity[i] = in->gravity[i];
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE;
     md.youngs_modulus_pa = s->youngs_pa, md.poisson_ratio = s->poisson;
-    if (pn_mpm_create(&wd, &w, NULL) != PN_OK || pn_material_init(&mat, &md, NULL) != PN_OK) return -1;
+    if (pn_mpm_create(&wd, &w, NULL, 0) != PN_OK || pn_material_init(&mat, &md, NULL, 0) != PN_OK) return -1;
     g = pn_mpm_add_group(w, &mat, s->density);
     if (!pn_rs_setup(w, g, s, in, 1, NULL, X, cap)) return -1;
     pn_mpm_stable_dt(w, &dts);

@@ -97,12 +97,12 @@ static void energy_report(const pn_model *mo, const pn_material *mat, int n, int
         for (k = 0; pn_models_all[k]; ++k)
             if (!strcmp(pn_models_all[k]()->name, mo->return_map)) desc.return_map = pn_models_all[k]();
     desc.regularizer = -1;
-    if (pn_pnet_init(&net, &desc, &m, d, NULL) != PN_OK) {
+    if (pn_pnet_init(&net, &desc, &m, d, NULL, 0) != PN_OK) {
         fg->failures = n;
         return;
     }
     desc.regularizer = 0;
-    pn_pnet_init(&net_reg, &desc, &m, d, NULL);
+    pn_pnet_init(&net_reg, &desc, &m, d, NULL, 0);
     rng.s = 20261122u + (unsigned)d;
     for (k = 0; k < n; ++k) {
         pn_real F0[9], F[9], Fa[9], h, T0[9], T[9], Ta[9], P[9], G[9], hG, hn, psi;
@@ -271,7 +271,7 @@ static void return_report(const pn_model *mo, int n, int timing, return_figures 
     bench_rng rng;
     double sl = 0, st = 0;
     memset(fg, 0, sizeof *fg);
-    pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL);
+    pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL, 0);
     rng.s = 777u + (unsigned)d;
     for (k = 0; k < n; ++k) {
         pn_real F0[9], F[9], Fa[9], h, Z[9], Zr[9], T[9], Tr[9], hn, hr, U[9], s[3], V[9], sr[3];
@@ -348,7 +348,7 @@ static int material_at(const pn_model *mo, const double *v, pn_material *m) {
     int i;
     pn_model_material_desc(mo, (pn_real)mo->youngs_modulus_train_pa, &d);
     for (i = 0; i < mo->n_params; ++i) pn_model_param_set(&d, mo->param[i].kind, v[i]);
-    return pn_material_init(m, &d, NULL) == PN_OK;
+    return pn_material_init(m, &d, NULL, 0) == PN_OK;
 }
 
 /* a single-material model's value of parameter kind k (pn_model_param units) */
@@ -377,7 +377,7 @@ static const pn_model *single_at(const pn_model *mo, const double *v) {
         nd.energy = s; /* with its learned return mapping, if it has one (the errors are against pn_return_map) */
         for (j = 0; s->return_map && pn_models_all[j]; ++j)
             if (!strcmp(pn_models_all[j]()->name, s->return_map)) nd.return_map = pn_models_all[j]();
-        if (pn_pnet_init(&net, &nd, &a, mo->dim, NULL) == PN_OK) return s; /* it serves a: the same material */
+        if (pn_pnet_init(&net, &nd, &a, mo->dim, NULL, 0) == PN_OK) return s; /* it serves a: the same material */
     }
     return NULL;
 }
@@ -405,7 +405,7 @@ static int conditioned_report(FILE *f, const char *only, int n, int banner) {
             const pn_model *s = pn_models_all[j]();
             pn_material sm;
             if (s->n_params || s->kind != PN_MODEL_ENERGY || s->dim != mo->dim || s->plastic != mo->plastic ||
-                s->elastic != mo->elastic || pn_model_material(s, 1, &sm, NULL) != PN_OK)
+                s->elastic != mo->elastic || pn_model_material(s, 1, &sm, NULL, 0) != PN_OK)
                 continue;
             for (i = 0; i < np; ++i) pts[npts][i] = model_value(s, mo->param[i].kind);
             for (g = 0; g < npts; ++g) {
@@ -512,7 +512,7 @@ int main(int argc, char **argv) {
         pn_material m;
         char hid[64];
         if (mo->kind != PN_MODEL_ENERGY || mo->n_params || (only && strcmp(only, mo->name))) continue;
-        pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL);
+        pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL, 0);
         energy_report(mo, &m, n, !banner, &e);
         fails += e.failures;
         hidden_of(mo, hid, sizeof hid);

@@ -100,7 +100,7 @@ int main(int argc, char **argv) {
     wd.res[0] = wd.res[1] = wd.res[2] = opt.res;
     wd.dx_m = dx;
     wd.gravity[1] = -9.81;
-    wd.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    wd.boundary = PN_BOUNDARY_SEPARATE;
     wd.friction = 0.5;
     wd.filter_time_s = 2e-3;
 
@@ -110,12 +110,12 @@ int main(int argc, char **argv) {
     heap.center_m[0] = 0.5, heap.center_m[1] = 3 * dx + 0.15, heap.center_m[2] = 0.5;
     heap.half_extent_m[0] = 0.25, heap.half_extent_m[1] = 0.15, heap.half_extent_m[2] = 0.25;
     heap.jitter = 1;
-    const char *why = "";
+    char why[256] = "";
     size_t n = 0;
-    if (pn_mpm_fill_count(&wd, &heap, &n, &why) != PN_OK) return std::fprintf(stderr, "game_loop: %s\n", why), 1;
+    if (pn_mpm_fill_count(&wd, &heap, &n, why, sizeof why) != PN_OK) return std::fprintf(stderr, "game_loop: %s\n", why), 1;
     wd.max_particles = n;
     pn_mpm_world *w = nullptr;
-    if (pn_mpm_create(&wd, &w, &why) != PN_OK) return std::fprintf(stderr, "game_loop: %s\n", why), 1;
+    if (pn_mpm_create(&wd, &w, why, sizeof why) != PN_OK) return std::fprintf(stderr, "game_loop: %s\n", why), 1;
 
     pn_material_desc md{};
     md.plastic = PN_PLASTIC_DRUCKER_PRAGER;
@@ -123,16 +123,16 @@ int main(int argc, char **argv) {
     md.poisson_ratio = 0.3;
     md.friction_angle_deg = 35;
     pn_material sand;
-    if (pn_material_init(&sand, &md, &why) != PN_OK) return std::fprintf(stderr, "game_loop: %s\n", why), 1;
+    if (pn_material_init(&sand, &md, why, sizeof why) != PN_OK) return std::fprintf(stderr, "game_loop: %s\n", why), 1;
     heap.group = pn_mpm_add_group(w, &sand, 1600);
-    pn_mpm_collider tool{};
-    tool.shape = PN_MPM_SHAPE_SPHERE;
-    tool.boundary = PN_MPM_BOUNDARY_SLIP;
+    pn_collider tool{};
+    tool.shape = PN_SHAPE_SPHERE;
+    tool.boundary = PN_BOUNDARY_SLIP;
     tool.radius_m = 0.08;
     tool.center_m[0] = 0.1, tool.center_m[1] = 0.2, tool.center_m[2] = 0.5;
     int tool_index = -1;
     if (heap.group < 0 || pn_mpm_fill(w, &heap, nullptr) != PN_OK ||
-        pn_mpm_group_set_energy(w, heap.group, PN_MPM_ENERGY_DP, nullptr) != PN_OK ||
+        pn_mpm_group_set_energy(w, heap.group, PN_ENERGY_DP, nullptr) != PN_OK ||
         pn_mpm_add_collider(w, &tool, &tool_index) != PN_OK)
         return std::fprintf(stderr, "game_loop: %s\n", pn_mpm_error(w)), 1;
 

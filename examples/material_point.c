@@ -435,7 +435,7 @@ fail:
 static int pn_mp_setup(int argc, char **argv, pn_mp_opts *o, pn_mp_run *r, FILE *err) {
     char given[PN_MP_NFLAGS];
     pn_material_desc desc;
-    const char *why = NULL;
+    char why[256] = "";
     int plastic = PN_PLASTIC_VON_MISES, elastic;
     pn_result res;
     memset(given, 0, sizeof given);
@@ -497,9 +497,9 @@ static int pn_mp_setup(int argc, char **argv, pn_mp_opts *o, pn_mp_run *r, FILE 
     desc.snow_theta_c = (pn_real)o->theta_c;
     desc.snow_theta_s = (pn_real)o->theta_s;
     desc.snow_xi = (pn_real)o->snow_xi;
-    res = pn_material_init(&r->m, &desc, &why);
+    res = pn_material_init(&r->m, &desc, why, sizeof why);
     if (res != PN_OK) {
-        fprintf(err, "material_point: bad material: %s (%s)\n", why ? why : "?",
+        fprintf(err, "material_point: bad material: %s (%s)\n", why,
                 pn_result_string(res));
         return 0;
     }

@@ -28,7 +28,7 @@ static int add_group(pn_mpm_world *w, int k) {
     static const double rho[KINDS] = {1600, 1100, 7800, 400};
     pn_material_desc d;
     pn_material m;
-    const char *why = "";
+    char why[256] = "";
     memset(&d, 0, sizeof d);
     d.poisson_ratio = 0.3;
     switch (k) {
@@ -45,7 +45,7 @@ static int add_group(pn_mpm_world *w, int k) {
         d.camclay_xi = 3;
         break;
     }
-    if (pn_material_init(&m, &d, &why) != PN_OK) {
+    if (pn_material_init(&m, &d, why, sizeof why) != PN_OK) {
         fprintf(stderr, "materials: %s\n", why);
         return -1;
     }
@@ -56,12 +56,13 @@ int main(int argc, char **argv) {
     pn_mpm_desc wd;
     pn_mpm_world *w = NULL;
     pn_mpm_fill_desc f[KINDS];
-    pn_mpm_collider post, plate;
+    pn_collider post, plate;
     pn_ex_view view;
     pn_apng *anim = NULL;
     unsigned char *rgb = NULL;
     pn_real *color = NULL;
-    const char *out = "build/materials_frames", *why = "";
+    const char *out = "build/materials_frames";
+    char why[256] = "";
     double frames_f = 30, res_f = 64, dx, fl;
     int png = 0, apng = 0, quiet = 0, k, frame, plate_index = -1, i;
     size_t n = 0, cnt, p;
@@ -86,7 +87,7 @@ int main(int argc, char **argv) {
     wd.res[0] = wd.res[1] = (int)res_f;
     wd.dx_m = (pn_real)dx;
     wd.gravity[1] = (pn_real)-9.81;
-    wd.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    wd.boundary = PN_BOUNDARY_SEPARATE;
     wd.friction = (pn_real)0.4;
     wd.filter_time_s = (pn_real)2e-3;
     /* the shapes, all on the grid's lattice (2 x 2 particles per cell) */
@@ -109,11 +110,11 @@ int main(int argc, char **argv) {
     for (k = 0; k < KINDS; ++k) {
         f[k].jitter = 1;
         f[k].seed = (unsigned long)k + 1;
-        if (pn_mpm_fill_count(&wd, &f[k], &cnt, &why) != PN_OK) return fprintf(stderr, "materials: %s\n", why), 1;
+        if (pn_mpm_fill_count(&wd, &f[k], &cnt, why, sizeof why) != PN_OK) return fprintf(stderr, "materials: %s\n", why), 1;
         n += cnt;
     }
     wd.max_particles = n;
-    if (pn_mpm_create(&wd, &w, &why) != PN_OK) return fprintf(stderr, "materials: %s\n", why), 1;
+    if (pn_mpm_create(&wd, &w, why, sizeof why) != PN_OK) return fprintf(stderr, "materials: %s\n", why), 1;
     for (k = 0; k < KINDS; ++k)
         if ((f[k].group = add_group(w, k)) < 0 || pn_mpm_fill(w, &f[k], NULL) != PN_OK) {
             fprintf(stderr, "materials: %s\n", pn_mpm_error(w));
@@ -121,14 +122,14 @@ int main(int argc, char **argv) {
             return 1;
         }
     memset(&post, 0, sizeof post); /* a round post the bar falls across */
-    post.shape = PN_MPM_SHAPE_SPHERE;
-    post.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    post.shape = PN_SHAPE_SPHERE;
+    post.boundary = PN_BOUNDARY_SEPARATE;
     post.friction = (pn_real)0.3;
     post.center_m[0] = (pn_real)0.74, post.center_m[1] = (pn_real)(fl + 0.12);
     post.radius_m = (pn_real)0.05;
     memset(&plate, 0, sizeof plate); /* a plate that comes in from the left at 0.3 m/s */
-    plate.shape = PN_MPM_SHAPE_BOX;
-    plate.boundary = PN_MPM_BOUNDARY_SLIP;
+    plate.shape = PN_SHAPE_BOX;
+    plate.boundary = PN_BOUNDARY_SLIP;
     plate.center_m[0] = (pn_real)0.08, plate.center_m[1] = (pn_real)(fl + 0.06);
     plate.half_extent_m[0] = (pn_real)0.02, plate.half_extent_m[1] = (pn_real)0.06;
     plate.velocity_m_s[0] = (pn_real)0.3;
@@ -183,8 +184,8 @@ int main(int argc, char **argv) {
             d.scale_bar = 1;
             d.title = view.title;
             for (i = 0; i < 2; ++i) {
-                const pn_mpm_collider *c = &w->colliders[i];
-                shapes[i].kind = c->shape == PN_MPM_SHAPE_BOX ? PN_RENDER_BOX : PN_RENDER_SPHERE;
+                const pn_collider *c = &w->colliders[i];
+                shapes[i].kind = c->shape == PN_SHAPE_BOX ? PN_RENDER_BOX : PN_RENDER_SPHERE;
                 shapes[i].center[0] = (double)(c->center_m[0] + w->time_s * c->velocity_m_s[0]);
                 shapes[i].center[1] = (double)(c->center_m[1] + w->time_s * c->velocity_m_s[1]);
                 shapes[i].half_extent[0] = (double)c->half_extent_m[0], shapes[i].half_extent[1] = (double)c->half_extent_m[1];

@@ -27,9 +27,9 @@ int main(int argc, char **argv) {
     pn_frame_cli o;
     pn_frame_desc fd;
     pn_fem_desc md;
-    pn_fem_group steel;
+    pn_group steel;
     pn_material_desc sd;
-    pn_mpm_collider ground, plate;
+    pn_collider ground, plate;
     pn_fem_implicit_desc id;
     pn_fem_mesh *m = NULL;
     pn_pnet net; /* the mesh keeps a pointer to it: it lives as long as the mesh */
@@ -54,7 +54,7 @@ int main(int argc, char **argv) {
     sd.hardening_modulus_pa = (pn_real)(fd.hardening_ratio * fd.E);
     memset(&steel, 0, sizeof steel);
     steel.density_kg_m3 = (pn_real)fd.density;
-    if (pn_material_init(&steel.material, &sd, NULL) != PN_OK) {
+    if (pn_material_init(&steel.material, &sd, NULL, 0) != PN_OK) {
         fprintf(stderr, "metal_frame: E %g Pa, yield ratio %g or hardening ratio %g is out of range\n", fd.E, fd.yield_ratio,
                 fd.hardening_ratio);
         free(X), free(el);
@@ -68,21 +68,21 @@ int main(int argc, char **argv) {
     if (pn_fem_create(&md, &m, why, sizeof why) == PN_OK) {
         if (fd.energy == PN_FRAME_PNET || fd.energy == PN_FRAME_PNET_NH || fd.energy == PN_FRAME_PNET_NH_ANY) {
             pn_pnet_desc pd;
-            const char *w2 = NULL;
+            char w2[256] = "";
             memset(&pd, 0, sizeof pd);
             pd.energy = model, pd.return_map = ret, pd.regularizer = (pn_real)fd.regularizer;
             pd.regularizer_form = PN_PNET_REG_STRAIN; /* bending turns elements: Eq. 11's form would resist it */
-            if (pn_pnet_init(&net, &pd, &steel.material, o.dim, &w2) != PN_OK) {
-                snprintf(why, sizeof why, "%s", w2 ? w2 : "pn_pnet_init failed");
+            if (pn_pnet_init(&net, &pd, &steel.material, o.dim, w2, sizeof w2) != PN_OK) {
+                snprintf(why, sizeof why, "%s", w2);
                 fails = 1;
-            } else if (pn_fem_group_set_energy(m, 0, PN_MPM_ENERGY_PNET, &net) != PN_OK)
+            } else if (pn_fem_group_set_energy(m, 0, PN_ENERGY_PNET, &net) != PN_OK)
                 fails = 2;
-        } else if (pn_fem_group_set_energy(m, 0, fd.energy == PN_FRAME_EXACT ? PN_MPM_ENERGY_EXACT_VM : PN_MPM_ENERGY_LAGGED,
+        } else if (pn_fem_group_set_energy(m, 0, fd.energy == PN_FRAME_EXACT ? PN_ENERGY_EXACT_VM : PN_ENERGY_LAGGED,
                                            NULL) != PN_OK)
             fails = 2;
         /* the ground, and the plate above the frame coming down at the flags' speed */
         memset(&ground, 0, sizeof ground);
-        ground.shape = PN_MPM_SHAPE_HALF_SPACE, ground.normal[1] = 1, ground.friction = (pn_real)fd.friction;
+        ground.shape = PN_SHAPE_HALF_SPACE, ground.normal[1] = 1, ground.friction = (pn_real)fd.friction;
         plate = ground;
         plate.normal[1] = -1, plate.center_m[1] = (pn_real)pn_frame_plate(&fd, 0), plate.velocity_m_s[1] = (pn_real)-fd.speed;
         if (!fails && (pn_fem_add_obstacle(m, &ground, NULL) != PN_OK || pn_fem_add_obstacle(m, &plate, NULL) != PN_OK))

@@ -37,12 +37,12 @@
 /* The column's world, with the library's calls: s holds the numbers the flags set (res, E,
    walls, jitter, aspect; pn_ex_scene_default gives the rest), energy what implicit steps
    minimize. NULL after a failure, said on stderr. Made twice: the run and its reference. */
-static pn_mpm_world *column_world(const char *prog, const pn_ex_scene *s, pn_mpm_energy energy) {
+static pn_mpm_world *column_world(const char *prog, const pn_ex_scene *s, pn_energy energy) {
     const pn_model *model = s->dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
     double dx = s->domain_m / s->res, sp = dx / 2, floor_m = PN_EX_WALL_CELLS * dx;
     int across = (int)(s->width_m / sp), up = (int)(s->aspect * s->width_m / sp), d = s->dim, i, g;
     double left = floor((s->domain_m / 2 - across * sp / 2) / sp + 0.5) * sp; /* on a lattice line */
-    const char *why = "";
+    char why[256] = "";
     pn_material_desc md;
     pn_material sand;
     pn_mpm_desc wd;
@@ -52,7 +52,7 @@ static pn_mpm_world *column_world(const char *prog, const pn_ex_scene *s, pn_mpm
     pn_result r;
     /* the sand the embedded PlasticityNet model was trained on (StVK-Hencky, Drucker-Prager), at E */
     pn_model_material_desc(model, (pn_real)s->E_pa, &md);
-    if ((r = pn_material_init(&sand, &md, &why)) != PN_OK) goto failed;
+    if ((r = pn_material_init(&sand, &md, why, sizeof why)) != PN_OK) goto failed;
     /* the world: res cells per axis, walls PN_EX_WALL_CELLS thick (the floor is their top), gravity */
     memset(&wd, 0, sizeof wd);
     wd.dim = d;
@@ -75,29 +75,29 @@ static pn_mpm_world *column_world(const char *prog, const pn_ex_scene *s, pn_mpm
     }
     fill.center_m[1] = (pn_real)(floor_m + up * sp / 2);
     fill.half_extent_m[1] = (pn_real)(up * sp / 2);
-    if ((r = pn_mpm_fill_count(&wd, &fill, &n, &why)) != PN_OK) goto failed;
+    if ((r = pn_mpm_fill_count(&wd, &fill, &n, why, sizeof why)) != PN_OK) goto failed;
     if (n == 0) {
         fprintf(stderr, "%s: the column has no particles (narrower than half a cell)\n", prog);
         return NULL;
     }
     wd.max_particles = n;
-    if ((r = pn_mpm_create(&wd, &w, &why)) != PN_OK) goto failed;
+    if ((r = pn_mpm_create(&wd, &w, why, sizeof why)) != PN_OK) goto failed;
     if ((g = pn_mpm_add_group(w, &sand, (pn_real)s->density_kg_m3)) < 0) r = PN_ERROR_INVALID_ARGUMENT;
     else {
         fill.group = g;
         r = pn_mpm_fill(w, &fill, NULL);
     }
-    if (r == PN_OK && energy == PN_MPM_ENERGY_PNET) { /* the network: the world keeps its own copy */
+    if (r == PN_OK && energy == PN_ENERGY_PNET) { /* the network: the world keeps its own copy */
         pn_pnet net;
         pn_pnet_desc nd;
         memset(&nd, 0, sizeof nd);
         nd.energy = model;
         nd.regularizer = (pn_real)s->regularizer;
-        if ((r = pn_pnet_init(&net, &nd, &sand, d, &why)) != PN_OK) goto failed;
-        r = pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net);
+        if ((r = pn_pnet_init(&net, &nd, &sand, d, why, sizeof why)) != PN_OK) goto failed;
+        r = pn_mpm_group_set_energy(w, g, PN_ENERGY_PNET, &net);
     } else if (r == PN_OK) r = pn_mpm_group_set_energy(w, g, energy, NULL);
     if (r == PN_OK) return w;
-    why = pn_mpm_error(w);
+    snprintf(why, sizeof why, "%s", pn_mpm_error(w));
 failed:
     fprintf(stderr, "%s: %s (%s)\n", prog, why, pn_result_string(r));
     pn_mpm_destroy(w);
@@ -171,8 +171,8 @@ static int flags(int argc, char **argv, pn_ex_cli *c, double *aspect, int *refer
 
 int main(int argc, char **argv) {
     static const char *const energies[] = {"pnet", "lagged", "dp", "elastic"};
-    static const pn_mpm_energy energy_of[] = {PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP,
-                                              PN_MPM_ENERGY_ELASTIC};
+    static const pn_energy energy_of[] = {PN_ENERGY_PNET, PN_ENERGY_LAGGED, PN_ENERGY_DP,
+                                              PN_ENERGY_ELASTIC};
     const char *prog = "sand_column";
     int energy, energy_given = 0, reference = -1, stress, stable, frame, ok = 1, exit_code;
     long k, per_frame;
@@ -198,7 +198,7 @@ int main(int argc, char **argv) {
     pn_ex_scene_view(&sc, &view);
     if (!pn_ex_output_open(prog, &c, &view, &out)) return 1;
     /* the stress formulation has no energy: bind one that needs no network */
-    if (!(w = column_world(prog, &sc, stress ? PN_MPM_ENERGY_DP : energy_of[energy]))) {
+    if (!(w = column_world(prog, &sc, stress ? PN_ENERGY_DP : energy_of[energy]))) {
         pn_ex_output_close(prog, &out, 0);
         return 1;
     }
@@ -247,7 +247,7 @@ int main(int argc, char **argv) {
     if (reference) {
         if (!c.quiet) fprintf(stderr, "the explicit reference to t = %.3f s ...", (double)w->time_s);
         /* explicit steps use no energy: the lagged one needs no network */
-        ref = column_world(prog, &sc, PN_MPM_ENERGY_LAGGED);
+        ref = column_world(prog, &sc, PN_ENERGY_LAGGED);
         if (!ref || !pn_ex_reference(prog, ref, (double)w->time_s, c.frames, &ref_tally, &ref_wall)) {
             pn_mpm_destroy(ref);
             pn_mpm_destroy(w);

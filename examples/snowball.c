@@ -71,7 +71,7 @@ int main(int argc, char **argv) {
     sc.angle_deg = angle;
     sc.h0 = h0;
     sc.no_hardening = no_hardening;
-    sc.energy = lagged ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_PNET;
+    sc.energy = lagged ? PN_ENERGY_LAGGED : PN_ENERGY_PNET;
     if (!pn_ex_simulate("snowball", &c, &sc, &o)) return 1;
     printf("{\"scene\": \"snowball\", \"dim\": %d, \"integrator\": \"%s\", \"energy\": \"%s\", \"dt\": %g, "
            "\"fixed_point_iters\": %d, \"contact_rounds\": %d, \"E\": %g, \"speed\": %g, \"angle\": %g, \"h0\": %g, \"hardening\": %s, \"boundary\": \"%s\", "

@@ -171,14 +171,14 @@ static int run_instance(const char *dir, const pn_rs_scene *s, int k, int frames
     wd.dim = 3;
     for (i = 0; i < 3; ++i) wd.res[i] = s->res[i], wd.gravity[i] = (pn_real)in.gravity[i];
     wd.dx_m = (pn_real)s->dx;
-    wd.boundary = PN_MPM_BOUNDARY_STICKY;
+    wd.boundary = PN_BOUNDARY_STICKY;
     wd.max_particles = cap;
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_FIXED_COROTATED;
     md.plastic = PN_PLASTIC_NONE;
     md.youngs_modulus_pa = s->youngs_pa;
     md.poisson_ratio = s->poisson;
-    if (pn_mpm_create(&wd, &w, NULL) != PN_OK || pn_material_init(&mat, &md, NULL) != PN_OK ||
+    if (pn_mpm_create(&wd, &w, NULL, 0) != PN_OK || pn_material_init(&mat, &md, NULL, 0) != PN_OK ||
         (g = pn_mpm_add_group(w, &mat, (pn_real)s->density)) < 0) {
         fprintf(stderr, "%s %d: cannot create the world\n", s->name, k);
         goto done;

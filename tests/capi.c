@@ -68,7 +68,7 @@ int capi_T(int elastic, int plastic, const double *par, int d, int n, const doub
     desc.hardening_modulus_pa = par[5];
     desc.camclay_beta = par[6];
     desc.camclay_xi = par[7];
-    if (pn_material_init(&m, &desc, NULL) != PN_OK) return n;
+    if (pn_material_init(&m, &desc, NULL, 0) != PN_OK) return n;
     for (k = 0; k < n; ++k)
         if (pn_return_map(&m, d, F + k * d * d, h[k], NULL, NULL, T + k * d * d) != PN_OK) fails++;
     return fails;
@@ -91,7 +91,7 @@ int capi_energy(int i, const double *values, int n, const double *F0, const doub
         if (!strcmp(pn_models_all[j]()->name, mo->return_map)) desc.return_map = pn_models_all[j]();
     pn_model_material_desc(mo, (pn_real)mo->youngs_modulus_train_pa, &md);
     for (k = 0; k < mo->n_params; ++k) pn_model_param_set(&md, mo->param[k].kind, values[k]);
-    if (pn_material_init(&m, &md, NULL) != PN_OK || pn_pnet_init(&net, &desc, &m, d, NULL) != PN_OK) return n;
+    if (pn_material_init(&m, &md, NULL, 0) != PN_OK || pn_pnet_init(&net, &desc, &m, d, NULL, 0) != PN_OK) return n;
     for (k = 0; k < n; ++k) {
         pn_pnet_point pt;
         if (pn_pnet_prepare(&net, F0 + k * d * d, h[k], &pt, NULL, NULL) != PN_OK ||
@@ -106,7 +106,7 @@ int capi_learned_T(int i, int n, const double *F, const double *h, double *T) {
     const pn_model *mo = pn_models_all[i]();
     pn_material m;
     int k, d = mo->dim, fails = 0;
-    if (pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL) != PN_OK) return n;
+    if (pn_model_material(mo, (pn_real)mo->youngs_modulus_train_pa, &m, NULL, 0) != PN_OK) return n;
     for (k = 0; k < n; ++k)
         if (pn_learned_return_map(mo, &m, d, F + k * d * d, h[k], NULL, NULL, T + k * d * d) != PN_OK) fails++;
     return fails;

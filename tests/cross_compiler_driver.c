@@ -24,7 +24,7 @@ typedef struct cc_combo {
     int metal; /* 0: the scene's material; 1: metal_2d (StVK-Hencky), 2: metal_nh_2d
                   (Neo-Hookean, learned return mapping) */
     int dim, implicit;
-    pn_mpm_energy energy;
+    pn_energy energy;
     double dt;
     long steps;
 } cc_combo;
@@ -33,22 +33,22 @@ typedef struct cc_combo {
    material to yield somewhere, so the return mappings and plastic energies run. The 3D worlds
    are the examples' on a coarser grid (16 cells) to keep the run short. */
 static const cc_combo combos[] = {
-    {"sand_dim2_implicit_pnet", PN_EX_SAND_COLUMN, 0, 2, 1, PN_MPM_ENERGY_PNET, 1e-3, 8},
-    {"sand_dim2_implicit_lagged", PN_EX_SAND_COLUMN, 0, 2, 1, PN_MPM_ENERGY_LAGGED, 1e-3, 8},
-    {"sand_dim2_implicit_dp", PN_EX_SAND_COLUMN, 0, 2, 1, PN_MPM_ENERGY_DP, 1e-3, 8},
-    {"sand_dim2_implicit_elastic", PN_EX_SAND_COLUMN, 0, 2, 1, PN_MPM_ENERGY_ELASTIC, 1e-3, 4},
-    {"sand_dim2_explicit", PN_EX_SAND_COLUMN, 0, 2, 0, PN_MPM_ENERGY_PNET, 1e-4, 40},
-    {"sand_dim3_implicit_pnet", PN_EX_SAND_COLUMN, 0, 3, 1, PN_MPM_ENERGY_PNET, 1e-3, 3},
-    {"sand_dim3_explicit", PN_EX_SAND_COLUMN, 0, 3, 0, PN_MPM_ENERGY_PNET, 1e-4, 10},
-    {"snow_dim2_implicit_pnet", PN_EX_SNOWBALL, 0, 2, 1, PN_MPM_ENERGY_PNET, 1e-3, 60},
-    {"snow_dim2_implicit_lagged", PN_EX_SNOWBALL, 0, 2, 1, PN_MPM_ENERGY_LAGGED, 1e-3, 60},
-    {"snow_dim2_explicit", PN_EX_SNOWBALL, 0, 2, 0, PN_MPM_ENERGY_PNET, 2e-4, 300},
-    {"snow_dim3_implicit_pnet", PN_EX_SNOWBALL, 0, 3, 1, PN_MPM_ENERGY_PNET, 1e-3, 40},
-    {"metal_dim2_implicit_exact_vm", PN_EX_SAND_COLUMN, 1, 2, 1, PN_MPM_ENERGY_EXACT_VM, 1e-3, 30},
-    {"metal_dim2_implicit_pnet", PN_EX_SAND_COLUMN, 1, 2, 1, PN_MPM_ENERGY_PNET, 1e-3, 30},
-    {"metal_dim2_explicit", PN_EX_SAND_COLUMN, 1, 2, 0, PN_MPM_ENERGY_DEFAULT, 1e-4, 150},
-    {"metal_nh_dim2_implicit_pnet", PN_EX_SAND_COLUMN, 2, 2, 1, PN_MPM_ENERGY_PNET, 1e-3, 30},
-    {"metal_nh_dim2_explicit", PN_EX_SAND_COLUMN, 2, 2, 0, PN_MPM_ENERGY_DEFAULT, 1e-4, 150},
+    {"sand_dim2_implicit_pnet", PN_EX_SAND_COLUMN, 0, 2, 1, PN_ENERGY_PNET, 1e-3, 8},
+    {"sand_dim2_implicit_lagged", PN_EX_SAND_COLUMN, 0, 2, 1, PN_ENERGY_LAGGED, 1e-3, 8},
+    {"sand_dim2_implicit_dp", PN_EX_SAND_COLUMN, 0, 2, 1, PN_ENERGY_DP, 1e-3, 8},
+    {"sand_dim2_implicit_elastic", PN_EX_SAND_COLUMN, 0, 2, 1, PN_ENERGY_ELASTIC, 1e-3, 4},
+    {"sand_dim2_explicit", PN_EX_SAND_COLUMN, 0, 2, 0, PN_ENERGY_PNET, 1e-4, 40},
+    {"sand_dim3_implicit_pnet", PN_EX_SAND_COLUMN, 0, 3, 1, PN_ENERGY_PNET, 1e-3, 3},
+    {"sand_dim3_explicit", PN_EX_SAND_COLUMN, 0, 3, 0, PN_ENERGY_PNET, 1e-4, 10},
+    {"snow_dim2_implicit_pnet", PN_EX_SNOWBALL, 0, 2, 1, PN_ENERGY_PNET, 1e-3, 60},
+    {"snow_dim2_implicit_lagged", PN_EX_SNOWBALL, 0, 2, 1, PN_ENERGY_LAGGED, 1e-3, 60},
+    {"snow_dim2_explicit", PN_EX_SNOWBALL, 0, 2, 0, PN_ENERGY_PNET, 2e-4, 300},
+    {"snow_dim3_implicit_pnet", PN_EX_SNOWBALL, 0, 3, 1, PN_ENERGY_PNET, 1e-3, 40},
+    {"metal_dim2_implicit_exact_vm", PN_EX_SAND_COLUMN, 1, 2, 1, PN_ENERGY_EXACT_VM, 1e-3, 30},
+    {"metal_dim2_implicit_pnet", PN_EX_SAND_COLUMN, 1, 2, 1, PN_ENERGY_PNET, 1e-3, 30},
+    {"metal_dim2_explicit", PN_EX_SAND_COLUMN, 1, 2, 0, PN_ENERGY_DEFAULT, 1e-4, 150},
+    {"metal_nh_dim2_implicit_pnet", PN_EX_SAND_COLUMN, 2, 2, 1, PN_ENERGY_PNET, 1e-3, 30},
+    {"metal_nh_dim2_explicit", PN_EX_SAND_COLUMN, 2, 2, 0, PN_ENERGY_DEFAULT, 1e-4, 150},
 };
 
 /* The material a model was trained for, at Young's modulus E (pn_model_material, spelt out
@@ -62,7 +62,7 @@ static pn_result cc_model_material(const pn_model *mo, double E, pn_material *m)
     d.poisson_ratio = (pn_real)mo->poisson_ratio;
     d.yield_stress_pa = (pn_real)(mo->yield_stress_ratio * E);
     d.hardening_modulus_pa = (pn_real)(mo->hardening_ratio * E);
-    return pn_material_init(m, &d, NULL);
+    return pn_material_init(m, &d, NULL, 0);
 }
 
 static unsigned long long cc_hash(unsigned long long h, const void *p, size_t n) {
@@ -84,19 +84,19 @@ int main(int argc, char **argv) {
         pn_mpm_world *w = NULL;
         pn_mpm_implicit_desc id;
         pn_ex_tally t;
-        const char *why = "";
+        char why[256] = "";
         unsigned long long h = 14695981039346656037ULL;
         size_t n, d;
         pn_result r;
         if (argc > 1 && !strstr(c->name, argv[1])) continue;
         pn_ex_scene_default(&sc, c->scene, c->dim);
         if (c->dim == 3) sc.res = 16;
-        sc.energy = c->metal ? PN_MPM_ENERGY_DEFAULT : c->energy;
+        sc.energy = c->metal ? PN_ENERGY_DEFAULT : c->energy;
         memset(&id, 0, sizeof id);
         memset(&t, 0, sizeof t);
         id.fixed_point_iters = 1;
         id.contact_rounds = 1;
-        r = pn_ex_scene_create(&sc, &w, &why);
+        r = pn_ex_scene_create(&sc, &w, why, sizeof why);
         if (r == PN_OK && c->metal) {
             /* the column's geometry, a metal soft enough (E = 1e5 Pa, yield stress 300 Pa) to
                yield under its weight: group 0's material swapped before the first step */
@@ -104,14 +104,14 @@ int main(int argc, char **argv) {
             pn_material m;
             r = cc_model_material(mo, 1e5, &m);
             if (r == PN_OK) w->groups[0].material = m;
-            if (r == PN_OK && c->energy == PN_MPM_ENERGY_PNET) {
+            if (r == PN_OK && c->energy == PN_ENERGY_PNET) {
                 pn_pnet net;
                 pn_pnet_desc nd;
                 memset(&nd, 0, sizeof nd);
                 nd.energy = mo;
                 if (c->metal == 2) nd.return_map = pn_model_metal_nh_return_2d(); /* learned return */
-                r = pn_pnet_init(&net, &nd, &m, c->dim, &why);
-                if (r == PN_OK) r = pn_mpm_group_set_energy(w, 0, PN_MPM_ENERGY_PNET, &net);
+                r = pn_pnet_init(&net, &nd, &m, c->dim, why, sizeof why);
+                if (r == PN_OK) r = pn_mpm_group_set_energy(w, 0, PN_ENERGY_PNET, &net);
             } else if (r == PN_OK) {
                 r = pn_mpm_group_set_energy(w, 0, c->energy, NULL);
             }

@@ -61,13 +61,13 @@ PN_EX_UNUSED static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *
     double dx = d->domain_m / d->res, fl = PN_EX_WALL_CELLS * dx, a = d->tilt_deg * 3.14159265358979 / 180, lowest = 1e30;
     double ctr[3], gap = d->gap_m > 0 ? d->gap_m : dx / 2;
     const pn_model *model = dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
-    const char *w_why = "";
+    char w_why[256] = "";
     pn_mpm_desc wd;
     pn_mpm_fill_desc f;
     pn_material_desc md;
     pn_material sand;
     pn_fem_grid g;
-    pn_fem_group fg;
+    pn_group fg;
     pn_fem_desc fd;
     pn_coupled_desc cd;
     size_t n = 0, nn, ne, k;
@@ -76,23 +76,23 @@ PN_EX_UNUSED static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *
     memset(&wd, 0, sizeof wd);
     wd.dim = dim;
     for (i = 0; i < dim; ++i) wd.res[i] = d->res;
-    wd.dx_m = (pn_real)dx, wd.gravity[1] = (pn_real)-9.81, wd.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    wd.dx_m = (pn_real)dx, wd.gravity[1] = (pn_real)-9.81, wd.boundary = PN_BOUNDARY_SEPARATE;
     wd.friction = (pn_real)0.5, wd.wall_cells = PN_EX_WALL_CELLS, wd.clock_s = pn_ex__clock;
     memset(&f, 0, sizeof f);
     f.shape = PN_MPM_FILL_BOX, f.per_axis = 2;
     for (i = 0; i < dim; ++i) f.center_m[i] = (pn_real)(d->domain_m / 2), f.half_extent_m[i] = (pn_real)(d->domain_m / 2 - fl);
     f.center_m[1] = (pn_real)(fl + d->bed_m / 2), f.half_extent_m[1] = (pn_real)(d->bed_m / 2);
-    if (pn_mpm_fill_count(&wd, &f, &n, &w_why) != PN_OK || !n) {
+    if (pn_mpm_fill_count(&wd, &f, &n, w_why, sizeof w_why) != PN_OK || !n) {
         snprintf(why, cap, "the sand bed: %.200s", w_why);
         return 0;
     }
     wd.max_particles = n;
-    if (pn_mpm_create(&wd, &s->w, &w_why) != PN_OK) {
+    if (pn_mpm_create(&wd, &s->w, w_why, sizeof w_why) != PN_OK) {
         snprintf(why, cap, "the world: %.200s", w_why);
         return 0;
     }
     pn_model_material_desc(model, (pn_real)d->E_sand, &md);
-    if (pn_material_init(&sand, &md, &w_why) != PN_OK) {
+    if (pn_material_init(&sand, &md, w_why, sizeof w_why) != PN_OK) {
         snprintf(why, cap, "the sand: %.200s", w_why);
         pn_drop_free(s);
         return 0;
@@ -108,13 +108,13 @@ PN_EX_UNUSED static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *
         pn_pnet_desc nd;
         memset(&nd, 0, sizeof nd);
         nd.energy = model;
-        if (pn_pnet_init(&s->net, &nd, &sand, dim, &w_why) != PN_OK ||
-            pn_mpm_group_set_energy(s->w, grp, PN_MPM_ENERGY_PNET, &s->net) != PN_OK) {
+        if (pn_pnet_init(&s->net, &nd, &sand, dim, w_why, sizeof w_why) != PN_OK ||
+            pn_mpm_group_set_energy(s->w, grp, PN_ENERGY_PNET, &s->net) != PN_OK) {
             snprintf(why, cap, "the sand model: %.100s%.100s", w_why, pn_mpm_error(s->w));
             pn_drop_free(s);
             return 0;
         }
-    } else if (pn_mpm_group_set_energy(s->w, grp, d->energy == PN_DROP_DP ? PN_MPM_ENERGY_DP : PN_MPM_ENERGY_LAGGED, NULL) !=
+    } else if (pn_mpm_group_set_energy(s->w, grp, d->energy == PN_DROP_DP ? PN_ENERGY_DP : PN_ENERGY_LAGGED, NULL) !=
                PN_OK) {
         snprintf(why, cap, "the sand's energy: %.200s", pn_mpm_error(s->w));
         pn_drop_free(s);
@@ -142,7 +142,7 @@ PN_EX_UNUSED static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_NEO_HOOKEAN, md.youngs_modulus_pa = (pn_real)d->E_block, md.poisson_ratio = (pn_real)0.3;
     memset(&fg, 0, sizeof fg);
-    if (pn_material_init(&fg.material, &md, &w_why) != PN_OK) {
+    if (pn_material_init(&fg.material, &md, w_why, sizeof w_why) != PN_OK) {
         snprintf(why, cap, "the block's material: %.200s", w_why);
         pn_drop_free(s);
         return 0;

@@ -112,10 +112,10 @@ PN_EX_UNUSED static int pn_ex_render(const pn_ex_view *v, const pn_mpm_world *w,
     d.scale_bar = 1;
     d.title = v->title;
     for (c = 0; c < w->n_colliders; ++c) { /* where each collider is now */
-        const pn_mpm_collider *k = &w->colliders[c];
+        const pn_collider *k = &w->colliders[c];
         memset(&shapes[c], 0, sizeof shapes[c]);
-        shapes[c].kind = k->shape == PN_MPM_SHAPE_HALF_SPACE ? PN_RENDER_HALF_SPACE
-                         : k->shape == PN_MPM_SHAPE_BOX       ? PN_RENDER_BOX
+        shapes[c].kind = k->shape == PN_SHAPE_HALF_SPACE ? PN_RENDER_HALF_SPACE
+                         : k->shape == PN_SHAPE_BOX       ? PN_RENDER_BOX
                                                               : PN_RENDER_SPHERE;
         for (i = 0; i < 3; ++i) {
             shapes[c].center[i] = (double)(k->center_m[i] + w->time_s * k->velocity_m_s[i]);
@@ -188,11 +188,11 @@ typedef struct pn_ex_scene {
     double domain_m;             /* side of the cubic domain [1 in 2D, 0.5 in 3D]           */
     double E_pa;                 /* Young's modulus [sand 1e7, snow 1e6]                    */
     double density_kg_m3;        /* [sand 1600, snow 400]                                   */
-    pn_mpm_boundary boundary;    /* domain walls [SEPARATE]                                 */
+    pn_boundary boundary;    /* domain walls [SEPARATE]                                 */
     double friction;             /* Coulomb coefficient of SEPARATE walls [0.5]             */
     double filter_s;             /* transfer filter time (pn_mpm_desc.filter_time_s) [2e-3]  */
     double regularizer;          /* PlasticityNet's w (pn_pnet_desc.regularizer) [0: 1]     */
-    pn_mpm_energy energy;        /* what implicit steps minimize [PNET]; ignored by explicit */
+    pn_energy energy;        /* what implicit steps minimize [PNET]; ignored by explicit */
     double width_m, aspect;      /* sand column: W [0.12], a = H / W [2]                    */
     double radius_m;             /* snowball: [0.1 in 2D, 0.08 in 3D]                       */
     double speed_m_s, angle_deg; /* snowball: throw speed [3] and angle below horizontal [45] */
@@ -216,10 +216,10 @@ PN_EX_UNUSED static void pn_ex_scene_default(pn_ex_scene *s, pn_ex_scene_kind ki
     s->domain_m = dim == 2 ? 1.0 : 0.5;
     s->E_pa = sand ? 1e7 : 1e6;
     s->density_kg_m3 = sand ? 1600 : 400;
-    s->boundary = PN_MPM_BOUNDARY_SEPARATE;
+    s->boundary = PN_BOUNDARY_SEPARATE;
     s->friction = 0.5;
     s->filter_s = 2e-3;
-    s->energy = PN_MPM_ENERGY_PNET;
+    s->energy = PN_ENERGY_PNET;
     s->width_m = 0.12;
     s->aspect = 2;
     s->radius_m = dim == 2 ? 0.1 : 0.08;
@@ -295,9 +295,9 @@ static void pn_ex__scene_setup(const pn_ex_scene *s, pn_mpm_desc *wd, pn_mpm_fil
 }
 
 /* Create the world of scene s in *out, filled and ready to step, with the energy s->energy
-   bound for implicit steps. On failure *out is NULL, *why says what went wrong. */
-PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_world **out, const char **why) {
-    static char msg[320];
+   bound for implicit steps. On failure *out is NULL, why (why_cap bytes) says what went wrong. */
+PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_world **out, char *why,
+                                                    size_t why_cap) {
     const pn_model *model;
     pn_mpm_desc wd;
     pn_mpm_fill_desc f;
@@ -307,29 +307,29 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
     int g, d = s->dim, i;
     pn_result r;
     *out = NULL;
-    *why = "";
+    if (why[0] && why_cap) why[0] = 0;
     if ((d != 2 && d != 3) || s->res < 16 || s->res > 1024 || !(s->domain_m > 0)) {
-        *why = "dim must be 2 or 3, res in [16, 1024], domain_m > 0";
+        snprintf(why, why_cap, "dim must be 2 or 3, res in [16, 1024], domain_m > 0");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     model = pn_ex_scene_model(s);
-    if ((r = pn_model_check(model, d, why)) != PN_OK) return r;
+    if ((r = pn_model_check(model, d, why, why_cap)) != PN_OK) return r;
     { /* the model's material, or another Poisson ratio or friction angle */
         pn_material_desc md;
         pn_model_material_desc(model, (pn_real)s->E_pa, &md);
         if (s->nu > 0) md.poisson_ratio = (pn_real)s->nu;
         if (s->friction_deg > 0) md.friction_angle_deg = (pn_real)s->friction_deg;
-        if ((r = pn_material_init(&m, &md, why)) != PN_OK) return r;
+        if ((r = pn_material_init(&m, &md, why, why_cap)) != PN_OK) return r;
     }
     if (s->no_hardening) m.camclay_hardening = 0;
     pn_ex__scene_setup(s, &wd, &f);
-    if ((r = pn_mpm_fill_count(&wd, &f, &n, why)) != PN_OK) return r;
+    if ((r = pn_mpm_fill_count(&wd, &f, &n, why, why_cap)) != PN_OK) return r;
     if (n == 0) {
-        *why = "the scene has no particles (size below half a cell)";
+        snprintf(why, why_cap, "the scene has no particles (size below half a cell)");
         return PN_ERROR_INVALID_ARGUMENT;
     }
     wd.max_particles = n;
-    if ((r = pn_mpm_create(&wd, &w, why)) != PN_OK) return r;
+    if ((r = pn_mpm_create(&wd, &w, why, why_cap)) != PN_OK) return r;
     if ((g = pn_mpm_add_group(w, &m, (pn_real)s->density_kg_m3)) < 0) {
         r = PN_ERROR_INVALID_ARGUMENT;
         goto fail;
@@ -337,12 +337,12 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
     f.group = g;
     if ((r = pn_mpm_fill(w, &f, NULL)) != PN_OK) goto fail;
     if (s->kind == PN_EX_SNOW_PRESS) { /* the plate, its lower face on the layer's top at t = 0 */
-        pn_mpm_collider c;
+        pn_collider c;
         memset(&c, 0, sizeof c);
-        c.shape = PN_MPM_SHAPE_BOX;
+        c.shape = PN_SHAPE_BOX;
         /* sticky, as snow under a sole: with a separating plate (Coulomb 0.5) 20-40 particles
            squeezed at its edges flew off at 4-11 m/s, by an amount that depended on the step */
-        c.boundary = PN_MPM_BOUNDARY_STICKY;
+        c.boundary = PN_BOUNDARY_STICKY;
         for (i = 0; i < d; ++i) {
             c.center_m[i] = (pn_real)(0.5 * s->domain_m);
             c.half_extent_m[i] = (pn_real)(0.1 * s->domain_m);
@@ -352,17 +352,17 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
         c.velocity_m_s[1] = (pn_real)-s->press_m_s;
         if ((r = pn_mpm_add_collider(w, &c, NULL)) != PN_OK) goto fail;
     }
-    if (s->energy == PN_MPM_ENERGY_PNET) {
+    if (s->energy == PN_ENERGY_PNET) {
         pn_pnet net;
         pn_pnet_desc nd;
         memset(&nd, 0, sizeof nd);
         nd.energy = model;
         nd.regularizer = (pn_real)s->regularizer;
-        if ((r = pn_pnet_init(&net, &nd, &m, d, why)) != PN_OK) {
+        if ((r = pn_pnet_init(&net, &nd, &m, d, why, why_cap)) != PN_OK) {
             pn_mpm_destroy(w);
             return r;
         }
-        r = pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net);
+        r = pn_mpm_group_set_energy(w, g, PN_ENERGY_PNET, &net);
     } else {
         r = pn_mpm_group_set_energy(w, g, s->energy, NULL);
     }
@@ -370,8 +370,7 @@ PN_EX_UNUSED static pn_result pn_ex_scene_create(const pn_ex_scene *s, pn_mpm_wo
     *out = w;
     return PN_OK;
 fail:
-    snprintf(msg, sizeof msg, "%s", pn_mpm_error(w));
-    *why = msg;
+    snprintf(why, why_cap, "%s", pn_mpm_error(w));
     pn_mpm_destroy(w);
     return r;
 }
@@ -505,7 +504,7 @@ PN_EX_UNUSED static void pn_ex_cli_default(pn_ex_cli *c, const char *out) {
     c->solver.fixed_point_iters = 1;
     c->solver.contact_rounds = 1;
     c->frames = c->fps = 30;
-    c->boundary = PN_MPM_BOUNDARY_SEPARATE;
+    c->boundary = PN_BOUNDARY_SEPARATE;
     c->friction = 0.5;
     c->filter = -1;
     c->energy = "pnet";
@@ -641,7 +640,7 @@ PN_EX_UNUSED static int pn_ex_cli_apply(const char *prog, const pn_ex_cli *c, pn
     s->regularizer = c->regularizer;
     if (c->res) s->res = c->res;
     if (c->E > 0) s->E_pa = c->E;
-    s->boundary = (pn_mpm_boundary)c->boundary;
+    s->boundary = (pn_boundary)c->boundary;
     s->friction = c->friction;
     s->jitter = c->jitter;
     return 1;
@@ -925,7 +924,7 @@ typedef struct pn_ex_outcome {
 /* Returns 0 after a failure (said on stderr; nothing left to destroy). */
 PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, const pn_ex_scene *sc,
                                        pn_ex_outcome *o) {
-    const char *why = "";
+    char why[256] = "";
     pn_ex_view view;
     pn_ex_output out;
     pn_result r;
@@ -933,7 +932,7 @@ PN_EX_UNUSED static int pn_ex_simulate(const char *prog, const pn_ex_cli *c, con
     memset(o, 0, sizeof *o);
     pn_ex_scene_view(sc, &view);
     if (!pn_ex_output_open(prog, c, &view, &out)) return 0;
-    if ((r = pn_ex_scene_create(sc, &o->w, &why)) != PN_OK) {
+    if ((r = pn_ex_scene_create(sc, &o->w, why, sizeof why)) != PN_OK) {
         fprintf(stderr, "%s: %s (%s)\n", prog, why, pn_result_string(r));
         pn_ex_output_close(prog, &out, 0);
         return 0;

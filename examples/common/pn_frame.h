@@ -118,9 +118,9 @@ PN_EX_UNUSED static void pn_frame_models(const pn_frame_desc *d, const pn_model 
    PlasticityNet binding (kept by the caller while the mesh lives). 0 and a message in why on
    failure. */
 PN_EX_UNUSED static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **out, pn_pnet *net, char *why, size_t cap) {
-    pn_fem_group grp;
+    pn_group grp;
     pn_fem_desc fd;
-    pn_mpm_collider c;
+    pn_collider c;
     pn_real *X;
     int *el, ok = 0;
     size_t nn, ne;
@@ -134,7 +134,7 @@ PN_EX_UNUSED static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **ou
     pn_model_material_desc(model, (pn_real)d->E, &md); /* the model's material at this yield and hardening */
     md.yield_stress_pa = (pn_real)(d->yield_ratio * d->E);
     md.hardening_modulus_pa = (pn_real)(d->hardening_ratio * d->E);
-    if (pn_material_init(&grp.material, &md, NULL) != PN_OK) {
+    if (pn_material_init(&grp.material, &md, NULL, 0) != PN_OK) {
         snprintf(why, cap, "E %g Pa, yield ratio %g or hardening ratio %g is out of range", d->E, d->yield_ratio, d->hardening_ratio);
         goto done;
     }
@@ -145,20 +145,20 @@ PN_EX_UNUSED static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **ou
     if (pn_fem_create(&fd, out, why, cap) != PN_OK) goto done;
     if (d->energy == PN_FRAME_PNET || d->energy == PN_FRAME_PNET_NH || d->energy == PN_FRAME_PNET_NH_ANY) {
         pn_pnet_desc pd;
-        const char *w2 = NULL;
+        char w2[256] = "";
         memset(&pd, 0, sizeof pd);
         pd.energy = model, pd.return_map = ret, pd.regularizer = (pn_real)d->regularizer;
         pd.regularizer_form = PN_PNET_REG_STRAIN;
-        if (pn_pnet_init(net, &pd, &grp.material, dim, &w2) != PN_OK) {
-            snprintf(why, cap, "%s", w2 ? w2 : "pn_pnet_init failed");
+        if (pn_pnet_init(net, &pd, &grp.material, dim, w2, sizeof w2) != PN_OK) {
+            snprintf(why, cap, "%s", w2);
             goto done;
         }
-        if (pn_fem_group_set_energy(*out, 0, PN_MPM_ENERGY_PNET, net) != PN_OK) goto fem_error;
-    } else if (pn_fem_group_set_energy(*out, 0, d->energy == PN_FRAME_EXACT ? PN_MPM_ENERGY_EXACT_VM : PN_MPM_ENERGY_LAGGED,
+        if (pn_fem_group_set_energy(*out, 0, PN_ENERGY_PNET, net) != PN_OK) goto fem_error;
+    } else if (pn_fem_group_set_energy(*out, 0, d->energy == PN_FRAME_EXACT ? PN_ENERGY_EXACT_VM : PN_ENERGY_LAGGED,
                                        NULL) != PN_OK)
         goto fem_error;
     memset(&c, 0, sizeof c); /* the ground */
-    c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)d->friction;
+    c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)d->friction;
     if (pn_fem_add_obstacle(*out, &c, NULL) != PN_OK) goto fem_error;
     c.normal[1] = -1, c.center_m[1] = (pn_real)pn_frame_plate(d, 0), c.velocity_m_s[1] = (pn_real)-d->speed; /* the plate */
     if (pn_fem_add_obstacle(*out, &c, NULL) != PN_OK) goto fem_error;

@@ -67,8 +67,8 @@ EMSCRIPTEN_KEEPALIVE int demo_reset(int kind) {
     pn_mpm_desc wd;
     pn_material_desc md;
     pn_material m;
-    pn_mpm_collider col;
-    const char *why = "";
+    pn_collider col;
+    char why[256] = "";
     double sp = DX / 2, x0, y0, width = 0.7, height = 0.8, rho;
     int nx = (int)(width / sp + 0.5), ny = (int)(height / sp + 0.5), i, j, g;
     size_t n = (size_t)nx * (size_t)ny, p;
@@ -93,7 +93,7 @@ EMSCRIPTEN_KEEPALIVE int demo_reset(int kind) {
         md.camclay_xi = 3;
         rho = 400;
     }
-    if ((r = pn_material_init(&m, &md, &why)) != PN_OK) {
+    if ((r = pn_material_init(&m, &md, why, sizeof why)) != PN_OK) {
         printf("demo: material: %s\n", why);
         return -1;
     }
@@ -104,12 +104,12 @@ EMSCRIPTEN_KEEPALIVE int demo_reset(int kind) {
     wd.res[1] = RES_Y;
     wd.dx_m = (pn_real)DX;
     wd.gravity[1] = (pn_real)-9.81;
-    wd.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    wd.boundary = PN_BOUNDARY_SEPARATE;
     wd.friction = (pn_real)0.6;
     wd.wall_cells = WALL;
     wd.max_particles = n;
     wd.allow_outflow = 1; /* a particle pushed through a wall is retired, not an error */
-    if (pn_mpm_create(&wd, &S.w, &why) != PN_OK) {
+    if (pn_mpm_create(&wd, &S.w, why, sizeof why) != PN_OK) {
         printf("demo: world: %s\n", why);
         return -2;
     }
@@ -136,8 +136,8 @@ EMSCRIPTEN_KEEPALIVE int demo_reset(int kind) {
     }
     free(x);
     memset(&col, 0, sizeof col);
-    col.shape = PN_MPM_SHAPE_SPHERE;
-    col.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    col.shape = PN_SHAPE_SPHERE;
+    col.boundary = PN_BOUNDARY_SEPARATE;
     col.friction = (pn_real)0.2;
     col.radius_m = (pn_real)RADIUS;
     col.center_m[0] = (pn_real)(RES_X * DX / 2);

@@ -13,7 +13,7 @@
 
 static void pn_fuzz_use_mesh(const pn_fem_mesh_data *d, int dim) {
     pn_fem_desc fd;
-    pn_fem_group grp;
+    pn_group grp;
     pn_material_desc md;
     pn_fem_mesh *m = NULL;
     char why[256];
@@ -24,7 +24,7 @@ static void pn_fuzz_use_mesh(const pn_fem_mesh_data *d, int dim) {
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_NEO_HOOKEAN, md.youngs_modulus_pa = 1e6, md.poisson_ratio = (pn_real)0.3;
     memset(&grp, 0, sizeof grp);
-    if (pn_material_init(&grp.material, &md, NULL) != PN_OK) abort();
+    if (pn_material_init(&grp.material, &md, NULL, 0) != PN_OK) abort();
     grp.density_kg_m3 = 1000;
     memset(&fd, 0, sizeof fd);
     fd.dim = dim, fd.n_nodes = d->n_nodes, fd.n_elements = d->n_elements, fd.rest_m = d->nodes, fd.elements = d->elements;

@@ -210,7 +210,7 @@ static int fuzz_arrays(fuzz_case *c) {
 /* what reads an accepted model */
 static void fuzz_use(fuzz_case *c) {
     const pn_model *mo = &c->mo;
-    const char *why = NULL;
+    char why[256] = "";
     pn_material m;
     int dim = mo->dim, i, nd;
     pn_real in[PN_MLP_MAX_WIDTH], out[PN_MLP_MAX_WIDTH], grad[PN_MLP_MAX_WIDTH * PN_MLP_MAX_DIFF];
@@ -222,7 +222,7 @@ static void fuzz_use(fuzz_case *c) {
     nd = c->n_diff;
     (void)pn_mlp_eval(&mo->mlp, in, nd, out, grad, hess);
     (void)pn_mlp_eval_lanes(&mo->mlp, 3, lin, nd, lout, lgrad, lhess);
-    if (pn_model_material(mo, c->E, &m, &why) != PN_OK) return;
+    if (pn_model_material(mo, c->E, &m, why, sizeof why) != PN_OK) return;
     if (mo->kind == PN_MODEL_RETURN_MAP) {
         pn_real Z[9], T[9], hn;
         (void)pn_learned_return_map(mo, &m, dim, c->F, c->h, Z, &hn, T);
@@ -235,7 +235,7 @@ static void fuzz_use(fuzz_case *c) {
         pn_result st[2];
         memset(&desc, 0, sizeof desc);
         desc.energy = mo, desc.regularizer = c->reg, desc.regularizer_form = (pn_pnet_regularizer)c->reg_form;
-        if (pn_pnet_init(&net, &desc, &m, 0, &why) != PN_OK) return;
+        if (pn_pnet_init(&net, &desc, &m, 0, why, sizeof why) != PN_OK) return;
         if (pn_pnet_prepare(&net, c->F0, c->h, &pt[0], &hn, T0) == PN_OK) {
             (void)pn_pnet_energy(&net, &pt[0], c->F, &psi[0], P, dPdF, 0);
             (void)pn_pnet_energy(&net, &pt[0], c->F, &psi[0], P, dPdF, PN_EVAL_PROJECT_PSD);
@@ -257,7 +257,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     fuzz_case *c = (fuzz_case *)malloc(sizeof *c);
     fuzz_in in;
-    const char *why = NULL;
+    char why[256] = "";
     int ops = 0, l;
     pn_result r;
     if (!c) return 0;
@@ -266,8 +266,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     while (ops++ < FZ_MAX_OPS && fuzz_op(c, &in)) {
     }
     if (fuzz_arrays(c)) {
-        r = pn_model_check(&c->mo, 0, &why);
-        if (r != PN_OK && !why) abort(); /* a refusal names its reason */
+        r = pn_model_check(&c->mo, 0, why, sizeof why);
+        if (r != PN_OK && !why[0]) abort(); /* a refusal names its reason */
         if (r == PN_OK) fuzz_use(c);
     }
     for (l = 0; l < PN_MLP_MAX_LAYERS; ++l) free(c->w[l]), free(c->b[l]);
