@@ -149,7 +149,7 @@ bg_tally() {
 models=
 [ -f models/pn_models.h ] && models=-DPN_TEST_HAVE_MODELS
 [ -f models/pn_rom_models.h ] && models="$models -DPN_TEST_HAVE_ROM_MODELS"
-# test_main with OpenMP: test_mpm.c checks that 1 and 2 threads give the same bits
+# test_main with OpenMP: the *_threads_identical tests check that 1 and 2 threads give the same bits
 # test_main, the longest, on one core while the others build and run on the other
 run_bin_bg test_main tests/test_main.c "$models -fopenmp" "$@"
 run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"

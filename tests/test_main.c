@@ -12,7 +12,7 @@
 #endif
 #include "pn_test.h"
 #ifdef _OPENMP
-#include <omp.h> /* test_mpm.c compares 1 and 2 threads */
+#include <omp.h> /* the thread tests compare 1 and 2 threads */
 #endif
 #include "test_util.h" /* the reference helpers the test files share */
 
@@ -20,8 +20,21 @@
 #include "test_energy.c"  /* pn_tests_energy: finite differences of every energy        */
 #include "test_return.c"  /* pn_tests_return: return-mapping invariants, bad input      */
 #include "test_driver.c"  /* pn_tests_driver: the material-point driver end to end      */
-#include "test_pnet.c"    /* pn_tests_pnet: MLP, PlasticityNet energy, learned return map */
-#include "test_mpm.c"     /* pn_tests_mpm: explicit MPM on small scenes                 */
+/* plastinet.h's learned models, by room (the helpers in test_pnet_mlp.c) */
+#include "test_pnet_mlp.c"      /* >>mlp: pn_mlp_eval                                     */
+#include "test_pnet_energy.c"   /* >>features, >>pnet: the energy and its derivatives     */
+#include "test_pnet_props.c"    /* >>pnet: invariants, PSD projection, bad input          */
+#include "test_pnet_return.c"   /* >>learned-return, the shipped models                   */
+#include "test_pnet_lanes.c"    /* the float lanes of >>mlp and >>pnet                    */
+/* plastinet_mpm.h's MPM, by room (the helpers in test_mpm_world.c) */
+#include "test_mpm_world.c"     /* >>world, >>drive                                       */
+#include "test_mpm_explicit.c"  /* >>explicit                                             */
+#include "test_mpm_transfer.c"  /* >>bin, >>transfer, 1 and 2 threads                     */
+#include "test_mpm_contact.c"   /* >>contact, >>friction                                  */
+#include "test_mpm_implicit.c"  /* >>implicit: energies, PlasticityNet, the energy guard  */
+#include "test_mpm_newton.c"    /* >>newton, >>implicit-step: the solve, the fallback     */
+#include "test_mpm_multigrid.c" /* >>multigrid                                            */
+#include "test_mpm_stress.c"    /* >>stress                                               */
 #include "test_scene.c"   /* pn_tests_scene: fill helpers, stable dt, large steps, errors */
 #include "test_fem.c"     /* pn_tests_fem: FEM meshes, energies, contact, Newton        */
 #include "test_rom.c"     /* pn_tests_rom: reduced-order MPM (maps, projections, the step) */
@@ -36,8 +49,19 @@ int main(int argc, char **argv) {
     pn_test_run(pn_tests_energy, PN_COUNT(pn_tests_energy), filter, &passed, &failed);
     pn_test_run(pn_tests_return, PN_COUNT(pn_tests_return), filter, &passed, &failed);
     pn_test_run(pn_tests_driver, PN_COUNT(pn_tests_driver), filter, &passed, &failed);
-    pn_test_run(pn_tests_pnet, PN_COUNT(pn_tests_pnet), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm, PN_COUNT(pn_tests_mpm), filter, &passed, &failed);
+    pn_test_run(pn_tests_pnet_mlp, PN_COUNT(pn_tests_pnet_mlp), filter, &passed, &failed);
+    pn_test_run(pn_tests_pnet_energy, PN_COUNT(pn_tests_pnet_energy), filter, &passed, &failed);
+    pn_test_run(pn_tests_pnet_props, PN_COUNT(pn_tests_pnet_props), filter, &passed, &failed);
+    pn_test_run(pn_tests_pnet_return, PN_COUNT(pn_tests_pnet_return), filter, &passed, &failed);
+    pn_test_run(pn_tests_pnet_lanes, PN_COUNT(pn_tests_pnet_lanes), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_world, PN_COUNT(pn_tests_mpm_world), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_explicit, PN_COUNT(pn_tests_mpm_explicit), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_transfer, PN_COUNT(pn_tests_mpm_transfer), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_contact, PN_COUNT(pn_tests_mpm_contact), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_implicit, PN_COUNT(pn_tests_mpm_implicit), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_newton, PN_COUNT(pn_tests_mpm_newton), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_multigrid, PN_COUNT(pn_tests_mpm_multigrid), filter, &passed, &failed);
+    pn_test_run(pn_tests_mpm_stress, PN_COUNT(pn_tests_mpm_stress), filter, &passed, &failed);
     pn_test_run(pn_tests_scene, PN_COUNT(pn_tests_scene), filter, &passed, &failed);
     pn_test_run(pn_tests_fem, PN_COUNT(pn_tests_fem), filter, &passed, &failed);
     pn_test_run(pn_tests_rom, PN_COUNT(pn_tests_rom), filter, &passed, &failed);

@@ -2,7 +2,7 @@
    particles (counts and volumes against the shapes' exact volumes), the explicit step bound
    (against the largest stable step found by search), honest large steps (never PN_OK with
    material lost), a domain placed anywhere, stepping a frame, and errors that name their
-   culprit. Uses t_mpm_* of test_mpm.c and t_pn_* of test_pnet.c. */
+   culprit. Uses t_mpm_* of test_mpm_world.c and t_pn_* of test_pnet_mlp.c. */
 
 #define T_SC_PI 3.14159265358979323846
 
@@ -535,7 +535,7 @@ PN_TEST(scene_large_steps_never_lose_material) {
     }
 }
 
-/* The block of mpm_particles_leaving_domain (400 m/s at a wall): refused as too large a step,
+/* The block of explicit_particles_leaving_domain (400 m/s at a wall): refused as too large a step,
    refused as outflow with the limit raised, retired and counted when outflow is allowed. */
 PN_TEST(scene_outflow) {
     int mode;
