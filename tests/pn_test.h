@@ -9,6 +9,8 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <stdlib.h>
+#include <time.h>
 
 typedef struct pn_test_ctx {
     const char *name;
@@ -82,17 +84,21 @@ static double pn_test_rng_range(pn_test_rng *r, double lo, double hi) {
     return lo + (hi - lo) * pn_test_rng_uniform(r);
 }
 
-/* Run the cases whose name contains filter (NULL: all); returns the number that failed. */
+/* Run the cases whose name contains filter (NULL: all); returns the number that failed. With
+   PN_TEST_TIMES set, each test's CPU seconds (every thread's) go to stderr: "cpu 1.23 name". */
 static int pn_test_run(const pn_test_case *cases, int count, const char *filter, int *passed,
                        int *failed) {
-    int i, bad = 0;
+    int i, bad = 0, times = getenv("PN_TEST_TIMES") != NULL;
     for (i = 0; i < count; ++i) {
         pn_test_ctx t;
+        clock_t c0;
         if (filter && !strstr(cases[i].name, filter)) continue;
         t.name = cases[i].name;
         t.failures = 0;
         t.reported = 0;
+        c0 = clock();
         cases[i].fn(&t);
+        if (times) fprintf(stderr, "cpu %.2f %s\n", (double)(clock() - c0) / CLOCKS_PER_SEC, cases[i].name);
         if (t.failures) {
             printf("FAIL %s (%d failed checks)\n", cases[i].name, t.failures);
             ++*failed;
