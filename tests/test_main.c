@@ -1,7 +1,12 @@
 /* The one test binary: every unit, property and driver test of plastinet.
    Build: cc -std=c99 -O2 -Wall -Wextra -pedantic tests/test_main.c -lm -o build/test_main
           (add -DPN_TEST_HAVE_MODELS to test the models of models/pn_models.h, as tests/run.sh does)
-   Run:   build/test_main [name-filter]          last line: N passed, N failed */
+   Run:   build/test_main [name-filter]          last line: N passed, N failed
+          build/test_main =NAME                  that test alone
+          build/test_main --list [name-filter]   the names, one a line (tests/run.sh runs them
+                                                 two at a time, each in its own process)
+          PN_TEST_FULL=1 build/test_main         every case of the sweeps (make test-all, CI)
+          PN_TEST_TIMES=1 build/test_main        each test's CPU seconds on stderr */
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
@@ -42,30 +47,41 @@
 
 #define PN_COUNT(a) ((int)(sizeof(a) / sizeof((a)[0])))
 
+static const struct {
+    const pn_test_case *cases;
+    int count;
+} pn_suites[] = {
+    {pn_tests_linalg, PN_COUNT(pn_tests_linalg)},
+    {pn_tests_energy, PN_COUNT(pn_tests_energy)},
+    {pn_tests_return, PN_COUNT(pn_tests_return)},
+    {pn_tests_driver, PN_COUNT(pn_tests_driver)},
+    {pn_tests_pnet_mlp, PN_COUNT(pn_tests_pnet_mlp)},
+    {pn_tests_pnet_energy, PN_COUNT(pn_tests_pnet_energy)},
+    {pn_tests_pnet_props, PN_COUNT(pn_tests_pnet_props)},
+    {pn_tests_pnet_return, PN_COUNT(pn_tests_pnet_return)},
+    {pn_tests_pnet_lanes, PN_COUNT(pn_tests_pnet_lanes)},
+    {pn_tests_mpm_world, PN_COUNT(pn_tests_mpm_world)},
+    {pn_tests_mpm_explicit, PN_COUNT(pn_tests_mpm_explicit)},
+    {pn_tests_mpm_transfer, PN_COUNT(pn_tests_mpm_transfer)},
+    {pn_tests_mpm_contact, PN_COUNT(pn_tests_mpm_contact)},
+    {pn_tests_mpm_implicit, PN_COUNT(pn_tests_mpm_implicit)},
+    {pn_tests_mpm_newton, PN_COUNT(pn_tests_mpm_newton)},
+    {pn_tests_mpm_multigrid, PN_COUNT(pn_tests_mpm_multigrid)},
+    {pn_tests_mpm_stress, PN_COUNT(pn_tests_mpm_stress)},
+    {pn_tests_scene, PN_COUNT(pn_tests_scene)},
+    {pn_tests_fem, PN_COUNT(pn_tests_fem)},
+    {pn_tests_rom, PN_COUNT(pn_tests_rom)},
+    {pn_tests_couple, PN_COUNT(pn_tests_couple)},
+};
+
 int main(int argc, char **argv) {
-    const char *filter = argc > 1 ? argv[1] : NULL;
-    int passed = 0, failed = 0;
-    pn_test_run(pn_tests_linalg, PN_COUNT(pn_tests_linalg), filter, &passed, &failed);
-    pn_test_run(pn_tests_energy, PN_COUNT(pn_tests_energy), filter, &passed, &failed);
-    pn_test_run(pn_tests_return, PN_COUNT(pn_tests_return), filter, &passed, &failed);
-    pn_test_run(pn_tests_driver, PN_COUNT(pn_tests_driver), filter, &passed, &failed);
-    pn_test_run(pn_tests_pnet_mlp, PN_COUNT(pn_tests_pnet_mlp), filter, &passed, &failed);
-    pn_test_run(pn_tests_pnet_energy, PN_COUNT(pn_tests_pnet_energy), filter, &passed, &failed);
-    pn_test_run(pn_tests_pnet_props, PN_COUNT(pn_tests_pnet_props), filter, &passed, &failed);
-    pn_test_run(pn_tests_pnet_return, PN_COUNT(pn_tests_pnet_return), filter, &passed, &failed);
-    pn_test_run(pn_tests_pnet_lanes, PN_COUNT(pn_tests_pnet_lanes), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_world, PN_COUNT(pn_tests_mpm_world), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_explicit, PN_COUNT(pn_tests_mpm_explicit), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_transfer, PN_COUNT(pn_tests_mpm_transfer), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_contact, PN_COUNT(pn_tests_mpm_contact), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_implicit, PN_COUNT(pn_tests_mpm_implicit), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_newton, PN_COUNT(pn_tests_mpm_newton), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_multigrid, PN_COUNT(pn_tests_mpm_multigrid), filter, &passed, &failed);
-    pn_test_run(pn_tests_mpm_stress, PN_COUNT(pn_tests_mpm_stress), filter, &passed, &failed);
-    pn_test_run(pn_tests_scene, PN_COUNT(pn_tests_scene), filter, &passed, &failed);
-    pn_test_run(pn_tests_fem, PN_COUNT(pn_tests_fem), filter, &passed, &failed);
-    pn_test_run(pn_tests_rom, PN_COUNT(pn_tests_rom), filter, &passed, &failed);
-    pn_test_run(pn_tests_couple, PN_COUNT(pn_tests_couple), filter, &passed, &failed);
+    int list = argc > 1 && !strcmp(argv[1], "--list"), s, passed = 0, failed = 0;
+    const char *filter = argc > 1 + list ? argv[1 + list] : NULL;
+    for (s = 0; s < PN_COUNT(pn_suites); ++s) {
+        if (list) pn_test_list(pn_suites[s].cases, pn_suites[s].count, filter);
+        else pn_test_run(pn_suites[s].cases, pn_suites[s].count, filter, &passed, &failed);
+    }
+    if (list) return 0;
     printf("%d passed, %d failed\n", passed, failed);
     return failed ? 1 : 0;
 }
