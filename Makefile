@@ -82,7 +82,8 @@ test:
 	@tests/run.sh
 
 # make test with the whole compile matrix (4 compilers x 6 configurations x 2 levels, and the
-# host's vector units): what CI runs
+# host's vector units) and every case of the tests' sweeps (PN_TEST_FULL=1): what CI runs.
+# tests/run.sh's top says what runs in make test, make test-all and make test-sanitize.
 test-all:
 	@FULL=1 tests/run.sh
 
@@ -219,6 +220,8 @@ build/model_report: bench/model_report.c bench/bench_util.h plastinet.h $(wildca
 crosscheck:
 	$(PY) gen/crosscheck.py
 
+# The test binaries under AddressSanitizer and UBSan, the sweeps' subsets (CI; the compile
+# matrix, the torch cross-checks and the examples run in make test-all).
 test-sanitize:
 	@SANITIZE=1 tests/run.sh
 

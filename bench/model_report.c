@@ -24,7 +24,7 @@
                     PSD projection
    Return-map models: |log z - log z_ref| against the root find of plastinet.h (mean, max),
    relative |T - T_ref| (mean, max), the yield residual |y(Z)| / tau_Y (max) and the cost of
-   both. Rates are per machine; nothing here is asserted (tests/test_pnet.c asserts accuracy). */
+   both. Rates are per machine; nothing here is asserted (tests/test_pnet_return.c asserts accuracy). */
 #define PLASTINET_IMPLEMENTATION
 #include "../plastinet.h"
 #include "../models/pn_models.h"
@@ -497,7 +497,7 @@ int main(int argc, char **argv) {
         fprintf(f, "Small strains: the ratio to lagged with |e0| <= 1e-3 and |de| <= 1e-2, far below the box,\n");
         fprintf(f, "where a simulation at a realistic E lives (a sand column at 1e7 Pa strains ~1e-4). A metal\n");
         fprintf(f, "with a high yield stress stays nearly elastic there, where the lagged energy is exact: the\n");
-        fprintf(f, "ratio is then large and says how few pairs yield (tests/test_pnet.c holds the network's error\n");
+        fprintf(f, "ratio is then large and says how few pairs yield (tests/test_pnet_return.c holds the network's error\n");
         fprintf(f, "to 1%% of |T| where the lagged energy's is below that).\n\n");
         fprintf(f, "## Energies\n\n");
         fprintf(f, "Least energy: min of Psi(F) - Psi(F0) per unit E with the regularizer on, F near F0 (the box)\n");

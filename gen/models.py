@@ -59,7 +59,7 @@ _add("metal_nh_3d", "metal_nh", 3, return_map="metal_nh_return_3d", encoding="sc
 # Conditioned models (any material in the ranges, no retraining): the parameters that change the
 # return mapping's shape are network inputs, (name, lo, hi) in pn_torch.PARAMS units; the others
 # stay the material's above. The output is a softplus (N >= 0: the energy is bounded below).
-# ship=False: not in models/ yet (it misses a bar of tests/test_pnet.c, see models/README.md);
+# ship=False: not in models/ yet (it misses a bar of tests/test_pnet_return.c, see models/README.md);
 # `make models` leaves it out, `make models MODEL=name` makes it.
 SAND_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 20.0, 45.0))
 _add("sand_any_2d", "sand", 2, encoding="scaled", params=SAND_RANGES, output="softplus")

@@ -1,7 +1,8 @@
 #!/bin/sh
 # Same bits across compilers (plastinet.h, THREADS AND DETERMINISM): builds
 # tests/cross_compiler_driver.c with every compiler found among gcc, clang and g++ (as C++) at
-# -O2 -ffp-contract=off, runs each build and compares the hash of the particle state after a
+# -O2 -ffp-contract=off (and -Wall -Wextra -Werror -pedantic: these are make test's clang and C++
+# builds of the headers), runs each build and compares the hash of the particle state after a
 # few steps of every integrator/energy combination the driver knows.
 # Usage: tests/cross_compiler.sh [name-filter]
 #        CC_OPT=-O3 CC_LIST="gcc clang clang++" tests/cross_compiler.sh   (defaults: -O2, gcc clang g++)
@@ -21,7 +22,7 @@ for cc in ${CC_LIST:-gcc clang g++}; do
     case $cc in *++) std="-x c++ -std=c++11";; *) std="-std=c99";; esac
     tag=$(echo "$cc" | tr '+' 'x')
     # shellcheck disable=SC2086
-    ( $cc $std $opt -ffp-contract=off tests/cross_compiler_driver.c -lm -o "$dir/$tag" \
+    ( $cc $std $opt -Wall -Wextra -Werror -pedantic -ffp-contract=off tests/cross_compiler_driver.c -lm -o "$dir/$tag" \
         >"$dir/$tag.log" 2>&1 && ./"$dir/$tag" "$@" >"$dir/$tag.out" 2>>"$dir/$tag.log" ) &
     built="$built $tag"
 done

@@ -9,6 +9,8 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <stdlib.h>
+#include <time.h>
 
 typedef struct pn_test_ctx {
     const char *name;
@@ -82,17 +84,43 @@ static double pn_test_rng_range(pn_test_rng *r, double lo, double hi) {
     return lo + (hi - lo) * pn_test_rng_uniform(r);
 }
 
-/* Run the cases whose name contains filter (NULL: all); returns the number that failed. */
+/* PN_TEST_FULL=1 (make test-all, what CI runs): the tests that sweep many cases run them all;
+   otherwise (make test, make test-sanitize) a representative subset named in the test. */
+static inline int pn_test_full(void) {
+    const char *s = getenv("PN_TEST_FULL");
+    return s && *s && strcmp(s, "0") != 0;
+}
+
+/* Does a case's name pass filter? NULL: all; "=name": that name exactly; else a substring. */
+static int pn_test_match(const char *name, const char *filter) {
+    if (!filter) return 1;
+    if (filter[0] == '=') return strcmp(name, filter + 1) == 0;
+    return strstr(name, filter) != NULL;
+}
+
+/* Print the names of the cases that pass filter, one a line (tests/run.sh runs them two at a
+   time, each in its own process). */
+static inline void pn_test_list(const pn_test_case *cases, int count, const char *filter) {
+    int i;
+    for (i = 0; i < count; ++i)
+        if (pn_test_match(cases[i].name, filter)) printf("%s\n", cases[i].name);
+}
+
+/* Run the cases that pass filter (pn_test_match); returns the number that failed. With
+   PN_TEST_TIMES set, each test's CPU seconds (every thread's) go to stderr: "cpu 1.23 name". */
 static int pn_test_run(const pn_test_case *cases, int count, const char *filter, int *passed,
                        int *failed) {
-    int i, bad = 0;
+    int i, bad = 0, times = getenv("PN_TEST_TIMES") != NULL;
     for (i = 0; i < count; ++i) {
         pn_test_ctx t;
-        if (filter && !strstr(cases[i].name, filter)) continue;
+        clock_t c0;
+        if (!pn_test_match(cases[i].name, filter)) continue;
         t.name = cases[i].name;
         t.failures = 0;
         t.reported = 0;
+        c0 = clock();
         cases[i].fn(&t);
+        if (times) fprintf(stderr, "cpu %.2f %s\n", (double)(clock() - c0) / CLOCKS_PER_SEC, cases[i].name);
         if (t.failures) {
             printf("FAIL %s (%d failed checks)\n", cases[i].name, t.failures);
             ++*failed;

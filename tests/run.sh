@@ -1,98 +1,43 @@
 #!/bin/sh
-# The one test runner: compile-configuration checks, then every unit/property/driver test.
-# Usage: tests/run.sh [name-filter]     SANITIZE=1 tests/run.sh  (ASan + UBSan build)
-#        FULL=1 tests/run.sh (make test-all: the whole compile matrix, as CI runs it)
-# Last line: N passed, N failed
+# The one test runner. Last line: N passed, N failed.
+#   make test           tests/run.sh             the loop of minutes: about 4 min on 2 idle cores
+#   make test-all       FULL=1 tests/run.sh      what CI runs: make test, the whole compile matrix
+#                                                and every case of the test binaries' sweeps
+#   make test-sanitize  SANITIZE=1 tests/run.sh  the test binaries alone, under AddressSanitizer
+#                                                and UBSan (CI), the sweeps' representative subsets
+#   tests/run.sh NAME                            the test binaries' tests whose name contains NAME
+#   TEST_JOBS=N                                  jobs at a time (default 2: the two cores)
+#
+# What runs where (CI runs test-all and test-sanitize, so every check runs there at least once):
+#   check                                          make test    test-all     test-sanitize
+#   the headers' compile matrix (tests/compile_      5 builds     52 builds    -
+#     check.c: 4 compilers x 6 configurations x 2
+#     levels + the host's vector units)
+#   test_main, test_float, test_render             quick        every case   quick, sanitized
+#   (PN_TEST_FULL=1: every case of the sweeps;
+#    else each sweep's subset, named in the test)
+#   float lanes: -march=native, no vector types    yes          yes          -
+#   torch cross-checks (gen/crosscheck.py, ROM)    yes          yes          -
+#   examples build, front door, README blocks      yes          yes          -
+#   same bits from every compiler, float vs double yes          yes          -
+#   one version everywhere                         yes          yes          -
+#   the browser demo (emscripten + chromium)       if installed required     -
+# The other compile risks are covered by builds made anyway: test_main is gcc C99 -O2 with
+# -Werror, test_float the same in float, tests/cross_compiler.sh builds with gcc, clang and g++
+# (C++11) at -O2 with -Werror.
+#
+# How: two phases of jobs, each phase run TEST_JOBS at a time (xargs -P), the longest first:
+# phase 1 builds (and runs what needs nothing else), phase 2 runs test_main's tests, one process
+# each, and what needs the examples. Each job writes build/run/JOB.log ending in its own
+# "N passed, N failed"; the logs are printed after, in a fixed order (the same output as one
+# process, whatever the timing).
 cd "$(dirname "$0")/.." || exit 1
-mkdir -p build
+R=build/run
+mkdir -p "$R/t"
 CC=${CC:-cc}
+PY=${PY:-/usr/bin/python3}
 W="-Wall -Wextra -Werror -pedantic"
-passed=0
-failed=0
-ok() { passed=$((passed + 1)); echo "ok   $1"; }
-bad() { failed=$((failed + 1)); echo "FAIL $1"; }
-
-# 1. the header in every configuration that matters, under every compiler found; two
-# compiles at a time (the machine's two cores), results printed in order
-cc_job() { # PREFIX COMMAND...: build PREFIX.bin, run it; the log and the status beside it
-    pre=$1; shift
-    if "$@" -o "$pre.bin" 2>"$pre.log" && "./$pre.bin" >>"$pre.log" 2>&1; then echo 0 >"$pre.rc"; else echo 1 >"$pre.rc"; fi
-}
-cc_n=0
-cc_flush() {
-    wait
-    k=0
-    while [ $k -lt $cc_n ]; do
-        name=$(cat build/cc_$k.name)
-        if [ "$(cat build/cc_$k.rc)" = 0 ]; then ok "$name"; else bad "$name"; sed 's/^/    /' build/cc_$k.log | head -20; fi
-        k=$((k + 1))
-    done
-    cc_n=0
-}
-cc_launch() { # NAME COMMAND...
-    echo "$1" >build/cc_$cc_n.name; shift
-    cc_job build/cc_$cc_n "$@" &
-    cc_n=$((cc_n + 1))
-    if [ $cc_n -ge 2 ]; then cc_flush; fi
-}
-# FULL=1 (make test-all, what CI runs): every compiler x configuration x level, 52 builds. Else
-# one build per distinct risk, 9: each compiler and language once, each configuration once, gcc
-# at both levels, the host's vector units in float
-if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -z "$FULL" ]; then
-    first_cc() { for c in "$@"; do command -v "$c" >/dev/null 2>&1 && { echo "$c"; return; }; done; }
-    ccc=$(first_cc gcc clang cc)
-    cpp=$(first_cc g++ clang++)
-    two="tests/compile_check.c tests/compile_check_tu2.c"
-    # shellcheck disable=SC2086
-    cc_launch "compile $ccc -std=c99 -O1 default" $ccc -std=c99 $W -O1 $two -lm
-    # shellcheck disable=SC2086
-    cc_launch "compile $ccc -std=c99 -O3 -DPN_REAL=float" $ccc -std=c99 $W -O3 -DPN_REAL=float $two -lm
-    # shellcheck disable=SC2086
-    cc_launch "compile $ccc -std=c99 -O3 -DPLASTINET_STATIC" $ccc -std=c99 $W -O3 -DPLASTINET_STATIC tests/compile_check.c -lm
-    # shellcheck disable=SC2086
-    cc_launch "compile $ccc -std=c99 -O1 -DPN_NO_STDIO" $ccc -std=c99 $W -O1 -DPN_NO_STDIO $two -lm
-    # shellcheck disable=SC2086
-    cc_launch "compile $ccc -std=c99 -O3 -DPN_NO_2D" $ccc -std=c99 $W -O3 -DPN_NO_2D $two -lm
-    # shellcheck disable=SC2086
-    cc_launch "compile $ccc -std=c99 -O1 -DPN_NO_3D" $ccc -std=c99 $W -O1 -DPN_NO_3D $two -lm
-    if command -v clang >/dev/null 2>&1 && [ "$ccc" != clang ]; then
-        # shellcheck disable=SC2086
-        cc_launch "compile clang -std=c99 -O3 default" clang -std=c99 $W -O3 $two -lm
-    fi
-    if [ -n "$cpp" ]; then
-        # shellcheck disable=SC2086
-        cc_launch "compile $cpp c++11 -O1 default" $cpp -x c++ -std=c++11 $W -O1 $two -lm
-    fi
-    # shellcheck disable=SC2086
-    cc_launch "compile $ccc -std=c99 -O3 -march=native -DPN_REAL=float" $ccc -std=c99 $W -O3 -march=native -DPN_REAL=float $two -lm
-    cc_flush
-fi
-if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -n "$FULL" ]; then
-    for cc in gcc clang g++ clang++; do
-        command -v "$cc" >/dev/null 2>&1 || { echo "skip $cc (not installed)"; continue; }
-        case $cc in *++) std="-x c++ -std=c++11";; *) std="-std=c99";; esac
-        for cfg in "" "-DPLASTINET_STATIC" "-DPN_REAL=float" "-DPN_NO_STDIO" "-DPN_NO_2D" "-DPN_NO_3D"; do
-            # gcc's flow-sensitive warnings (maybe-uninitialized) differ between levels
-            for opt in -O1 -O3; do
-                if [ "$cfg" = "-DPLASTINET_STATIC" ]; then srcs="tests/compile_check.c"; else srcs="tests/compile_check.c tests/compile_check_tu2.c"; fi
-                # shellcheck disable=SC2086
-                cc_launch "compile $cc ${std#-x c++ } $opt ${cfg:-default}" $cc $std $W $opt $cfg $srcs -lm
-            done
-        done
-    done
-    # what users build with: the host's vector units (gcc's flow-sensitive warnings differ again)
-    for cc in gcc clang; do
-        command -v "$cc" >/dev/null 2>&1 || continue
-        for cfg in "" "-DPN_REAL=float"; do
-            # shellcheck disable=SC2086
-            cc_launch "compile $cc -std=c99 -O3 -march=native ${cfg:-default}" $cc -std=c99 $W -O3 -march=native $cfg \
-                tests/compile_check.c tests/compile_check_tu2.c -lm
-        done
-    done
-    cc_flush
-fi
-
-# 2. the test binaries: test_main (double, every test) and test_float (PN_REAL=float)
+if [ -n "$FULL" ]; then PN_TEST_FULL=1; export PN_TEST_FULL; fi
 if [ -n "$SANITIZE" ]; then
     flags="-O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer"
     suffix=_san
@@ -100,6 +45,14 @@ else
     flags="-O2 -g"
     suffix=
 fi
+# the shipped models (models/pn_models.h, written by gen/export.py) are tested when present
+models=
+[ -f models/pn_models.h ] && models=-DPN_TEST_HAVE_MODELS
+[ -f models/pn_rom_models.h ] && models="$models -DPN_TEST_HAVE_ROM_MODELS"
+passed=0
+failed=0
+ok() { passed=$((passed + 1)); echo "ok   $1"; }
+bad() { failed=$((failed + 1)); echo "FAIL $1"; }
 # tally NAME LOG STATUS: print LOG without its summary line, add that "N passed, N failed" to ours
 tally() {
     grep -v '^[0-9]* passed, [0-9]* failed$' "$2"
@@ -113,68 +66,99 @@ tally() {
         if [ "$3" -ne 0 ] && [ "$f" -eq 0 ]; then bad "$1 exit status $3"; fi
     fi
 }
-# run_bin NAME SOURCE EXTRA_FLAGS [filter]: build, run, add its "N passed, N failed" to ours
-run_bin() {
-    bin=build/$1$suffix
-    # shellcheck disable=SC2086
-    if ! $CC -std=c99 $W $flags $3 "$2" -lm -o "$bin"; then
-        bad "build $bin"
+summary() { echo "$passed passed, $failed failed"; }
+
+# ---- the jobs (tests/run.sh --job JOB runs one; its output is its log) -------------------------
+
+# the compile matrix: one line per build, "NAME|COMMAND" (COMMAND gets -o BINARY; the binary runs)
+cc_list() {
+    two="tests/compile_check.c tests/compile_check_tu2.c"
+    if [ -z "$FULL" ]; then
+        # one build per distinct risk not built anyway (see the top): each configuration once,
+        # each level, C++, the host's vector units in float
+        first_cc() { for c in "$@"; do command -v "$c" >/dev/null 2>&1 && { echo "$c"; return; }; done; }
+        ccc=$(first_cc gcc clang cc)
+        clg=$(first_cc clang gcc cc)
+        cpp=$(first_cc g++ clang++)
+        echo "compile $ccc -std=c99 -O1 -DPN_NO_STDIO|$ccc -std=c99 $W -O1 -DPN_NO_STDIO $two -lm"
+        echo "compile $clg -std=c99 -O3 -DPN_NO_2D|$clg -std=c99 $W -O3 -DPN_NO_2D $two -lm"
+        [ -n "$cpp" ] && echo "compile $cpp c++11 -O1 -DPN_NO_3D|$cpp -x c++ -std=c++11 $W -O1 -DPN_NO_3D $two -lm"
+        echo "compile $ccc -std=c99 -O3 -DPLASTINET_STATIC|$ccc -std=c99 $W -O3 -DPLASTINET_STATIC tests/compile_check.c -lm"
+        echo "compile $ccc -std=c99 -O3 -march=native -DPN_REAL=float|$ccc -std=c99 $W -O3 -march=native -DPN_REAL=float $two -lm"
         return
     fi
-    shift 3
-    ./"$bin" "$@" >"$bin.log" 2>&1
-    tally "$bin" "$bin.log" $?
+    for cc in gcc clang g++ clang++; do
+        command -v "$cc" >/dev/null 2>&1 || continue
+        case $cc in *++) std="-x c++ -std=c++11";; *) std="-std=c99";; esac
+        for cfg in "" "-DPLASTINET_STATIC" "-DPN_REAL=float" "-DPN_NO_STDIO" "-DPN_NO_2D" "-DPN_NO_3D"; do
+            # gcc's flow-sensitive warnings (maybe-uninitialized) differ between levels
+            for opt in -O1 -O3; do
+                if [ "$cfg" = "-DPLASTINET_STATIC" ]; then srcs="tests/compile_check.c"; else srcs="$two"; fi
+                echo "compile $cc ${std#-x c++ } $opt ${cfg:-default}|$cc $std $W $opt $cfg $srcs -lm"
+            done
+        done
+    done
+    # what users build with: the host's vector units (gcc's flow-sensitive warnings differ again)
+    for cc in gcc clang; do
+        command -v "$cc" >/dev/null 2>&1 || continue
+        for cfg in "" "-DPN_REAL=float"; do
+            echo "compile $cc -std=c99 -O3 -march=native ${cfg:-default}|$cc -std=c99 $W -O3 -march=native $cfg $two -lm"
+        done
+    done
 }
-# run_bin_bg NAME SOURCE EXTRA_FLAGS [filter]: the same in the background (the other core);
-# bg_tally NAME collects it
-run_bin_bg() {
-    bin=build/$1$suffix
+job_cc() { # K: line K of the compile matrix
+    line=$(sed -n "${1}p" "$R/cc.list")
+    name=${line%%|*}
     # shellcheck disable=SC2086
-    ( if $CC -std=c99 $W $flags $3 "$2" -lm -o "$bin" 2>"$bin.build"; then
-          shift 3
-          ./"$bin" "$@" >"$bin.log" 2>&1
-          echo $? >"$bin.rc"
-      else
-          echo build >"$bin.rc"
-      fi ) &
-    bg_pid=$!
+    if ${line#*|} -o "$R/cc_$1.bin" >"$R/cc_$1.out" 2>&1 && "./$R/cc_$1.bin" >>"$R/cc_$1.out" 2>&1; then ok "$name"
+    else bad "$name"; sed 's/^/    /' "$R/cc_$1.out" | head -20; fi
+    rm -f "$R/cc_$1.bin"
 }
-bg_tally() {
+# build NAME SOURCE EXTRA_FLAGS: build/NAME (with _san under SANITIZE)
+build() {
+    # shellcheck disable=SC2086
+    if $CC -std=c99 $W $flags $3 "$2" -lm -o "build/$1$suffix" 2>"$R/$1.build"; then ok "build build/$1$suffix"
+    else bad "build build/$1$suffix"; sed 's/^/    /' "$R/$1.build" | head -20; fi
+}
+# run_bin NAME [filter]: run build/NAME, its lines and its count into ours
+run_bin() {
     bin=build/$1$suffix
-    wait "$bg_pid"
-    if [ "$(cat "$bin.rc")" = build ]; then bad "build $bin"; sed 's/^/    /' "$bin.build" | head -20; return; fi
-    tally "$bin" "$bin.log" "$(cat "$bin.rc")"
+    shift
+    if [ ! -x "$bin" ]; then bad "$bin was not built"; return; fi
+    ./"$bin" "$@" >"$R/out.$$" 2>&1
+    tally "$bin" "$R/out.$$" $?
+    rm -f "$R/out.$$"
 }
-# the shipped models (models/pn_models.h, written by gen/export.py) are tested when present
-models=
-[ -f models/pn_models.h ] && models=-DPN_TEST_HAVE_MODELS
-[ -f models/pn_rom_models.h ] && models="$models -DPN_TEST_HAVE_ROM_MODELS"
-# test_main with OpenMP: test_mpm.c checks that 1 and 2 threads give the same bits
-# test_main, the longest, on one core while the others build and run on the other
-run_bin_bg test_main tests/test_main.c "$models -fopenmp" "$@"
-run_bin test_float tests/test_float.c "-DPN_REAL=float" "$@"
-# the float lanes of PlasticityNet in their other spellings: 8-lane vectors (AVX and up, what
-# -march=native gives on x86-64) and the plain-struct path of compilers without vector types
-if [ -z "$1" ]; then
-    run_bin test_lanes_native tests/test_main.c "$models -march=native" pnet_lanes
-    run_bin test_lanes_portable tests/test_main.c "$models -DPN_NO_VECTOR_EXTENSIONS" pnet_lanes
-fi
-run_bin test_render tests/test_render.c "" "$@"
-bg_tally test_main
-
-# 3. C against torch (gen/crosscheck.py): the training targets and every shipped model. Runs
-#    whenever torch is installed (Debian: apt-get install -y python3-torch); CI requires it.
-PY=${PY:-/usr/bin/python3}
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+# test_main (double, every test) with OpenMP: the *_threads_identical tests compare 1 and 2 threads
+job_build_main() { build test_main tests/test_main.c "$models -fopenmp"; }
+job_float() { build test_float tests/test_float.c "-DPN_REAL=float" && run_bin test_float ${FILTER:+"$FILTER"}; }
+job_render() { build test_render tests/test_render.c "" && run_bin test_render ${FILTER:+"$FILTER"}; }
+# the float lanes of PlasticityNet in their other spellings (tests/test_lanes.c): 8-lane vectors
+# (AVX and up, what -march=native gives on x86-64) and the plain-struct path of compilers without
+# vector types
+job_lanes_native() { build test_lanes_native tests/test_lanes.c "$models -march=native" && run_bin test_lanes_native; }
+job_lanes_portable() {
+    build test_lanes_portable tests/test_lanes.c "$models -DPN_NO_VECTOR_EXTENSIONS" && run_bin test_lanes_portable
+}
+job_t() { # NAME: one test of test_main, in its own process
+    ./build/test_main$suffix "=$1" >"$R/t/$1.out" 2>&1
+    tally "$1" "$R/t/$1.out" $?
+    rm -f "$R/t/$1.out"
+}
+# C against torch (gen/crosscheck.py): the training targets and every shipped model. Runs
+# whenever torch is installed (Debian: apt-get install -y python3-torch); CI requires it.
+job_crosscheck() {
     if "$PY" -c "import torch" >/dev/null 2>&1; then
         "$PY" gen/crosscheck.py >build/crosscheck.log 2>&1
         tally crosscheck build/crosscheck.log $?
         # the reduced-order models (models/rom_*.h): torch references, then the C evaluation
         if [ -f models/pn_rom_models.h ]; then
+            : >build/rom_crosscheck.log
             for h in models/rom_*.h; do
                 n=$(basename "$h" .h); n=${n#rom_}
                 "$PY" gen/rom_crosscheck.py "$n" --out "build/rom_${n}_ref.txt" >>build/rom_crosscheck.log 2>&1
             done
+            # shellcheck disable=SC2086
             if $CC -std=c99 $W -O2 tests/rom_crosscheck.c -lm -o build/rom_crosscheck 2>>build/rom_crosscheck.log; then
                 ./build/rom_crosscheck build >build/rom_crosscheck.out 2>&1
                 tally rom_crosscheck build/rom_crosscheck.out $?
@@ -187,18 +171,19 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     else
         echo "skip crosscheck (torch not installed: apt-get install -y python3-torch)"
     fi
-fi
-# 4. every example builds with the Makefile's line (make examples), and every C block of
-#    README.md builds and runs (tests/readme_snippets.sh)
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
-    if make -s examples >build/examples.log 2>&1; then ok "examples build (make examples)"
-    else bad "examples build (make examples)"; sed 's/^/    /' build/examples.log | head -20; fi
-fi
-# 4b. the front door (issue 42), a few seconds in all: the demo at its defaults against the
-#     explicit reference it runs itself (runout and height within 10%); explicit runs at their
-#     stable step by default; every example's --help exits 0 and lists each flag it takes,
-#     once; game_loop creates its picture folder
-if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -x build/sand_column ]; then
+}
+# every example builds with the Makefile's line (make examples: one job per example)
+EXAMPLES="sand_column snowball materials game_loop metal_frame drop_on_sand rom_poke rom_tower material_point"
+job_ex() {
+    if make -s "build/$1" >"$R/ex_$1.out" 2>&1; then ok "example builds: make build/$1"
+    else bad "example builds: make build/$1"; sed 's/^/    /' "$R/ex_$1.out" | head -20; fi
+}
+# the front door (issue 42), a few seconds in all: the demo at its defaults against the explicit
+# reference it runs itself (runout and height within 10%); explicit runs at their stable step by
+# default; every example's --help exits 0 and lists each flag it takes, once; game_loop creates
+# its picture folder
+job_front_door() {
+    [ -x build/sand_column ] || { bad "front door: build/sand_column was not built"; return; }
     json=$(OMP_NUM_THREADS=1 build/sand_column --quiet 2>build/demo_check.err)
     ro=$(echo "$json" | sed -n 's/.*"runout_ratio": \([^,}]*\).*/\1/p')
     hr=$(echo "$json" | sed -n 's/.*"height_ratio": \([^,}]*\).*/\1/p')
@@ -235,13 +220,14 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ] && [ -x build/sand_column ]; then
     else
         bad "example_game_loop_png_mkdir: build/example_png_dir/sub not created"; sed 's/^/    /' build/example_png.log | tail -5
     fi
-fi
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+}
+# every C block of README.md builds and runs (tests/readme_snippets.sh)
+job_readme() {
     sh tests/readme_snippets.sh >build/readme_snippets.log 2>&1
     tally readme_snippets build/readme_snippets.log $?
-fi
-# 4c. one version everywhere: each header's banner, PN_VERSION_MAJOR/_MINOR and CHANGELOG.md's newest entry
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+}
+# one version everywhere: each header's banner, PN_VERSION_MAJOR/_MINOR and CHANGELOG.md's newest entry
+job_version() {
     v=$(sed -n 's/^#define PN_VERSION_MAJOR \([0-9]*\)$/\1/p' plastinet.h).$(sed -n 's/^#define PN_VERSION_MINOR \([0-9]*\)$/\1/p' plastinet.h)
     c=$(sed -n 's/^## \([0-9][0-9.]*\).*/\1/p' CHANGELOG.md | head -n 1)
     vok=1
@@ -250,23 +236,23 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     done
     [ "$c" = "$v" ] || { vok=0; echo "    CHANGELOG.md's newest entry is $c, PN_VERSION is $v"; }
     if [ $vok = 1 ]; then ok "version $v: banners, PN_VERSION and CHANGELOG.md agree"; else bad "version: banners, PN_VERSION and CHANGELOG.md disagree"; fi
-fi
-# 5. the same bits from every compiler (tests/cross_compiler.sh: gcc, g++, clang at -O2 with
-#    -ffp-contract=off, every integrator and energy); skipped with fewer than two compilers
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+}
+# the same bits from every compiler (tests/cross_compiler.sh: gcc, g++, clang at -O2 with
+# -ffp-contract=off and -Werror, every integrator and energy); skipped with fewer than two compilers
+job_cross() {
     sh tests/cross_compiler.sh >build/cross_compiler.log 2>&1
     tally cross_compiler build/cross_compiler.log $?
-fi
-# 5b. explicit MPM in float against double (bench/bench_explicit.c, the 88-line MLS-MPM scene
-#     with 3000 particles, 0.15 s through the impact): the elastic blocks' mean height agrees to
-#     5e-4 (float resolves a height of 0.2 m to 1.5e-8 m, and a step moves a particle 1e-4 m or
-#     less, so each step's displacement is rounded by up to ~1e-4 of itself; over 1500 steps of
-#     slowly varying velocity those roundings add up to a few 1e-4: measured 7.7e-5, and 2.1e-4
-#     with one more wall row held; double is not sensitive there: E x (1 + 1e-6) or FMA on/off
-#     move it < 1e-5); for the snow, which fractures (chaotic), the float-double gap is printed
-#     beside what a change of E by 1e-6 does in double (docs/results.md: float works at the
-#     precision the scene allows)
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+}
+# explicit MPM in float against double (bench/bench_explicit.c, the 88-line MLS-MPM scene
+# with 3000 particles, 0.15 s through the impact): the elastic blocks' mean height agrees to
+# 5e-4 (float resolves a height of 0.2 m to 1.5e-8 m, and a step moves a particle 1e-4 m or
+# less, so each step's displacement is rounded by up to ~1e-4 of itself; over 1500 steps of
+# slowly varying velocity those roundings add up to a few 1e-4: measured 7.7e-5, and 2.1e-4
+# with one more wall row held; double is not sensitive there: E x (1 + 1e-6) or FMA on/off
+# move it < 1e-5); for the snow, which fractures (chaotic), the float-double gap is printed
+# beside what a change of E by 1e-6 does in double (docs/results.md: float works at the
+# precision the scene allows)
+job_float_check() {
     ok_build=1
     for r in float double; do
         f=""; [ $r = float ] && f="-DPN_REAL=float"
@@ -289,11 +275,11 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     else
         bad "explicit MPM float check: build failed"; sed 's/^/    /' build/float_check.log | head -10
     fi
-fi
-# 6. the browser demo (examples/web, WebAssembly) in headless Chromium: tests/web_test.py. Runs
-#    whenever emscripten, chromium and chromedriver are installed (Debian: apt-get install -y
-#    emscripten chromium chromium-driver); CI requires them.
-if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+}
+# the browser demo (examples/web, WebAssembly) in headless Chromium: tests/web_test.py. Runs
+# whenever emscripten, chromium and chromedriver are installed (Debian: apt-get install -y
+# emscripten chromium chromium-driver); CI requires them.
+job_web() {
     if command -v emcc >/dev/null 2>&1 && command -v chromium >/dev/null 2>&1 &&
         command -v chromedriver >/dev/null 2>&1; then
         if make -s web >build/web_build.log 2>&1; then
@@ -307,6 +293,70 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
     else
         echo "skip web demo test (emscripten, chromium or chromedriver not installed: apt-get install -y emscripten chromium chromium-driver)"
     fi
+}
+
+if [ "$1" = --job ]; then # JOB [ARG]: one job, its lines then its "N passed, N failed"
+    FILTER=$RUN_FILTER
+    case $2 in
+        cc:*) job_cc "${2#cc:}";;
+        t:*) job_t "${2#t:}";;
+        ex:*) job_ex "${2#ex:}";;
+        *) "job_$2";;
+    esac
+    summary
+    exit 0
 fi
+
+# ---- the driver ----------------------------------------------------------------------------------
+RUN_FILTER=$1
+export RUN_FILTER
+rm -f "$R"/*.log "$R"/t/*.log
+# run_phase LIST: run the jobs of file LIST, TEST_JOBS at a time, each into its log
+run_phase() {
+    # shellcheck disable=SC2016
+    xargs -P "${TEST_JOBS:-2}" -n 1 sh -c 'sh tests/run.sh --job "$1" >"build/run/$(echo "$1" | tr ":" "_").log" 2>&1' sh <"$1"
+}
+# phase 1, the longest first (CPU seconds on one core, measured: examples 15-30 each, a compile
+# check about 20, test_main's build about 45)
+: >"$R/phase1"
+if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
+    cc_list >"$R/cc.list"
+    echo web >>"$R/phase1"
+    echo build_main >>"$R/phase1"
+    echo cross >>"$R/phase1"
+    for e in $EXAMPLES; do echo "ex:$e" >>"$R/phase1"; done
+    echo readme >>"$R/phase1"
+    k=1
+    while [ $k -le "$(wc -l <"$R/cc.list")" ]; do echo "cc:$k" >>"$R/phase1"; k=$((k + 1)); done
+    for j in float_check crosscheck float render lanes_native lanes_portable version; do echo $j >>"$R/phase1"; done
+else
+    for j in build_main float render; do echo $j >>"$R/phase1"; done
+fi
+run_phase "$R/phase1"
+# phase 2: test_main's tests (the list in registration order; run the slowest first), the front door
+: >"$R/phase2"
+[ -z "$SANITIZE" ] && [ -z "$1" ] && echo front_door >>"$R/phase2"
+if [ -x "build/test_main$suffix" ]; then
+    "./build/test_main$suffix" --list ${1:+"$1"} >"$R/tests"
+    # the slowest first, then the rest in order (CPU seconds measured, the full sweeps)
+    for n in fem_explicit_implicit transfer_threads_identical implicit_failed_step_no_trace scene_stable_dt \
+        stress_hydrostatic couple_explicit_implicit couple_threads_identical; do
+        grep -qx "$n" "$R/tests" && echo "t:$n" >>"$R/phase2"
+    done
+    sed 's/^/t:/' "$R/tests" | grep -vxF -f "$R/phase2" >>"$R/phase2"
+fi
+run_phase "$R/phase2"
+# the logs, in a fixed order: phase 1's, then the test_main tests in registration order, then
+# the front door
+print_log() { # JOB
+    f=$R/$(echo "$1" | tr ":" "_").log
+    if [ -f "$f" ]; then tally "$1" "$f" 0; else bad "$1: no log"; fi
+}
+for j in $(cat "$R/phase1"); do
+    case $j in build_main) ;; *) print_log "$j";; esac
+done
+print_log build_main
+[ -f "$R/tests" ] && for n in $(cat "$R/tests"); do print_log "t:$n"; done
+grep -qx front_door "$R/phase2" && print_log front_door
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

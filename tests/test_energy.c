@@ -109,7 +109,7 @@ typedef struct t_en_fn {
     const pn_material *m;
     double h;        /* state (elastic: Stomakhin hardening; von Mises: frozen a; lagged: h_G) */
     const double *G; /* lagged only */
-    const pn_pnet *net;          /* PlasticityNet only (test_pnet.c) */
+    const pn_pnet *net;          /* PlasticityNet only (test_pnet_*.c) */
     const pn_pnet_point *pt;
     double tau_y;                /* frozen-yield Drucker-Prager only */
 } t_en_fn;

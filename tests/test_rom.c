@@ -56,7 +56,7 @@ static void t_rom_random_model(t_rom_net *t, int d, int K, unsigned long long se
 }
 
 /* g, F and G of pn_rom_eval against central differences, 2D and 3D */
-static void rom_eval_fd(pn_test_ctx *pn__t) {
+PN_TEST(rom_eval_fd) {
     int d;
     for (d = 2; d <= 3; ++d) {
         t_rom_net t;
@@ -96,7 +96,7 @@ static void rom_eval_fd(pn_test_ctx *pn__t) {
 }
 
 /* the float path (pn_rom_map) against the double reference, positions and F */
-static void rom_float_path(pn_test_ctx *pn__t) {
+PN_TEST(rom_float_path) {
     t_rom_net t;
     pn_rom_desc desc;
     pn_rom_world *w = NULL;
@@ -146,7 +146,7 @@ static size_t t_rom_box(int d, const double *lo, const int *n, double h, double 
    trial state must be the full-order explicit step of plastinet_mpm.h from the same affine
    state, and the new latent the least-squares affine fit of that state (solved here by the
    normal equations on the basis (1, X)). 2D and 3D, APIC, with gravity and stress. */
-static void rom_affine_equals_mpm(pn_test_ctx *pn__t) {
+PN_TEST(rom_affine_equals_mpm) {
     int d;
     for (d = 2; d <= 3; ++d) {
         const double dx = 1.0 / 32, h = dx / 2, dt = 2e-4, E = 2e4, nu = 0.3, rho = 1000;
@@ -262,7 +262,7 @@ static void rom_affine_equals_mpm(pn_test_ctx *pn__t) {
 /* projections: a velocity field in the tangent space projects to its own vhat; a state on the
    manifold fits back to its latent (affine map: unique), and on the ELU map the fit's misfit
    vanishes */
-static void rom_projections(pn_test_ctx *pn__t) {
+PN_TEST(rom_projections) {
     pn_rom_model am;
     t_rom_net t;
     pn_rom_desc desc;
@@ -313,7 +313,7 @@ static void rom_projections(pn_test_ctx *pn__t) {
 /* Eulerian quadrature: every kept point's X maps back onto its lattice position (checked with
    the double path, the world's Newton runs on the float one), and with the affine map X is
    the exact inverse written out here */
-static void rom_inverse_map(pn_test_ctx *pn__t) {
+PN_TEST(rom_inverse_map) {
     t_rom_net t;
     pn_rom_model am;
     pn_rom_desc desc;
@@ -373,7 +373,7 @@ static void rom_inverse_map(pn_test_ctx *pn__t) {
 }
 
 /* bad models and bad input are refused, naming the culprit, with nothing changed */
-static void rom_bad_input(pn_test_ctx *pn__t) {
+PN_TEST(rom_bad_input) {
     t_rom_net t;
     pn_rom_desc desc;
     pn_rom_world *w = NULL;
@@ -433,7 +433,7 @@ static void rom_bad_input(pn_test_ctx *pn__t) {
 }
 
 /* the same bits for 1 and 2 threads (Eulerian, Lagrangian and implicit, with a drive and a load) */
-static void rom_threads_identical(pn_test_ctx *pn__t) {
+PN_TEST(rom_threads_identical) {
     t_rom_net t;
     double lo[3] = {0.02, 0.02, 0.02}, X[3 * 4096], keep[2][4];
     int nb[3] = {16, 16, 16}, quad, th, s;
@@ -492,7 +492,7 @@ static double t_rom_dilation_step(int d, double I, double V, double mu, double l
     return s;
 }
 
-static void rom_implicit_dilation(pn_test_ctx *pn__t) {
+PN_TEST(rom_implicit_dilation) {
     int d, scheme;
     for (d = 2; d <= 3; ++d)
         for (scheme = PN_ROM_IMPLICIT; scheme <= PN_ROM_MIDPOINT; ++scheme) {
@@ -560,7 +560,7 @@ static void rom_implicit_dilation(pn_test_ctx *pn__t) {
    differences of the incremental potential itself, on a nonlinear test map in double; and its
    Gauss-Newton Hessian against differences of the gradient on the affine map, where g is
    linear in the latent and (stretched, so dP/dF needs no projection) the Hessian is exact. */
-static void rom_implicit_gradient(pn_test_ctx *pn__t) {
+PN_TEST(rom_implicit_gradient) {
     int d, aff;
     for (d = 2; d <= 3; ++d)
         for (aff = 0; aff <= 1; ++aff) {
@@ -615,7 +615,7 @@ static void rom_implicit_gradient(pn_test_ctx *pn__t) {
 /* The render embedding: on the affine map the Taylor step from a node is exact (to float
    rounding); on a nonlinear map its error against pn_rom_map falls as spacing^2 (checked:
    halving the spacing divides it by more than 3); bad spacing and points refused. */
-static void rom_embed(pn_test_ctx *pn__t) {
+PN_TEST(rom_embed) {
     t_rom_net t;
     pn_rom_model am;
     int aff;
@@ -748,7 +748,7 @@ static size_t t_rom_occupy(t_rom_net *t, unsigned char *occ, int c, double h, in
 /* pn_rom_desc.refine: counted in closed form (refine 2000 used to count 1.6e13 points one at a
    time), refused above PN_ROM_MAX_REFINE and when the lattice would exceed PN_ROM_MAX_POINTS,
    naming refine; the lattice's first points where the cell-centred lattice puts them. */
-static void rom_refine_bound(pn_test_ctx *pn__t) {
+PN_TEST(rom_refine_bound) {
     t_rom_net t;
     unsigned char occ[8 * 8 * 8];
     pn_rom_desc desc;
@@ -796,7 +796,7 @@ static void rom_refine_bound(pn_test_ctx *pn__t) {
    of the start, and not growing from the first 100 steps to the last 100; 20 times the bound, and the issue's 10 s, are refused naming the bound with the world
    bit for bit as it was. The implicit step refuses 1e30 s of gravity (free flight of 1e60 m)
    the same way, held or not, and still takes a frame. */
-static void rom_stable_dt(pn_test_ctx *pn__t) {
+PN_TEST(rom_stable_dt) {
     const double E = 1e4, nu = 0.3, rho = 1000, dx = 1.0 / 64, h = dx / 2;
     const double lam = E * nu / ((1 + nu) * (1 - 2 * nu)), mu = E / (2 * (1 + nu)), c = sqrt((lam + 2 * mu) / rho);
     double lo[3] = {0.3, 0.35, 0}, X[2 * 400], lat[6] = {0, 0, 0.04, 0, 0, -0.03}, vl[6] = {1, 0, 0, 0, 0, 0};
@@ -901,7 +901,7 @@ static void rom_stable_dt(pn_test_ctx *pn__t) {
 /* pn_rom_model carries its arrays' lengths (format 2): every disagreement between a length
    and the sizes, an occupancy grid of absurd or overflowing size, and non-finite values are
    refused naming the field (under the sanitizers: without reading past an array) */
-static void rom_model_counts(pn_test_ctx *pn__t) {
+PN_TEST(rom_model_counts) {
     t_rom_net t;
     unsigned char occ[16];
     char why[256];
@@ -976,7 +976,7 @@ static void rom_model_counts(pn_test_ctx *pn__t) {
 /* NaN, infinite, negative or out-of-range description fields are refused naming the field
    (zero still means the default); pn_rom_map refuses a NaN or infinite reference point and
    writes nothing */
-static void rom_desc_nan(pn_test_ctx *pn__t) {
+PN_TEST(rom_desc_nan) {
     static const char *const field[] = {"youngs_pa", "dx_m", "refine", "poisson", "density_kg_m3", "youngs_pa",
                                         "dx_m", "point_volume_m3", "gravity", "boundary_samples", "quad_per_axis",
                                         "gn_max", "parallel_min", "cubature_m", "newton_max", "newton_tol",
@@ -1070,7 +1070,7 @@ static size_t t_rom_cylinder_mpm(const pn_rs_scene *s, const pn_rs_instance *in,
     return pn_rs_setup(*mw, g, s, in, 1, NULL, X, cap);
 }
 
-static void rom_cylinder_vs_mpm(pn_test_ctx *pn__t) {
+PN_TEST(rom_cylinder_vs_mpm) {
     const pn_rom_model *m = pn_rom_model_cylinder();
     pn_rs_scene s = pn_rs_get(PN_RS_CYLINDER, 1);
     pn_rs_instance in = pn_rs_instance_of(&s, 27);
@@ -1135,7 +1135,7 @@ static void rom_cylinder_vs_mpm(pn_test_ctx *pn__t) {
    too. Measured here on plastinet_mpm.h itself (the cylinder against its wall, one step under
    gravity: the particles left exactly at rest), against the implicit cubature's driven
    points at one point per cubature cell; and with drive_region_only, just the region. */
-static void rom_drive_as_mpm(pn_test_ctx *pn__t) {
+PN_TEST(rom_drive_as_mpm) {
     const pn_rom_model *m = pn_rom_model_cylinder();
     pn_rs_scene s = pn_rs_get(PN_RS_CYLINDER, 1);
     pn_rs_instance in = pn_rs_instance_of(&s, 27);

@@ -2,7 +2,7 @@
    particles (counts and volumes against the shapes' exact volumes), the explicit step bound
    (against the largest stable step found by search), honest large steps (never PN_OK with
    material lost), a domain placed anywhere, stepping a frame, and errors that name their
-   culprit. Uses t_mpm_* of test_mpm.c and t_pn_* of test_pnet.c. */
+   culprit. Uses t_mpm_* of test_mpm_world.c and t_pn_* of test_pnet_mlp.c. */
 
 #define T_SC_PI 3.14159265358979323846
 
@@ -442,6 +442,7 @@ PN_TEST(scene_stable_dt) {
     for (s = 0; s < 6; ++s) {
         double ke_ref, ke, k, largest = 0, T = kinds[s] == 3 ? 0.03 : 0.2;
         int stable_at_1, d = dims[s];
+        if (s == 5 && !pn_test_full()) continue; /* 3D rubber: PN_TEST_FULL=1 (make test-all, CI) */
         PN_CHECK(t_sc_run_at(kinds[s], d, 0.5, T, HUGE_VAL, &ke_ref));
         stable_at_1 = t_sc_run_at(kinds[s], d, 1.0, T, 1.5 * ke_ref + 1e-9, &ke);
         PN_CHECK(stable_at_1);
@@ -535,7 +536,7 @@ PN_TEST(scene_large_steps_never_lose_material) {
     }
 }
 
-/* The block of mpm_particles_leaving_domain (400 m/s at a wall): refused as too large a step,
+/* The block of explicit_particles_leaving_domain (400 m/s at a wall): refused as too large a step,
    refused as outflow with the limit raised, retired and counted when outflow is allowed. */
 PN_TEST(scene_outflow) {
     int mode;
