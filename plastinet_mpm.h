@@ -1484,12 +1484,12 @@ static int pn__mpm_inside(const pn_mpm_world *w, const pn_real *x) {
    rows on the planes are held with the walls (pn__mpm_obstacle): holding only the rows
    behind them let material sink up to about a cell in, and once particles were put back on
    the plane, the material above a floor, still moving into it, piled into one dense sheet
-   on the plane (a compacted snow layer held 2.7x the mass of the rows above in its bottom
-   row, and its mass field depended on the step). A particle that still ends a step past a
-   plane but on the grid is put back on the plane, its velocity left to the grid (zeroing
-   its normal part as well drains momentum at every contact: the sand column of
-   tests/test_mpm.c then ran out 3% shorter explicitly and 6% implicitly); one that left
-   the grid went through (outflow). */
+   on the plane (a compacted snow layer piled up in its bottom row, its mass field
+   depending on the step). A particle that still ends a step past a plane but on the grid
+   is put back on the plane, its velocity left to the grid (zeroing its normal part as
+   well drains momentum at every contact: the sand column ran out shorter; figures in
+   docs/notebook.md, "is the reference converged?"); one that left the grid went through
+   (outflow). */
 static inline void pn__mpm_wall_plane(const pn_mpm_world *w, pn_real *x) {
     int i;
     for (i = 0; i < w->dim; ++i) {

@@ -10,9 +10,10 @@
 #
 # What runs where (CI runs test-all and test-sanitize, so every check runs there at least once):
 #   check                                          make test    test-all     test-sanitize
-#   the headers' compile matrix (tests/compile_      5 builds     52 builds    -
+#   the headers' compile matrix (tests/compile_      6 builds     54 builds    -
 #     check.c: 4 compilers x 6 configurations x 2
-#     levels + the host's vector units)
+#     levels + the host's vector units + PN_NO_FEM
+#     in C and C++)
 #   test_main, test_float, test_render             quick        every case   quick, sanitized
 #   (PN_TEST_FULL=1: every case of the sweeps;
 #    else each sweep's subset, named in the test)
@@ -85,6 +86,7 @@ cc_list() {
         [ -n "$cpp" ] && echo "compile $cpp c++11 -O1 -DPN_NO_3D|$cpp -x c++ -std=c++11 $W -O1 -DPN_NO_3D $two -lm"
         echo "compile $ccc -std=c99 -O3 -DPLASTINET_STATIC|$ccc -std=c99 $W -O3 -DPLASTINET_STATIC tests/compile_check.c -lm"
         echo "compile $ccc -std=c99 -O3 -march=native -DPN_REAL=float|$ccc -std=c99 $W -O3 -march=native -DPN_REAL=float $two -lm"
+        echo "compile $clg -std=c99 -O1 -DPN_NO_FEM|$clg -std=c99 $W -O1 -DPN_NO_FEM $two -lm"
         return
     fi
     for cc in gcc clang g++ clang++; do
@@ -97,6 +99,12 @@ cc_list() {
                 echo "compile $cc ${std#-x c++ } $opt ${cfg:-default}|$cc $std $W $opt $cfg $srcs -lm"
             done
         done
+    done
+    # a game's particles-only build: FEM and coupling left out (C and C++)
+    for cc in gcc g++; do
+        command -v "$cc" >/dev/null 2>&1 || continue
+        case $cc in *++) std="-x c++ -std=c++11";; *) std="-std=c99";; esac
+        echo "compile $cc ${std#-x c++ } -O2 -DPN_NO_FEM|$cc $std $W -O2 -DPN_NO_FEM $two -lm"
     done
     # what users build with: the host's vector units (gcc's flow-sensitive warnings differ again)
     for cc in gcc clang; do

@@ -17,7 +17,7 @@ typedef struct t_cpl {
 typedef struct t_cpl_scene {
     int dim, res, cells[3];
     double gy, sand_lo[3], sand_size[3], block_lo[3], block_size[3], block_v[3], E_sand, E_block, friction;
-    pn_mpm_boundary boundary;
+    pn_boundary boundary;
     pn_allocator allocator;      /* the world's and the mesh's (zero: malloc)               */
 } t_cpl_scene;
 
@@ -45,11 +45,11 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     pn_mpm_fill_desc f;
     pn_material_desc md;
     pn_material sand;
-    pn_fem_group fg;
+    pn_group fg;
     pn_fem_desc fd;
     pn_fem_grid g;
     pn_coupled_desc cd;
-    const char *why = "";
+    char why[256] = "";
     char msg[256];
     size_t n = 0, k;
     int d = sc->dim, i;
@@ -67,14 +67,14 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     f.shape = PN_MPM_FILL_BOX;
     for (i = 0; i < d; ++i)
         f.center_m[i] = (pn_real)(sc->sand_lo[i] + sc->sand_size[i] / 2), f.half_extent_m[i] = (pn_real)(sc->sand_size[i] / 2);
-    if (pn_mpm_fill_count(&wd, &f, &n, &why) != PN_OK) return 0;
+    if (pn_mpm_fill_count(&wd, &f, &n, why, sizeof why) != PN_OK) return 0;
     wd.max_particles = n;
-    if (pn_mpm_create(&wd, &t->w, &why) != PN_OK) return 0;
+    if (pn_mpm_create(&wd, &t->w, why, sizeof why) != PN_OK) return 0;
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_STVK_HENCKY, md.plastic = PN_PLASTIC_DRUCKER_PRAGER;
     md.youngs_modulus_pa = (pn_real)(sc->E_sand > 0 ? sc->E_sand : 1e6), md.poisson_ratio = (pn_real)0.3;
     md.friction_angle_deg = 30;
-    if (pn_material_init(&sand, &md, &why) != PN_OK) return 0;
+    if (pn_material_init(&sand, &md, why, sizeof why) != PN_OK) return 0;
     f.group = pn_mpm_add_group(t->w, &sand, 1600);
     if (pn_mpm_fill(t->w, &f, NULL) != PN_OK) return 0;
     memset(&g, 0, sizeof g);
@@ -87,7 +87,7 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     memset(&fg, 0, sizeof fg);
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_NEO_HOOKEAN, md.youngs_modulus_pa = (pn_real)sc->E_block, md.poisson_ratio = (pn_real)0.3;
-    if (pn_material_init(&fg.material, &md, &why) != PN_OK) return 0;
+    if (pn_material_init(&fg.material, &md, why, sizeof why) != PN_OK) return 0;
     fg.density_kg_m3 = 3000;
     memset(&fd, 0, sizeof fd);
     fd.dim = d, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el;
@@ -130,7 +130,7 @@ static t_cpl_scene t_cpl_collision(int dim) {
     int i;
     memset(&sc, 0, sizeof sc);
     sc.dim = dim, sc.res = dim == 2 ? 32 : 16, sc.gy = 0, sc.E_block = 1e8, sc.friction = 0.3;
-    sc.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    sc.boundary = PN_BOUNDARY_SEPARATE;
     for (i = 0; i < dim; ++i) {
         sc.sand_lo[i] = 0.4, sc.sand_size[i] = 0.25;
         sc.block_lo[i] = 0.45, sc.block_size[i] = 0.1, sc.cells[i] = 2;
@@ -195,7 +195,7 @@ static void t_cpl_rest_scene(t_cpl_scene *sc, double *W, int *under, double *yto
     int it;
     size_t k;
     memset(sc, 0, sizeof *sc);
-    sc->dim = 2, sc->res = 32, sc->gy = -9.81, sc->E_sand = 1e7, sc->E_block = 1e9, sc->boundary = PN_MPM_BOUNDARY_SEPARATE;
+    sc->dim = 2, sc->res = 32, sc->gy = -9.81, sc->E_sand = 1e7, sc->E_block = 1e9, sc->boundary = PN_BOUNDARY_SEPARATE;
     sc->sand_lo[0] = 3 * dx, sc->sand_size[0] = 1 - 6 * dx, sc->sand_lo[1] = 3 * dx, sc->sand_size[1] = 0.25;
     sc->block_lo[0] = 0.4, sc->block_size[0] = 0.2, sc->block_size[1] = 0.1, sc->cells[0] = 8, sc->cells[1] = 4;
     sc->friction = 0.5;
@@ -404,7 +404,7 @@ PN_TEST(couple_explicit_implicit) {
     int run, n_out = 4;
     size_t np = 0;
     memset(&sc, 0, sizeof sc);
-    sc.dim = 2, sc.res = 32, sc.gy = -9.81, sc.E_sand = 1e7, sc.E_block = 1e9, sc.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    sc.dim = 2, sc.res = 32, sc.gy = -9.81, sc.E_sand = 1e7, sc.E_block = 1e9, sc.boundary = PN_BOUNDARY_SEPARATE;
     sc.sand_lo[0] = 3 * dx, sc.sand_size[0] = 1 - 6 * dx, sc.sand_lo[1] = 3 * dx, sc.sand_size[1] = 0.25;
     sc.block_lo[0] = 0.4, sc.block_size[0] = 0.2, sc.block_size[1] = 0.1, sc.cells[0] = 8, sc.cells[1] = 4;
     sc.block_lo[1] = 3 * dx + 0.25 + 0.3 * dx, sc.block_v[1] = -1.5, sc.friction = 0.5; /* just beyond dhat */

@@ -595,7 +595,7 @@ PN_TEST(driver_step_failure_reported) {
     desc.youngs_modulus_pa = 200e9;
     desc.poisson_ratio = 0.3;
     desc.yield_stress_pa = 250e6;
-    PN_CHECK(pn_material_init(&r.m, &desc, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&r.m, &desc, NULL, 0) == PN_OK);
     for (i = 0; i < 27; ++i) hist[i] = (pn_real)(i % 9 % 4 == 0 ? 1 : 0);
     hist[0] = (pn_real)1.001;
     hist[9] = (pn_real)1.002;

@@ -50,11 +50,11 @@ static void t_en_desc(pn_material_desc *d, pn_elastic_model el, pn_plastic_model
     d->poisson_ratio = nu;
 }
 static int t_en_init(pn_test_ctx *pn__t, pn_material *m, const pn_material_desc *d) {
-    const char *why = NULL;
-    pn_result r = pn_material_init(m, d, &why);
+    char why[256] = "";
+    pn_result r = pn_material_init(m, d, why, sizeof why);
     if (r != PN_OK) {
         char msg[200];
-        snprintf(msg, sizeof msg, "pn_material_init failed (%d): %s", (int)r, why ? why : "?");
+        snprintf(msg, sizeof msg, "pn_material_init failed (%d): %s", (int)r, why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return 0;
     }

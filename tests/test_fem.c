@@ -11,19 +11,19 @@ typedef struct t_fem {
     pn_fem_mesh *m;
 } t_fem;
 
-static pn_fem_group t_fem_group(pn_elastic_model e, pn_plastic_model p, double E, double rho) {
-    pn_fem_group g;
+static pn_group t_fem_group(pn_elastic_model e, pn_plastic_model p, double E, double rho) {
+    pn_group g;
     pn_material_desc md;
     memset(&md, 0, sizeof md);
     md.elastic = e, md.plastic = p, md.youngs_modulus_pa = (pn_real)E, md.poisson_ratio = (pn_real)0.3;
     md.yield_stress_pa = (pn_real)(3e-3 * E), md.hardening_modulus_pa = (pn_real)(1e-2 * E);
     memset(&g, 0, sizeof g);
-    pn_material_init(&g.material, &md, NULL);
+    pn_material_init(&g.material, &md, NULL, 0);
     g.density_kg_m3 = (pn_real)rho;
     return g;
 }
 
-static int t_fem_make(t_fem *t, const pn_fem_grid *g, const pn_fem_group *grp, double gy) {
+static int t_fem_make(t_fem *t, const pn_fem_grid *g, const pn_group *grp, double gy) {
     pn_fem_desc fd;
     char why[256];
     memset(t, 0, sizeof *t);
@@ -63,7 +63,7 @@ PN_TEST(fem_grid_mesh) {
         pn_fem_grid g = t_fem_grid(crossed ? 2 : dim, 4, 5, 3, 0.4, 0.5, 0.3);
         size_t nn, ne, e;
         t_fem t;
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
         double vol = 0, expect;
         int hole;
         for (hole = 0; hole < 2; ++hole) {
@@ -108,7 +108,7 @@ PN_TEST(fem_patch) {
     for (dim = 2; dim <= 3; ++dim) {
         static const double A[9] = {1.05, 0.02, -0.03, 0.01, 0.97, 0.04, 0.02, -0.01, 1.02};
         pn_fem_grid g = t_fem_grid(dim, 4, 4, 4, 1, 1, 1);
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
         t_fem t;
         size_t k, e;
         double vin = 0, vout = 0, ferr = 0;
@@ -197,9 +197,9 @@ PN_TEST(fem_objective_fd) {
     for (dim = 2; dim <= 3; ++dim)
         for (mat = 0; mat < 4; ++mat) {
             pn_fem_grid g = t_fem_grid(dim, 2, 2, 1, 0.02, 0.02, 0.01);
-            pn_fem_group grp = mat & 1 ? t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e6, 1000)
+            pn_group grp = mat & 1 ? t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e6, 1000)
                                    : t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
-            pn_mpm_collider c;
+            pn_collider c;
             t_fem t;
             pn__fem *s;
             size_t k, l, nu, nd;
@@ -211,12 +211,12 @@ PN_TEST(fem_objective_fd) {
                 PN_CHECK(0);
                 continue;
             }
-            if (mat & 1) PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+            if (mat & 1) PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_ENERGY_EXACT_VM, NULL) == PN_OK);
             memset(&c, 0, sizeof c);
-            c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)0.5; /* the floor, 2e-5 below */
+            c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)0.5; /* the floor, 2e-5 below */
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
             memset(&c, 0, sizeof c); /* a box coming down from above */
-            c.shape = PN_MPM_SHAPE_BOX, c.center_m[0] = (pn_real)0.01, c.center_m[1] = (pn_real)(0.02 + 2e-5 + 1.5e-5 + 0.005);
+            c.shape = PN_SHAPE_BOX, c.center_m[0] = (pn_real)0.01, c.center_m[1] = (pn_real)(0.02 + 2e-5 + 1.5e-5 + 0.005);
             c.center_m[2] = (pn_real)0.005, c.half_extent_m[0] = c.half_extent_m[1] = (pn_real)0.005, c.half_extent_m[2] = (pn_real)0.01;
             c.velocity_m_s[1] = (pn_real)-0.01, c.friction = (pn_real)0.3;
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
@@ -286,7 +286,7 @@ PN_TEST(fem_objective_fd) {
    of one node against a half-space and a moving box; the truth by fine sampling. */
 PN_TEST(fem_ccd) {
     pn_fem_grid g = t_fem_grid(2, 1, 1, 1, 0.01, 0.01, 0.01);
-    pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+    pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
     t_fem t;
     unsigned long seed = 99;
     int trial, shape, late = 0, hits = 0;
@@ -297,7 +297,7 @@ PN_TEST(fem_ccd) {
     for (shape = 0; shape < 2; ++shape)
         for (trial = 0; trial < 2000; ++trial) {
             pn__fem *s = (pn__fem *)t.m->impl;
-            pn_mpm_collider *c = &t.m->obstacles[0];
+            pn_collider *c = &t.m->obstacles[0];
             pn_real x[16], dir[16], nrm[3], amax;
             double r[8], tru = 2;
             int i, k;
@@ -309,9 +309,9 @@ PN_TEST(fem_ccd) {
             t.m->n_obstacles = 1;
             s->n_mov = 0, s->nu = t.nn * 2, s->t_end = 0;
             t.m->time_s = 0;
-            if (shape == 0) c->shape = PN_MPM_SHAPE_HALF_SPACE, c->normal[0] = (pn_real)r[0], c->normal[1] = (pn_real)(r[1] + 0.7);
+            if (shape == 0) c->shape = PN_SHAPE_HALF_SPACE, c->normal[0] = (pn_real)r[0], c->normal[1] = (pn_real)(r[1] + 0.7);
             else {
-                c->shape = PN_MPM_SHAPE_BOX, c->half_extent_m[0] = (pn_real)0.02, c->half_extent_m[1] = (pn_real)0.01;
+                c->shape = PN_SHAPE_BOX, c->half_extent_m[0] = (pn_real)0.02, c->half_extent_m[1] = (pn_real)0.01;
                 s->n_mov = 1, s->mov[0] = 0, s->nu = t.nn * 2 + 2;
                 c->velocity_m_s[0] = (pn_real)1e-3; /* moving: its offset is an unknown */
             }
@@ -362,9 +362,9 @@ PN_TEST(fem_line_search) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
         pn_fem_grid g = t_fem_grid(dim, 4, 4, 2, 0.04, 0.04, 0.02);
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
         pn_fem_implicit_desc id;
-        pn_mpm_collider c;
+        pn_collider c;
         t_fem_trace tr;
         t_fem t;
         int step;
@@ -374,9 +374,9 @@ PN_TEST(fem_line_search) {
             PN_CHECK(0);
             continue;
         }
-        PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+        PN_CHECK(pn_fem_group_set_energy(t.m, 0, PN_ENERGY_EXACT_VM, NULL) == PN_OK);
         memset(&c, 0, sizeof c);
-        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+        c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1;
         PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
         c.normal[1] = -1, c.center_m[1] = (pn_real)0.042, c.velocity_m_s[1] = (pn_real)-0.2;
         PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
@@ -437,7 +437,7 @@ static void t_fem_tail_fn(void *user, int solve, int it, pn_real E, pn_real res)
 
 PN_TEST(fem_newton_tail) {
     pn_fem_grid g = t_fem_grid(2, 3, 18, 1, 0.01, 0.06, 0.01);
-    pn_fem_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_NONE, 1e9, 7850);
+    pn_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_NONE, 1e9, 7850);
     pn_fem_implicit_desc id;
     pn_real down[2] = {0, (pn_real)-0.9};
     int foot[16], head[16], nf = 0, nh = 0;
@@ -484,7 +484,7 @@ PN_TEST(fem_newton_tail) {
    halving h cuts it by more than 2.5. */
 static double t_fem_cantilever(int nx, int ny) {
     pn_fem_grid g = t_fem_grid(2, nx, ny, 1, 1, 0.1, 1);
-    pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e7, 1000);
+    pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e7, 1000);
     t_fem t;
     int fix[256], nf = 0;
     size_t k;
@@ -519,9 +519,9 @@ PN_TEST(fem_explicit_implicit) {
     int dim;
     for (dim = 2; dim <= (pn_test_full() ? 3 : 2); ++dim) {
         pn_fem_grid g = t_fem_grid(dim, 3, 3, 3, 0.03, 0.03, 0.03);
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
         t_fem a, b;
-        pn_mpm_collider c;
+        pn_collider c;
         pn_real sdt = 0;
         double T = 0.06, dt_e, err = 0, t_now;
         long k;
@@ -531,7 +531,7 @@ PN_TEST(fem_explicit_implicit) {
             continue;
         }
         memset(&c, 0, sizeof c);
-        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+        c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1;
         PN_CHECK(pn_fem_add_obstacle(a.m, &c, NULL) == PN_OK && pn_fem_add_obstacle(b.m, &c, NULL) == PN_OK);
         for (t_now = 0, k = 0; t_now < T - 1e-12 && k < 10000000; ++k) { /* at half the bound of each step */
             PN_CHECK(pn_fem_stable_dt(a.m, &sdt) == PN_OK && sdt > 0);
@@ -569,9 +569,9 @@ PN_TEST(fem_pcg) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
         pn_fem_grid g = t_fem_grid(dim, 5, 5, 3, 0.03, 0.03, 0.018);
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
         t_fem a[2];
-        pn_mpm_collider c;
+        pn_collider c;
         pn_fem_implicit_desc id;
         pn_fem_stats st;
         double apart = 0, plastic = 0;
@@ -583,9 +583,9 @@ PN_TEST(fem_pcg) {
                 PN_CHECK(0);
                 return;
             }
-            PN_CHECK(pn_fem_group_set_energy(a[s].m, 0, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+            PN_CHECK(pn_fem_group_set_energy(a[s].m, 0, PN_ENERGY_EXACT_VM, NULL) == PN_OK);
             memset(&c, 0, sizeof c);
-            c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)0.3;
+            c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)0.3;
             PN_CHECK(pn_fem_add_obstacle(a[s].m, &c, NULL) == PN_OK);
             c.normal[1] = -1, c.center_m[1] = (pn_real)(0.03 + 3e-4), c.velocity_m_s[1] = (pn_real)-0.1;
             PN_CHECK(pn_fem_add_obstacle(a[s].m, &c, NULL) == PN_OK);
@@ -642,8 +642,8 @@ PN_TEST(fem_friction_slide) {
         /* explicit: stiff, so that the block's elastic ringing (undamped) barely lifts the
            nodes off the barrier's reach, where they would lose their friction (at 1e7 Pa
            it slides 9% too far) */
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, implicit ? 1e7 : 1e9, 1000);
-        pn_mpm_collider c;
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, implicit ? 1e7 : 1e9, 1000);
+        pn_collider c;
         t_fem t;
         size_t k;
         double t_now = 0, T = 0.3, x0 = 0, x1 = 0, mu = 0.5, v0 = 1, expect = v0 * v0 / (2 * mu * 9.81);
@@ -653,7 +653,7 @@ PN_TEST(fem_friction_slide) {
             continue;
         }
         memset(&c, 0, sizeof c);
-        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)mu;
+        c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1, c.friction = (pn_real)mu;
         PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
         /* settle on the floor first (at rest), then slide */
         for (k = 0; k < 50; ++k) PN_CHECK(pn_fem_step_implicit(t.m, (pn_real)1e-3, NULL, NULL) == PN_OK);
@@ -919,7 +919,7 @@ PN_TEST(fem_self_contact) {
     int implicit;
     for (implicit = 0; implicit < 2; ++implicit) {
         pn_fem_grid g = t_fem_grid(2, 4, 4, 1, 0.04, 0.04, 1);
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
         pn_fem_desc fd;
         pn_fem_mesh *m = NULL;
         size_t nn, ne, k, half;
@@ -1000,7 +1000,7 @@ PN_TEST(fem_spin_release) {
     for (dim = 2; dim <= 3; ++dim)
         for (implicit = 0; implicit < 2; ++implicit) {
             pn_fem_grid g = t_fem_grid(dim, 3, 2, 2, 0.03, 0.02, 0.02);
-            pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
+            pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
             t_fem t;
             pn_real centre[3] = {(pn_real)0.015, (pn_real)0.01, (pn_real)0.01}, w[3] = {0, 0, 3};
             double dt = 1e-3, err = 0, el = 0, kin = 0, L0[3] = {0, 0, 0}, L1[3] = {0, 0, 0}, Lerr = 0, ax[3];
@@ -1073,8 +1073,8 @@ PN_TEST(fem_threads_same_bits) {
             int t, same = 1;
             for (t = 1; t <= 2; ++t) {
                 pn_fem_grid g = dim == 2 ? t_fem_grid(2, 24, 12, 1, 0.06, 0.03, 0) : t_fem_grid(3, 8, 6, 4, 0.04, 0.03, 0.02);
-                pn_fem_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
-                pn_mpm_collider c;
+                pn_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
+                pn_collider c;
                 t_fem tf;
                 int step;
                 g.lo_m[1] = (pn_real)1e-3, g.crossed = 1;
@@ -1083,9 +1083,9 @@ PN_TEST(fem_threads_same_bits) {
                     PN_CHECK(0);
                     break;
                 }
-                PN_CHECK(pn_fem_group_set_energy(tf.m, 0, en ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+                PN_CHECK(pn_fem_group_set_energy(tf.m, 0, en ? PN_ENERGY_LAGGED : PN_ENERGY_EXACT_VM, NULL) == PN_OK);
                 memset(&c, 0, sizeof c);
-                c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1;
+                c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1;
                 PN_CHECK(pn_fem_add_obstacle(tf.m, &c, NULL) == PN_OK);
                 c.normal[1] = -1, c.center_m[1] = (pn_real)0.0315, c.velocity_m_s[1] = (pn_real)-0.5;
                 PN_CHECK(pn_fem_add_obstacle(tf.m, &c, NULL) == PN_OK);
@@ -1148,7 +1148,7 @@ PN_TEST(fem_permanent_set) {
     double E = 1e7, nu = 0.3, sy = 1e4, L = 0.2, h = 0.02, Ep = E / (1 - nu * nu), syp = 2 * sy / sqrt(3.0);
     double ky = 2 * syp / (Ep * h), kmax = 3 * ky, kres, kload = 0, kr = 0;
     pn_fem_grid g = t_fem_grid(2, 40, 8, 1, L, h, 1);
-    pn_fem_group grp;
+    pn_group grp;
     pn_material_desc md;
     t_fem t;
     int *right, nr = 0, step, ok = 1;
@@ -1157,9 +1157,9 @@ PN_TEST(fem_permanent_set) {
     md.elastic = PN_ELASTIC_STVK_HENCKY, md.plastic = PN_PLASTIC_VON_MISES, md.youngs_modulus_pa = (pn_real)E;
     md.poisson_ratio = (pn_real)nu, md.yield_stress_pa = (pn_real)sy;
     memset(&grp, 0, sizeof grp);
-    PN_CHECK(pn_material_init(&grp.material, &md, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&grp.material, &md, NULL, 0) == PN_OK);
     grp.density_kg_m3 = 1000; /* static: inertia is 1e-9 of the stiffness over a step of 1 s */
-    grp.energy = PN_MPM_ENERGY_EXACT_VM;
+    grp.energy = PN_ENERGY_EXACT_VM;
     g.crossed = 1, g.lo_m[1] = (pn_real)(-h / 2);
     if (!t_fem_make(&t, &g, &grp, 0)) {
         PN_CHECK(0);
@@ -1237,7 +1237,7 @@ PN_TEST(fem_self_contact_3d) {
     int implicit;
     for (implicit = 0; implicit < 3; ++implicit) { /* 2: implicit with PCG (the pairs all off its block pattern) */
         pn_fem_grid g = t_fem_grid(3, 8, 2, 2, 0.08, 0.02, 0.02);
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
         pn_fem_desc fd;
         pn_fem_mesh *m = NULL;
         size_t nn, ne, k, e, f;
@@ -1323,7 +1323,7 @@ PN_TEST(fem_self_contact_3d) {
 PN_TEST(fem_bad_mesh) {
     static const pn_real X[] = {0, 0, 1, 0, 0, 1, 1, 1, 2, 2};
     static const int good[] = {0, 1, 2, 1, 3, 2};
-    pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+    pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
     pn_fem_desc fd;
     pn_fem_mesh *m = NULL;
     char why[256];
@@ -1360,10 +1360,10 @@ PN_TEST(fem_bad_mesh) {
         }
     }
     { /* an obstacle with a node inside is refused, the mesh unchanged */
-        pn_mpm_collider c;
+        pn_collider c;
         PN_CHECK(pn_fem_create(&fd, &m, why, sizeof why) == PN_OK);
         memset(&c, 0, sizeof c);
-        c.shape = PN_MPM_SHAPE_HALF_SPACE, c.normal[1] = 1, c.center_m[1] = (pn_real)0.5;
+        c.shape = PN_SHAPE_HALF_SPACE, c.normal[1] = 1, c.center_m[1] = (pn_real)0.5;
         PN_CHECK(pn_fem_add_obstacle(m, &c, NULL) == PN_ERROR_INVALID_ARGUMENT);
         PN_CHECK(strstr(pn_fem_error(m), "node 0") != NULL);
         PN_CHECK(m->n_obstacles == 0);
@@ -1389,7 +1389,7 @@ PN_TEST(fem_nonfinite_state) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
         pn_fem_grid g = t_fem_grid(dim, 4, 3, 2, 0.4, 0.3, 0.2);
-        pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_VON_MISES, 1e6, 1000);
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_VON_MISES, 1e6, 1000);
         pn_fem_implicit_desc id;
         t_fem t;
         pn_real *x, *v, *Fp, *h;
@@ -1442,8 +1442,8 @@ PN_TEST(fem_obstacle_inside_element) {
     for (dim = 2; dim <= 3; ++dim)
         for (cs = 0; cs < 3; ++cs) {
             pn_fem_grid g = t_fem_grid(dim, 2, 2, 2, 1, 1, 1);
-            pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
-            pn_mpm_collider c;
+            pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+            pn_collider c;
             t_fem t;
             int i, inside_any = 0, s;
             pn_result r;
@@ -1452,7 +1452,7 @@ PN_TEST(fem_obstacle_inside_element) {
                 continue;
             }
             memset(&c, 0, sizeof c);
-            c.shape = PN_MPM_SHAPE_BOX;
+            c.shape = PN_SHAPE_BOX;
             for (i = 0; i < dim; ++i) c.center_m[i] = (pn_real)0.27, c.half_extent_m[i] = (pn_real)0.05;
             if (cs == 1) c.center_m[0] = (pn_real)0.5, c.half_extent_m[0] = (pn_real)0.7, c.half_extent_m[1] = (pn_real)0.01,
                          c.center_m[1] = (pn_real)0.27; /* a thin bar right through the mesh, between node rows */
@@ -1505,7 +1505,7 @@ static const char t_fem_ele[] = "2 4 1\n1 1 2 3 4 7\n2 2 4 3 5 8\n";
    in make test-sanitize) and what parses is a mesh pn_fem_create takes or refuses. */
 PN_TEST(fem_loaders) {
     pn_fem_mesh_data d;
-    pn_fem_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+    pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
     char why[256], buf[1024];
     int pass, ok_parse = 0, created = 0;
     unsigned long seed = 12345;

@@ -92,7 +92,7 @@ PN_TEST(float_return_mappings) {
             ds.camclay_xi = 3;
             ds.plastic = pm == 0 ? PN_PLASTIC_DRUCKER_PRAGER : pm == 3 ? PN_PLASTIC_CAM_CLAY : PN_PLASTIC_VON_MISES;
             if (pm == 2) ds.elastic = PN_ELASTIC_NEO_HOOKEAN;
-            PN_CHECK(pn_material_init(&m, &ds, NULL) == PN_OK);
+            PN_CHECK(pn_material_init(&m, &ds, NULL, 0) == PN_OK);
             for (t = 0; t < 10000; ++t) {
                 pn_real R1[9], R2[9], F[9], Z[9], T[9], hn = 0, y = 0, ys = 1, y0 = 0, ys0 = 1;
                 pn_real h = (pn_real)pn_test_rng_range(&rng, hmin, 0);
@@ -136,7 +136,7 @@ PN_TEST(float_pnet_sand) {
         pn_pnet_desc nd;
         memset(&nd, 0, sizeof nd);
         nd.energy = mo;
-        if (pn_model_material(mo, 1e7, &m, NULL) != PN_OK || pn_pnet_init(&net, &nd, &m, d, NULL) != PN_OK) {
+        if (pn_model_material(mo, 1e7, &m, NULL, 0) != PN_OK || pn_pnet_init(&net, &nd, &m, d, NULL, 0) != PN_OK) {
             PN_CHECK(!"PlasticityNet sand in float");
             return;
         }

@@ -23,10 +23,10 @@ PN_TEST(contact_settled_layer_stays) {
         pn_real *x0;
         int steps = (int)(0.3 / dts[k] + 0.5);
         for (c = 0; c < 3; ++c) { /* floor, left and right wall */
-            pn_mpm_collider co;
+            pn_collider co;
             memset(&co, 0, sizeof co);
-            co.shape = PN_MPM_SHAPE_HALF_SPACE;
-            co.boundary = PN_MPM_BOUNDARY_SEPARATE;
+            co.shape = PN_SHAPE_HALF_SPACE;
+            co.boundary = PN_BOUNDARY_SEPARATE;
             co.friction = c == 0 ? 0.5 : 0;
             co.center_m[0] = at[c][0];
             co.center_m[1] = at[c][1];
@@ -69,7 +69,7 @@ PN_TEST(contact_sliding_block_friction) {
     for (dim = 2; dim <= 3; ++dim)
         for (k = 0; k < 3; ++k) {
             int res = dim == 2 ? 32 : 16, gi, s, i;
-            pn_mpm_world *w = t_mpm_world(dim, res, -g, PN_MPM_BOUNDARY_SEPARATE);
+            pn_mpm_world *w = t_mpm_world(dim, res, -g, PN_BOUNDARY_SEPARATE);
             double lo[3] = {3.0 / res + 0.005, 3.0 / res, 0.35}, sz[3] = {dim == 2 ? 0.2 : 0.125, 2.0 / res, 0.3};
             double v[3] = {v0, 0, 0};
             double c0 = 0, c1 = 0, tol = k == 2 ? 0.05 : 0.03;
@@ -102,29 +102,29 @@ PN_TEST(contact_sliding_block_friction) {
 PN_TEST(contact_colliders) {
     int implicit, g, s;
     for (implicit = 0; implicit < 2; ++implicit) {
-        pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_MPM_BOUNDARY_SLIP);
-        pn_mpm_collider ball, plate;
+        pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_BOUNDARY_SLIP);
+        pn_collider ball, plate;
         double lo[2] = {0.35, 0.55}, sz[2] = {0.3, 0.1}, deepest = 0, below = 0, dx = 1.0 / 32;
         size_t n, p;
         int idx = -1;
         g = t_mpm_group(w, PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE, 1e5);
         n = t_mpm_block(w, g, lo, sz, NULL);
         memset(&ball, 0, sizeof ball);
-        ball.shape = PN_MPM_SHAPE_SPHERE;
-        ball.boundary = PN_MPM_BOUNDARY_SEPARATE;
+        ball.shape = PN_SHAPE_SPHERE;
+        ball.boundary = PN_BOUNDARY_SEPARATE;
         ball.center_m[0] = 0.5;
         ball.center_m[1] = 0.35;
         ball.radius_m = 0.12;
         PN_CHECK(pn_mpm_add_collider(w, &ball, &idx) == PN_OK && idx == 0);
         memset(&plate, 0, sizeof plate);
-        plate.shape = PN_MPM_SHAPE_HALF_SPACE;
-        plate.boundary = PN_MPM_BOUNDARY_STICKY;
+        plate.shape = PN_SHAPE_HALF_SPACE;
+        plate.boundary = PN_BOUNDARY_STICKY;
         plate.center_m[1] = 0.05;
         plate.normal[1] = 2; /* normalized by the library */
         plate.velocity_m_s[1] = 0.2;
         PN_CHECK(pn_mpm_add_collider(w, &plate, NULL) == PN_OK);
         plate.radius_m = -1;
-        plate.shape = PN_MPM_SHAPE_SPHERE;
+        plate.shape = PN_SHAPE_SPHERE;
         PN_CHECK(pn_mpm_add_collider(w, &plate, NULL) == PN_ERROR_INVALID_ARGUMENT && w->n_colliders == 2);
         for (s = 0; s < (implicit ? 600 : 6000); ++s) {
             pn_result r = implicit ? pn_mpm_step_implicit(w, 1e-3, NULL, NULL) : pn_mpm_step_explicit(w, 1e-4, NULL);
@@ -154,14 +154,14 @@ PN_TEST(contact_floor_plane) {
     for (dim = 2; dim <= 3; ++dim)
         for (kind = 0; kind < 2; ++kind)
             for (impl = 0; impl < 2; ++impl) {
-                pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 32 : 16, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+                pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 32 : 16, -9.81, PN_BOUNDARY_SEPARATE);
                 double lo[3] = {0.4, 0.25, 0.4}, sz[3] = {0.2, 0.2, 0.2}, v[3] = {0, kind ? -8 : 0, 0}, deepest = 1e9;
                 double floor_y, t = 0, end = 0.3;
                 size_t n, p;
                 int g, bad = 0;
                 PN_CHECK(w != NULL);
                 if (!w) continue;
-                floor_y = w->wall * w->desc.dx_m;
+                floor_y = w->s.wall * w->desc.dx_m;
                 g = kind ? t_mpm_group(w, PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE, 1e5)
                          : t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e5);
                 lo[1] = floor_y + (kind ? 0.02 : 0.15);

@@ -8,7 +8,7 @@
 PN_TEST(explicit_elastic_block_at_rest) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
-        pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 64 : 24, 0, PN_MPM_BOUNDARY_SLIP);
+        pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 64 : 24, 0, PN_BOUNDARY_SLIP);
         double lo[3] = {0.3, 0.3, 0.3}, sz[3] = {0.4, 0.3, 0.3}, vmax = 0;
         size_t p, n;
         int g, step;
@@ -30,7 +30,7 @@ PN_TEST(explicit_elastic_block_at_rest) {
 PN_TEST(explicit_free_fall) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
-        pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 64 : 24, -9.81, PN_MPM_BOUNDARY_STICKY);
+        pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 64 : 24, -9.81, PN_BOUNDARY_STICKY);
         double lo[3] = {0.4, 0.6, 0.4}, sz[3] = {0.2, 0.2, 0.2}, worst = 0;
         size_t p, n;
         int g, step;
@@ -49,7 +49,7 @@ PN_TEST(explicit_free_fall) {
 /* Bad input: a NaN particle is refused whole; a step that meets a NaN deformation fails,
    names the particle and leaves every array as it was. */
 PN_TEST(explicit_bad_input) {
-    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_MPM_BOUNDARY_STICKY);
+    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_BOUNDARY_STICKY);
     double lo[3] = {0.3, 0.3, 0}, sz[3] = {0.2, 0.2, 0}, x[4] = {0.5, 0.5, NAN, 0.5};
     double *copy;
     size_t n, bytes;
@@ -82,19 +82,19 @@ PN_TEST(explicit_bad_input) {
     bad.res[0] = bad.res[1] = 32;
     bad.dx_m = -1;
     bad.max_particles = 10;
-    PN_CHECK(pn_mpm_create(&bad, &w2, NULL) == PN_ERROR_INVALID_ARGUMENT && w2 == NULL);
+    PN_CHECK(pn_mpm_create(&bad, &w2, NULL, 0) == PN_ERROR_INVALID_ARGUMENT && w2 == NULL);
     bad.dx_m = 1.0 / 32;
     bad.filter_time_s = -1e-3;
-    PN_CHECK(pn_mpm_create(&bad, &w2, NULL) == PN_ERROR_INVALID_ARGUMENT && w2 == NULL);
+    PN_CHECK(pn_mpm_create(&bad, &w2, NULL, 0) == PN_ERROR_INVALID_ARGUMENT && w2 == NULL);
     bad.filter_time_s = NAN;
-    PN_CHECK(pn_mpm_create(&bad, &w2, NULL) == PN_ERROR_INVALID_ARGUMENT && w2 == NULL);
+    PN_CHECK(pn_mpm_create(&bad, &w2, NULL, 0) == PN_ERROR_INVALID_ARGUMENT && w2 == NULL);
 }
 
 /* With outflow allowed (and the advection limit raised), particles thrown through a wall
    faster than the walls can stop them are retired and counted, not lost or left outside the
    grid (test_scene.c, scene_outflow: refused by default). */
 PN_TEST(explicit_particles_leaving_domain) {
-    pn_mpm_world *w = t_mpm_world(2, 32, 0, PN_MPM_BOUNDARY_SEPARATE);
+    pn_mpm_world *w = t_mpm_world(2, 32, 0, PN_BOUNDARY_SEPARATE);
     double lo[3] = {0.7, 0.4, 0}, sz[3] = {0.1, 0.1, 0}, v[3] = {400, 0, 0}, m, mom[3];
     size_t n;
     int g;
@@ -124,9 +124,9 @@ PN_TEST(explicit_snow2_closed_form) {
     double worst_z = 0, worst_t = 0, worst_h = 0;
     int v, k, clamped_count = 0, inverted = 0, flag_mismatch = 0;
     t_snow_desc(&md);
-    PN_CHECK(pn_material_init(&m[0], &md, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&m[0], &md, NULL, 0) == PN_OK);
     md.snow_jp_min = 0.6, md.snow_jp_max = 20; /* with the J_p bounds */
-    PN_CHECK(pn_material_init(&m[1], &md, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&m[1], &md, NULL, 0) == PN_OK);
     for (v = 0; v < 2; ++v)
         for (k = 0; k < 4000; ++k) {
             pn_real F[4], Z[4], Z2[4], tau[4], tau2[4], h = (pn_real)pn_test_rng_range(&rng, -0.6, 0.6), hn, hn2 = h;
@@ -204,24 +204,24 @@ PN_TEST(explicit_inversion) {
     md.snow_xi = 10;
     md.snow_jp_min = 0.6;
     md.snow_jp_max = 20;
-    PN_CHECK(pn_material_init(&snow, &md, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&snow, &md, NULL, 0) == PN_OK);
     /* the material point: clamped to [1 - theta_c, 1 + theta_s], J_p = 0.2 / 0.975 -> 0.6 */
     PN_CHECK(pn_return_map(&snow, 2, F, 0, Z, &h, T) == PN_OK);
     PN_CHECK(pn_mat_det(2, Z) > 0 && fabs(Z[0] - 1) < 1e-12 && fabs(Z[3] - 0.975) < 1e-12);
     PN_CHECK(fabs(h - log(0.6)) < 1e-12);
     md.plastic = PN_PLASTIC_NONE;
     md.elastic = PN_ELASTIC_NEO_HOOKEAN;
-    PN_CHECK(pn_material_init(&nh, &md, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&nh, &md, NULL, 0) == PN_OK);
     PN_CHECK(pn_return_map(&nh, 2, F, 0, Z, &h, T) == PN_ERROR_INVERTED);
     md.snow_jp_min = 1; /* the bounds must straddle 1 */
     md.plastic = PN_PLASTIC_SNOW_STOMAKHIN;
     md.elastic = PN_ELASTIC_FIXED_COROTATED;
-    PN_CHECK(pn_material_init(&nh, &md, NULL) == PN_ERROR_INVALID_PARAMETER);
+    PN_CHECK(pn_material_init(&nh, &md, NULL, 0) == PN_ERROR_INVALID_PARAMETER);
     md.plastic = PN_PLASTIC_NONE;
     md.elastic = PN_ELASTIC_NEO_HOOKEAN;
-    PN_CHECK(pn_material_init(&nh, &md, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&nh, &md, NULL, 0) == PN_OK);
     for (model = 0; model < 2; ++model) { /* the MPM scene: two blocks meet at 2 x 20 m/s, twice the stable step */
-        pn_mpm_world *w = t_mpm_world(2, 32, 0, PN_MPM_BOUNDARY_SEPARATE);
+        pn_mpm_world *w = t_mpm_world(2, 32, 0, PN_BOUNDARY_SEPARATE);
         double lo[3] = {0.25, 0.4, 0}, sz[3] = {0.2, 0.2, 0}, v[3] = {20, 0, 0};
         size_t n;
         int g, s, inverted = 0, failed = 0;

@@ -13,8 +13,8 @@
    stopping error (about newton_tol dx per step) does not hide the comparison. */
 static double t_mpm_elastic_gap(pn_test_ctx *pn__t, int dim, double dt, double *rel) {
     int res = dim == 2 ? 32 : 16, step, i, steps = (int)(0.02 / dt + 0.5);
-    pn_mpm_world *a = t_mpm_world(dim, res, 0, PN_MPM_BOUNDARY_STICKY);
-    pn_mpm_world *b = t_mpm_world(dim, res, 0, PN_MPM_BOUNDARY_STICKY);
+    pn_mpm_world *a = t_mpm_world(dim, res, 0, PN_BOUNDARY_STICKY);
+    pn_mpm_world *b = t_mpm_world(dim, res, 0, PN_BOUNDARY_STICKY);
     double lo[3] = {0.35, 0.35, 0.35}, sz[3] = {0.3, 0.3, 0.3}, diff = 0, disp = 0, *x0;
     pn_mpm_implicit_desc id;
     size_t n, p;
@@ -50,7 +50,7 @@ static double t_mpm_elastic_gap(pn_test_ctx *pn__t, int dim, double dt, double *
    (I + dt C_new) F_old with C_new the APIC matrix the step leaves on each particle (the MLS
    gradient of >>implicit; weight gradients would miss this by O(dt |C|)). */
 static double t_mpm_f_update_gap(pn_test_ctx *pn__t, int dim) {
-    pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 32 : 16, 0, PN_MPM_BOUNDARY_STICKY);
+    pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 32 : 16, 0, PN_BOUNDARY_STICKY);
     double lo[3] = {0.35, 0.35, 0.35}, sz[3] = {0.3, 0.3, 0.3}, dt = 2e-3, worst = 0, *F0;
     size_t n, p;
     int dd = dim * dim, i, j, k;
@@ -107,9 +107,9 @@ static void t_mpm_extent(const pn_mpm_world *w, size_t n, double *xmax, double *
 /* A sand column collapse (2D, 64 x 64 cells, E = 1e5 Pa, about 14 s): implicit with the lagged energy at 10x the explicit
    step lands where explicit does (runout and final height), and stays finite at 100x. */
 PN_TEST(implicit_sand_column) {
-    pn_mpm_world *e = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
-    pn_mpm_world *im = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
-    pn_mpm_world *big = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+    pn_mpm_world *e = t_mpm_world(2, 64, -9.81, PN_BOUNDARY_SEPARATE);
+    pn_mpm_world *im = t_mpm_world(2, 64, -9.81, PN_BOUNDARY_SEPARATE);
+    pn_mpm_world *big = t_mpm_world(2, 64, -9.81, PN_BOUNDARY_SEPARATE);
     double lo[3] = {0.4, 0.05, 0}, sz[3] = {0.2, 0.3, 0}, xe, xi, ye, yi, worst_fp = 0;
     pn_mpm_implicit_desc id;
     pn_mpm_stats st;
@@ -145,7 +145,7 @@ PN_TEST(implicit_sand_column) {
 /* A NaN deformation met by an implicit step: the error names the particle, the world is as
    it was. */
 PN_TEST(implicit_bad_input) {
-    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_MPM_BOUNDARY_STICKY);
+    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_BOUNDARY_STICKY);
     double lo[3] = {0.3, 0.3, 0}, sz[3] = {0.2, 0.2, 0}, *copy;
     size_t n, bytes;
     int g;
@@ -162,11 +162,11 @@ PN_TEST(implicit_bad_input) {
     PN_CHECK(pn_mpm_step_implicit(w, 1e-3, NULL, NULL) == PN_ERROR_NONFINITE);
     PN_CHECK(w->error_particle == 7);
     PN_CHECK(memcmp(copy, w->x, bytes) == 0 && memcmp(copy + n * 2, w->v, bytes) == 0 && w->steps == 1);
-    PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_EXACT_VM, NULL) == PN_ERROR_UNSUPPORTED);
-    PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, NULL) == PN_ERROR_INVALID_ARGUMENT);
-    PN_CHECK(pn_mpm_group_set_energy(w, g, (pn_mpm_energy)99, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(pn_mpm_group_set_energy(w, g, PN_ENERGY_EXACT_VM, NULL) == PN_ERROR_UNSUPPORTED);
+    PN_CHECK(pn_mpm_group_set_energy(w, g, PN_ENERGY_PNET, NULL) == PN_ERROR_INVALID_ARGUMENT);
+    PN_CHECK(pn_mpm_group_set_energy(w, g, (pn_energy)99, NULL) == PN_ERROR_INVALID_ARGUMENT);
     g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_NONE, 1e6); /* DP needs a DP material */
-    PN_CHECK(g >= 0 && pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_DP, NULL) == PN_ERROR_UNSUPPORTED);
+    PN_CHECK(g >= 0 && pn_mpm_group_set_energy(w, g, PN_ENERGY_DP, NULL) == PN_ERROR_UNSUPPORTED);
     free(copy);
     pn_mpm_destroy(w);
 }
@@ -175,8 +175,8 @@ PN_TEST(implicit_bad_input) {
    two fixed-point passes): it lands where explicit does. */
 PN_TEST(implicit_pnet_sand_column) {
 #ifdef PN_TEST_HAVE_MODELS
-    pn_mpm_world *e = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
-    pn_mpm_world *im = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+    pn_mpm_world *e = t_mpm_world(2, 64, -9.81, PN_BOUNDARY_SEPARATE);
+    pn_mpm_world *im = t_mpm_world(2, 64, -9.81, PN_BOUNDARY_SEPARATE);
     double lo[3] = {0.4, 0.05, 0}, sz[3] = {0.2, 0.3, 0}, xe, xi, ye, yi;
     pn_material m;
     pn_pnet net;
@@ -186,13 +186,13 @@ PN_TEST(implicit_pnet_sand_column) {
     int step, ge, gi;
     PN_CHECK(e && im);
     if (!e || !im) return;
-    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e5, &m, NULL) == PN_OK);
+    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e5, &m, NULL, 0) == PN_OK);
     memset(&nd, 0, sizeof nd);
     nd.energy = pn_model_sand_2d();
-    PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK);
+    PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL, 0) == PN_OK);
     ge = pn_mpm_add_group(e, &m, 1000);
     gi = pn_mpm_add_group(im, &m, 1000);
-    PN_CHECK(pn_mpm_group_set_energy(im, gi, PN_MPM_ENERGY_PNET, &net) == PN_OK);
+    PN_CHECK(pn_mpm_group_set_energy(im, gi, PN_ENERGY_PNET, &net) == PN_OK);
     n = t_mpm_block(e, ge, lo, sz, NULL);
     t_mpm_block(im, gi, lo, sz, NULL);
     memset(&id, 0, sizeof id);
@@ -232,17 +232,17 @@ PN_TEST(implicit_pnet_reuse) {
     pn_mpm_implicit_desc id[2];
     size_t n = 0, p;
     int step, i, a, kept = 0, nlayer = 0, models = 0, loaded = 0;
-    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e5, &m, NULL) == PN_OK);
+    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e5, &m, NULL, 0) == PN_OK);
     memset(&nd, 0, sizeof nd);
     nd.energy = pn_model_sand_2d();
-    PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK);
+    PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL, 0) == PN_OK);
     for (i = 0; i < 2; ++i) {
         int g;
-        w[i] = t_mpm_world(2, 48, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+        w[i] = t_mpm_world(2, 48, -9.81, PN_BOUNDARY_SEPARATE);
         PN_CHECK(w[i] != NULL);
         if (!w[i]) return;
         g = pn_mpm_add_group(w[i], &m, 1000);
-        PN_CHECK(pn_mpm_group_set_energy(w[i], g, PN_MPM_ENERGY_PNET, &net) == PN_OK);
+        PN_CHECK(pn_mpm_group_set_energy(w[i], g, PN_ENERGY_PNET, &net) == PN_OK);
         n = t_mpm_block(w[i], g, lo, sz, NULL);
         PN_CHECK(n > 100);
         memset(&id[i], 0, sizeof id[i]);
@@ -253,28 +253,28 @@ PN_TEST(implicit_pnet_reuse) {
         for (i = 0; i < 2; ++i) PN_CHECK(pn_mpm_step_implicit(w[i], 1e-3, &id[i], NULL) == PN_OK);
     for (p = 0; p < n; ++p)
         for (a = 0; a < 2; ++a) worst = fmax(worst, fabs(w[0]->x[2 * p + a] - w[1]->x[2 * p + a]));
-    PN_CHECK(w[1]->tok == NULL && w[0]->tok != NULL);
+    PN_CHECK(w[1]->s.tok == NULL && w[0]->s.tok != NULL);
     /* (1) at each model, F moved by r (1e-3, then a quarter of it) in a fixed direction */
-    for (p = 0; w[0]->tok && p < n; ++p) {
-        const pn_real *F0 = w[0]->tF + 4 * p;
+    for (p = 0; w[0]->s.tok && p < n; ++p) {
+        const pn_real *F0 = w[0]->s.tF + 4 * p;
         pn_real F[4], psi, Pm[4], Pe[4];
-        if (!w[0]->tok[p]) continue;
+        if (!w[0]->s.tok[p]) continue;
         models++;
-        if (!(fabs(w[0]->tP[4 * p] + w[0]->tP[4 * p + 3]) > 0.005 * 1e5)) continue; /* |tr P| / 2 > 25 E |dF| */
+        if (!(fabs(w[0]->s.tP[4 * p] + w[0]->s.tP[4 * p + 3]) > 0.005 * 1e5)) continue; /* |tr P| / 2 > 25 E |dF| */
         loaded++;
         for (i = 0; i < 2; ++i) {
-            pn_real r = i ? 2.5e-5 : 1e-4, save = w[0]->reuse_tol;
-            const pn_pnet_point *pt = &w[0]->ppt[p];
+            pn_real r = i ? 2.5e-5 : 1e-4, save = w[0]->s.reuse_tol;
+            const pn_pnet_point *pt = &w[0]->s.ppt[p];
             pn_result st;
             for (a = 0; a < 4; ++a) F[a] = F0[a] + r * (a == 0 ? 1 : a == 3 ? -0.5 : 0.7);
-            w[0]->reuse_tol = 1;
+            w[0]->s.reuse_tol = 1;
             PN_CHECK(pn__mpm_taylor(w[0], p, F, &psi, Pm));
-            w[0]->reuse_tol = save;
+            w[0]->s.reuse_tol = save;
             /* the network as the solver evaluates it (float lanes) */
             PN_CHECK(pn_pnet_energy_lanes(&net, 1, &pt, F, &psi, Pe, NULL, 0, &st) == PN_OK);
             for (a = 0; a < 4; ++a) {
                 err[i] += fabs(Pm[a] - Pe[a]);
-                err0[i] += fabs(w[0]->tP[4 * p + a] - Pe[a]);
+                err0[i] += fabs(w[0]->s.tP[4 * p + a] - Pe[a]);
             }
         }
     }
@@ -283,16 +283,16 @@ PN_TEST(implicit_pnet_reuse) {
     PN_CHECK_LE(worst / dx, 1e-3);
     /* (3) a layer over the whole floor, 0.15 s to settle, then one more step */
     {
-        pn_mpm_world *b = t_mpm_world(2, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+        pn_mpm_world *b = t_mpm_world(2, 32, -9.81, PN_BOUNDARY_SEPARATE);
         double blo[3], bsz[3] = {0, 0.08, 0};
         pn_pnet_point *before = NULL;
         size_t nb = 0, same = 0;
         int g, left_ok = 1;
         PN_CHECK(b != NULL);
         if (b) {
-            blo[0] = b->wall_lo[0], blo[1] = b->wall_lo[1], bsz[0] = b->wall_hi[0] - b->wall_lo[0];
+            blo[0] = b->s.wall_lo[0], blo[1] = b->s.wall_lo[1], bsz[0] = b->s.wall_hi[0] - b->s.wall_lo[0];
             g = pn_mpm_add_group(b, &m, 1000);
-            PN_CHECK(pn_mpm_group_set_energy(b, g, PN_MPM_ENERGY_PNET, &net) == PN_OK);
+            PN_CHECK(pn_mpm_group_set_energy(b, g, PN_ENERGY_PNET, &net) == PN_OK);
             nb = t_mpm_block(b, g, blo, bsz, NULL);
             nlayer = (int)nb;
             PN_CHECK(nb > 100);
@@ -300,12 +300,12 @@ PN_TEST(implicit_pnet_reuse) {
             before = (pn_pnet_point *)malloc(sizeof(pn_pnet_point) * nb);
         }
         if (before) {
-            memcpy(before, b->ppt, sizeof(pn_pnet_point) * nb);
+            memcpy(before, b->s.ppt, sizeof(pn_pnet_point) * nb);
             PN_CHECK(pn_mpm_step_implicit(b, 1e-3, &id[0], NULL) == PN_OK);
             for (p = 0; p < nb; ++p) { /* a point is prepared anew only when F0 has left it */
                 double moved = 0;
-                for (a = 0; a < 4; ++a) moved = fmax(moved, fabs(b->ppt[p].F0[a] - before[p].F0[a]));
-                if (memcmp(&before[p], &b->ppt[p], sizeof(pn_pnet_point)) == 0) same++;
+                for (a = 0; a < 4; ++a) moved = fmax(moved, fabs(b->s.ppt[p].F0[a] - before[p].F0[a]));
+                if (memcmp(&before[p], &b->s.ppt[p], sizeof(pn_pnet_point)) == 0) same++;
                 else left_ok &= moved > 1e-5;
             }
             kept = (int)same;
@@ -334,7 +334,7 @@ PN_TEST(implicit_force_error) {
     long plastic[2] = {0, 0};
     int which, step, off_ok = 1;
     for (which = 0; which < 2; ++which) {
-        pn_mpm_world *w = t_mpm_world(2, 48, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+        pn_mpm_world *w = t_mpm_world(2, 48, -9.81, PN_BOUNDARY_SEPARATE);
         pn_material_desc d;
         pn_material m;
         pn_mpm_implicit_desc id;
@@ -347,9 +347,9 @@ PN_TEST(implicit_force_error) {
         d.youngs_modulus_pa = 1e6;
         d.poisson_ratio = 0.3;
         d.yield_stress_pa = 2e3;
-        PN_CHECK(pn_material_init(&m, &d, NULL) == PN_OK);
+        PN_CHECK(pn_material_init(&m, &d, NULL, 0) == PN_OK);
         g = pn_mpm_add_group(w, &m, 1000);
-        PN_CHECK(pn_mpm_group_set_energy(w, g, which ? PN_MPM_ENERGY_LAGGED : PN_MPM_ENERGY_EXACT_VM, NULL) == PN_OK);
+        PN_CHECK(pn_mpm_group_set_energy(w, g, which ? PN_ENERGY_LAGGED : PN_ENERGY_EXACT_VM, NULL) == PN_OK);
         t_mpm_block(w, g, lo, sz, v0);
         memset(&id, 0, sizeof id);
         id.fixed_point_iters = 1;
@@ -394,7 +394,7 @@ PN_TEST(implicit_pnet_large_steps) {
     int a, b, s;
     for (a = 0; a < 2; ++a)
         for (b = 0; b < 2; ++b) {
-            pn_mpm_world *w = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+            pn_mpm_world *w = t_mpm_world(2, 64, -9.81, PN_BOUNDARY_SEPARATE);
             double lo[2] = {0.4, 3.0 / 64}, sz[2] = {0.2, 0.3}, emin = 1e300, vmax = 0;
             pn_material m;
             pn_pnet net;
@@ -405,12 +405,12 @@ PN_TEST(implicit_pnet_large_steps) {
             int g, ok = 0, failed = 0, bad = 0;
             PN_CHECK(w != NULL);
             if (!w) return;
-            PN_CHECK(pn_model_material(pn_model_sand_2d(), Es[b], &m, NULL) == PN_OK);
+            PN_CHECK(pn_model_material(pn_model_sand_2d(), Es[b], &m, NULL, 0) == PN_OK);
             memset(&nd, 0, sizeof nd);
             nd.energy = pn_model_sand_2d();
-            PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK);
+            PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL, 0) == PN_OK);
             g = pn_mpm_add_group(w, &m, 1000);
-            PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net) == PN_OK);
+            PN_CHECK(pn_mpm_group_set_energy(w, g, PN_ENERGY_PNET, &net) == PN_OK);
             n = t_mpm_block(w, g, lo, sz, NULL);
             memset(&id, 0, sizeof id);
             id.trace = t_min_trace;
@@ -472,15 +472,15 @@ PN_TEST(implicit_energy_guard) {
     pn_material m;
     pn_pnet net;
     pn_pnet_desc nd;
-    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e7, &m, NULL) == PN_OK);
+    PN_CHECK(pn_model_material(pn_model_sand_2d(), 1e7, &m, NULL, 0) == PN_OK);
     memset(&nd, 0, sizeof nd);
     nd.energy = pn_model_sand_2d();
-    PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK);
+    PN_CHECK(pn_pnet_init(&net, &nd, &m, 2, NULL, 0) == PN_OK);
     for (k = 0; k < 3; ++k) {
-        pn_mpm_world *w = t_mpm_world(2, 64, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+        pn_mpm_world *w = t_mpm_world(2, 64, -9.81, PN_BOUNDARY_SEPARATE);
         pn_mpm_implicit_desc id;
         int g = w ? pn_mpm_add_group(w, &m, 1000) : -1;
-        PN_CHECK(g >= 0 && pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net) == PN_OK);
+        PN_CHECK(g >= 0 && pn_mpm_group_set_energy(w, g, PN_ENERGY_PNET, &net) == PN_OK);
         if (g < 0) {
             pn_mpm_destroy(w);
             return;
@@ -513,7 +513,7 @@ PN_TEST(implicit_energy_guard) {
     {
         double lo2[3] = {0.4, 0.1, 0};
         size_t n;
-        pn_mpm_world *w = t_stress_scene(pn__t, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo2, sz, &n);
+        pn_mpm_world *w = t_stress_scene(pn__t, 32, -9.81, PN_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo2, sz, &n);
         pn_mpm_implicit_desc id = t_stress_desc();
         if (!w) return;
         id.energy_rise_tol = NAN;

@@ -37,30 +37,30 @@ static void t_mg_trace(void *user, int solve, int iteration, pn_real energy_j, p
     t_mg_probe *pr = (t_mg_probe *)user;
     pn_mpm_world *w = pr->w;
     int d = w->dim, l, trial;
-    size_t n = w->n_act * (size_t)d, i, cap = 0;
+    size_t n = w->s.n_act * (size_t)d, i, cap = 0;
     pn_real *x, *y, *a, *b, *c;
     pn_test_rng rng = {12345};
     (void)energy_j, (void)residual;
     if (pr->done || solve != 1 || iteration != 0) return;
     pr->done = 1;
-    pr->levels = w->mg_levels;
-    for (l = 0; l < w->mg_levels; ++l) cap = cap > w->mg[l].n ? cap : w->mg[l].n;
+    pr->levels = w->s.mg_levels;
+    for (l = 0; l < w->s.mg_levels; ++l) cap = cap > w->s.mg[l].n ? cap : w->s.mg[l].n;
     cap *= (size_t)d;
     x = (pn_real *)calloc(cap, sizeof(pn_real)), y = (pn_real *)calloc(cap, sizeof(pn_real));
     a = (pn_real *)calloc(cap, sizeof(pn_real)), b = (pn_real *)calloc(cap, sizeof(pn_real));
     c = (pn_real *)calloc(cap, sizeof(pn_real));
     if (!x || !y || !a || !b || !c) return;
     /* assembled against matrix-free */
-    t_mg_fill(&rng, w, w->n_act, x, 1);
+    t_mg_fill(&rng, w, w->s.n_act, x, 1);
     pn__mpm_hess_vec(w, x, pr->dt, a);
-    w->mg_on = 0;
+    w->s.mg_on = 0;
     pn__mpm_hess_vec(w, x, pr->dt, b);
-    w->mg_on = 1;
+    w->s.mg_on = 1;
     for (i = 0; i < n; ++i) pr->op_err = fmax(pr->op_err, fabs((double)(a[i] - b[i])));
     pr->op_err /= sqrt(t_mg_dot(b, b, n) / (double)n);
     /* P^T A_l P = A_l+1, and restriction = prolongation^T */
-    for (l = 0; l + 1 < w->mg_levels; ++l) {
-        pn__mpm_level *F = &w->mg[l], *C = &w->mg[l + 1];
+    for (l = 0; l + 1 < w->s.mg_levels; ++l) {
+        pn__mpm_level *F = &w->s.mg[l], *C = &w->s.mg[l + 1];
         size_t nf = F->n * (size_t)d, nc = C->n * (size_t)d;
         double nrm, ptu, u_pc;
         t_mg_fill(&rng, w, C->n, C->x, 0);
@@ -80,8 +80,8 @@ static void t_mg_trace(void *user, int solve, int iteration, pn_real energy_j, p
     }
     for (trial = 0; trial < 3; ++trial) { /* x.By = y.Bx, x.Bx > 0 */
         double xby, ybx, xbx;
-        t_mg_fill(&rng, w, w->n_act, x, 1);
-        t_mg_fill(&rng, w, w->n_act, y, 1);
+        t_mg_fill(&rng, w, w->s.n_act, x, 1);
+        t_mg_fill(&rng, w, w->s.n_act, y, 1);
         pn__mpm_mg_vcycle(w, 0, x, a);
         pn__mpm_mg_vcycle(w, 0, y, b);
         xby = t_mg_dot(x, b, n), ybx = t_mg_dot(y, a, n), xbx = t_mg_dot(x, a, n);
@@ -91,7 +91,7 @@ static void t_mg_trace(void *user, int solve, int iteration, pn_real energy_j, p
     free(x), free(y), free(a), free(b), free(c);
 }
 
-static pn_mpm_world *t_mg_scene(int dim, int res, double E, int elastic, pn_mpm_boundary wall, int *g) {
+static pn_mpm_world *t_mg_scene(int dim, int res, double E, int elastic, pn_boundary wall, int *g) {
     pn_mpm_world *w = t_mpm_world(dim, res, -9.81, wall);
     double lo[3] = {0.3, 3.0 / res, 0.3}, sz[3] = {0.4, 0.3, 0.4};
     if (!w) return NULL;
@@ -112,7 +112,7 @@ PN_TEST(multigrid_operators) {
         int g, s;
         t_mg_probe pr;
         pn_mpm_implicit_desc id;
-        pn_mpm_world *w = t_mg_scene(dim, dim == 2 ? 64 : 16, 1e7, 0, PN_MPM_BOUNDARY_SEPARATE, &g);
+        pn_mpm_world *w = t_mg_scene(dim, dim == 2 ? 64 : 16, 1e7, 0, PN_BOUNDARY_SEPARATE, &g);
         PN_CHECK(w != NULL);
         if (!w) return;
         memset(&id, 0, sizeof id);
@@ -154,7 +154,7 @@ PN_TEST(multigrid_iterations) {
             int g;
             pn_mpm_implicit_desc id;
             pn_mpm_stats st;
-            pn_mpm_world *w = t_mg_scene(dim, 64, Es[e], 1, PN_MPM_BOUNDARY_STICKY, &g);
+            pn_mpm_world *w = t_mg_scene(dim, 64, Es[e], 1, PN_BOUNDARY_STICKY, &g);
             PN_CHECK(w != NULL);
             if (!w) return;
             memset(&id, 0, sizeof id);
@@ -191,7 +191,7 @@ PN_TEST(multigrid_iterations) {
         for (t = 1; t <= 2; ++t) {
             int g, s;
             pn_mpm_implicit_desc id;
-            pn_mpm_world *w = t_mg_scene(3, 16, 1e7, 0, PN_MPM_BOUNDARY_SEPARATE, &g);
+            pn_mpm_world *w = t_mg_scene(3, 16, 1e7, 0, PN_BOUNDARY_SEPARATE, &g);
             PN_CHECK(w != NULL);
             if (!w) break;
             w->desc.parallel_min_particles = 1;
@@ -200,7 +200,7 @@ PN_TEST(multigrid_iterations) {
             id.linear_solver = PN_MPM_LINEAR_MULTIGRID;
             id.mg_levels = 2; /* a coarsest level too large to factor: smoothed */
             for (s = 0; s < 4; ++s) PN_CHECK(pn_mpm_step_implicit(w, 2e-3, &id, NULL) == PN_OK);
-            levels = w->mg_levels;
+            levels = w->s.mg_levels;
             n = w->n * 3;
             if (t == 1) {
                 keep = (pn_real *)malloc(sizeof(pn_real) * n);

@@ -42,29 +42,29 @@ PN_TEST(implicit_fallback) {
    implicit energy en (PlasticityNet from the shipped models). rest 0: a block (E 1e6 Pa)
    thrown at the floor; rest 1: a stiff layer (E 1e8 Pa) resting on it, where F moves less
    than PlasticityNet's reuse tolerance per step, so its Taylor models live across steps. */
-static pn_mpm_world *t_twin_world(int dim, int rest, pn_mpm_energy en, pn_pnet *net) {
+static pn_mpm_world *t_twin_world(int dim, int rest, pn_energy en, pn_pnet *net) {
     int res = dim == 2 ? 32 : 10, g;
     double E = rest ? 1e8 : 1e6;
-    pn_mpm_world *w = t_mpm_world(dim, res, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+    pn_mpm_world *w = t_mpm_world(dim, res, -9.81, PN_BOUNDARY_SEPARATE);
     double lo[3] = {0.35, 3.0 / res, 0.35}, sz[3] = {0.3, 0.3, 0.3}, v[3] = {0.3, -1, 0.2}, v0[3] = {0, 0, 0};
     if (!w) return NULL;
     if (rest) lo[0] = lo[2] = 3.0 / res, sz[0] = sz[2] = 1 - 6.0 / res, sz[1] = 2.0 / res;
     w->desc.friction = 0.5;
     g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, E);
 #ifdef PN_TEST_HAVE_MODELS
-    if (en == PN_MPM_ENERGY_PNET) {
+    if (en == PN_ENERGY_PNET) {
         pn_material m;
         pn_pnet_desc nd;
         const pn_model *model = dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
         memset(&nd, 0, sizeof nd);
         nd.energy = model;
-        if (pn_model_material(model, E, &m, NULL) != PN_OK || pn_pnet_init(net, &nd, &m, dim, NULL) != PN_OK) g = -1;
+        if (pn_model_material(model, E, &m, NULL, 0) != PN_OK || pn_pnet_init(net, &nd, &m, dim, NULL, 0) != PN_OK) g = -1;
         else w->groups[g].material = m;
     }
 #else
     (void)net;
 #endif
-    if (g < 0 || pn_mpm_group_set_energy(w, g, en, en == PN_MPM_ENERGY_PNET ? net : NULL) != PN_OK ||
+    if (g < 0 || pn_mpm_group_set_energy(w, g, en, en == PN_ENERGY_PNET ? net : NULL) != PN_OK ||
         t_mpm_block(w, g, lo, sz, rest ? v0 : v) == 0) {
         pn_mpm_destroy(w);
         return NULL;
@@ -90,8 +90,8 @@ static int t_twin_same(const pn_mpm_world *a, const pn_mpm_world *b) {
    or a linear solve capped at one CG iteration (resting). make test: 2D, and 3D with the
    lagged energy; PN_TEST_FULL=1 (make test-all, CI): 3D with every energy. */
 PN_TEST(implicit_failed_step_no_trace) {
-    static const pn_mpm_energy ens[6] = {PN_MPM_ENERGY_ELASTIC, PN_MPM_ENERGY_LAGGED, PN_MPM_ENERGY_DP, PN_MPM_ENERGY_PNET,
-                                         PN_MPM_ENERGY_PNET, PN_MPM_ENERGY_DEFAULT};
+    static const pn_energy ens[6] = {PN_ENERGY_ELASTIC, PN_ENERGY_LAGGED, PN_ENERGY_DP, PN_ENERGY_PNET,
+                                         PN_ENERGY_PNET, PN_ENERGY_DEFAULT};
     static const char *names[6] = {"elastic", "lagged", "dp", "pnet", "pnet (no reuse)", "stress"};
     int dim, e, rest, mode, cases = 0, failed_ok = 0, twins_ok = 0;
     for (dim = 2; dim <= 3; ++dim)
@@ -105,7 +105,7 @@ PN_TEST(implicit_failed_step_no_trace) {
                     int k, same_before, same_after = 1;
                     pn_result r;
 #ifndef PN_TEST_HAVE_MODELS
-                    if (ens[e] == PN_MPM_ENERGY_PNET) continue;
+                    if (ens[e] == PN_ENERGY_PNET) continue;
 #endif
                     if (e == 5 && mode == 2 && rest) continue; /* no CG in the stress formulation */
                     if (mode == 1 && !rest) continue;             /* the substeps' path: resting sand */
@@ -189,7 +189,7 @@ PN_TEST(newton_line_search_descends) {
         id.trace_user = &tr;
         t_mpm_block(w, g, lo, sz, NULL);
         if (k >= 4) {
-            PN_CHECK(pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_DP, NULL) == PN_OK);
+            PN_CHECK(pn_mpm_group_set_energy(w, g, PN_ENERGY_DP, NULL) == PN_OK);
             energy = "frozen-yield DP";
         }
 #ifdef PN_TEST_HAVE_MODELS
@@ -197,11 +197,11 @@ PN_TEST(newton_line_search_descends) {
             pn_material m;
             pn_pnet net;
             pn_pnet_desc nd;
-            pn_model_material(pn_model_sand_2d(), 1e6, &m, NULL);
+            pn_model_material(pn_model_sand_2d(), 1e6, &m, NULL, 0);
             w->groups[g].material = m;
             memset(&nd, 0, sizeof nd);
             nd.energy = pn_model_sand_2d();
-            if (pn_pnet_init(&net, &nd, &m, 2, NULL) == PN_OK && pn_mpm_group_set_energy(w, g, PN_MPM_ENERGY_PNET, &net) == PN_OK)
+            if (pn_pnet_init(&net, &nd, &m, 2, NULL, 0) == PN_OK && pn_mpm_group_set_energy(w, g, PN_ENERGY_PNET, &net) == PN_OK)
                 energy = "PlasticityNet";
         }
 #endif
@@ -231,7 +231,7 @@ PN_TEST(implicit_newton_forcing) {
         PN_CHECK(w[k] != NULL);
         if (!w[k]) return;
         n = t_mpm_block(w[k], g, lo, sz, NULL);
-        PN_CHECK(pn_mpm_group_set_energy(w[k], g, PN_MPM_ENERGY_DP, NULL) == PN_OK);
+        PN_CHECK(pn_mpm_group_set_energy(w[k], g, PN_ENERGY_DP, NULL) == PN_OK);
         memset(&id, 0, sizeof id);
         id.fixed_point_iters = 1;
         id.newton_tol = 1e-9;
@@ -265,7 +265,7 @@ static void t_count_trace(void *user, int solve, int iteration, pn_real energy_j
 }
 
 PN_TEST(implicit_cg_capped) {
-    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+    pn_mpm_world *w = t_mpm_world(2, 32, -9.81, PN_BOUNDARY_SEPARATE);
     int traced = 0;
     double lo[2] = {0.4, 3.0 / 32 + 0.02}, sz[2] = {0.2, 0.1}, v[2] = {0, -1};
     pn_mpm_implicit_desc id;
@@ -329,7 +329,7 @@ PN_TEST(implicit_stage_clock) {
     size_t n;
     int k, s;
     for (k = 0; k < 3; ++k) {
-        pn_mpm_world *w = t_stress_scene(pn__t, 32, -9.81, PN_MPM_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo, sz, &n);
+        pn_mpm_world *w = t_stress_scene(pn__t, 32, -9.81, PN_BOUNDARY_SEPARATE, PN_PLASTIC_DRUCKER_PRAGER, 1e6, lo, sz, &n);
         pn_mpm_implicit_desc id = t_stress_desc();
         pn_mpm_stats st;
         long ticks = 0, before;

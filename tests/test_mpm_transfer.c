@@ -10,7 +10,7 @@ PN_TEST(transfer_conserves_mass_momentum) {
     int dim, f;
     for (dim = 2; dim <= 3; ++dim)
     for (f = 0; f < 2; ++f) {
-        pn_mpm_world *w = t_mpm_world_f(dim, dim == 2 ? 64 : 24, 0, PN_MPM_BOUNDARY_STICKY, f ? 1e-3 : 0);
+        pn_mpm_world *w = t_mpm_world_f(dim, dim == 2 ? 64 : 24, 0, PN_BOUNDARY_STICKY, f ? 1e-3 : 0);
         double lo[3] = {0.35, 0.35, 0.35}, sz[3] = {0.3, 0.3, 0.3}, m0, m1, p0[3], p1[3], pscale = 0;
         pn_test_rng rng;
         size_t p, n;
@@ -45,7 +45,7 @@ PN_TEST(transfer_conserves_mass_momentum) {
 /* Kinetic energy left after T = 2 ms of a shear wave of 8 cells, v_x = sin(2 pi y / 8 dx) (a
    near-stress-free block, no gravity, no wall in reach), stepping at dt. */
 static double t_mpm_filter_ke(int dim, int implicit, double tf, double dt) {
-    pn_mpm_world *w = t_mpm_world_f(dim, dim == 2 ? 64 : 24, 0, PN_MPM_BOUNDARY_STICKY, tf);
+    pn_mpm_world *w = t_mpm_world_f(dim, dim == 2 ? 64 : 24, 0, PN_BOUNDARY_STICKY, tf);
     double lo[3] = {0.35, 0.35, 0.35}, sz[3] = {0.3, 0.3, 0.3}, ke[2] = {0, 0};
     size_t p, n;
     int g, i, k, steps = (int)(2e-3 / dt + 0.5), ok = 1;
@@ -99,7 +99,7 @@ static void t_mpm_threads_explicit(pn_test_ctx *pn__t, int dim) {
     size_t n = 0, bytes = 0, plastic = 0;
     int t, s;
     for (t = 1; t <= 2; ++t) {
-        pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 64 : 24, -9.81, PN_MPM_BOUNDARY_SEPARATE);
+        pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 64 : 24, -9.81, PN_BOUNDARY_SEPARATE);
         double lo[3] = {0.2, 0.15, 0.3}, sz[3] = {0.25, 0.2, 0.3}, lo2[3] = {0.55, 0.3, 0.3}, v[3] = {1, -3, 0};
         pn_material_desc md;
         pn_material m;
@@ -107,7 +107,7 @@ static void t_mpm_threads_explicit(pn_test_ctx *pn__t, int dim) {
         PN_CHECK(w != NULL);
         if (!w) return;
         t_snow_desc(&md);
-        PN_CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+        PN_CHECK(pn_material_init(&m, &md, NULL, 0) == PN_OK);
         gs = pn_mpm_add_group(w, &m, 400);
         gj = t_mpm_group(w, PN_ELASTIC_FIXED_COROTATED, PN_PLASTIC_NONE, 1e5);
         w->desc.parallel_min_particles = 1; /* this small world on 2 threads too */

@@ -7,7 +7,7 @@
 
 /* a world of res^dim cells on the unit box, sticky walls, no gravity unless set; transfer
    filter time tf (0: APIC) */
-static pn_mpm_world *t_mpm_world_f(int dim, int res, pn_real gy, pn_mpm_boundary b, double tf) {
+static pn_mpm_world *t_mpm_world_f(int dim, int res, pn_real gy, pn_boundary b, double tf) {
     pn_mpm_desc wd;
     pn_mpm_world *w = NULL;
     memset(&wd, 0, sizeof wd);
@@ -18,11 +18,11 @@ static pn_mpm_world *t_mpm_world_f(int dim, int res, pn_real gy, pn_mpm_boundary
     wd.boundary = b;
     wd.max_particles = 20000;
     wd.filter_time_s = tf;
-    if (pn_mpm_create(&wd, &w, NULL) != PN_OK) return NULL;
+    if (pn_mpm_create(&wd, &w, NULL, 0) != PN_OK) return NULL;
     return w;
 }
 
-static pn_mpm_world *t_mpm_world(int dim, int res, pn_real gy, pn_mpm_boundary b) {
+static pn_mpm_world *t_mpm_world(int dim, int res, pn_real gy, pn_boundary b) {
     return t_mpm_world_f(dim, res, gy, b, 0);
 }
 
@@ -35,7 +35,7 @@ static int t_mpm_group(pn_mpm_world *w, pn_elastic_model e, pn_plastic_model pl,
     d.youngs_modulus_pa = E;
     d.poisson_ratio = 0.3;
     d.friction_angle_deg = 30;
-    if (pn_material_init(&m, &d, NULL) != PN_OK) return -1;
+    if (pn_material_init(&m, &d, NULL, 0) != PN_OK) return -1;
     return pn_mpm_add_group(w, &m, 1000);
 }
 
@@ -75,10 +75,10 @@ static pn_mpm_world *t_mpm_sand_world(int res, double friction, int *g) {
     wd.res[0] = wd.res[1] = res;
     wd.dx_m = 1.0 / res;
     wd.gravity[1] = -9.81;
-    wd.boundary = PN_MPM_BOUNDARY_SEPARATE;
+    wd.boundary = PN_BOUNDARY_SEPARATE;
     wd.friction = friction;
     wd.max_particles = 20000;
-    if (pn_mpm_create(&wd, &w, NULL) != PN_OK) return NULL;
+    if (pn_mpm_create(&wd, &w, NULL, 0) != PN_OK) return NULL;
     *g = t_mpm_group(w, PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_DRUCKER_PRAGER, 1e6);
     return w;
 }
@@ -104,7 +104,7 @@ static pn_mpm_implicit_desc t_stress_desc(void) {
 
 /* the stress tests' scene: a 2D world (t_mpm_world) with one StVK-Hencky block of plastic
    model pl and modulus E at lo, size sz; NULL (a failed check) if any of it fails */
-static pn_mpm_world *t_stress_scene(pn_test_ctx *pn__t, int res, pn_real gy, pn_mpm_boundary b, pn_plastic_model pl,
+static pn_mpm_world *t_stress_scene(pn_test_ctx *pn__t, int res, pn_real gy, pn_boundary b, pn_plastic_model pl,
                                     double E, const double *lo, const double *sz, size_t *n) {
     pn_mpm_world *w = t_mpm_world(2, res, gy, b);
     int g;
@@ -129,7 +129,7 @@ PN_TEST(drive_exact) {
     int t, s;
     pn_real *keep = NULL;
     for (t = 1; t <= 2; ++t) {
-        pn_mpm_world *w = t_mpm_world(3, 24, 0, PN_MPM_BOUNDARY_STICKY);
+        pn_mpm_world *w = t_mpm_world(3, 24, 0, PN_BOUNDARY_STICKY);
         double lo[3] = {0.3, 0.4, 0.4}, sz[3] = {0.4, 0.125, 0.125};
         pn_real vel[3] = {(pn_real)v, 0, 0}, c[3] = {0, 0.4625, 0.4625}, omega[3] = {(pn_real)om, 0, 0};
         pn_real blo[3] = {0, 0, 0}, bhi[3] = {0.35, 1, 1};
@@ -190,7 +190,7 @@ PN_TEST(drive_exact) {
 PN_TEST(drive_load_impulse) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
-        pn_mpm_world *w = t_mpm_world(dim, 32, 0, PN_MPM_BOUNDARY_STICKY);
+        pn_mpm_world *w = t_mpm_world(dim, 32, 0, PN_BOUNDARY_STICKY);
         double lo[3] = {0.4, 0.4, 0.4}, sz[3] = {0.2, 0.2, 0.2}, T = 0.0105;
         pn_real f[3] = {0.3, -0.2, 0.1}, blo[3] = {0.5, 0.5, 0.5}, bhi[3] = {1, 1, 1}, mass, mom[3];
         size_t sel[4096], cnt = 0;
@@ -213,7 +213,7 @@ PN_TEST(drive_load_impulse) {
 
 /* >>drive: bad input is refused with the culprit named and nothing changed */
 PN_TEST(drive_bad_input) {
-    pn_mpm_world *w = t_mpm_world(3, 16, 0, PN_MPM_BOUNDARY_STICKY);
+    pn_mpm_world *w = t_mpm_world(3, 16, 0, PN_BOUNDARY_STICKY);
     double lo[3] = {0.3, 0.3, 0.3}, sz[3] = {0.25, 0.25, 0.25};
     pn_real nanv[3] = {0, 0, 0}, f[3] = {1, 0, 0}, om[3] = {0, 0, 1}, c[3] = {0.4, 0.4, 0.4};
     size_t sel[2] = {0, 1}, bad[1] = {999999};
@@ -229,7 +229,7 @@ PN_TEST(drive_bad_input) {
     PN_CHECK(strstr(pn_mpm_error(w), "999999") != NULL);
     PN_CHECK(pn_mpm_drive_particles(w, 0, sel, NULL, NULL, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT);
     PN_CHECK(pn_mpm_drive_particles(w, 2, sel, NULL, NULL, om, NULL) == PN_ERROR_INVALID_ARGUMENT); /* spin, no centre */
-    PN_CHECK(w->n_drives == 0);
+    PN_CHECK(w->s.n_drives == 0);
     PN_CHECK(pn_mpm_drive_particles(w, 2, sel, NULL, c, om, &di) == PN_OK);
     PN_CHECK(pn_mpm_drive_particles(w, 1, sel + 1, NULL, NULL, NULL, NULL) == PN_ERROR_INVALID_ARGUMENT); /* driven twice */
     PN_CHECK(strstr(pn_mpm_error(w), "particle 1") != NULL);
@@ -246,7 +246,7 @@ PN_TEST(drive_bad_input) {
     PN_CHECK(pn_mpm_release_drive(w, PN_MPM_MAX_DRIVES) == PN_ERROR_INVALID_ARGUMENT);
     PN_CHECK(pn_mpm_add_load(w, 2, sel, f, -1, NULL) == PN_ERROR_INVALID_ARGUMENT);
     PN_CHECK(pn_mpm_add_load(w, 2, sel, nanv, 1, NULL) == PN_ERROR_NONFINITE);
-    PN_CHECK(w->n_loads == 0);
+    PN_CHECK(w->s.n_loads == 0);
     memset(&o, 0, sizeof o);
     {
         pn_real x0 = w->x[0];

@@ -64,11 +64,11 @@ PN_TEST(pnet_fd) {
                 return;
             memset(&sd, 0, sizeof sd);
             sd.energy = s.net.energy, sd.return_map = s.net.return_map, sd.regularizer_form = PN_PNET_REG_STRAIN;
-            PN_CHECK(pn_pnet_init(&str, &sd, &s.m, dim, NULL) == PN_OK);
+            PN_CHECK(pn_pnet_init(&str, &sd, &s.m, dim, NULL, 0) == PN_OK);
             sd.regularizer_form = (pn_pnet_regularizer)7;
-            PN_CHECK(pn_pnet_init(&str, &sd, &s.m, dim, NULL) == PN_ERROR_INVALID_ARGUMENT);
+            PN_CHECK(pn_pnet_init(&str, &sd, &s.m, dim, NULL, 0) == PN_ERROR_INVALID_ARGUMENT);
             sd.regularizer_form = PN_PNET_REG_STRAIN;
-            PN_CHECK(pn_pnet_init(&str, &sd, &s.m, dim, NULL) == PN_OK);
+            PN_CHECK(pn_pnet_init(&str, &sd, &s.m, dim, NULL, 0) == PN_OK);
             for (kind = 0; kind < T_PN_NK; ++kind)
                 for (i = 0; i < count[kind]; ++i) {
                     const int n2 = dim * dim, n4 = n2 * n2;
@@ -259,14 +259,14 @@ PN_TEST(pnet_scaled_encoding) {
         pn_pnet net;
         pn_pnet_desc pd;
         pn_test_rng rng;
-        const char *why = NULL;
+        char why[256] = "";
         rng.s = 3100 + (unsigned long long)dim;
         if (!t_pn_material(pn__t, &m1, &d1, T_PN_SAND, 1)) return;
         t_pn_model_make_enc(&tm, PN_MODEL_ENERGY, dim, &d1, &m1, "t_sand_scaled", NULL, PN_ACTIVATION_SILU, &rng, 1);
         memset(&pd, 0, sizeof pd);
         pd.energy = &tm.model;
         pd.regularizer = -1;
-        if (pn_pnet_init(&net, &pd, &m1, dim, &why) != PN_OK) {
+        if (pn_pnet_init(&net, &pd, &m1, dim, why, sizeof why) != PN_OK) {
             PN_CHECK(!"pn_pnet_init of a scaled model");
             return;
         }
@@ -353,7 +353,7 @@ static void t_pn_cond_model(t_pn_model *tm, int dim, int scaled, pn_test_rng *rn
     pn_model *mo = &tm->model;
     int size[4], i;
     t_pn_desc(&d1, T_PN_SAND, 1);
-    pn_material_init(&m1, &d1, NULL);
+    pn_material_init(&m1, &d1, NULL, 0);
     t_pn_model_make_enc(tm, PN_MODEL_ENERGY, dim, &d1, &m1, "t_sand_any", NULL, PN_ACTIVATION_SILU, rng, scaled);
     mo->n_params = 2;
     mo->param[0].kind = PN_MODEL_PARAM_POISSON, mo->param[0].lo = 0.2, mo->param[0].hi = 0.4;
@@ -395,7 +395,7 @@ PN_TEST(pnet_conditioned) {
             pn_pnet net, net2;
             pn_pnet_desc pd;
             pn_test_rng rng;
-            const char *why = NULL;
+            char why[256] = "";
             rng.s = 3300 + 10 * (unsigned long long)dim + (unsigned long long)scaled;
             t_pn_cond_model(&tm, dim, scaled, &rng);
             memset(&pd, 0, sizeof pd);
@@ -403,25 +403,25 @@ PN_TEST(pnet_conditioned) {
             /* outside the ranges: refused, naming the parameter and the range */
             t_pn_desc(&md, T_PN_SAND, E);
             md.poisson_ratio = 0.45;
-            pn_material_init(&m, &md, NULL);
-            if (pn_pnet_init(&net, &pd, &m, dim, &why) == PN_ERROR_INVALID_PARAMETER && why &&
+            pn_material_init(&m, &md, NULL, 0);
+            if (pn_pnet_init(&net, &pd, &m, dim, why, sizeof why) == PN_ERROR_INVALID_PARAMETER && why[0] &&
                 strstr(why, "poisson_ratio = 0.45") && strstr(why, "[0.2, 0.4]"))
                 ++refused;
             md.poisson_ratio = 0.3, md.friction_angle_deg = 50;
-            pn_material_init(&m, &md, NULL);
-            if (pn_pnet_init(&net, &pd, &m, dim, &why) == PN_ERROR_INVALID_PARAMETER && why &&
+            pn_material_init(&m, &md, NULL, 0);
+            if (pn_pnet_init(&net, &pd, &m, dim, why, sizeof why) == PN_ERROR_INVALID_PARAMETER && why[0] &&
                 strstr(why, "friction_angle_deg = 50") && strstr(why, "[20, 45]"))
                 ++refused;
             md.cohesion_strain = 1e-3, md.friction_angle_deg = 30; /* not an input: must be the model's */
-            pn_material_init(&m, &md, NULL);
-            refused += pn_pnet_init(&net, &pd, &m, dim, &why) == PN_ERROR_INVALID_PARAMETER;
+            pn_material_init(&m, &md, NULL, 0);
+            refused += pn_pnet_init(&net, &pd, &m, dim, why, sizeof why) == PN_ERROR_INVALID_PARAMETER;
             /* inside (the ends included) */
             md.cohesion_strain = 0, md.poisson_ratio = 0.4, md.friction_angle_deg = 20;
-            pn_material_init(&m2, &md, NULL);
-            fails += pn_pnet_init(&net2, &pd, &m2, dim, NULL) != PN_OK;
+            pn_material_init(&m2, &md, NULL, 0);
+            fails += pn_pnet_init(&net2, &pd, &m2, dim, NULL, 0) != PN_OK;
             md.poisson_ratio = 0.25, md.friction_angle_deg = 40;
-            pn_material_init(&m, &md, NULL);
-            fails += pn_pnet_init(&net, &pd, &m, dim, NULL) != PN_OK;
+            pn_material_init(&m, &md, NULL, 0);
+            fails += pn_pnet_init(&net, &pd, &m, dim, NULL, 0) != PN_OK;
             for (i = 0; i < 40; ++i) {
                 const double r = i % 4 == 3 ? 1e-2 : 0.5;
                 double R[4][9], s0[3], sv[3], F0[9], F[9], x0[3], x[3], S = 1, sq = 1, pw[3] = {1, 1, 1}, u[12], out;
@@ -517,12 +517,12 @@ PN_TEST(pnet_base_energy) {
             pn_pnet net, net0;
             pn_pnet_desc pd;
             pn_test_rng rng;
-            const char *why = NULL;
+            char why[256] = "";
             rng.s = 4400 + 10 * (unsigned long long)dim + (unsigned long long)scaled;
             t_pn_desc(&md, T_PN_METAL, E); /* Neo-Hookean + von Mises */
             hd = md;
             hd.elastic = PN_ELASTIC_STVK_HENCKY;
-            if (pn_material_init(&m, &md, NULL) != PN_OK || pn_material_init(&mh, &hd, NULL) != PN_OK) {
+            if (pn_material_init(&m, &md, NULL, 0) != PN_OK || pn_material_init(&mh, &hd, NULL, 0) != PN_OK) {
                 PN_CHECK(!"pn_material_init");
                 continue;
             }
@@ -534,13 +534,13 @@ PN_TEST(pnet_base_energy) {
             memset(&pd, 0, sizeof pd);
             pd.energy = &tm.model;
             pd.regularizer = -1;
-            if (pn_pnet_init(&net, &pd, &m, dim, &why) != PN_OK) {
+            if (pn_pnet_init(&net, &pd, &m, dim, why, sizeof why) != PN_OK) {
                 PN_CHECK(!"pn_pnet_init with a base");
                 continue;
             }
             pd.energy = &plain.model;
             plain.model.base = PN_MODEL_BASE_NONE;
-            if (pn_pnet_init(&net0, &pd, &m, dim, &why) != PN_OK) {
+            if (pn_pnet_init(&net0, &pd, &m, dim, why, sizeof why) != PN_OK) {
                 PN_CHECK(!"pn_pnet_init without the base");
                 continue;
             }
@@ -575,10 +575,10 @@ PN_TEST(pnet_base_energy) {
             { /* a base needs a von Mises model; an unknown base is malformed */
                 t_pn_model bad = tm;
                 bad.model.plastic = PN_PLASTIC_DRUCKER_PRAGER;
-                refused += pn_model_check(&bad.model, 0, &why) == PN_ERROR_FORMAT && why && strstr(why, "base");
+                refused += pn_model_check(&bad.model, 0, why, sizeof why) == PN_ERROR_FORMAT && why[0] && strstr(why, "base");
                 bad.model.plastic = PN_PLASTIC_VON_MISES;
                 bad.model.base = 7;
-                refused += pn_model_check(&bad.model, 0, &why) == PN_ERROR_FORMAT;
+                refused += pn_model_check(&bad.model, 0, why, sizeof why) == PN_ERROR_FORMAT;
             }
         }
     PN_REPORT("%ld samples (2D, 3D; raw, scaled): Psi - Psi without the base vs B(F) - grad B(F0):F %.2e (the base "

@@ -125,13 +125,13 @@ PN_TEST(pnet_lanes) {
                 t_pn_model tm;
                 pn_pnet net;
                 pn_pnet_desc pd;
-                const char *why = NULL;
+                char why[256] = "";
                 if (!t_pn_material(pn__t, &m1, &d1, T_PN_SAND, 1)) return;
                 t_pn_model_make_enc(&tm, PN_MODEL_ENERGY, dim, &d1, &m1, "t_sand_lanes", NULL,
                                     act ? PN_ACTIVATION_TANH : PN_ACTIVATION_SILU, &rng, scaled);
                 memset(&pd, 0, sizeof pd);
                 pd.energy = &tm.model;
-                if (pn_pnet_init(&net, &pd, &m1, dim, &why) != PN_OK) {
+                if (pn_pnet_init(&net, &pd, &m1, dim, why, sizeof why) != PN_OK) {
                     PN_CHECK(!"pn_pnet_init");
                     return;
                 }

@@ -210,11 +210,11 @@ static void t_pn_model_make(t_pn_model *tm, pn_model_kind kind, int dim, const p
 }
 
 static int t_pn_material(pn_test_ctx *pn__t, pn_material *m, pn_material_desc *desc, int which, double E) {
-    const char *why = NULL;
+    char why[256] = "";
     t_pn_desc(desc, which, E);
-    if (pn_material_init(m, desc, &why) != PN_OK) {
+    if (pn_material_init(m, desc, why, sizeof why) != PN_OK) {
         char msg[200];
-        snprintf(msg, sizeof msg, "pn_material_init: %s", why ? why : "?");
+        snprintf(msg, sizeof msg, "pn_material_init: %s", why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return 0;
     }
@@ -236,7 +236,7 @@ static int t_pn_setup_make(pn_test_ctx *pn__t, t_pn_setup *s, int which, int dim
     pn_pnet_desc pd;
     pn_material m1;
     pn_material_desc d1;
-    const char *why = NULL;
+    char why[256] = "";
     pn_result r;
     rng.s = seed;
     s->which = which;
@@ -253,10 +253,10 @@ static int t_pn_setup_make(pn_test_ctx *pn__t, t_pn_setup *s, int which, int dim
     pd.energy = &s->energy.model;
     pd.return_map = which == T_PN_SAND ? NULL : &s->rmap.model;
     pd.regularizer = regularizer;
-    r = pn_pnet_init(&s->net, &pd, &s->m, dim, &why);
+    r = pn_pnet_init(&s->net, &pd, &s->m, dim, why, sizeof why);
     if (r != PN_OK) {
         char msg[200];
-        snprintf(msg, sizeof msg, "pn_pnet_init: %d (%s)", (int)r, why ? why : "?");
+        snprintf(msg, sizeof msg, "pn_pnet_init: %d (%s)", (int)r, why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return 0;
     }

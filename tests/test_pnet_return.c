@@ -72,7 +72,7 @@ PN_TEST(learned_return_map) {
             rng.s = 8000 + 10 * (unsigned long long)el + (unsigned long long)dim;
             t_pn_desc(&md, T_PN_METAL, 1);
             if (el) md.elastic = PN_ELASTIC_STVK_HENCKY;
-            PN_CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+            PN_CHECK(pn_material_init(&m, &md, NULL, 0) == PN_OK);
             t_pn_model_make(&rm, PN_MODEL_RETURN_MAP, dim, &md, &m, "t_return", NULL,
                             el ? PN_ACTIVATION_TANH : PN_ACTIVATION_SILU, &rng);
             if (el) rm.model.out_scale = 2; /* radii far from r_ref: the dgamma = 0 clamp binds */
@@ -203,7 +203,7 @@ static void t_pn_shipped_return(pn_test_ctx *pn__t, const pn_model *mo) {
     pn_test_rng rng;
     int i, k;
     rng.s = 9100;
-    if (pn_model_material(mo, 1, &m, NULL) != PN_OK) {
+    if (pn_model_material(mo, 1, &m, NULL, 0) != PN_OK) {
         PN_CHECK(!"pn_model_material");
         return;
     }
@@ -286,7 +286,7 @@ static void t_pn_shipped_energy_at(pn_test_ctx *pn__t, const pn_model *mo, const
     pn_pnet net;
     pn_pnet_desc desc;
     pn_test_rng rng;
-    const char *why = NULL;
+    char why[256] = "";
     pn_result r;
     int i, k;
     rng.s = 9200;
@@ -301,10 +301,10 @@ static void t_pn_shipped_energy_at(pn_test_ctx *pn__t, const pn_model *mo, const
         return;
     }
     desc.regularizer = -1; /* off: the network alone approximates T(F) */
-    r = pn_pnet_init(&net, &desc, &m, dim, &why);
+    r = pn_pnet_init(&net, &desc, &m, dim, why, sizeof why);
     if (r != PN_OK) {
         char msg[200];
-        snprintf(msg, sizeof msg, "%s: pn_pnet_init %d (%s)", mo->name, (int)r, why ? why : "?");
+        snprintf(msg, sizeof msg, "%s: pn_pnet_init %d (%s)", mo->name, (int)r, why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return;
     }
@@ -350,7 +350,7 @@ static void t_pn_shipped_energy_at(pn_test_ctx *pn__t, const pn_model *mo, const
 static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
     pn_material m;
     int c, i;
-    if (pn_model_material(mo, 1, &m, NULL) != PN_OK) {
+    if (pn_model_material(mo, 1, &m, NULL, 0) != PN_OK) {
         PN_CHECK(!"pn_model_material");
         return;
     }
@@ -365,7 +365,7 @@ static void t_pn_shipped_energy(pn_test_ctx *pn__t, const pn_model *mo) {
             pn_model_param_set(&d, mo->param[i].kind, v);
             len += (size_t)snprintf(at + len, sizeof at - len, " %g", v);
         }
-        if (pn_material_init(&m, &d, NULL) != PN_OK) {
+        if (pn_material_init(&m, &d, NULL, 0) != PN_OK) {
             PN_CHECK(!"pn_material_init at a corner");
             continue;
         }
@@ -379,11 +379,11 @@ PN_TEST(pnet_shipped_models) {
     int i, n_energy = 0, n_return = 0;
     for (i = 0; pn_models_all[i]; ++i) {
         const pn_model *mo = pn_models_all[i]();
-        const char *why = NULL;
-        pn_result r = pn_model_check(mo, 0, &why);
+        char why[256] = "";
+        pn_result r = pn_model_check(mo, 0, why, sizeof why);
         if (r != PN_OK) {
             char msg[200];
-            snprintf(msg, sizeof msg, "%s: pn_model_check %d (%s)", mo->name ? mo->name : "?", (int)r, why ? why : "?");
+            snprintf(msg, sizeof msg, "%s: pn_model_check %d (%s)", mo->name ? mo->name : "?", (int)r, why);
             pn_test__fail(pn__t, __FILE__, __LINE__, msg);
             continue;
         }

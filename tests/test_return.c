@@ -666,9 +666,9 @@ static void pn_tr_run_case(pn_test_ctx *pn__t, const pn_tr_case *c, unsigned lon
     pn_material m;
     pn_tr_stats st;
     pn_test_rng rng;
-    const char *why = NULL;
+    char why[256] = "";
     int d, k, plastic_cases;
-    pn_result r = pn_material_init(&m, &c->desc, &why);
+    pn_result r = pn_material_init(&m, &c->desc, why, sizeof why);
     PN_CHECK(r == PN_OK);
     if (r != PN_OK) return;
     memset(&st, 0, sizeof st);
@@ -785,7 +785,7 @@ PN_TEST(return_von_mises_small_yield) {
                     memset(&d, 0, sizeof d);
                     d.elastic = PN_ELASTIC_NEO_HOOKEAN, d.plastic = PN_PLASTIC_VON_MISES, d.youngs_modulus_pa = 1;
                     d.poisson_ratio = nus[a], d.yield_stress_pa = ys[b], d.hardening_modulus_pa = ks[c];
-                    if (pn_material_init(&m, &d, NULL) != PN_OK) {
+                    if (pn_material_init(&m, &d, NULL, 0) != PN_OK) {
                         PN_CHECK(!"pn_material_init");
                         continue;
                     }
@@ -855,7 +855,7 @@ PN_TEST(return_cam_clay_large_shear_3d) {
     s[1] = 0.39203361551350102;
     s[2] = 0.4258398603552494;
     pn_tr_cc(&c, "cam-clay phi=30 beta=0.3 xi=10", 30, 0.3, 10, 0);
-    PN_CHECK(pn_material_init(&m, &c.desc, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&m, &c.desc, NULL, 0) == PN_OK);
     for (i = 0; i < 9; ++i) F[i] = 0;
     for (i = 0; i < 3; ++i) {
         F[i * 4] = s[i];
@@ -898,7 +898,7 @@ PN_TEST(return_von_mises_energy_gradient) {
     dk.poisson_ratio = 0.3;
     dk.yield_stress_pa = 250e6;
     dk.hardening_modulus_pa = 2e9;
-    PN_CHECK(pn_material_init(&mk, &dk, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&mk, &dk, NULL, 0) == PN_OK);
     rng.s = 601;
     for (d = 2; d <= 3; ++d)
         for (k = 0; k < 1500; ++k) {
@@ -920,7 +920,7 @@ PN_TEST(return_von_mises_energy_gradient) {
             d0 = dk;
             d0.hardening_modulus_pa = 0;
             d0.yield_stress_pa = dk.yield_stress_pa + dk.hardening_modulus_pa * h;
-            if (pn_material_init(&m0, &d0, NULL) != PN_OK) { errors++; continue; }
+            if (pn_material_init(&m0, &d0, NULL, 0) != PN_OK) { errors++; continue; }
             if (pn_von_mises_energy(use_k ? &mk : &m0, d, Fr, use_k ? h : 0, &psi, P, NULL, 0) != PN_OK ||
                 pn_return_map(use_k ? &mk : &m0, d, Fr, use_k ? h : 0, NULL, NULL, T) != PN_OK) {
                 errors++;
@@ -1011,7 +1011,7 @@ PN_TEST(return_bad_input_nonfinite) {
     bad[2] = HUGE_VAL - HUGE_VAL; /* NaN without relying on the NAN macro */
     for (c = 0; c < nc; ++c) {
         pn_material m;
-        PN_CHECK(pn_material_init(&m, &cases[c].desc, NULL) == PN_OK);
+        PN_CHECK(pn_material_init(&m, &cases[c].desc, NULL, 0) == PN_OK);
         for (d = 2; d <= 3; ++d)
             for (i = 0; i <= d * d; ++i)      /* i == d*d: the state h is the bad value */
                 for (k = 0; k < 3; ++k) {
@@ -1038,20 +1038,20 @@ PN_TEST(return_bad_input_nonfinite) {
 static void pn_tr_expect_init_fail(pn_test_ctx *pn__t, const pn_material_desc *desc,
                                    pn_result want, const char *what) {
     pn_material m, copy;
-    const char *why = NULL;
+    char why[256] = "";
     pn_result r;
     memset(&m, 0xA5, sizeof m);
     memcpy(&copy, &m, sizeof m);
-    r = pn_material_init(&m, desc, &why);
-    if (r != want || !why || !why[0] || memcmp(&m, &copy, sizeof m) != 0) {
+    r = pn_material_init(&m, desc, why, sizeof why);
+    if (r != want || !why[0] || memcmp(&m, &copy, sizeof m) != 0) {
         char msg[200];
         snprintf(msg, sizeof msg, "%s: got %d (want %d), why %s, material %s", what, (int)r,
-                 (int)want, why ? why : "NULL",
+                 (int)want, why,
                  memcmp(&m, &copy, sizeof m) ? "modified" : "untouched");
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
     }
     /* a NULL why must be accepted too */
-    if (pn_material_init(&m, desc, NULL) != want)
+    if (pn_material_init(&m, desc, NULL, 0) != want)
         pn_test__fail(pn__t, __FILE__, __LINE__, "different result with why == NULL");
 }
 
@@ -1124,7 +1124,7 @@ PN_TEST(return_inverted) {
     for (c = 0; c < nc; ++c) {
         pn_material m;
         if (cases[c].desc.plastic == PN_PLASTIC_SNOW_STOMAKHIN) continue; /* fixed corotated */
-        PN_CHECK(pn_material_init(&m, &cases[c].desc, NULL) == PN_OK);
+        PN_CHECK(pn_material_init(&m, &cases[c].desc, NULL, 0) == PN_OK);
         for (d = 2; d <= 3; ++d)
             for (k = 0; k < 40; ++k) {
                 double R1[9], R2[9], s[3], F[9];
@@ -1158,7 +1158,7 @@ PN_TEST(return_von_mises_negative_state) {
     pn_real F[9], Z[9], T[9], hn;
     int i;
     pn_tr_vm(&c, "vm", PN_ELASTIC_STVK_HENCKY, 2e9);
-    PN_CHECK(pn_material_init(&m, &c.desc, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&m, &c.desc, NULL, 0) == PN_OK);
     for (i = 0; i < 9; ++i) F[i] = (pn_real)(i % 4 == 0 ? 1.1 : 0);
     pn_tr_sentinel(Z, &hn, T);
     PN_CHECK(pn_return_map(&m, 3, F, -0.01, Z, &hn, T) == PN_ERROR_INVALID_ARGUMENT);
@@ -1205,7 +1205,7 @@ PN_TEST(return_extremes_fuzz) {
         ds.snow_theta_c = pn_test_rng_range(&rng, 0.01, 0.2);
         ds.snow_theta_s = pn_test_rng_range(&rng, 0, 0.02);
         ds.snow_xi = pn_test_rng_range(&rng, 0, 20);
-        if (pn_material_init(&m, &ds, NULL) != PN_OK) continue; /* unsupported pairs */
+        if (pn_material_init(&m, &ds, NULL, 0) != PN_OK) continue; /* unsupported pairs */
         t_rand_rot(&rng, d, R1);
         t_rand_rot(&rng, d, R2);
         for (k = 0; k < d; ++k) s[k] = exp(pn_test_rng_range(&rng, -range, range));
@@ -1281,7 +1281,7 @@ PN_TEST(return_dp_friction_angle) {
             md.youngs_modulus_pa = 1e6;
             md.poisson_ratio = 0.3;
             md.friction_angle_deg = phis[k];
-            PN_CHECK(pn_material_init(&m, &md, NULL) == PN_OK);
+            PN_CHECK(pn_material_init(&m, &md, NULL, 0) == PN_OK);
             mu = t_mu(1e6, 0.3);
             la = t_lambda(1e6, 0.3);
             for (step = 1; step <= 400; ++step) {

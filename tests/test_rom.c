@@ -155,7 +155,7 @@ PN_TEST(rom_affine_equals_mpm) {
         int nb[3] = {12, 10, 8}, i, j, k, K = d + d * d;
         size_t n = t_rom_box(d, lo, nb, h, X), p;
         pn_test_rng r;
-        pn_mpm_world *mw = t_mpm_world(d, 32, -9.81, PN_MPM_BOUNDARY_STICKY);
+        pn_mpm_world *mw = t_mpm_world(d, 32, -9.81, PN_BOUNDARY_STICKY);
         pn_rom_model am;
         pn_rom_desc desc;
         pn_rom_world *w = NULL;
@@ -168,7 +168,7 @@ PN_TEST(rom_affine_equals_mpm) {
         for (i = 0; i < d * d; ++i) A[i] = pn_test_rng_range(&r, -0.05, 0.05), Ad[i] = pn_test_rng_range(&r, -2, 2);
         memset(&md, 0, sizeof md);
         md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = E, md.poisson_ratio = nu;
-        PN_CHECK(mw != NULL && pn_material_init(&mat, &md, NULL) == PN_OK);
+        PN_CHECK(mw != NULL && pn_material_init(&mat, &md, NULL, 0) == PN_OK);
         if (!mw) return;
         g = pn_mpm_add_group(mw, &mat, rho);
         {
@@ -811,7 +811,7 @@ PN_TEST(rom_stable_dt) {
     unsigned char *kept;
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = E, md.poisson_ratio = nu;
-    PN_CHECK(pn_material_init(&mat, &md, NULL) == PN_OK);
+    PN_CHECK(pn_material_init(&mat, &md, NULL, 0) == PN_OK);
     pn_rom_affine_model(2, &am);
     memset(&desc, 0, sizeof desc);
     desc.model = &am, desc.points = X, desc.n_points = n, desc.point_volume_m3 = h * h, desc.dx_m = dx;
@@ -1059,13 +1059,13 @@ static size_t t_rom_cylinder_mpm(const pn_rs_scene *s, const pn_rs_instance *in,
     pn_material mat;
     int g, i;
     memset(&wd, 0, sizeof wd);
-    wd.dim = 3, wd.dx_m = s->dx, wd.boundary = PN_MPM_BOUNDARY_STICKY, wd.max_particles = cap;
+    wd.dim = 3, wd.dx_m = s->dx, wd.boundary = PN_BOUNDARY_STICKY, wd.max_particles = cap;
     for (i = 0; i < 3; ++i) wd.res[i] = s->res[i], wd.gravity[i] = in->gravity[i];
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_FIXED_COROTATED, md.plastic = PN_PLASTIC_NONE, md.youngs_modulus_pa = s->youngs_pa;
     md.poisson_ratio = s->poisson;
     *mw = NULL;
-    if (pn_mpm_create(&wd, mw, NULL) != PN_OK || pn_material_init(&mat, &md, NULL) != PN_OK) return 0;
+    if (pn_mpm_create(&wd, mw, NULL, 0) != PN_OK || pn_material_init(&mat, &md, NULL, 0) != PN_OK) return 0;
     g = pn_mpm_add_group(*mw, &mat, s->density);
     return pn_rs_setup(*mw, g, s, in, 1, NULL, X, cap);
 }
