@@ -43,31 +43,42 @@
    A pn_real[9] serves both dimensions. Fourth-order tensors (dP/dF) are dim^2 x dim^2
    row-major: dPdF[(i*dim+j)*dim*dim + k*dim+l] = dP_ij / dF_kl.
 
-   What is here (greppable banners in the implementation: // >>name), in file order:
-     >>config   every option resolved in one place
+   What is here (greppable banners in the implementation: // >>name), in file order, with
+   each room's public functions:
+     >>config   every option resolved in one place; pn_result_string, pn_alloc, pn_free
      >>kit      the private helpers every module shares (plastinet_mpm.h and plastinet_rom.h
                 too): messages, a hash, B-spline weights, dense Cholesky, the backtracking
                 line search, preconditioned CG, a rigid drive's motion, the substep fallback
-     >>matrix   small dense 2D/3D matrix helpers
+     >>matrix   small dense 2D/3D matrix helpers: pn_mat_det, pn_mat_inverse, pn_mat_mul
      >>svd      SVD with rotation-valued U and V (det +1), the sign of an inverted F carried
-                by the smallest singular value; polar decomposition; Hencky strain
-     >>eigen    symmetric eigen-decomposition (Jacobi) and PSD projection, n <= 12
-     >>material parameter validation, Lame constants
+                by the smallest singular value; polar decomposition; Hencky strain: pn_svd,
+                pn_polar, pn_hencky_strain
+     >>eigen    symmetric eigen-decomposition (Jacobi) and PSD projection, n <= 12:
+                pn_sym_eigen, pn_sym_project_psd
+     >>material parameter validation, Lame constants, names: pn_material_init, _check,
+                _describe, pn_lame, pn_elastic_model_name / _from_name, pn_plastic_model_name
+                / _from_name
      >>elastic  fixed corotated, StVK-Hencky, Neo-Hookean, and the Neo-Hookean variant used by
-                Cam-Clay snow: energy, P, dP/dF, PSD-projected dP/dF
+                Cam-Clay snow: energy, P, dP/dF, PSD-projected dP/dF: pn_elastic_energy,
+                pn_kirchhoff_stress
      >>return-mapping  Drucker-Prager (sand), von Mises (metal, closed form for StVK-Hencky,
                 safeguarded root find otherwise), non-associative Cam-Clay (snow), and the
-                singular-value clamp snow of Stomakhin et al. 2013
+                singular-value clamp snow of Stomakhin et al. 2013: pn_return_map,
+                pn_yield_function
      >>energy-vm      exact StVK-Hencky + von Mises elastoplastic energy (the return mapping's
-                      incremental potential, hardening included)
-     >>energy-dp      the frozen-yield Drucker-Prager energy
-     >>energy-lagged  lagged-plasticity energy Psi_el(F G), G = F0^-1 Z(F0)
+                      incremental potential, hardening included): pn_von_mises_energy
+     >>energy-dp      the frozen-yield Drucker-Prager energy: pn_dp_prepare, pn_dp_energy
+     >>energy-lagged  lagged-plasticity energy Psi_el(F G), G = F0^-1 Z(F0):
+                      pn_lagged_prepare, pn_lagged_energy
      >>mlp      inference of small MLPs stored as float arrays: value, input gradient and the
-                exact input Hessian (forward-mode second order)
+                exact input Hessian (forward-mode second order): pn_mlp_eval, _eval_lanes
      >>features rotation invariants of F (from C = F^T F, no SVD) and their F-derivatives
      >>pnet     PlasticityNet learned elastoplastic energy Psi(F; F0, h) (Li et al. 2022,
-                Eqs. 8 and 11) from a model header in models/, rescaled to any E
-     >>learned-return  learned volume-preserving von Mises return mapping (Eqs. 12-13)
+                Eqs. 8 and 11) from a model header in models/, rescaled to any E:
+                pn_model_check, pn_model_material, _material_desc, pn_model_param_set,
+                pn_pnet_init, pn_pnet_prepare, _prepare_lanes, pn_pnet_energy, _energy_lanes
+     >>learned-return  learned volume-preserving von Mises return mapping (Eqs. 12-13):
+                pn_learned_return_map
 
    ======================================================================================
    CONVENTIONS (all four modules: core, MPM, FEM and coupling, ROM)

@@ -53,7 +53,7 @@ static int t_en_init(pn_test_ctx *pn__t, pn_material *m, const pn_material_desc 
     char why[256] = "";
     pn_result r = pn_material_init(m, d, why, sizeof why);
     if (r != PN_OK) {
-        char msg[200];
+        char msg[512];
         snprintf(msg, sizeof msg, "pn_material_init failed (%d): %s", (int)r, why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return 0;

@@ -213,7 +213,7 @@ static int t_pn_material(pn_test_ctx *pn__t, pn_material *m, pn_material_desc *d
     char why[256] = "";
     t_pn_desc(desc, which, E);
     if (pn_material_init(m, desc, why, sizeof why) != PN_OK) {
-        char msg[200];
+        char msg[512];
         snprintf(msg, sizeof msg, "pn_material_init: %s", why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return 0;
@@ -255,7 +255,7 @@ static int t_pn_setup_make(pn_test_ctx *pn__t, t_pn_setup *s, int which, int dim
     pd.regularizer = regularizer;
     r = pn_pnet_init(&s->net, &pd, &s->m, dim, why, sizeof why);
     if (r != PN_OK) {
-        char msg[200];
+        char msg[512];
         snprintf(msg, sizeof msg, "pn_pnet_init: %d (%s)", (int)r, why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return 0;

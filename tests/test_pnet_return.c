@@ -303,7 +303,7 @@ static void t_pn_shipped_energy_at(pn_test_ctx *pn__t, const pn_model *mo, const
     desc.regularizer = -1; /* off: the network alone approximates T(F) */
     r = pn_pnet_init(&net, &desc, &m, dim, why, sizeof why);
     if (r != PN_OK) {
-        char msg[200];
+        char msg[512];
         snprintf(msg, sizeof msg, "%s: pn_pnet_init %d (%s)", mo->name, (int)r, why);
         pn_test__fail(pn__t, __FILE__, __LINE__, msg);
         return;
@@ -382,7 +382,7 @@ PN_TEST(pnet_shipped_models) {
         char why[256] = "";
         pn_result r = pn_model_check(mo, 0, why, sizeof why);
         if (r != PN_OK) {
-            char msg[200];
+            char msg[512];
             snprintf(msg, sizeof msg, "%s: pn_model_check %d (%s)", mo->name ? mo->name : "?", (int)r, why);
             pn_test__fail(pn__t, __FILE__, __LINE__, msg);
             continue;

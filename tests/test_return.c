@@ -1044,7 +1044,7 @@ static void pn_tr_expect_init_fail(pn_test_ctx *pn__t, const pn_material_desc *d
     memcpy(&copy, &m, sizeof m);
     r = pn_material_init(&m, desc, why, sizeof why);
     if (r != want || !why[0] || memcmp(&m, &copy, sizeof m) != 0) {
-        char msg[200];
+        char msg[512];
         snprintf(msg, sizeof msg, "%s: got %d (want %d), why %s, material %s", what, (int)r,
                  (int)want, why,
                  memcmp(&m, &copy, sizeof m) ? "modified" : "untouched");
