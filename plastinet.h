@@ -695,8 +695,12 @@ PN_API pn_result pn_learned_return_map(const pn_model *model, const pn_material 
 #include <stdio.h>
 #endif
 
-#ifdef PLASTINET_STATIC
+#ifdef PLASTINET_STATIC /* a file need not call every function it compiles */
+#if defined(__GNUC__) || defined(__clang__)
+#define PN__DEF static __attribute__((unused))
+#else
 #define PN__DEF static
+#endif
 #else
 #define PN__DEF
 #endif

@@ -11,6 +11,7 @@
 //                per cell then per particle (pn_mpm_implicit_desc.stress_unknowns)
 //   --png DIR    a picture of every 10th frame into DIR (created; examples/common/pn_render.h)
 #define PLASTINET_IMPLEMENTATION
+#define PN_NO_FEM /* a game that simulates particles only: FEM and coupling left out */
 #include "../plastinet.h"
 #include "../plastinet_mpm.h"
 #include "common/pn_render.h"

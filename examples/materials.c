@@ -8,6 +8,7 @@
    Writes DIR/frame_NNNN.png (--png) and DIR/preview.png (--apng, every second frame) [DIR:
    build/materials_frames]; prints per material its particle count and final centre. */
 #define PLASTINET_IMPLEMENTATION
+#define PN_NO_FEM /* particles only: FEM and coupling left out of the build */
 #include "common/pn_example.h"
 
 enum { SAND, RUBBER, METAL, SNOW, KINDS };

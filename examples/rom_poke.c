@@ -12,6 +12,7 @@
    poke, wall milliseconds per step and wall seconds per simulated second. --help lists every
    flag. Build: cc -O2 examples/rom_poke.c -lm */
 #define PLASTINET_IMPLEMENTATION
+#define PN_NO_FEM /* particles only: FEM and coupling left out of the build */
 #include "common/pn_example.h"
 #include "../plastinet_rom.h"
 #include "../models/rom_poke.h"

@@ -15,6 +15,7 @@
    the dynamics (<= 1: real time) and the cost of reconstructing the drawn points. --help lists
    every flag. Build: cc -O2 examples/rom_tower.c -lm */
 #define PLASTINET_IMPLEMENTATION
+#define PN_NO_FEM /* particles only: FEM and coupling left out of the build */
 #include "common/pn_example.h"
 #include "../plastinet_rom.h"
 #include "../models/rom_tower.h"

@@ -32,6 +32,7 @@
    fixed-point residual; and the reference's runout, height, steps and wall seconds, the
    ratios run / reference, and the min/max mass IoU of the two deposits. */
 #define PLASTINET_IMPLEMENTATION
+#define PN_NO_FEM /* particles only: FEM and coupling left out of the build */
 #include "common/pn_example.h" /* plastinet.h, plastinet_mpm.h, the sand models, the plumbing */
 
 /* The column's world, with the library's calls: s holds the numbers the flags set (res, E,

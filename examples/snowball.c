@@ -17,6 +17,7 @@
    iterations per step, spread (extent of the snow along the throw), runout (how far its front
    moved), final height above the floor, largest fixed-point residual. */
 #define PLASTINET_IMPLEMENTATION
+#define PN_NO_FEM /* particles only: FEM and coupling left out of the build */
 #include "common/pn_example.h"
 
 static void usage(FILE *f, const pn_ex_cli *d) {

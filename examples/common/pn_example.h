@@ -736,6 +736,7 @@ PN_EX_UNUSED static int pn_ex_output_close(const char *prog, pn_ex_output *o, in
     return ok;
 }
 
+#ifndef PN_NO_FEM /* the examples that simulate only particles leave FEM out */
 /* ---- FEM meshes: VTU (ParaView) with per-element fields, OBJ surfaces (Blender) ---- */
 
 /* VTK unstructured grid of mesh m at its positions, n_fields per-element arrays (names[f],
@@ -820,6 +821,7 @@ PN_EX_UNUSED static int pn_ex_write_mesh_obj(const char *path, const pn_fem_mesh
     free(keys);
     return fclose(f) == 0;
 }
+#endif
 
 /* OBJ iso-surface of the active particles (3D), for Blender */
 static int pn_ex__write_obj(const char *path, const pn_mpm_world *w) {

@@ -16,6 +16,7 @@
    than teleporting through it. It waits high above the box while the pointer is up.
    Native timing run: cc -std=c99 -O2 -DDEMO_MAIN examples/web/demo.c -lm && ./a.out [sand|snow] [frames] */
 #define PLASTINET_IMPLEMENTATION
+#define PN_NO_FEM /* particles only: FEM and coupling left out of the build */
 #include "../../plastinet.h"
 #include "../../plastinet_mpm.h"
 #include <math.h>
