@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-all test-sanitize bench-core bench-mpm bench-fem bench-coupling bench-explicit bench-deposit bench-rom rom-data clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-all test-sanitize bench-core bench-mpm bench-fem bench-coupling bench-explicit bench-deposit bench-coarse bench-rom rom-data clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -167,6 +167,17 @@ bench-deposit: build/bench_deposit
 build/bench_deposit: bench/bench_deposit.c $(EXAMPLE_DEPS)
 	@mkdir -p build
 	$(CC) $(CFLAGS) bench/bench_deposit.c $(LDLIBS) -o $@
+
+# The stress formulation's coarse correction against the sweeps alone as the grid grows
+# (bench/bench_coarse.c): an elastic 3D block at res 32, 48, 64, one step per 1/60 s frame,
+# against the sweeps at a 100x tighter tolerance. build/bench_coarse.md (about 15 minutes).
+bench-coarse: build/bench_coarse
+	build/bench_coarse --reference --md build/bench_coarse.md $(BENCH_COARSE_FLAGS)
+	@cat build/bench_coarse.md
+
+build/bench_coarse: bench/bench_coarse.c bench/bench_util.h plastinet.h plastinet_mpm.h
+	@mkdir -p build
+	$(CC) $(CFLAGS) bench/bench_coarse.c $(LDLIBS) -o $@
 
 # ---- reduced-order MPM (plastinet_rom.h; docs/rom.md) ------------------------------------------
 # A jelly cylinder poked ten times from random directions, on the shipped reduced model

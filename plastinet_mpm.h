@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.10 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.11 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -384,6 +384,16 @@ typedef struct pn_mpm_implicit_desc {
                                     0.25 for FORMULATION_ENERGY, off for FORMULATION_STRESS,
                                     whose steps only lose energy; < 0: never; > 0: this
                                     tolerance for either]                                    */
+    int coarse_every;            /* STRESS, particles, elastic material: a coarse correction
+                                    (the step's linearized problem in the velocities, solved
+                                    by multigrid-preconditioned CG) after every this many
+                                    sweeps, so the sweeps needed stop growing with the
+                                    grid's width and dt / dt_CFL (docs/method.md, "the
+                                    coarse correction"); not taken while any group is
+                                    plastic, nor with linear_solver JACOBI [0: 4; < 0:
+                                    never]                                                   */
+    int coarse_cg;               /* STRESS: CG iterations per coarse correction, at most [50] */
+    pn_real coarse_tol;          /* STRESS: its CG's relative tolerance [1e-3]              */
 } pn_mpm_implicit_desc;
 
 /* The stages of an implicit step (pn_mpm_stats.stage_s, with pn_mpm_desc.clock_s). */
@@ -431,6 +441,8 @@ typedef struct pn_mpm_stats {
        an explicit step taken alone, which does not compute the bound)                      */
     pn_real dt_over_cfl;
     int sweeps;                  /* FORMULATION_STRESS: Gauss-Seidel sweeps                  */
+    int coarse_corrections, coarse_rejected; /* STRESS: coarse corrections taken, and those
+                                    undone for leaving the velocities worse              */
     pn_real energy_rise;         /* implicit: the step's change of mechanical energy over its
                                     size at the start (pn_mpm_implicit_desc.energy_rise_tol;
                                     the largest over substeps); 0 when not checked           */
@@ -512,6 +524,8 @@ typedef struct pn__mpm_solver {
                                     first such step)                                          */
     long *pdof;
     size_t *inc, *inc_start, *prank;
+    size_t *sgrp;                /* >>stress: the colour groups, then each particle's cell (5 cap) */
+    pn_real *ptau;               /* >>stress, the coarse correction: stresses before it, energies (cap (dim^2 + 1)) */
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
     unsigned char *bactive;
     /* contact memory of the last implicit step: the nodes a separating contact held, ascending,
@@ -1263,7 +1277,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(s.order) X(s.start) X(s.act) X(s.dof) X(s.mark) X(s.grid_m) X(s.grid_v) X(s.grid_v0) X(s.pmat) X(s.pscal) X(s.part)        \
     X(s.pstat) X(s.sx) X(s.sv) X(s.sC) X(s.sF) X(s.sh) X(s.sactive) X(s.cn) X(s.ckind) X(s.chold) X(s.cdir) X(s.cvel)   \
     X(s.cmu) X(s.clam) X(s.ctan) X(s.vstar) X(s.vsol) X(s.vtry) X(s.grad) X(s.dir) X(s.cg_r) X(s.cg_z) X(s.cg_p) X(s.cg_q)      \
-    X(s.diag) X(s.pP) X(s.pH) X(s.pG) X(s.phG) X(s.pF0) X(s.pty) X(s.ppt) X(s.tF) X(s.tpsi) X(s.tP) X(s.tH) X(s.tok) X(s.jF) X(s.jpsi) X(s.jP) X(s.jH) X(s.jpH) X(s.jppt) X(s.jst) X(s.pq) X(s.pb) X(s.pdof) X(s.inc) X(s.inc_start) X(s.prank) X(s.bx) X(s.bv) X(s.bC) X(s.bF) X(s.bh) X(s.bactive)  \
+    X(s.diag) X(s.pP) X(s.pH) X(s.pG) X(s.phG) X(s.pF0) X(s.pty) X(s.ppt) X(s.tF) X(s.tpsi) X(s.tP) X(s.tH) X(s.tok) X(s.jF) X(s.jpsi) X(s.jP) X(s.jH) X(s.jpH) X(s.jppt) X(s.jst) X(s.pq) X(s.pb) X(s.sgrp) X(s.ptau) X(s.pdof) X(s.inc) X(s.inc_start) X(s.prank) X(s.bx) X(s.bv) X(s.bC) X(s.bF) X(s.bh) X(s.bactive)  \
     X(s.lnode) X(s.blnode) X(s.lval) X(s.blval) X(s.bmark) X(s.bact) X(s.rowcount) X(s.gdense) X(s.gdense0) X(s.ppay) X(s.spay) X(s.prow) X(s.srow)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -2621,7 +2635,7 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
             pn_real L[9];
             pn__mpm_push(w, q, gv_all, dt, NULL, L);
             if (w->s.stress_on == 2) { /* the cell's strain rate, the particle's own spin */
-                size_t r = w->s.inc[2 * w->s.start[w->s.nodes] + w->s.prank[q]];
+                size_t r = w->s.sgrp[2 * w->s.start[w->s.nodes] + w->s.prank[q]];
                 const pn_real *b = w->s.pb + r * (size_t)(w->s.ns * d);
                 const long *dof = w->s.pdof + r * (size_t)w->s.ns;
                 pn_real Lc[9];
@@ -5496,7 +5510,7 @@ static int pn__mpm_stress_ok(const pn_material *m) {
    Both laws are radial in s, so the particle's own share of D, moved to the left, only
    shrinks the trial deviator (by 1 + bs) and mean (by 1 + bm): the closed form below. */
 static void pn__mpm_stress_local(const pn_material *m, int d, const pn_real *hat, const pn_real *cur, pn_real h,
-                                 const pn_real *L, pn_real c, pn_real dt, pn_real *tau) {
+                                 const pn_real *L, pn_real c, pn_real dt, pn_real *tau, pn_real *H) {
     int dd = d * d, i, k;
     pn_real dr = (pn_real)d, kappa = m->lambda + 2 * m->mu / dr, trL = 0, mcur = 0, mhat = 0;
     pn_real mc = 0, am, bm, bs, as[9], an = 0, mnew, sc, mu2 = 2 * m->mu * dt, mean, rad2 = -1;
@@ -5534,6 +5548,18 @@ static void pn__mpm_stress_local(const pn_material *m, int d, const pn_real *hat
     if (rad2 >= 0 && an * sc * sc > rad2) sc = PN__SQRT(rad2 / an); /* an > 0 here */
     for (i = 0; i < dd; ++i) tau[i] = sc * as[i];
     for (i = 0; i < d; ++i) tau[i * d + i] += mnew + mc;
+    if (H) { /* (c = 0, elastic material: >>stress, the coarse correction) the trial and its
+                tangent d tau / (dt dL): 2 mu on the deviator (made symmetric), kappa on the mean */
+        int a, b, cc, e;
+        for (i = 0; i < dd; ++i) tau[i] = as[i];
+        for (i = 0; i < d; ++i) tau[i * d + i] += am / (1 + bm) + mc;
+        for (a = 0; a < d; ++a)
+            for (cc = 0; cc < d; ++cc)
+                for (b = 0; b < d; ++b)
+                    for (e = 0; e < d; ++e)
+                        H[(a * d + cc) * dd + b * d + e] = m->mu * ((a == b && cc == e) + (a == e && cc == b)) +
+                                                           (a == cc && b == e) * (kappa - 2 * m->mu / dr);
+    }
 }
 
 /* v_k of every stencil node (dof) += -sV / m_k dtau g_k: a particle's force (g its weights, sV =
@@ -5577,12 +5603,12 @@ static void pn__mpm_stress_contact(pn_mpm_world *w, pn_real *v, pn_real *r) {
    are at least three nodes apart on some axis, so their 3-wide stencils share no node and a
    colour's groups can run on any threads at once; within a group the particles go in sorted
    order, so every thread count gives the same sweep. Group q of colour c: particles
-   grp[2q] .. grp[2q + 1] - 1 (sorted indices), q from cstart[c] to cstart[c + 1] - 1. grp
-   reuses inc (cap ns entries), which only the gather transfer needed before. */
+   grp[2q] .. grp[2q + 1] - 1 (sorted indices), q from cstart[c] to cstart[c + 1] - 1, grp = sgrp
+   (the node incidences, inc, stay for the coarse correction's assembly). */
 static void pn__mpm_stress_groups(pn_mpm_world *w, size_t *cstart) {
-    size_t j, np = w->s.start[w->s.nodes], count[28] = {0}, ng = 0, *grp = w->s.inc, *tmp;
+    size_t j, np = w->s.start[w->s.nodes], count[28] = {0}, ng = 0, *grp = w->s.sgrp, *tmp;
     int c, idx[3], i, d = w->dim, nc = d == 2 ? 9 : 27;
-    tmp = grp + 2 * np; /* unsorted groups: start, end, colour (inc has ns >= 9 per particle) */
+    tmp = grp + 2 * np; /* unsorted groups: start, end, colour (sgrp has 5 per particle) */
     for (j = 0; j < np;) {
         size_t b = w->s.pbase[w->s.order[j]], e = j + 1;
         while (e < np && w->s.pbase[w->s.order[e]] == b) ++e;
@@ -5622,7 +5648,7 @@ static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real 
             g = w->s.pq + j * (size_t)(ns * d), sV = dt * w->vol0[p], h = w->h[p];
             pn__mpm_push(w, p, v, 1, NULL, L);
         }
-        pn__mpm_stress_local(&w->groups[w->group[p]].material, d, hat, cur, h, L, c, dt, tau);
+        pn__mpm_stress_local(&w->groups[w->group[p]].material, d, hat, cur, h, L, c, dt, tau, NULL);
         for (i = 0; i < dd; ++i) {
             dtau[i] = tau[i] - cur[i];
             cur[i] = tau[i];
@@ -5654,7 +5680,7 @@ static pn_real pn__mpm_stress_compliance(const pn_mpm_world *w, const pn_real *g
    on node s is -tau_c b_s, whose power is -V_c tau_c : L_c, so the pair stays adjoint. A
    cell lives at its first particle's sorted index r: b in pb, V in phG (0 at its other
    particles), and in pH (dim^4 >= 2 dim^2 + 2 reals) tau^, tau, c and h; each particle's
-   cell in crep (inc after the colour groups). Material groups mixed in one cell give it one
+   cell in crep (sgrp after the colour groups). Material groups mixed in one cell give it one
    unknown per group. The first iterate is tau^_c, applied to v; the particles' own tau^
    (pF0) and compliances stay, for a per-particle solve after it. At the end the particles
    of a cell take its velocity gradient L_c for their F (pn__mpm_g2p), not their own: a
@@ -5663,9 +5689,9 @@ static pn_real pn__mpm_stress_compliance(const pn_mpm_world *w, const pn_real *g
    elastic layer at rest showed stresses 2.3 times the hydrostatic ones, in a sawtooth). */
 static void pn__mpm_stress_cells(pn_mpm_world *w, const size_t *cstart, pn_real dt, pn_real relax, pn_real *v) {
     int d = w->dim, dd = d * d, ns = w->s.ns, nsd = ns * d, i;
-    size_t q, nq = cstart[d == 2 ? 9 : 27], *crep = w->s.inc + 2 * w->s.start[w->s.nodes];
+    size_t q, nq = cstart[d == 2 ? 9 : 27], *crep = w->s.sgrp + 2 * w->s.start[w->s.nodes];
     for (q = 0; q < nq; ++q) {
-        size_t j0 = w->s.inc[2 * q], j1 = w->s.inc[2 * q + 1], j, r;
+        size_t j0 = w->s.sgrp[2 * q], j1 = w->s.sgrp[2 * q + 1], j, r;
         for (j = j0; j < j1; ++j) {
             size_t p = w->s.order[j];
             pn_real V = w->vol0[p], *cell;
@@ -5699,9 +5725,184 @@ static void pn__mpm_stress_cells(pn_mpm_world *w, const size_t *cstart, pn_real 
 /* the cells' stresses handed to their particles (tau_p = tau_c: the same forces, so v stays) */
 static void pn__mpm_stress_uncell(pn_mpm_world *w) {
     int dd = w->dim * w->dim;
-    size_t j, np = w->s.start[w->s.nodes], *crep = w->s.inc + 2 * np;
+    size_t j, np = w->s.start[w->s.nodes], *crep = w->s.sgrp + 2 * np;
     for (j = 0; j < np; ++j)
         memcpy(w->s.pP + j * (size_t)dd, w->s.pH + crep[j] * (size_t)(dd * dd) + dd, sizeof(pn_real) * (size_t)dd);
+}
+
+/* The coarse correction (pn_mpm_implicit_desc.coarse_every; elastic material only). A
+   Gauss-Seidel sweep moves information about one cell, so a step many explicit steps long
+   needs sweeps in proportion to the grid's width and to dt / dt_CFL. The sweeps descend the
+   dual objective J(tau) of pn__mpm_stress_dual (for elastic material a quadratic). Every few
+   sweeps the stresses take the step that minimizes J, found in the velocities: the law
+   linearized at the current v, tau_p = hat_p + dt C (D_p(v) + D_p(dv)), in the momentum
+   balance gives
+       (M + dt^2 sum_p V_p B_p^T C B_p) dv = -dt sum_p V_p B_p^T (trial_p - tau_p),
+   trial_p the law's stress at v and B_p v = sum_i v_i g_ip^T; the matrix is assembled into
+   the multigrid hierarchy of >>multigrid (contact nodes held at the velocities the sweeps
+   gave them: whole where there is friction, along their normals where they slip) and solved by CG to coarse_tol, preconditioned by its V-cycles.
+   Then tau += alpha (trial - tau + dt C dL(dv)), the velocities following by the force of
+   the change (by colour, as a sweep), and the contact nodes take their exact local solve
+   (the sweeps' contact step: their impulses stay admissible, so J stays the step's dual
+   objective); alpha = 1 unless J does not decrease (then 1/4, 1/16, 1/64, else undone).
+   For elastic material away from contact alpha = 1 lands on the step's solution up to CG's
+   tolerance. On yielding sand four variants were tried and none converged to the sweeps'
+   answer (docs/notebook.md, "a coarse correction for yielding sand"). build: assemble the matrix
+   (the step's first correction; for elastic material it does not change within the step).
+   Returns the alpha taken, 0 when undone, -1 when the hierarchy could not be allocated. */
+typedef struct pn__mpm_coarse {
+    pn_mpm_world *w;
+} pn__mpm_coarse;
+
+static void pn__mpm_coarse_apply(void *ctx, const pn_real *x, pn_real *y) {
+    pn__mpm_mg_apply(((pn__mpm_coarse *)ctx)->w, 0, x, NULL, y);
+}
+
+static void pn__mpm_coarse_precond(void *ctx, const pn_real *r, pn_real *z) {
+    pn_mpm_world *w = ((pn__mpm_coarse *)ctx)->w;
+    size_t k;
+    pn__mpm_mg_vcycle(w, 0, r, z);
+    for (k = 0; k < w->s.n_act; ++k) pn__mpm_filter(w, k, z + k * (size_t)w->dim);
+}
+
+static pn_real pn__mpm_coarse_dot(void *ctx, size_t n, const pn_real *a, const pn_real *b) {
+    return pn__mpm_sum(((pn__mpm_coarse *)ctx)->w, n, a, b);
+}
+
+/* The dual objective the sweeps descend, J = 1/2 sum_k m_k |v_k|^2 + sum_p V_p / 2 (tau_p -
+   hat_p) : C^-1 : (tau_p - hat_p) (v the velocities the stresses and contact impulses make;
+   C^-1 X = dev X / (2 mu) + tr X I / (d^2 kappa), kappa as the local law has it), less the
+   contact impulses' work r . v_obstacle; e: scratch of np reals */
+static pn_real pn__mpm_stress_dual(pn_mpm_world *w, const pn_real *v, const pn_real *r, pn_real *e) {
+    int d = w->dim, dd = d * d;
+    size_t np = w->s.start[w->s.nodes];
+    long lj, lk;
+    pn_real *ek = w->s.cg_z;
+    PN__OMP_FOR
+    for (lj = 0; lj < (long)np; ++lj) {
+        size_t j = (size_t)lj, p = w->s.order[j];
+        const pn_material *m = &w->groups[w->group[p]].material;
+        const pn_real *t = w->s.pP + j * (size_t)dd, *hat = w->s.pF0 + j * (size_t)dd;
+        pn_real X[9], tr = 0, mhat = 0, dev2 = 0, dr = (pn_real)d, kappa = m->lambda + 2 * m->mu / dr;
+        int i;
+        for (i = 0; i < dd; ++i) X[i] = t[i] - hat[i];
+        for (i = 0; i < d; ++i) tr += X[i * d + i], mhat += hat[i * d + i] / dr;
+        if (m->elastic == PN_ELASTIC_NEO_HOOKEAN_SNOW) kappa = PN__MAX(kappa + 2 * mhat, (pn_real)1e-3 * kappa);
+        for (i = 0; i < d; ++i) X[i * d + i] -= tr / dr;
+        for (i = 0; i < dd; ++i) dev2 += X[i] * X[i];
+        e[j] = w->vol0[p] / 2 * (dev2 / (2 * m->mu) + tr * tr / (dr * dr * kappa));
+    }
+    PN__OMP_FOR
+    for (lk = 0; lk < (long)w->s.n_act; ++lk) {
+        size_t k = (size_t)lk;
+        int i;
+        ek[k] = 0;
+        for (i = 0; i < d; ++i) /* and the contact impulses' work against the obstacles */
+            ek[k] += w->s.grid_m[k] / 2 * v[k * (size_t)d + (size_t)i] * v[k * (size_t)d + (size_t)i] -
+                     r[k * (size_t)d + (size_t)i] * w->s.cvel[k * 3 + (size_t)i];
+    }
+    return pn__mpm_sum(w, np, e, NULL) + pn__mpm_sum(w, w->s.n_act, ek, NULL);
+}
+
+/* the stresses tau0 + alpha dtau and the velocities their change makes (by colour, as a
+   sweep), then the contact nodes' exact local solve (the sweeps' contact step), so their
+   impulses r stay admissible and J stays the dual objective of the step */
+static void pn__mpm_stress_move(pn_mpm_world *w, const size_t *cstart, pn_real dt, pn_real alpha, const pn_real *tau0,
+                                const pn_real *dtau, pn_real *v, pn_real *r) {
+    int d = w->dim, dd = d * d, ns = w->s.ns, c;
+    for (c = 0; c < (d == 2 ? 9 : 27); ++c) {
+        long q;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static) if (w->n >= w->desc.parallel_min_particles)
+#endif
+        for (q = (long)cstart[c]; q < (long)cstart[c + 1]; ++q) {
+            size_t j;
+            for (j = w->s.sgrp[2 * (size_t)q]; j < w->s.sgrp[2 * (size_t)q + 1]; ++j) {
+                size_t p = w->s.order[j];
+                pn_real D[9], *cur = w->s.pP + j * (size_t)dd;
+                int i;
+                for (i = 0; i < dd; ++i) {
+                    pn_real t = tau0[j * (size_t)dd + (size_t)i] + alpha * dtau[j * (size_t)dd + (size_t)i];
+                    D[i] = t - cur[i], cur[i] = t;
+                }
+                pn__mpm_stress_apply(w, w->s.pq + j * (size_t)(ns * d), w->s.pdof + j * (size_t)ns, D, dt * w->vol0[p], v);
+            }
+        }
+    }
+    pn__mpm_stress_contact(w, v, r);
+}
+
+static pn_real pn__mpm_stress_coarse(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, const size_t *cstart,
+                                     int build, pn_real *v, pn_real *r, pn_mpm_stats *st) {
+    int d = w->dim, dd = d * d, ns = w->s.ns, capped, it, tries;
+    size_t np = w->s.start[w->s.nodes], nd = w->s.n_act * (size_t)d;
+    pn_real *dtau = w->s.pG, *b = w->s.cg_r, *dv = w->s.dir, *tau0 = w->s.ptau, *e = w->s.ptau + w->cap * (size_t)dd;
+    pn_real J0, J1 = 0, alpha = 1;
+    long lj, lk;
+    pn__mpm_coarse cc;
+    pn__cg_ops op;
+    PN__OMP_FOR
+    for (lj = 0; lj < (long)np; ++lj) { /* the law linearized at v, each particle: trial - tau */
+        size_t j = (size_t)lj, p = w->s.order[j];
+        pn_real L[9], Z[9], *cur = w->s.pP + j * (size_t)dd;
+        int i;
+        pn__mpm_push(w, p, v, 1, NULL, L);
+        pn__mpm_stress_local(&w->groups[w->group[p]].material, d, w->s.pF0 + j * (size_t)dd, cur, w->h[p], L, 0, dt, Z,
+                             w->s.pH + p * (size_t)(dd * dd));
+        for (i = 0; i < dd; ++i) dtau[j * (size_t)dd + (size_t)i] = Z[i] - cur[i];
+    }
+    PN__OMP_FOR
+    for (lk = 0; lk < (long)w->s.n_act; ++lk) { /* b = -dt sum V (trial - tau) g, gathered per node */
+        size_t ei, k = (size_t)lk;
+        pn_real acc[3] = {0, 0, 0};
+        int a, c;
+        for (ei = w->s.inc_start[k]; ei < w->s.inc_start[k + 1]; ++ei) {
+            size_t ps = w->s.inc[ei], j = ps / (size_t)ns;
+            const pn_real *g = w->s.pq + ps * (size_t)d, *z = dtau + j * (size_t)dd;
+            pn_real sV = dt * w->vol0[w->s.order[j]];
+            for (a = 0; a < d; ++a)
+                for (c = 0; c < d; ++c) acc[a] -= sV * z[a * d + c] * g[c];
+        }
+        for (a = 0; a < d; ++a) b[k * (size_t)d + (size_t)a] = acc[a];
+        pn__mpm_filter(w, k, b + k * (size_t)d);
+    }
+    if (build) { /* the matrix is the step's own (elastic C, the step's weights and masses): once */
+        if (pn__mpm_mg_build(w, dt, 1, o->mg_levels ? o->mg_levels : PN__MPM_MG_MAX) != PN_OK) return -1;
+        st->mg_builds++;
+    }
+    cc.w = w;
+    op.ctx = &cc, op.apply = pn__mpm_coarse_apply, op.precond = pn__mpm_coarse_precond, op.dot = pn__mpm_coarse_dot;
+    op.curv = NULL;
+    it = pn__pcg(&op, nd, dv, b, w->s.cg_z, w->s.cg_p, w->s.cg_q, o->coarse_cg, o->coarse_tol, 0, &capped);
+    st->cg_iters += it;
+    PN__OMP_FOR
+    for (lj = 0; lj < (long)np; ++lj) { /* dtau = trial - tau + dt C dL(dv) */
+        size_t j = (size_t)lj, p = w->s.order[j];
+        const pn_real *H = w->s.pH + p * (size_t)(dd * dd);
+        pn_real L[9], *z = dtau + j * (size_t)dd;
+        int i, k;
+        pn__mpm_push(w, p, dv, 1, NULL, L);
+        for (i = 0; i < dd; ++i) {
+            pn_real t = 0;
+            for (k = 0; k < dd; ++k) t += H[i * dd + k] * L[k];
+            z[i] += dt * t;
+        }
+    }
+    J0 = pn__mpm_stress_dual(w, v, r, e);
+    memcpy(tau0, w->s.pP, sizeof(pn_real) * np * (size_t)dd);
+    memcpy(w->s.vtry, v, sizeof(pn_real) * nd);
+    memcpy(w->s.cg_p, r, sizeof(pn_real) * nd);
+    for (tries = 0; tries < 4; ++tries, alpha /= 4) { /* backtracking on J */
+        pn__mpm_stress_move(w, cstart, dt, alpha, tau0, dtau, v, r);
+        J1 = pn__mpm_stress_dual(w, v, r, e);
+        if (J1 < J0) break;
+        memcpy(w->s.pP, tau0, sizeof(pn_real) * np * (size_t)dd);
+        memcpy(v, w->s.vtry, sizeof(pn_real) * nd);
+        memcpy(r, w->s.cg_p, sizeof(pn_real) * nd);
+    }
+    st->coarse_corrections++;
+    st->coarse_rejected += tries == 4;
+    return tries < 4 ? alpha : 0;
 }
 
 /* Gauss-Seidel sweeps (by colour; the cells' or the particles') and the contact nodes' until
@@ -5709,11 +5910,16 @@ static void pn__mpm_stress_uncell(pn_mpm_world *w) {
    about res rho / (1 - rho) after a sweep that moved res; stop on that, not on res (a slow,
    smooth mode moves little per sweep); rho the slower of the last two rates (they are noisy) */
 static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_real tol,
-                                       const size_t *cstart, int cells, pn_real mref, pn_real *v, pn_real *r,
-                                       pn_mpm_stats *st) {
+                                       const size_t *cstart, int cells, int coarse, pn_real mref, pn_real *v,
+                                       pn_real *r, pn_mpm_stats *st) {
     int d = w->dim, i, sweep;
     size_t k, nd = w->s.n_act * (size_t)d;
     pn_real *v0 = w->s.vtry, vscale = tol * w->desc.dx_m / dt, res = 0, prev = 0, prev2 = 0;
+    int gap = coarse, next = coarse - 1, built = 0;
+    if (coarse > 0) /* in the corrections' linear systems, contact nodes with friction held whole (slip: the normal) */
+        for (k = 0; k < w->s.n_act; ++k)
+            if (w->s.cn[k] && (w->s.ckind[k] == PN_BOUNDARY_STICKY || w->s.cmu[k] > 0))
+                w->s.chold[k] = (unsigned char)(w->s.chold[k] | PN__MPM_STICK);
     for (sweep = 0; sweep < o->sweeps_max; ++sweep) {
         int c;
         memcpy(v0, v, sizeof(pn_real) * nd);
@@ -5723,7 +5929,7 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
 #pragma omp parallel for schedule(static) if (w->n >= w->desc.parallel_min_particles)
 #endif
             for (q = (long)cstart[c]; q < (long)cstart[c + 1]; ++q)
-                pn__mpm_stress_group(w, w->s.inc[2 * (size_t)q], w->s.inc[2 * (size_t)q + 1], dt, v, cells);
+                pn__mpm_stress_group(w, w->s.sgrp[2 * (size_t)q], w->s.sgrp[2 * (size_t)q + 1], dt, v, cells);
         }
         pn__mpm_stress_contact(w, v, r);
         for (res = 0, k = 0; k < w->s.n_act; ++k) {
@@ -5742,6 +5948,14 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
         }
         prev2 = prev;
         prev = res;
+        if (coarse > 0 && sweep == next) { /* a correction; after one that took less than a quarter step, wait longer */
+            pn_real alpha = pn__mpm_stress_coarse(w, dt, o, cstart, !built, v, r, st);
+            built = 1;
+            if (alpha < 0) coarse = 0; /* no room for the hierarchy: the sweeps alone */
+            gap = alpha >= (pn_real)0.25 ? coarse : 2 * gap;
+            next = sweep + gap;
+            if (alpha > 0) prev = prev2 = 0; /* a new start for the rate */
+        }
     }
     st->newton_residual = PN__MAX(st->newton_residual, res * dt / w->desc.dx_m);
     if (sweep == o->sweeps_max)
@@ -5754,13 +5968,27 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
 
 static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
     int d = w->dim, dd = d * d, ns = w->s.ns, i, cells = o->stress_unknowns != PN_MPM_STRESS_PARTICLES;
-    int cascade = o->stress_unknowns == PN_MPM_STRESS_CELLS_THEN_PARTICLES;
+    int cascade = o->stress_unknowns == PN_MPM_STRESS_CELLS_THEN_PARTICLES, coarse;
     size_t k, j, np, total = 0, cstart[28];
     pn_real *v = w->s.vsol, *r = w->s.grad, mref = 0;
     pn_result rr;
     if (w->s.tok) /* pH becomes scratch here: no Taylor model survives */
         for (k = 0; k < w->n; ++k)
             if (w->s.tok[k]) pn__mpm_touch(w, k), w->s.tok[k] = 0;
+    if (!w->s.sgrp) {
+        int fail = 0;
+        w->s.sgrp = (size_t *)pn__mpm_alloc(&w->desc, w->cap * 5, sizeof(size_t), &fail);
+        if (fail)
+            return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
+                                "for the sweep's groups (%lu indices)", (unsigned long)(w->cap * 5));
+    }
+    if (!cells || cascade) { /* the coarse correction's scratch */
+        int fail = 0;
+        if (!w->s.ptau) w->s.ptau = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(dd + 1), sizeof(pn_real), &fail);
+        if (fail)
+            return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
+                                "for the coarse correction (%lu reals)", (unsigned long)(w->cap * (size_t)(dd + 1)));
+    }
     if (cells && !w->s.pb) {
         int fail = 0;
         w->s.pb = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(ns * d), sizeof(pn_real), &fail);
@@ -5812,11 +6040,15 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     pn__mpm_stress_groups(w, cstart);
     if (cells) pn__mpm_stress_cells(w, cstart, dt, o->cell_relax, v);
     pn__mpm_stress_contact(w, v, r);
-    rr = pn__mpm_stress_sweeps(w, dt, o, cascade ? 10 * o->sweep_tol : o->sweep_tol, cstart, cells, mref, v, r, st);
+    coarse = o->coarse_every > 0 ? o->coarse_every : o->coarse_every == 0 && o->linear_solver != PN_MPM_LINEAR_JACOBI ? 4 : 0;
+    for (i = 0; i < w->n_groups; ++i) /* elastic material only (docs/notebook.md, "a coarse correction for yielding sand") */
+        if (w->groups[i].material.plastic != PN_PLASTIC_NONE) coarse = 0;
+    rr = pn__mpm_stress_sweeps(w, dt, o, cascade ? 10 * o->sweep_tol : o->sweep_tol, cstart, cells, cells ? 0 : coarse,
+                               mref, v, r, st);
     if (rr != PN_OK) return rr;
     if (cascade) { /* the particles from the cells' stresses: the same forces, so v holds */
         pn__mpm_stress_uncell(w);
-        if ((rr = pn__mpm_stress_sweeps(w, dt, o, o->sweep_tol, cstart, 0, mref, v, r, st)) != PN_OK) return rr;
+        if ((rr = pn__mpm_stress_sweeps(w, dt, o, o->sweep_tol, cstart, 0, coarse, mref, v, r, st)) != PN_OK) return rr;
     }
     pn__mpm_mark(w, st, PN_MPM_STAGE_SWEEPS);
     w->s.stress_on = cells && !cascade ? 2 : 1;
@@ -6011,6 +6243,7 @@ static const char *pn__mpm_negative_count(const pn_mpm_implicit_desc *o) {
     if (o->contact_rounds < 0) return "contact_rounds";
     if (o->newton_budget < 0) return "newton_budget";
     if (o->sweeps_max < 0) return "sweeps_max";
+    if (o->coarse_cg < 0) return "coarse_cg";
     return NULL;
 }
 
@@ -6087,6 +6320,8 @@ static void pn__mpm_implicit_defaults(pn_mpm_implicit_desc *o, int cg_max, pn_re
     if (o->mg_levels == 0) o->mg_levels = PN__MPM_MG_MAX;
     if (o->max_halvings == 0) o->max_halvings = 3;
     if (o->max_halvings > 10) o->max_halvings = 10;
+    if (o->coarse_cg <= 0) o->coarse_cg = 50;
+    if (o->coarse_tol == 0) o->coarse_tol = (pn_real)1e-3; /* negative or NaN: refused */
 }
 
 /* the first drive (*load = 0) or load (*load = 1) acting now, or -1: implicit steps refuse them */
@@ -6133,10 +6368,10 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                             "pn_mpm_linear_solver, mg_levels %d < 0 or mg_rebuild %d not 0 or 1", (int)o.linear_solver,
                             o.mg_levels, o.mg_rebuild);
     if (o.formulation < PN_MPM_FORMULATION_ENERGY || o.formulation > PN_MPM_FORMULATION_STRESS ||
-        !pn__finite(o.sweep_tol) || o.sweep_tol < 0)
+        !pn__finite(o.sweep_tol) || o.sweep_tol < 0 || !pn__finite(o.coarse_tol) || o.coarse_tol < 0)
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: formulation %d is not a "
-                            "pn_mpm_formulation, or sweep_tol %g is not finite and >= 0", (int)o.formulation,
-                            (double)o.sweep_tol);
+                            "pn_mpm_formulation, or sweep_tol %g or coarse_tol %g is not finite and >= 0",
+                            (int)o.formulation, (double)o.sweep_tol, (double)o.coarse_tol);
     if (!pn__finite(o.energy_rise_tol) || !pn__finite(o.pnet_reuse_tol))
         return PN__FAIL(w, PN_ERROR_INVALID_ARGUMENT, "pn_mpm_implicit_desc: energy_rise_tol %g or pnet_reuse_tol %g "
                             "is not finite", (double)o.energy_rise_tol, (double)o.pnet_reuse_tol);

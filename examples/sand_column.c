@@ -268,7 +268,7 @@ int main(int argc, char **argv) {
            "\"fixed_point_iters\": %d, \"contact_rounds\": %d, \"E\": %g, \"aspect\": %g, \"boundary\": \"%s\", \"friction\": %g, "
            "\"res\": %d, \"particles\": %lu, \"frames\": %d, \"simulated_s\": %.4f, \"wall_s\": %.3f, \"steps\": %ld, "
            "\"newton_per_step\": %.2f, \"cg_per_step\": %.1f, \"fixed_point_per_step\": %.2f, \"sweeps_per_step\": %.1f, "
-           "\"line_search_failures\": %ld, \"runout_m\": %.4f, "
+           "\"coarse_per_step\": %.2f, \"coarse_rejected\": %ld, \"line_search_failures\": %ld, \"runout_m\": %.4f, "
            "\"final_height_m\": %.4f, \"max_fixed_point_residual\": %.3e, \"left_domain\": %lu",
            c.dim, c.implicit ? "implicit" : "explicit", !c.implicit ? "explicit" : stress ? "stress" : "energy",
            !c.implicit || stress ? "return_mapping" : energies[energy],
@@ -277,8 +277,8 @@ int main(int argc, char **argv) {
            sc.E_pa, aspect, pn_ex_walls[c.boundary], c.friction, sc.res, (unsigned long)w->n, c.frames,
            (double)w->time_s, wall_s, tally.steps, (double)tally.newton / (double)tally.steps,
            (double)tally.cg / (double)tally.steps, (double)tally.fixed_point / (double)tally.steps,
-           (double)tally.sweeps / (double)tally.steps,
-           tally.line_search_failures, runout, height, tally.max_fixed_point_residual, (unsigned long)w->left_total);
+           (double)tally.sweeps / (double)tally.steps, (double)tally.coarse / (double)tally.steps,
+           tally.coarse_rejected, tally.line_search_failures, runout, height, tally.max_fixed_point_residual, (unsigned long)w->left_total);
     if (reference)
         printf(", \"reference_integrator\": \"explicit at pn_mpm_stable_dt\", \"reference_steps\": %ld, "
                "\"reference_wall_s\": %.3f, \"reference_runout_m\": %.4f, \"reference_final_height_m\": %.4f, "

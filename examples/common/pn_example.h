@@ -405,6 +405,7 @@ typedef struct pn_ex_tally {
     double max_dt_over_cfl;          /* largest step over pn_mpm_stable_dt at its start      */
     long cg_capped;                  /* Newton steps whose linear solve stopped at cg_max    */
     long sweeps;                     /* stress formulation: Gauss-Seidel sweeps              */
+    long coarse, coarse_rejected;    /* stress formulation: coarse corrections, those undone  */
     double stage_s[PN_MPM_STAGES];   /* implicit: seconds per pn_mpm_stage (the scenes' clock) */
     /* pn_mpm_implicit_desc.measure_force_error: per-step values summed (mean = sum / steps) */
     double force_error, force_error_regularizer, apex_fraction;
@@ -417,6 +418,8 @@ PN_EX_UNUSED static void pn_ex_tally_step(pn_ex_tally *t, const pn_mpm_stats *st
     if (implicit && (double)st->dt_over_cfl > t->max_dt_over_cfl) t->max_dt_over_cfl = (double)st->dt_over_cfl;
     t->cg_capped += st->cg_capped;
     t->sweeps += st->sweeps;
+    t->coarse += st->coarse_corrections;
+    t->coarse_rejected += st->coarse_rejected;
     if (implicit)
         for (i = 0; i < PN_MPM_STAGES; ++i) t->stage_s[i] += st->stage_s[i];
     t->steps++;
@@ -594,6 +597,9 @@ PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const cha
         ok = k >= 0;
         c->solver.formulation = (pn_mpm_formulation)(k < 0 ? 0 : k);
     } else if (!strcmp(a, "--sweeps")) ok = pn_ex_integer(prog, a, v, &c->solver.sweeps_max);
+    else if (!strcmp(a, "--coarse-every")) ok = pn_ex_integer(prog, a, v, &c->solver.coarse_every);
+    else if (!strcmp(a, "--coarse-cg")) ok = pn_ex_integer(prog, a, v, &c->solver.coarse_cg);
+    else if (!strcmp(a, "--coarse-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.coarse_tol = (pn_real)x;
     else if (!strcmp(a, "--sweep-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.sweep_tol = (pn_real)x;
     else if (!strcmp(a, "--cell-relax")) ok = pn_ex_number(prog, a, v, &x), c->solver.cell_relax = (pn_real)x;
     else if (!strcmp(a, "--stress-unknowns")) {
@@ -668,6 +674,10 @@ PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f, const pn_ex_cli *d) {
                "  --formulation energy|stress  --sweeps N  --sweep-tol X\n"
                "                             what implicit steps solve for; the stress formulation's Gauss-Seidel\n"
                "                             sweeps and tolerance (pn_mpm_implicit_desc) [%s, 1000, 1e-4]\n"
+               "  --coarse-every N  --coarse-cg N  --coarse-tol X\n"
+               "                             the stress formulation's coarse correction on elastic material: after\n"
+               "                             every N sweeps, CG to X in at most N iterations (pn_mpm_implicit_desc)\n"
+               "                             [4, 50, 1e-3; --coarse-every -1: never]\n"
                "  --stress-unknowns particles|cells|cells-then-particles  --cell-relax X\n"
                "                             where the stress formulation's stresses live, and the cells'\n"
                "                             over-relaxation (pn_mpm_implicit_desc) [particles, 1.8]\n"
