@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.11 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.12 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -372,7 +372,8 @@ typedef struct pn_mpm_implicit_desc {
     pn_mpm_stress_unknowns stress_unknowns; /* STRESS: where the stresses live
                                     [PN_MPM_STRESS_PARTICLES]                                */
     pn_real cell_relax;          /* STRESS, cells: over-relaxation of the cells' Gauss-Seidel
-                                    updates, in [1, 2) [1.8]                                  */
+                                    updates, in [1, 2) [0: 1 with Anderson acceleration, which
+                                    over-relaxed sweeps throw off; 1.8 without]              */
     pn_real energy_rise_tol;     /* a step whose mechanical energy (kinetic, elastic, and
                                     gravitational above the domain's floor) rises by more than
                                     this share of it fails (PN_ERROR_STEP_TOO_LARGE, then the
@@ -394,6 +395,10 @@ typedef struct pn_mpm_implicit_desc {
                                     never]                                                   */
     int coarse_cg;               /* STRESS: CG iterations per coarse correction, at most [50] */
     pn_real coarse_tol;          /* STRESS: its CG's relative tolerance [1e-3]              */
+    int anderson;                /* STRESS: Anderson acceleration of the sweeps (each sweep's
+                                    result combined with the one before, so that the change
+                                    left is least; docs/method.md, "Anderson acceleration")
+                                    [0: on; < 0: off]                                        */
 } pn_mpm_implicit_desc;
 
 /* The stages of an implicit step (pn_mpm_stats.stage_s, with pn_mpm_desc.clock_s). */
@@ -441,6 +446,7 @@ typedef struct pn_mpm_stats {
        an explicit step taken alone, which does not compute the bound)                      */
     pn_real dt_over_cfl;
     int sweeps;                  /* FORMULATION_STRESS: Gauss-Seidel sweeps                  */
+    int anderson_steps;          /* STRESS: sweeps whose result Anderson acceleration moved   */
     int coarse_corrections, coarse_rejected; /* STRESS: coarse corrections taken, and those
                                     undone for leaving the velocities worse              */
     pn_real energy_rise;         /* implicit: the step's change of mechanical energy over its
@@ -526,6 +532,9 @@ typedef struct pn__mpm_solver {
     size_t *inc, *inc_start, *prank;
     size_t *sgrp;                /* >>stress: the colour groups, then each particle's cell (5 cap) */
     pn_real *ptau;               /* >>stress, the coarse correction: stresses before it, energies (cap (dim^2 + 1)) */
+    pn_real *paa;                /* >>stress, Anderson acceleration: per unknown the last sweep's
+                                    result and change, four sums (cap (2 dim^2 + 4))             */
+    size_t *paai;                /* >>stress, Anderson acceleration: the unknowns' storage (cap) */
     pn_real *bx, *bv, *bC, *bF, *bh; /* the state before a step that falls back             */
     unsigned char *bactive;
     /* contact memory of the last implicit step: the nodes a separating contact held, ascending,
@@ -1277,7 +1286,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(s.order) X(s.start) X(s.act) X(s.dof) X(s.mark) X(s.grid_m) X(s.grid_v) X(s.grid_v0) X(s.pmat) X(s.pscal) X(s.part)        \
     X(s.pstat) X(s.sx) X(s.sv) X(s.sC) X(s.sF) X(s.sh) X(s.sactive) X(s.cn) X(s.ckind) X(s.chold) X(s.cdir) X(s.cvel)   \
     X(s.cmu) X(s.clam) X(s.ctan) X(s.vstar) X(s.vsol) X(s.vtry) X(s.grad) X(s.dir) X(s.cg_r) X(s.cg_z) X(s.cg_p) X(s.cg_q)      \
-    X(s.diag) X(s.pP) X(s.pH) X(s.pG) X(s.phG) X(s.pF0) X(s.pty) X(s.ppt) X(s.tF) X(s.tpsi) X(s.tP) X(s.tH) X(s.tok) X(s.jF) X(s.jpsi) X(s.jP) X(s.jH) X(s.jpH) X(s.jppt) X(s.jst) X(s.pq) X(s.pb) X(s.sgrp) X(s.ptau) X(s.pdof) X(s.inc) X(s.inc_start) X(s.prank) X(s.bx) X(s.bv) X(s.bC) X(s.bF) X(s.bh) X(s.bactive)  \
+    X(s.diag) X(s.pP) X(s.pH) X(s.pG) X(s.phG) X(s.pF0) X(s.pty) X(s.ppt) X(s.tF) X(s.tpsi) X(s.tP) X(s.tH) X(s.tok) X(s.jF) X(s.jpsi) X(s.jP) X(s.jH) X(s.jpH) X(s.jppt) X(s.jst) X(s.pq) X(s.pb) X(s.sgrp) X(s.ptau) X(s.paa) X(s.paai) X(s.pdof) X(s.inc) X(s.inc_start) X(s.prank) X(s.bx) X(s.bv) X(s.bC) X(s.bF) X(s.bh) X(s.bactive)  \
     X(s.lnode) X(s.blnode) X(s.lval) X(s.blval) X(s.bmark) X(s.bact) X(s.rowcount) X(s.gdense) X(s.gdense0) X(s.ppay) X(s.spay) X(s.prow) X(s.srow)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
@@ -5627,8 +5636,10 @@ static void pn__mpm_stress_groups(pn_mpm_world *w, size_t *cstart) {
 }
 
 /* one Gauss-Seidel pass over the unknowns of sorted particles j0 .. j1 - 1 (one stencil base
-   node): each particle's, or (cells) each cell's at its first particle (pn__mpm_stress_cells) */
-static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real dt, pn_real *v, int cells) {
+   node): each particle's, or (cells) each cell's at its first particle (pn__mpm_stress_cells);
+   f (optional): each unknown's change, at its storage index (pn__mpm_stress_anderson) */
+static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real dt, pn_real *v, int cells,
+                                 pn_real *f) {
     int d = w->dim, dd = d * d, ns = w->s.ns, i;
     size_t j;
     for (j = j0; j < j1; ++j) {
@@ -5653,6 +5664,7 @@ static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real 
             dtau[i] = tau[i] - cur[i];
             cur[i] = tau[i];
         }
+        if (f) memcpy(f + j * (size_t)dd, dtau, sizeof(pn_real) * (size_t)dd);
         pn__mpm_stress_apply(w, g, dof, dtau, sV, v);
     }
 }
@@ -5905,17 +5917,105 @@ static pn_real pn__mpm_stress_coarse(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     return tries < 4 ? alpha : 0;
 }
 
+/* Anderson acceleration of the sweeps (pn_mpm_implicit_desc.anderson; Walker and Ni 2011,
+   depth one). A sweep maps the stresses x to g = S(x), and the velocities and the contact
+   impulses r follow the stresses affinely (v = v* + M^-1 (r - dt sum V B^T tau)), so the
+   step's answer is S's fixed point. Projected Gauss-Seidel converges on it linearly, and
+   slowly where information must cross the grid. With f_k = g_k - x_k, the sweep's change,
+   and the previous sweep's g and f, the next iterate is
+       x = g_k - gamma (g_k - g_{k-1}),   gamma = <df, f_k> / <df, df>,   df = f_k - f_{k-1}
+   (the combination of the two results whose changes, extrapolated linearly, cancel most),
+   and v and r take the same combination of their values after those sweeps: momentum stays
+   exact, and no particle is visited. A stress taken outside the yield surface is brought
+   back by its next local solve, and the contact nodes' impulses by the next contact step;
+   the sweeps stop only on a sweep's own change. When a sweep changed more than the one
+   before (|f_k| > |f_{k-1}|, ff holding |f_{k-1}|^2), its result stands and the history
+   starts again from it. Storage: paa holds per unknown g_{k-1}, f_{k-1} (dim^2 each, unknown
+   u) and four sums; the unknowns' storage indices are paai (cells) or the sorted indices; f_k
+   comes from the sweep in pG; v_{k-1} and r_{k-1} in dir and cg_z. have: the previous
+   sweep's results are recorded. This part: the sums, gamma, and q = |dx| / |df|, the secant
+   of (I - S)^-1 (the stopping rule's estimate of the error left over the change); returns 1
+   when gamma is to be taken, 0 when the sweep's result stands (only recorded). */
+static int pn__mpm_stress_anderson(pn_mpm_world *w, int cells, size_t nu, int have, pn_real *gamma, pn_real *q,
+                                   pn_real *ff) {
+    int dd = w->dim * w->dim;
+    pn_real *gp = w->s.paa, *fp = w->s.paa + w->cap * (size_t)dd, *e1 = fp + w->cap * (size_t)dd, *e2 = e1 + w->cap;
+    pn_real *e3 = e2 + w->cap, *e4 = e3 + w->cap, a, b, c, fk;
+    long lu;
+    PN__OMP_FOR
+    for (lu = 0; lu < (long)nu; ++lu) { /* per unknown: df . f_k, |df|^2, |dx|^2; then f_{k-1} = f_k */
+        size_t u = (size_t)lu, j = cells ? w->s.paai[u] : u;
+        const pn_real *f = w->s.pG + j * (size_t)dd;
+        const pn_real *x = cells ? w->s.pH + j * (size_t)(dd * dd) + dd : w->s.pP + j * (size_t)dd;
+        pn_real *fu = fp + u * (size_t)dd, *gu = gp + u * (size_t)dd, s1 = 0, s2 = 0, s3 = 0, s4 = 0;
+        int i;
+        for (i = 0; i < dd; ++i) {
+            pn_real df = f[i] - fu[i], dx = x[i] - gu[i] - df;
+            s1 += df * f[i], s2 += df * df, s3 += dx * dx, s4 += f[i] * f[i];
+            fu[i] = f[i];
+        }
+        e1[u] = s1, e2[u] = s2, e3[u] = s3, e4[u] = s4;
+    }
+    *q = *gamma = 0;
+    fk = pn__mpm_sum(w, nu, e4, NULL);
+    if (!have || !(fk <= *ff)) { /* the first record, or the change grew: the sweep's own result, a new start */
+        *ff = fk;
+        return 0;
+    }
+    *ff = fk;
+    a = pn__mpm_sum(w, nu, e1, NULL);
+    b = pn__mpm_sum(w, nu, e2, NULL);
+    c = pn__mpm_sum(w, nu, e3, NULL);
+    if (!(b > 0)) return 0;
+    *gamma = a / b, *q = PN__SQRT(c / b);
+    if (!pn__finite(*gamma) || !pn__finite(*q)) *gamma = *q = 0;
+    return *gamma != 0;
+}
+
+/* the accelerated iterate: x = g_k - gamma (g_k - g_{k-1}), and v and r alike; then g_{k-1} = g_k */
+static void pn__mpm_stress_anderson_move(pn_mpm_world *w, int cells, size_t nu, pn_real gamma, pn_real *v, pn_real *r) {
+    int dd = w->dim * w->dim;
+    size_t nd = w->s.n_act * (size_t)w->dim;
+    pn_real *gp = w->s.paa, *vp = w->s.dir, *rp = w->s.cg_z;
+    long lu, lk;
+    PN__OMP_FOR
+    for (lu = 0; lu < (long)nu; ++lu) {
+        size_t u = (size_t)lu, j = cells ? w->s.paai[u] : u;
+        pn_real *x = cells ? w->s.pH + j * (size_t)(dd * dd) + dd : w->s.pP + j * (size_t)dd, *gu = gp + u * (size_t)dd;
+        int i;
+        for (i = 0; i < dd; ++i) {
+            pn_real g = x[i];
+            x[i] = g - gamma * (g - gu[i]);
+            gu[i] = g;
+        }
+    }
+    PN__OMP_FOR
+    for (lk = 0; lk < (long)nd; ++lk) {
+        size_t k = (size_t)lk;
+        pn_real vk = v[k], rk = r[k];
+        v[k] = vk - gamma * (vk - vp[k]), vp[k] = vk;
+        r[k] = rk - gamma * (rk - rp[k]), rp[k] = rk;
+    }
+}
+
 /* Gauss-Seidel sweeps (by colour; the cells' or the particles') and the contact nodes' until
    the velocity error left, estimated, is below sweep_tol dx / dt: a linear rate rho leaves
    about res rho / (1 - rho) after a sweep that moved res; stop on that, not on res (a slow,
-   smooth mode moves little per sweep); rho the slower of the last two rates (they are noisy) */
+   smooth mode moves little per sweep); rho the slower of the last two rates (they are noisy).
+   With Anderson acceleration (pn__mpm_stress_anderson) the rate is the acceleration's, not
+   the sweeps': rho / (1 - rho) is estimated by q - 1, q the secant |dx| / |df|. */
 static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_real tol,
                                        const size_t *cstart, int cells, int coarse, pn_real mref, pn_real *v,
                                        pn_real *r, pn_mpm_stats *st) {
     int d = w->dim, i, sweep;
     size_t k, nd = w->s.n_act * (size_t)d;
     pn_real *v0 = w->s.vtry, vscale = tol * w->desc.dx_m / dt, res = 0, prev = 0, prev2 = 0;
-    int gap = coarse, next = coarse - 1, built = 0;
+    int gap = coarse, next = coarse - 1, built = 0, aa = o->anderson >= 0, have = 0, acc = 0;
+    pn_real gamma = 0, qa = 0, ff = 0;
+    size_t nu = w->s.start[w->s.nodes], j;
+    if (aa && cells) /* the cells' storage indices */
+        for (nu = 0, j = 0; j < w->s.start[w->s.nodes]; ++j)
+            if (w->s.phG[j] != 0) w->s.paai[nu++] = j;
     if (coarse > 0) /* in the corrections' linear systems, contact nodes with friction held whole (slip: the normal) */
         for (k = 0; k < w->s.n_act; ++k)
             if (w->s.cn[k] && (w->s.ckind[k] == PN_BOUNDARY_STICKY || w->s.cmu[k] > 0))
@@ -5929,7 +6029,8 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
 #pragma omp parallel for schedule(static) if (w->n >= w->desc.parallel_min_particles)
 #endif
             for (q = (long)cstart[c]; q < (long)cstart[c + 1]; ++q)
-                pn__mpm_stress_group(w, w->s.sgrp[2 * (size_t)q], w->s.sgrp[2 * (size_t)q + 1], dt, v, cells);
+                pn__mpm_stress_group(w, w->s.sgrp[2 * (size_t)q], w->s.sgrp[2 * (size_t)q + 1], dt, v, cells,
+                                     aa ? w->s.pG : NULL);
         }
         pn__mpm_stress_contact(w, v, r);
         for (res = 0, k = 0; k < w->s.n_act; ++k) {
@@ -5942,9 +6043,12 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
             return PN__FAIL(w, PN_ERROR_OVERFLOW, "implicit step of %g s (stress formulation): the velocities "
                                 "overflowed", (double)dt);
         if (res == 0) break; /* nothing moved: converged (material in free flight) */
+        if (aa) acc = pn__mpm_stress_anderson(w, cells, nu, have, &gamma, &qa, &ff);
         if (sweep > 1 && res <= vscale) {
             pn_real rho = prev > 0 && prev2 > 0 ? PN__MAX(res / prev, prev / prev2) : 1;
-            if (rho < 1 && res * rho <= vscale * (1 - rho)) break;
+            if (acc && qa > 0) { /* accelerated, the rate says little: the secant of the change */
+                if (res * (qa - 1) <= vscale) break;
+            } else if (rho < 1 && res * rho <= vscale * (1 - rho)) break;
         }
         prev2 = prev;
         prev = res;
@@ -5955,6 +6059,11 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
             gap = alpha >= (pn_real)0.25 ? coarse : 2 * gap;
             next = sweep + gap;
             if (alpha > 0) prev = prev2 = 0; /* a new start for the rate */
+            have = 0; /* and for the acceleration, whose records the correction used as scratch */
+        } else if (aa) {
+            pn__mpm_stress_anderson_move(w, cells, nu, acc ? gamma : 0, v, r); /* gamma 0: records g, v, r */
+            st->anderson_steps += acc;
+            have = 1;
         }
     }
     st->newton_residual = PN__MAX(st->newton_residual, res * dt / w->desc.dx_m);
@@ -5988,6 +6097,15 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         if (fail)
             return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
                                 "for the coarse correction (%lu reals)", (unsigned long)(w->cap * (size_t)(dd + 1)));
+    }
+    if (o->anderson >= 0 && (!w->s.paa || !w->s.paai)) {
+        int fail = 0;
+        if (!w->s.paai) w->s.paai = (size_t *)pn__mpm_alloc(&w->desc, w->cap, sizeof(size_t), &fail);
+        if (!fail && !w->s.paa) w->s.paa = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * (size_t)(2 * dd + 4), sizeof(pn_real), &fail);
+        if (fail)
+            return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
+                                "for the sweeps' Anderson acceleration (%lu values)",
+                                (unsigned long)(w->cap * (size_t)(2 * dd + 5)));
     }
     if (cells && !w->s.pb) {
         int fail = 0;
@@ -6382,7 +6500,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
                             (double)o.cell_relax, (int)o.stress_unknowns);
     if (o.sweeps_max <= 0) o.sweeps_max = 1000;
     if (!(o.sweep_tol > 0)) o.sweep_tol = (pn_real)1e-4;
-    if (o.cell_relax == 0) o.cell_relax = (pn_real)1.8;
+    if (o.cell_relax == 0) o.cell_relax = o.anderson >= 0 ? 1 : (pn_real)1.8;
     if (o.formulation == PN_MPM_FORMULATION_STRESS) {
         int g;
         for (g = 0; g < w->n_groups; ++g)

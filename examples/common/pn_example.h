@@ -601,6 +601,12 @@ PN_EX_UNUSED static int pn_ex_cli_flag(const char *prog, pn_ex_cli *c, const cha
     else if (!strcmp(a, "--coarse-cg")) ok = pn_ex_integer(prog, a, v, &c->solver.coarse_cg);
     else if (!strcmp(a, "--coarse-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.coarse_tol = (pn_real)x;
     else if (!strcmp(a, "--sweep-tol")) ok = pn_ex_number(prog, a, v, &x), c->solver.sweep_tol = (pn_real)x;
+    else if (!strcmp(a, "--anderson")) {
+        static const char *const onoff[] = {"on", "off"};
+        int k = pn_ex_choice(prog, a, v, onoff, 2);
+        ok = k >= 0;
+        c->solver.anderson = k == 1 ? -1 : 0;
+    }
     else if (!strcmp(a, "--cell-relax")) ok = pn_ex_number(prog, a, v, &x), c->solver.cell_relax = (pn_real)x;
     else if (!strcmp(a, "--stress-unknowns")) {
         static const char *const where[] = {"particles", "cells", "cells-then-particles"};
@@ -671,16 +677,18 @@ PN_EX_UNUSED static void pn_ex_cli_usage(FILE *f, const pn_ex_cli *d) {
                "                             pn_mpm_implicit_desc [1, 1, and the library's defaults]\n"
                "  --linear jacobi|multigrid  --mg-levels N  --mg-rebuild 0|1\n"
                "                             the Newton systems' solver (pn_mpm_implicit_desc) [multigrid, 8, 0]\n"
-               "  --formulation energy|stress  --sweeps N  --sweep-tol X\n"
+               "  --formulation energy|stress  --sweeps N  --sweep-tol X  --anderson on|off\n"
                "                             what implicit steps solve for; the stress formulation's Gauss-Seidel\n"
-               "                             sweeps and tolerance (pn_mpm_implicit_desc) [%s, 1000, 1e-4]\n"
+               "                             sweeps, tolerance and Anderson acceleration (pn_mpm_implicit_desc)\n"
+               "                             [%s, 1000, 1e-4, on]\n"
                "  --coarse-every N  --coarse-cg N  --coarse-tol X\n"
                "                             the stress formulation's coarse correction on elastic material: after\n"
                "                             every N sweeps, CG to X in at most N iterations (pn_mpm_implicit_desc)\n"
                "                             [4, 50, 1e-3; --coarse-every -1: never]\n"
                "  --stress-unknowns particles|cells|cells-then-particles  --cell-relax X\n"
                "                             where the stress formulation's stresses live, and the cells'\n"
-               "                             over-relaxation (pn_mpm_implicit_desc) [particles, 1.8]\n"
+               "                             over-relaxation (pn_mpm_implicit_desc) [particles; 1, or 1.8 without\n"
+               "                             the acceleration]\n"
                "  --pnet-double              PlasticityNet one particle at a time in double (the reference;\n"
                "                             default: its network in float vector lanes)\n"
                "  --force-error              measure the energy's force error (pn_mpm_stats)\n"
