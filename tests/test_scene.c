@@ -442,7 +442,7 @@ PN_TEST(scene_stable_dt) {
     for (s = 0; s < 6; ++s) {
         double ke_ref, ke, k, largest = 0, T = kinds[s] == 3 ? 0.03 : 0.2;
         int stable_at_1, d = dims[s];
-        if (s == 5 && !pn_test_full()) continue; /* 3D rubber: PN_TEST_FULL=1 (make test-all, CI) */
+        if (d == 3 && !pn_test_full()) continue; /* 3D (16 of its 20 CPU s): PN_TEST_FULL=1 (make test-all, CI) */
         PN_CHECK(t_sc_run_at(kinds[s], d, 0.5, T, HUGE_VAL, &ke_ref));
         stable_at_1 = t_sc_run_at(kinds[s], d, 1.0, T, 1.5 * ke_ref + 1e-9, &ke);
         PN_CHECK(stable_at_1);
