@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-all test-sanitize bench-core bench-mpm bench-fem bench-coupling bench-explicit bench-deposit bench-coarse bench-rom rom-data clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-all test-sanitize bench-core bench-mpm bench-scale bench-fem bench-coupling bench-explicit bench-deposit bench-coarse bench-rom rom-data clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -100,6 +100,15 @@ bench-core: bench/bench_core.c bench/bench_util.h plastinet.h
 bench-mpm: build/bench_mpm
 	build/bench_mpm --out build $(BENCH_MPM_FLAGS)
 	@cat build/bench_mpm.md
+
+# The implicit sand column at user sizes (bench_mpm --scale; bench/bench_mpm.c's top): 3D at
+# 25k, 100k, 400k particles and 2D at 20k, 100k, E 1e7 and 1e9 Pa, 1.5 s each: fair explicit,
+# reference, the stress formulation at the advection limit and 1/60 s. Hours at 400k: each run
+# goes to build/bench_scale.csv as it ends and a rerun skips those. build/bench_scale.{csv,md}.
+# BENCH_SCALE_FLAGS="--scale-dim 2 --scale-res2 16 --duration 0.1 --sweep-E 1e7": a smoke test.
+bench-scale: build/bench_mpm
+	build/bench_mpm --scale --out build $(BENCH_SCALE_FLAGS)
+	@cat build/bench_scale.md
 
 # FEM: the metal frame, accuracy at a softened stiffness and speed at 200 GPa (bench/bench_fem.c;
 # 2D then 3D; BENCH_FEM_FLAGS=--quick for a smoke test).

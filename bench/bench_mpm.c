@@ -8,7 +8,9 @@
                     [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]
                     [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..]
                     [--sweep-runs I,I,..] [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]
-                    [--energy-rise-tol X] [--materials]
+                    [--energy-rise-tol X] [--anderson on|off] [--materials]
+          bench_mpm --scale [--scale-dim 2|3] [--scale-res2 N,N,..] [--scale-res3 N,N,..] [--sweep-E E,E,..]
+                    [--duration S] [--max-run-seconds S] [--out DIR] [--scale-count]   (or: make bench-scale)
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated (the snow press for at most 0.2 s, while its plate goes 0.08 domain_m deep), at
    most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
@@ -34,6 +36,34 @@
    model pn_model_sand_any_2d, with the lagged energy, and at 30 deg / 0.3 with the
    single-material sand_2d; mass IoU and the runout (the deposit's half-width at the end,
    against the reference's). DIR/bench_mpm_materials.md.
+
+   --scale: instead, the implicit sand column at user sizes, carried to its deposit (1.5 s
+   simulated unless --duration; frames of 1/20 s, SCALE_FPS, so that 1/60 s steps divide them):
+   the 3D column at res 49, 78, 122 (24863, 101306, 393588 particles; --scale-res3) and the 2D
+   one at res 417, 932 (20000, 99681; --scale-res2), both unless --scale-dim, at E 1e7 and
+   1e9 Pa (--sweep-E). Per (dim, res, E), with the sweep's machinery: the fair explicit
+   baseline (bench_fair), the explicit reference at half its step (the sweep's rule), and the
+   stress formulation (the group's Drucker-Prager) per particle at the advection limit and at
+   1/60 s, and per cell (stress_unknowns cells) at 1/60 s. The advection limit: the library has
+   no helper that returns it (pn_mpm_advance picks such steps inside), so
+   dt = dx / (2 sqrt(2 g H)), H the column height (the free fall from its top at half a cell
+   per step), rounded down to whole steps per frame. Per run: particles, dt, dt / dt_CFL
+   (dt_CFL: the fair explicit step), sweeps, coarse corrections, Newton and CG iterations per
+   step, the share of steps retried as substeps (material moving over a cell), the share of
+   each pn_mpm_stats.stage_s stage, mean / min min/max mass IoU against the reference, runout
+   and final height (the highest particle above the floor) over the reference's, wall and
+   processor (clock()) seconds per simulated second and the processor time over the fair
+   run's. Runs at 400k particles take hours, so the mode resumes: each run is appended to
+   DIR/bench_scale.csv as it ends, and a start skips the runs already there (key: dim, res, E,
+   run, dt; the fair run, whose step is searched, by dim, res, E; one DIR per --duration). The
+   fair run is written once the reference exists to score it, and the reference's mass fields
+   are kept in DIR/bench_scale_ref_<dim>d_res<res>_E<E>.bin (about 450 MB at res 122; in
+   memory the reference's and the fair run's fields, twice that), so that a resumed start does
+   not repeat it. --max-run-seconds (none by default here) stops an implicit run, which is then a
+   "timeout" row (and is skipped later: delete the row to run it again). --scale-count:
+   print the particle count of each size and stop. --filter and the solver's flags
+   (--sweep-tol, --cell-relax, --anderson on|off, --energy-rise-tol) apply as elsewhere. DIR/bench_scale.md: the
+   table of every row of the CSV.
 
    For each scene and dimension, in one run:
    1. the fair explicit baseline: the largest stable explicit step, searched from the CFL
@@ -101,6 +131,8 @@ typedef struct bench_run {
     double biou_mean;               /* binary occupancy IoU                        */
     int scored;                     /* compared with a reference                   */
     double runout;                  /* at the end: the largest |x - domain centre| */
+    double height;                  /* at the end: the highest particle above the floor */
+    double frame_s;                 /* the frames' length [0: 1 / BENCH_FPS]           */
 } bench_run;
 
 typedef struct bench_cfg {
@@ -123,6 +155,7 @@ typedef struct bench_cfg {
     int n_Es, sweep_res, sweep_dim;
     unsigned sweep_mask;  /* bit c: run sweep_cfgs[c]                              */
     pn_ex_scene_kind sweep_kind; /* the sweep's scene: the sand column or the snow press */
+    int scale_res[4][8], scale_n_res[4]; /* --scale: the sizes, by dimension             */
     const char *out;
 } bench_cfg;
 
@@ -210,7 +243,7 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     pn_mpm_world *w;
     pn_mpm_implicit_desc id;
     char why[256] = "";
-    double frame_dt = 1.0 / BENCH_FPS, kin0, pot0, kin, pot, vmax, *field;
+    double frame_dt = r->frame_s > 0 ? r->frame_s : 1.0 / BENCH_FPS, kin0, pot0, kin, pot, vmax, *field;
     long per_frame = (long)floor(frame_dt / r->dt + 0.5);
     size_t nodes;
     int f;
@@ -260,11 +293,14 @@ static void bench_run_scene(const pn_ex_scene *s0, bench_run *r, int frames, dou
     }
     r->fail_t = r->sim;
     if (ref) bench_score(r, r->frames_done, NULL, NULL, nodes);
-    { /* the deposit's half-width */
+    { /* the deposit's half-width and height */
         size_t p;
-        r->runout = 0;
+        r->runout = r->height = 0;
         for (p = 0; p < w->n; ++p)
-            if (w->active[p]) r->runout = fmax(r->runout, fabs((double)w->x[p * (size_t)w->dim] - 0.5 * s.domain_m));
+            if (w->active[p]) {
+                r->runout = fmax(r->runout, fabs((double)w->x[p * (size_t)w->dim] - 0.5 * s.domain_m));
+                r->height = fmax(r->height, (double)w->x[p * (size_t)w->dim + 1] - pn_ex_scene_floor(&s));
+            }
     }
     free(field);
     pn_mpm_destroy(w);
@@ -287,16 +323,18 @@ static void bench_progress(const char *scene, int dim, const bench_run *r) {
             r->tally.steps ? (double)r->tally.sweeps / r->tally.steps : 0.0, status_name(r));
 }
 
-/* The fair explicit baseline: the largest stable step, in halvings from the CFL estimate.
-   Its fields (if not NULL) are kept for the IoU. Returns 0 if no step was stable. */
-static int bench_fair(const pn_ex_scene *s, int frames, bench_run *r, double *fields) {
-    double frame_dt = 1.0 / BENCH_FPS, c = sqrt(s->E_pa / s->density_kg_m3);
+/* The fair explicit baseline: the largest stable step, in halvings from the CFL estimate, in
+   frames of frame_dt s. Its fields (if not NULL) are kept for the IoU. Returns 0 if no step
+   was stable. */
+static int bench_fair(const pn_ex_scene *s, int frames, double frame_dt, bench_run *r, double *fields) {
+    double c = sqrt(s->E_pa / s->density_kg_m3);
     double dt = 0.5 * pn_ex_scene_dx(s) / c * 4;
     long n = (long)ceil(frame_dt / dt - 1e-9); /* whole steps per frame, so halving stays exact */
     int k;
     for (k = 0; k < 16; ++k, n *= 2) {
         memset(r, 0, sizeof *r);
         strcpy(r->role, "fair");
+        r->frame_s = frame_dt;
         r->dt = frame_dt / (double)n;
         bench_run_scene(s, r, frames, 0, NULL, fields, NULL);
         fprintf(stderr, "    search dt %.4g: %s\n", r->dt, status_name(r));
@@ -474,7 +512,7 @@ static void bench_one(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, benc
     if (!ref || !tmp) exit(1);
     /* 1. fair baseline (fields kept in tmp until the reference exists) */
     r = &out->runs[0];
-    if (!bench_fair(&s, frames, r, tmp)) {
+    if (!bench_fair(&s, frames, 1.0 / BENCH_FPS, r, tmp)) {
         fprintf(stderr, "bench_mpm: %s %dD: no stable explicit step found\n", out->name, dim);
         out->n_runs = 1;
         csv_row(csv, out->name, dim, r, 0);
@@ -576,7 +614,7 @@ static void bench_cost(const bench_cfg *cfg, pn_ex_scene_kind kind, int dim, FIL
     if (cfg->filter >= 0) s.filter_s = cfg->filter;
     frames = bench_frames(cfg, &s);
     warm_s = 0.4 * frames / (double)BENCH_FPS;
-    if (!bench_fair(&s, frames, &fair, NULL)) {
+    if (!bench_fair(&s, frames, 1.0 / BENCH_FPS, &fair, NULL)) {
         fprintf(md, "**%s %dD**: no stable explicit step found.\n\n", kind == PN_EX_SAND_COLUMN ? "sand" : "snow", dim);
         return;
     }
@@ -705,7 +743,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
         s.E_pa = cfg->Es[i];
         w->E = s.E_pa;
         fprintf(stderr, "E sweep, %s %dD, E = %.0e Pa, res %d\n", name, dim, w->E, s.res);
-        w->found = bench_fair(&s, frames, &w->fair, fair);
+        w->found = bench_fair(&s, frames, 1.0 / BENCH_FPS, &w->fair, fair);
         memset(&w->ref, 0, sizeof w->ref);
         strcpy(w->ref.role, "reference");
         w->ref.dt = w->found ? w->fair.dt / 2 : 0;
@@ -1027,7 +1065,7 @@ static void bench_materials(const bench_cfg *cfg, int n_dts, const double *dts, 
             nodes = pn_ex_field_size(w);
             pn_mpm_destroy(w);
             fields = (double *)malloc(sizeof(double) * nodes * (size_t)frames);
-            if (!fields || !bench_fair(&s, frames, &fair, NULL)) {
+            if (!fields || !bench_fair(&s, frames, 1.0 / BENCH_FPS, &fair, NULL)) {
                 fprintf(stderr, "bench_mpm: no stable explicit step at %g deg, nu %g\n", phis[a], nus[b]);
                 exit(1);
             }
@@ -1063,6 +1101,425 @@ static void bench_materials(const bench_cfg *cfg, int n_dts, const double *dts, 
     fprintf(stderr, "wrote %s\n", path);
 }
 
+/* ---- --scale: the implicit sand column at user sizes, resumable ----------------------------- */
+
+#define SCALE_FPS 20 /* 0.05 s frames: a 1/60 s step is 3 of a frame */
+
+/* the runs of each (dim, res, E), in this order; the CSV's run and step columns */
+enum { SCALE_FAIR = 0, SCALE_REF, SCALE_ADVECTION, SCALE_FRAME, SCALE_CELLS, SCALE_RUNS };
+static const char *const scale_kinds[SCALE_RUNS] = {"explicit_fair", "explicit_reference", "stress_particles",
+                                                    "stress_particles", "stress_cells"};
+static const char *const scale_steps[SCALE_RUNS] = {"fair", "fair/2", "advection", "1/60", "1/60"};
+
+/* one row of DIR/bench_scale.csv: written as each run ends, read back on start (resume) */
+typedef struct scale_row {
+    int dim, res;
+    double E;
+    char run[24], step[16];
+    unsigned long particles;
+    double dt, dt_over_fair;             /* the step, and over the fair explicit step (dt_CFL) */
+    double sweeps, coarse, newton, cg;   /* per step                                          */
+    double halved;                       /* the share of the steps retried as substeps        */
+    double share[5];                     /* % of the step in each pn_mpm_stage (implicit)     */
+    double mm_mean, mm_min;              /* min/max mass IoU against the reference            */
+    double runout, height, runout_ratio, height_ratio; /* the deposit, and over the reference's */
+    double wall_ps, cpu_ps, cpu_over_fair, sim, wall, cpu;
+    char status[96];
+} scale_row;
+
+static const char scale_header[] =
+    "dim,res,E_pa,run,step,particles,dt_s,dt_over_fair,sweeps_per_step,coarse_per_step,newton_per_step,"
+    "cg_per_step,substepped_share,setup_pct,energy_pct,linear_pct,sweeps_pct,g2p_pct,minmax_iou_mean,minmax_iou_min,runout_m,"
+    "height_m,runout_over_ref,height_over_ref,wall_per_sim_s,cpu_per_sim_s,cpu_over_fair,simulated_s,wall_s,cpu_s,"
+    "status";
+#define SCALE_COLUMNS 31
+
+typedef struct scale_csv {
+    scale_row *rows;
+    int n, cap;
+    FILE *f; /* appended to */
+} scale_csv;
+
+static void scale_write(FILE *f, const scale_row *o) {
+    fprintf(f, "%d,%d,%g,%s,%s,%lu,%.10g,%.4g,%.2f,%.3f,%.2f,%.1f,%.4f,%.1f,%.1f,%.1f,%.1f,%.1f,%.4f,%.4f,%.5f,%.5f,%.4f,%.4f,"
+               "%.5g,%.5g,%.4g,%.4f,%.3f,%.3f,\"%s\"\n",
+            o->dim, o->res, o->E, o->run, o->step, o->particles, o->dt, o->dt_over_fair, o->sweeps, o->coarse,
+            o->newton, o->cg, o->halved, o->share[0], o->share[1], o->share[2], o->share[3], o->share[4], o->mm_mean, o->mm_min,
+            o->runout, o->height, o->runout_ratio, o->height_ratio, o->wall_ps, o->cpu_ps, o->cpu_over_fair, o->sim,
+            o->wall, o->cpu, o->status);
+}
+
+/* a line scale_write wrote into *o; 0 if it is not one */
+static int scale_parse(char *line, scale_row *o) {
+    char *c[SCALE_COLUMNS], *p = line;
+    int n = 0;
+    size_t len;
+    while (n < SCALE_COLUMNS - 1) { /* the last column, the quoted status, may hold commas */
+        c[n++] = p;
+        if (!(p = strchr(p, ','))) return 0;
+        *p++ = 0;
+    }
+    c[n] = p;
+    memset(o, 0, sizeof *o);
+    o->dim = atoi(c[0]), o->res = atoi(c[1]), o->E = atof(c[2]);
+    snprintf(o->run, sizeof o->run, "%s", c[3]);
+    snprintf(o->step, sizeof o->step, "%s", c[4]);
+    o->particles = strtoul(c[5], NULL, 10);
+    o->dt = atof(c[6]), o->dt_over_fair = atof(c[7]), o->sweeps = atof(c[8]), o->coarse = atof(c[9]);
+    o->newton = atof(c[10]), o->cg = atof(c[11]), o->halved = atof(c[12]);
+    for (n = 0; n < 5; ++n) o->share[n] = atof(c[13 + n]);
+    o->mm_mean = atof(c[18]), o->mm_min = atof(c[19]), o->runout = atof(c[20]), o->height = atof(c[21]);
+    o->runout_ratio = atof(c[22]), o->height_ratio = atof(c[23]), o->wall_ps = atof(c[24]), o->cpu_ps = atof(c[25]);
+    o->cpu_over_fair = atof(c[26]), o->sim = atof(c[27]), o->wall = atof(c[28]), o->cpu = atof(c[29]);
+    p = c[30] + (c[30][0] == '"');
+    len = strcspn(p, "\"\r\n");
+    p[len] = 0;
+    snprintf(o->status, sizeof o->status, "%s", p);
+    return (o->dim == 2 || o->dim == 3) && o->res > 0 && o->E > 0;
+}
+
+static void scale_add(scale_csv *t, const scale_row *o) {
+    if (t->n == t->cap) {
+        t->cap = t->cap ? 2 * t->cap : 64;
+        if (!(t->rows = (scale_row *)realloc(t->rows, sizeof(scale_row) * (size_t)t->cap))) exit(1);
+    }
+    t->rows[t->n++] = *o;
+}
+
+/* a finished run: to the CSV at once (a later start skips it) and to the table */
+static void scale_append(scale_csv *t, const scale_row *o) {
+    scale_write(t->f, o);
+    fflush(t->f);
+    scale_add(t, o);
+}
+
+/* the row of run k of (dim, res, E) at step dt (dt <= 0: at any step), -1 if none */
+static int scale_find(const scale_csv *t, int dim, int res, double E, int k, double dt) {
+    int i;
+    for (i = 0; i < t->n; ++i) {
+        const scale_row *o = &t->rows[i];
+        if (o->dim == dim && o->res == res && fabs(o->E - E) <= 1e-9 * E && !strcmp(o->run, scale_kinds[k]) &&
+            (dt <= 0 || fabs(o->dt - dt) <= 1e-6 * dt))
+            return i;
+    }
+    return -1;
+}
+
+/* Row k of a run r; fair_dt, fair_cpu_ps: the fair explicit run's step and processor seconds per
+   simulated second; ref_runout, ref_height: the reference's deposit. */
+static void scale_row_of(scale_row *o, const pn_ex_scene *s, int k, const bench_run *r, double fair_dt,
+                         double fair_cpu_ps, double ref_runout, double ref_height) {
+    double st = r->tally.steps ? (double)r->tally.steps : 1, sum = 0;
+    int g;
+    memset(o, 0, sizeof *o);
+    o->dim = s->dim, o->res = s->res, o->E = s->E_pa;
+    snprintf(o->run, sizeof o->run, "%s", scale_kinds[k]);
+    snprintf(o->step, sizeof o->step, "%s", scale_steps[k]);
+    o->particles = (unsigned long)r->particles;
+    o->dt = r->dt;
+    o->dt_over_fair = fair_dt > 0 ? r->dt / fair_dt : 0;
+    o->sweeps = r->tally.sweeps / st, o->coarse = r->tally.coarse / st;
+    o->newton = r->tally.newton / st, o->cg = r->tally.cg / st, o->halved = r->tally.halved / st;
+    for (g = 0; g < PN_MPM_STAGES; ++g) sum += r->tally.stage_s[g];
+    for (g = 0; g < PN_MPM_STAGES && g < 5; ++g) o->share[g] = sum > 0 ? 100 * r->tally.stage_s[g] / sum : 0;
+    o->mm_mean = r->mm_mean, o->mm_min = r->mm_min;
+    o->runout = r->runout, o->height = r->height;
+    o->runout_ratio = ref_runout > 0 ? r->runout / ref_runout : 0;
+    o->height_ratio = ref_height > 0 ? r->height / ref_height : 0;
+    o->wall_ps = wall_per_sim(r);
+    o->cpu_ps = r->sim > 0 ? r->cpu / r->sim : 0;
+    o->cpu_over_fair = fair_cpu_ps > 0 ? o->cpu_ps / fair_cpu_ps : 0;
+    o->sim = r->sim, o->wall = r->wall, o->cpu = r->cpu;
+    snprintf(o->status, sizeof o->status, "%s", status_detail(r));
+}
+
+/* The sand column at res cells and E: its scene, its particle count and its field's size. */
+static size_t scale_scene(const bench_cfg *cfg, int dim, int res, double E, pn_ex_scene *s, size_t *nodes) {
+    pn_mpm_world *w;
+    char why[256] = "";
+    size_t n;
+    pn_ex_scene_default(s, PN_EX_SAND_COLUMN, dim);
+    s->res = res;
+    s->E_pa = E;
+    if (cfg->filter >= 0) s->filter_s = cfg->filter;
+    if (pn_ex_scene_create(s, &w, why, sizeof why) != PN_OK) {
+        fprintf(stderr, "bench_mpm: %s\n", why);
+        exit(1);
+    }
+    n = w->n;
+    if (nodes) *nodes = pn_ex_field_size(w);
+    pn_mpm_destroy(w);
+    return n;
+}
+
+/* The implicit step at the advection limit. The library has no helper that returns it
+   (pn_mpm_advance picks such steps inside, one by one, from the fastest particle), so: the
+   fastest a particle of the column gets is its free fall from the top, sqrt(2 g H) with H the
+   column height (aspect x width), and dt = dx / (2 sqrt(2 g H)) keeps it half a cell per step
+   (under one, with room for the spread of the collapse); rounded down to whole steps per frame. */
+static double scale_advection_dt(const pn_ex_scene *s, double frame_s) {
+    double dt = pn_ex_scene_dx(s) / (2 * sqrt(2 * 9.81 * s->aspect * s->width_m));
+    return frame_s / ceil(frame_s / dt - 1e-9);
+}
+
+/* the reference's mass fields on disk, so that a resumed run need not repeat it */
+#define SCALE_CACHE_TAG 0x504e5331ul /* "PNS1" */
+
+static void scale_cache_path(const bench_cfg *cfg, const pn_ex_scene *s, char *path, size_t cap) {
+    snprintf(path, cap, "%s/bench_scale_ref_%dd_res%d_E%g.bin", cfg->out, s->dim, s->res, s->E_pa);
+}
+
+static int scale_cache_read(const char *path, double *fields, size_t nodes, int frames, double dt) {
+    FILE *f = fopen(path, "rb");
+    unsigned long tag = 0;
+    size_t nn = 0;
+    int nf = 0, ok;
+    double d = 0;
+    if (!f) return 0;
+    ok = fread(&tag, sizeof tag, 1, f) == 1 && tag == SCALE_CACHE_TAG && fread(&nn, sizeof nn, 1, f) == 1 &&
+         nn == nodes && fread(&nf, sizeof nf, 1, f) == 1 && nf == frames && fread(&d, sizeof d, 1, f) == 1 &&
+         fabs(d - dt) <= 1e-9 * dt && fread(fields, sizeof(double) * nodes, (size_t)frames, f) == (size_t)frames;
+    fclose(f);
+    return ok;
+}
+
+static void scale_cache_write(const char *path, const double *fields, size_t nodes, int frames, double dt) {
+    FILE *f = fopen(path, "wb");
+    unsigned long tag = SCALE_CACHE_TAG;
+    int ok;
+    if (!f) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        return;
+    }
+    ok = fwrite(&tag, sizeof tag, 1, f) == 1 && fwrite(&nodes, sizeof nodes, 1, f) == 1 &&
+         fwrite(&frames, sizeof frames, 1, f) == 1 && fwrite(&dt, sizeof dt, 1, f) == 1 &&
+         fwrite(fields, sizeof(double) * nodes, (size_t)frames, f) == (size_t)frames;
+    if (fclose(f) != 0 || !ok) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        remove(path);
+    }
+}
+
+/* The runs of one (dim, res, E) that the CSV does not have yet: the fair explicit baseline
+   (searched as bench_fair does; it is kept only once the reference exists to score it), the
+   reference at half its step (the sweep's rule; its fields cached), then the stress
+   formulation per particle at the advection limit and at 1/60 s, and per cell at 1/60 s. */
+static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, double E, int frames) {
+    double frame_s = 1.0 / SCALE_FPS, dts[SCALE_RUNS], fair_dt, fair_cpu, ref_runout, ref_height, *ref, *fair_f = NULL;
+    int have[SCALE_RUNS], k, todo = 0;
+    pn_ex_scene s;
+    size_t nodes;
+    bench_run fair, r;
+    scale_row o;
+    char path[1024];
+    unsigned long n = (unsigned long)scale_scene(cfg, dim, res, E, &s, &nodes);
+    dts[SCALE_FAIR] = dts[SCALE_REF] = 0;
+    dts[SCALE_ADVECTION] = scale_advection_dt(&s, frame_s);
+    dts[SCALE_FRAME] = dts[SCALE_CELLS] = 1.0 / 60;
+    have[SCALE_FAIR] = scale_find(t, dim, res, E, SCALE_FAIR, 0);
+    fair_dt = have[SCALE_FAIR] >= 0 ? t->rows[have[SCALE_FAIR]].dt : 0;
+    if (fair_dt > 0) fair_dt = frame_s / floor(frame_s / fair_dt + 0.5); /* exactly the searched step */
+    dts[SCALE_REF] = fair_dt / 2;
+    have[SCALE_REF] = fair_dt > 0 ? scale_find(t, dim, res, E, SCALE_REF, dts[SCALE_REF]) : -1;
+    for (k = SCALE_ADVECTION; k < SCALE_RUNS; ++k) have[k] = scale_find(t, dim, res, E, k, dts[k]);
+    for (k = 0; k < SCALE_RUNS; ++k) todo += have[k] < 0;
+    fprintf(stderr, "scale: sand %dD res %d (%lu particles), E %g Pa, %d frames (%.2f s): %d of %d runs to do\n", dim,
+            res, n, E, frames, frames * frame_s, todo, SCALE_RUNS);
+    if (!todo) return;
+    if (have[SCALE_FAIR] >= 0 && strcmp(t->rows[have[SCALE_FAIR]].status, "ok")) {
+        fprintf(stderr, "  the fair explicit run is %s: nothing to compare with\n", t->rows[have[SCALE_FAIR]].status);
+        return;
+    }
+    if (!(ref = (double *)calloc(nodes * (size_t)frames, sizeof(double)))) exit(1);
+    if (have[SCALE_FAIR] < 0) { /* 1. the fair explicit baseline (fields kept until the reference exists) */
+        if (!(fair_f = (double *)calloc(nodes * (size_t)frames, sizeof(double)))) exit(1);
+        if (!bench_fair(&s, frames, frame_s, &fair, fair_f)) {
+            fprintf(stderr, "bench_mpm: sand %dD res %d E %g: no stable explicit step found\n", dim, res, E);
+            scale_row_of(&o, &s, SCALE_FAIR, &fair, 0, 0, 0, 0);
+            snprintf(o.status, sizeof o.status, "no stable step");
+            scale_append(t, &o);
+            free(fair_f);
+            free(ref);
+            return;
+        }
+        fair_dt = fair.dt;
+        dts[SCALE_REF] = fair_dt / 2;
+        have[SCALE_REF] = scale_find(t, dim, res, E, SCALE_REF, dts[SCALE_REF]);
+        fair_cpu = fair.sim > 0 ? fair.cpu / fair.sim : 0;
+    } else fair_cpu = t->rows[have[SCALE_FAIR]].cpu_ps;
+    /* 2. the reference: from its cache when its row is in the CSV */
+    scale_cache_path(cfg, &s, path, sizeof path);
+    if (have[SCALE_REF] >= 0 && scale_cache_read(path, ref, nodes, frames, dts[SCALE_REF])) {
+        ref_runout = t->rows[have[SCALE_REF]].runout;
+        ref_height = t->rows[have[SCALE_REF]].height;
+        fprintf(stderr, "  reference read from %s\n", path);
+    } else {
+        memset(&r, 0, sizeof r);
+        strcpy(r.role, "reference");
+        r.frame_s = frame_s;
+        r.dt = dts[SCALE_REF];
+        if (have[SCALE_REF] >= 0) fprintf(stderr, "  %s is missing or another run's: the reference again\n", path);
+        bench_run_scene(&s, &r, frames, 0, NULL, ref, NULL);
+        if (r.status != RUN_OK) fprintf(stderr, "bench_mpm: the reference failed (%s)\n", status_name(&r));
+        bench_compare(&r, ref, ref, nodes);
+        bench_progress("sand", dim, &r);
+        scale_cache_write(path, ref, nodes, frames, r.dt);
+        ref_runout = r.runout;
+        ref_height = r.height;
+        if (have[SCALE_REF] < 0) {
+            scale_row_of(&o, &s, SCALE_REF, &r, fair_dt, fair_cpu, ref_runout, ref_height);
+            scale_append(t, &o);
+        }
+    }
+    if (fair_f) { /* the fair run, now that it can be scored */
+        bench_compare(&fair, fair_f, ref, nodes);
+        bench_progress("sand", dim, &fair);
+        scale_row_of(&o, &s, SCALE_FAIR, &fair, fair_dt, fair_cpu, ref_runout, ref_height);
+        scale_append(t, &o);
+        free(fair_f);
+    }
+    /* 3. the stress formulation (its law: the group's Drucker-Prager, as in the sweep) */
+    for (k = SCALE_ADVECTION; k < SCALE_RUNS; ++k) {
+        pn_mpm_implicit_desc id = cfg->solver;
+        if (have[k] >= 0) continue;
+        memset(&r, 0, sizeof r);
+        strcpy(r.role, "implicit");
+        r.implicit = r.stress = 1;
+        r.energy = PN_ENERGY_DP;
+        r.fp = 1;
+        r.frame_s = frame_s;
+        r.dt = dts[k];
+        id.stress_unknowns = k == SCALE_CELLS ? PN_MPM_STRESS_CELLS : PN_MPM_STRESS_PARTICLES;
+        bench_run_scene(&s, &r, frames, cfg->max_run_s, &id, NULL, ref);
+        bench_progress("sand", dim, &r);
+        scale_row_of(&o, &s, k, &r, fair_dt, fair_cpu, ref_runout, ref_height);
+        scale_append(t, &o);
+    }
+    free(ref);
+}
+
+/* the table's order: dimension, res, E, then the runs in scale_kinds' order by step */
+static int scale_rank(const scale_row *o) {
+    int k;
+    for (k = 0; k < SCALE_RUNS; ++k)
+        if (!strcmp(o->run, scale_kinds[k])) return k;
+    return SCALE_RUNS;
+}
+
+static int scale_cmp(const void *pa, const void *pb) {
+    const scale_row *a = (const scale_row *)pa, *b = (const scale_row *)pb;
+    if (a->dim != b->dim) return a->dim - b->dim;
+    if (a->res != b->res) return a->res - b->res;
+    if (a->E != b->E) return a->E < b->E ? -1 : 1;
+    if (scale_rank(a) != scale_rank(b)) return scale_rank(a) - scale_rank(b);
+    return a->dt < b->dt ? -1 : a->dt > b->dt;
+}
+
+/* DIR/bench_scale.md: every row of the CSV, this start's and earlier ones' */
+static void scale_md(const char *path, const scale_csv *t) {
+    FILE *f = fopen(path, "w");
+    scale_row *rows;
+    int i;
+    if (!f) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        return;
+    }
+    if (!(rows = (scale_row *)malloc(sizeof(scale_row) * (size_t)(t->n ? t->n : 1)))) exit(1);
+    if (t->n) memcpy(rows, t->rows, sizeof(scale_row) * (size_t)t->n);
+    qsort(rows, (size_t)t->n, sizeof(scale_row), scale_cmp);
+    fprintf(f, "<!-- written by bench/bench_mpm.c --scale (make bench-scale) from bench_scale.csv -->\n"
+               "**The sand column at user sizes** (examples/common/pn_example.h: StVK-Hencky + Drucker-Prager, a "
+               "0.12 m column of aspect 2; 2D over 1 m, 3D over 0.5 m), to the deposit. Per (dim, res, E): the fair "
+               "explicit baseline (largest stable step, searched), the explicit reference at half its step (every IoU "
+               "is the mean / min min/max mass IoU against it, at %d frames per second), and the stress formulation "
+               "(`PN_MPM_FORMULATION_STRESS`, the group's Drucker-Prager) with its stresses per particle at the "
+               "advection limit (dx / (2 sqrt(2 g H)), H the column height, in whole steps per frame) and at "
+               "1/60 s, and per cell at 1/60 s. *dt / dt_CFL*: the step over the fair explicit step. *per step*: "
+               "Gauss-Seidel sweeps, coarse corrections (`pn_mpm_stats.coarse_corrections`), Newton and CG "
+               "iterations (of a step retried as substeps, for all of them), and *substepped*: the share of the "
+               "steps that were (one that would move material more than a cell is). *stage %%*: the share of the step's time in setup / energy / linear / sweeps / g2p "
+               "(`pn_mpm_stats.stage_s`). *runout, height*: the deposit's half-width and top above the floor at the "
+               "end, over the reference's. Time per simulated second: wall (CLOCK_MONOTONIC) and processor "
+               "(`clock()`) seconds; *CPU x fair*: processor time over the fair explicit run's.\n\n",
+            SCALE_FPS);
+    fprintf(f, "| dim | res | particles | E (Pa) | run | step | dt (s) | dt / dt_CFL | sweeps / coarse per step | "
+               "Newton / CG per step | substepped | stage %% setup / energy / linear / sweeps / g2p | min/max IoU mean / min | "
+               "runout / ref | height / ref | wall s / sim s | CPU s / sim s | CPU x fair | status |\n"
+               "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for (i = 0; i < t->n; ++i) {
+        const scale_row *o = &rows[i];
+        char stage[64] = "-", status[128];
+        if (o->share[0] + o->share[1] + o->share[2] + o->share[3] + o->share[4] > 0)
+            snprintf(stage, sizeof stage, "%.0f / %.0f / %.0f / %.0f / %.0f", o->share[0], o->share[1], o->share[2],
+                     o->share[3], o->share[4]);
+        if (strcmp(o->status, "ok")) snprintf(status, sizeof status, "%s at t = %.2f s", o->status, o->sim);
+        else strcpy(status, "ok");
+        fprintf(f, "| %d | %d | %lu | %.0e | %s | %s | %.3g | %.3g | %.1f / %.2f | %.1f / %.1f | %.2f | %s | %.3f / %.3f | "
+                   "%.3f | %.3f | %.3g | %.3g | %.3g | %s |\n",
+                o->dim, o->res, o->particles, o->E, o->run, o->step, o->dt, o->dt_over_fair, o->sweeps, o->coarse,
+                o->newton, o->cg, o->halved, stage, o->mm_mean, o->mm_min, o->runout_ratio, o->height_ratio, o->wall_ps,
+                o->cpu_ps, o->cpu_over_fair, status);
+    }
+    free(rows);
+    fclose(f);
+}
+
+/* --scale: the particle counts of the chosen sizes, then (unless count_only) every run of every
+   (dim, res, E) that DIR/bench_scale.csv does not have, each appended as it ends; then
+   DIR/bench_scale.md from the whole CSV. Returns the exit status. */
+static int bench_scale(const bench_cfg *cfg, const int *dims, int count_only) {
+    scale_csv t;
+    char path[1024], line[2048];
+    FILE *in;
+    int d, i, e, whole = 1, frames = (int)floor(cfg->duration[2] * SCALE_FPS + 0.5);
+    if (frames < 1) frames = 1;
+    for (d = 2; d <= 3; ++d)
+        for (i = 0; dims[d] && i < cfg->scale_n_res[d]; ++i) {
+            pn_ex_scene s;
+            size_t nodes;
+            unsigned long n = (unsigned long)scale_scene(cfg, d, cfg->scale_res[d][i], 1e7, &s, &nodes);
+            printf("sand column %dD res %d: %lu particles, %lu grid nodes\n", d, cfg->scale_res[d][i], n,
+                   (unsigned long)nodes);
+        }
+    fflush(stdout);
+    if (count_only) return 0;
+    memset(&t, 0, sizeof t);
+    snprintf(path, sizeof path, "%s/bench_scale.csv", cfg->out);
+    if ((in = fopen(path, "r"))) { /* resume: the runs already there are skipped */
+        int ln = 0;
+        while (fgets(line, sizeof line, in)) {
+            scale_row o;
+            whole = strchr(line, '\n') != NULL;
+            if (ln++ == 0) {
+                if (strncmp(line, scale_header, strlen(scale_header))) {
+                    fprintf(stderr, "bench_mpm: %s has another header (an older bench_mpm's): move it away\n", path);
+                    fclose(in);
+                    return 1;
+                }
+                continue;
+            }
+            if (scale_parse(line, &o)) scale_add(&t, &o);
+        }
+        fclose(in);
+        fprintf(stderr, "scale: %d runs already in %s\n", t.n, path);
+    }
+    if (!(t.f = fopen(path, "a"))) {
+        fprintf(stderr, "bench_mpm: cannot write %s\n", path);
+        return 1;
+    }
+    if (fseek(t.f, 0, SEEK_END) == 0 && ftell(t.f) == 0) fprintf(t.f, "%s\n", scale_header);
+    else if (!whole) fprintf(t.f, "\n"); /* a line cut short by a kill: left unparsed, ended here */
+    for (d = 2; d <= 3; ++d)
+        for (i = 0; dims[d] && i < cfg->scale_n_res[d]; ++i)
+            for (e = 0; e < cfg->n_Es; ++e) scale_group(cfg, &t, d, cfg->scale_res[d][i], cfg->Es[e], frames);
+    fclose(t.f);
+    snprintf(path, sizeof path, "%s/bench_scale.md", cfg->out);
+    scale_md(path, &t);
+    fprintf(stderr, "wrote %s/bench_scale.{csv,md}\n", cfg->out);
+    free(t.rows);
+    return 0;
+}
+
 static void usage(void) {
     fprintf(stderr, "usage: bench_mpm [--quick] [--only sand|snow] [--dim 2|3] [--duration S] [--res2 N] [--res3 N]\n"
                     "       [--max-run-seconds S] [--filter S] [--references] [--out DIR] [--snowball]\n"
@@ -1070,7 +1527,9 @@ static void usage(void) {
                     "       [--contact-rounds N] [--cg-forcing X] [--no-hardening] [--cost]\n"
                     "       [--sweep-only] [--sweep-dim 2|3] [--sweep-res N] [--sweep-E E,E,..] [--sweep-runs I,I,..]\n"
                     "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X] [--energy-rise-tol X]\n"
-                    "       [--materials]\n");
+                    "       [--materials]\n"
+                    "       bench_mpm --scale [--scale-dim 2|3] [--scale-res2 N,N,..] [--scale-res3 N,N,..]\n"
+                    "       [--sweep-E E,E,..] [--duration S] [--max-run-seconds S] [--out DIR] [--scale-count]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -1110,7 +1569,10 @@ int main(int argc, char **argv) {
     static const int fp_full[] = {1, 2, 4}, fp_quick[] = {1, 2};
     static const double Es_full[] = {1e6, 1e7, 1e8, 1e9, 1e10}, Es_quick[] = {1e6, 1e7};
     static double Es_arg[8];
-    int n_Es_arg = 0, sweep_only = 0, materials = 0;
+    static const double Es_scale[] = {1e7, 1e9};
+    static const int res_scale[4][3] = {{0, 0, 0}, {0, 0, 0}, {417, 932, 0}, {49, 78, 122}};
+    int n_Es_arg = 0, sweep_only = 0, materials = 0, scale = 0, scale_count = 0, scale_dim = 0, max_run_set = 0;
+    double scale_res_arg[4][8];
     bench_cfg cfg;
     int only = -1, dim_only = 0, k, d, kind, n_sc = 0, n_rows = 0, n_dts = 0, n_passes = 0, sweep = 1, bad = 0, cost = 0;
     static double dts_arg[8], passes_arg[8];
@@ -1140,6 +1602,8 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--snowball")) cfg.snowball = 1;
         else if (!strcmp(a, "--cost")) cost = 1;
         else if (!strcmp(a, "--materials")) materials = 1;
+        else if (!strcmp(a, "--scale")) scale = 1;
+        else if (!strcmp(a, "--scale-count")) scale = scale_count = 1;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
         else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
@@ -1161,7 +1625,15 @@ int main(int argc, char **argv) {
             for (cfg.sweep_mask = 0, q = 0; q < m; ++q) bad |= idx[q] > SWEEP_RUNS, cfg.sweep_mask |= 1u << ((int)idx[q] - 1);
             ++k;
         }
-        else if (!strcmp(a, "--max-run-seconds")) cfg.max_run_s = atof(v), ++k;
+        else if (!strcmp(a, "--max-run-seconds")) cfg.max_run_s = atof(v), max_run_set = 1, ++k;
+        else if (!strcmp(a, "--scale-dim")) bad |= (scale_dim = atoi(v)) != 2 && scale_dim != 3, ++k;
+        else if (!strcmp(a, "--scale-res2") || !strcmp(a, "--scale-res3")) {
+            int dd = a[11] - '0', q;
+            bad |= !(cfg.scale_n_res[dd] = parse_list(v, scale_res_arg[dd]));
+            for (q = 0; q < cfg.scale_n_res[dd]; ++q)
+                bad |= (cfg.scale_res[dd][q] = (int)scale_res_arg[dd][q]) < 16 || cfg.scale_res[dd][q] > 1024;
+            ++k;
+        }
         else if (!strcmp(a, "--out")) cfg.out = v, ++k;
         else if (!strcmp(a, "--filter")) cfg.filter = atof(v), ++k;
         else if (!strcmp(a, "--dts")) bad |= !(n_dts = parse_list(v, dts_arg)), ++k;
@@ -1169,6 +1641,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--energies")) bad |= !(mask = parse_energies(v)), ++k;
         else if (!strcmp(a, "--sweep-tol")) bad |= !((cfg.solver.sweep_tol = (pn_real)atof(v)) > 0), ++k;
         else if (!strcmp(a, "--cell-relax")) bad |= !((cfg.solver.cell_relax = (pn_real)atof(v)) >= 1), ++k;
+        else if (!strcmp(a, "--anderson")) bad |= strcmp(v, "on") && strcmp(v, "off"), cfg.solver.anderson = strcmp(v, "off") ? 0 : -1, ++k;
         else if (!strcmp(a, "--energy-rise-tol")) cfg.solver.energy_rise_tol = (pn_real)atof(v), ++k;
         else if (!strcmp(a, "--contact-rounds")) bad |= (cfg.solver.contact_rounds = atoi(v)) < 1, ++k;
         else if (!strcmp(a, "--cg-forcing")) bad |= !((cfg.solver.cg_forcing_max = (pn_real)atof(v)) >= 0 && cfg.solver.cg_forcing_max < 1), ++k;
@@ -1202,6 +1675,17 @@ int main(int argc, char **argv) {
     if (!pn_ex_mkdirs(cfg.out)) {
         fprintf(stderr, "bench_mpm: cannot create the folder %s\n", cfg.out);
         return 1;
+    }
+    if (scale) { /* the sizes table only: 1.5 s, E 1e7 and 1e9 Pa, no time limit unless said */
+        int dims[4] = {0, 0, 1, 1};
+        if (scale_dim) dims[5 - scale_dim] = 0;
+        for (d = 2; d <= 3; ++d)
+            if (!cfg.scale_n_res[d])
+                for (k = 0; k < 3 && res_scale[d][k]; ++k) cfg.scale_res[d][cfg.scale_n_res[d]++] = res_scale[d][k];
+        cfg.duration[2] = cfg.duration[3] = duration > 0 ? duration : 1.5;
+        if (!n_Es_arg) cfg.Es = Es_scale, cfg.n_Es = 2;
+        if (!max_run_set) cfg.max_run_s = 0;
+        return bench_scale(&cfg, dims, scale_count);
     }
     if (materials) { /* the material table only */
         static const double m_dts[] = {1e-4, 1e-3};
