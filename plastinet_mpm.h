@@ -6148,7 +6148,8 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
         {
             const pn_real *g = w->s.pq + j * (size_t)(ns * d);
             const long *dof = w->s.pdof + j * (size_t)ns;
-            w->s.pty[j] = pn__mpm_stress_compliance(w, g, dof, w->vol0[p], dt, 1);
+            if (!cells || cascade) /* a particle's own compliance: only its own sweeps use it */
+                w->s.pty[j] = pn__mpm_stress_compliance(w, g, dof, w->vol0[p], dt, 1);
             memcpy(w->s.pP + j * (size_t)dd, w->s.pF0 + j * (size_t)dd, sizeof(pn_real) * (size_t)dd);
             if (!cells) pn__mpm_stress_apply(w, g, dof, w->s.pP + j * (size_t)dd, dt * w->vol0[p], v);
         }

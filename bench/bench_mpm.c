@@ -10,7 +10,8 @@
                     [--sweep-runs I,I,..] [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X]
                     [--energy-rise-tol X] [--anderson on|off] [--materials]
           bench_mpm --scale [--scale-dim 2|3] [--scale-res2 N,N,..] [--scale-res3 N,N,..] [--sweep-E E,E,..]
-                    [--duration S] [--max-run-seconds S] [--out DIR] [--scale-count]   (or: make bench-scale)
+                    [--duration S] [--max-run-seconds S] [--out DIR] [--scale-count] [--scale-implicit-only]
+                    (or: make bench-scale)
    Defaults: both scenes, 2D at res 64 (1 m) for 0.5 s and 3D at res 16 (0.5 m) for 0.3 s
    simulated (the snow press for at most 0.2 s, while its plate goes 0.08 domain_m deep), at
    most 120 wall seconds per run (--max-run-seconds 0: no limit), DIR = build.
@@ -44,7 +45,7 @@
    1e9 Pa (--sweep-E). Per (dim, res, E), with the sweep's machinery: the fair explicit
    baseline (bench_fair), the explicit reference at half its step (the sweep's rule), and the
    stress formulation (the group's Drucker-Prager) per particle at the advection limit and at
-   1/60 s, and per cell (stress_unknowns cells) at 1/60 s. The advection limit: the library has
+   1/60 s, and per cell (stress_unknowns cells) at both. The advection limit: the library has
    no helper that returns it (pn_mpm_advance picks such steps inside), so
    dt = dx / (2 sqrt(2 g H)), H the column height (the free fall from its top at half a cell
    per step), rounded down to whole steps per frame. Per run: particles, dt, dt / dt_CFL
@@ -61,7 +62,10 @@
    memory the reference's and the fair run's fields, twice that), so that a resumed start does
    not repeat it. --max-run-seconds (none by default here) stops an implicit run, which is then a
    "timeout" row (and is skipped later: delete the row to run it again). --scale-count:
-   print the particle count of each size and stop. --filter and the solver's flags
+   print the particle count of each size and stop. --scale-implicit-only: the stress
+   formulation's runs alone, without the explicit runs or any score (IoU, deposit ratios,
+   dt / dt_CFL and CPU x fair are then "-"): the work per step and the cost's slope in
+   particles at sizes whose explicit runs take too long (in a DIR of its own). --filter and the solver's flags
    (--sweep-tol, --cell-relax, --anderson on|off, --energy-rise-tol) apply as elsewhere. DIR/bench_scale.md: the
    table of every row of the CSV.
 
@@ -156,6 +160,7 @@ typedef struct bench_cfg {
     unsigned sweep_mask;  /* bit c: run sweep_cfgs[c]                              */
     pn_ex_scene_kind sweep_kind; /* the sweep's scene: the sand column or the snow press */
     int scale_res[4][8], scale_n_res[4]; /* --scale: the sizes, by dimension             */
+    int scale_implicit_only; /* --scale-implicit-only: no explicit runs, nothing scored    */
     const char *out;
 } bench_cfg;
 
@@ -1106,10 +1111,10 @@ static void bench_materials(const bench_cfg *cfg, int n_dts, const double *dts, 
 #define SCALE_FPS 20 /* 0.05 s frames: a 1/60 s step is 3 of a frame */
 
 /* the runs of each (dim, res, E), in this order; the CSV's run and step columns */
-enum { SCALE_FAIR = 0, SCALE_REF, SCALE_ADVECTION, SCALE_FRAME, SCALE_CELLS, SCALE_RUNS };
+enum { SCALE_FAIR = 0, SCALE_REF, SCALE_ADVECTION, SCALE_FRAME, SCALE_CELLS_ADVECTION, SCALE_CELLS, SCALE_RUNS };
 static const char *const scale_kinds[SCALE_RUNS] = {"explicit_fair", "explicit_reference", "stress_particles",
-                                                    "stress_particles", "stress_cells"};
-static const char *const scale_steps[SCALE_RUNS] = {"fair", "fair/2", "advection", "1/60", "1/60"};
+                                                    "stress_particles", "stress_cells", "stress_cells"};
+static const char *const scale_steps[SCALE_RUNS] = {"fair", "fair/2", "advection", "1/60", "advection", "1/60"};
 
 /* one row of DIR/bench_scale.csv: written as each run ends, read back on start (resume) */
 typedef struct scale_row {
@@ -1303,7 +1308,7 @@ static void scale_cache_write(const char *path, const double *fields, size_t nod
 /* The runs of one (dim, res, E) that the CSV does not have yet: the fair explicit baseline
    (searched as bench_fair does; it is kept only once the reference exists to score it), the
    reference at half its step (the sweep's rule; its fields cached), then the stress
-   formulation per particle at the advection limit and at 1/60 s, and per cell at 1/60 s. */
+   formulation per particle at the advection limit and at 1/60 s, and per cell at both. */
 static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, double E, int frames) {
     double frame_s = 1.0 / SCALE_FPS, dts[SCALE_RUNS], fair_dt, fair_cpu, ref_runout, ref_height, *ref, *fair_f = NULL;
     int have[SCALE_RUNS], k, todo = 0;
@@ -1314,7 +1319,7 @@ static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, do
     char path[1024];
     unsigned long n = (unsigned long)scale_scene(cfg, dim, res, E, &s, &nodes);
     dts[SCALE_FAIR] = dts[SCALE_REF] = 0;
-    dts[SCALE_ADVECTION] = scale_advection_dt(&s, frame_s);
+    dts[SCALE_ADVECTION] = dts[SCALE_CELLS_ADVECTION] = scale_advection_dt(&s, frame_s);
     dts[SCALE_FRAME] = dts[SCALE_CELLS] = 1.0 / 60;
     have[SCALE_FAIR] = scale_find(t, dim, res, E, SCALE_FAIR, 0);
     fair_dt = have[SCALE_FAIR] >= 0 ? t->rows[have[SCALE_FAIR]].dt : 0;
@@ -1322,15 +1327,19 @@ static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, do
     dts[SCALE_REF] = fair_dt / 2;
     have[SCALE_REF] = fair_dt > 0 ? scale_find(t, dim, res, E, SCALE_REF, dts[SCALE_REF]) : -1;
     for (k = SCALE_ADVECTION; k < SCALE_RUNS; ++k) have[k] = scale_find(t, dim, res, E, k, dts[k]);
-    for (k = 0; k < SCALE_RUNS; ++k) todo += have[k] < 0;
+    for (k = cfg->scale_implicit_only ? SCALE_ADVECTION : 0; k < SCALE_RUNS; ++k) todo += have[k] < 0;
     fprintf(stderr, "scale: sand %dD res %d (%lu particles), E %g Pa, %d frames (%.2f s): %d of %d runs to do\n", dim,
-            res, n, E, frames, frames * frame_s, todo, SCALE_RUNS);
+            res, n, E, frames, frames * frame_s, todo, cfg->scale_implicit_only ? SCALE_RUNS - SCALE_ADVECTION : SCALE_RUNS);
     if (!todo) return;
     if (have[SCALE_FAIR] >= 0 && strcmp(t->rows[have[SCALE_FAIR]].status, "ok")) {
         fprintf(stderr, "  the fair explicit run is %s: nothing to compare with\n", t->rows[have[SCALE_FAIR]].status);
         return;
     }
     if (!(ref = (double *)calloc(nodes * (size_t)frames, sizeof(double)))) exit(1);
+    if (cfg->scale_implicit_only) { /* nothing to score against */
+        fair_dt = fair_cpu = ref_runout = ref_height = 0;
+        goto implicit;
+    }
     if (have[SCALE_FAIR] < 0) { /* 1. the fair explicit baseline (fields kept until the reference exists) */
         if (!(fair_f = (double *)calloc(nodes * (size_t)frames, sizeof(double)))) exit(1);
         if (!bench_fair(&s, frames, frame_s, &fair, fair_f)) {
@@ -1378,7 +1387,7 @@ static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, do
         scale_append(t, &o);
         free(fair_f);
     }
-    /* 3. the stress formulation (its law: the group's Drucker-Prager, as in the sweep) */
+implicit: /* 3. the stress formulation (its law: the group's Drucker-Prager, as in the sweep) */
     for (k = SCALE_ADVECTION; k < SCALE_RUNS; ++k) {
         pn_mpm_implicit_desc id = cfg->solver;
         if (have[k] >= 0) continue;
@@ -1389,8 +1398,8 @@ static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, do
         r.fp = 1;
         r.frame_s = frame_s;
         r.dt = dts[k];
-        id.stress_unknowns = k == SCALE_CELLS ? PN_MPM_STRESS_CELLS : PN_MPM_STRESS_PARTICLES;
-        bench_run_scene(&s, &r, frames, cfg->max_run_s, &id, NULL, ref);
+        id.stress_unknowns = k == SCALE_CELLS || k == SCALE_CELLS_ADVECTION ? PN_MPM_STRESS_CELLS : PN_MPM_STRESS_PARTICLES;
+        bench_run_scene(&s, &r, frames, cfg->max_run_s, &id, NULL, cfg->scale_implicit_only ? NULL : ref);
         bench_progress("sand", dim, &r);
         scale_row_of(&o, &s, k, &r, fair_dt, fair_cpu, ref_runout, ref_height);
         scale_append(t, &o);
@@ -1434,7 +1443,7 @@ static void scale_md(const char *path, const scale_csv *t) {
                "is the mean / min min/max mass IoU against it, at %d frames per second), and the stress formulation "
                "(`PN_MPM_FORMULATION_STRESS`, the group's Drucker-Prager) with its stresses per particle at the "
                "advection limit (dx / (2 sqrt(2 g H)), H the column height, in whole steps per frame) and at "
-               "1/60 s, and per cell at 1/60 s. *dt / dt_CFL*: the step over the fair explicit step. *per step*: "
+               "1/60 s, and per cell at both. *dt / dt_CFL*: the step over the fair explicit step. *per step*: "
                "Gauss-Seidel sweeps, coarse corrections (`pn_mpm_stats.coarse_corrections`), Newton and CG "
                "iterations (of a step retried as substeps, for all of them), and *substepped*: the share of the "
                "steps that were (one that would move material more than a cell is). *stage %%*: the share of the step's time in setup / energy / linear / sweeps / g2p "
@@ -1448,17 +1457,24 @@ static void scale_md(const char *path, const scale_csv *t) {
                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (i = 0; i < t->n; ++i) {
         const scale_row *o = &rows[i];
-        char stage[64] = "-", status[128];
+        char stage[64] = "-", status[128], ratio[4][32];
+        int scored = o->mm_mean > 0 || o->runout_ratio > 0; /* (--scale-implicit-only: not) */
         if (o->share[0] + o->share[1] + o->share[2] + o->share[3] + o->share[4] > 0)
             snprintf(stage, sizeof stage, "%.0f / %.0f / %.0f / %.0f / %.0f", o->share[0], o->share[1], o->share[2],
                      o->share[3], o->share[4]);
         if (strcmp(o->status, "ok")) snprintf(status, sizeof status, "%s at t = %.2f s", o->status, o->sim);
         else strcpy(status, "ok");
-        fprintf(f, "| %d | %d | %lu | %.0e | %s | %s | %.3g | %.3g | %.1f / %.2f | %.1f / %.1f | %.2f | %s | %.3f / %.3f | "
-                   "%.3f | %.3f | %.3g | %.3g | %.3g | %s |\n",
-                o->dim, o->res, o->particles, o->E, o->run, o->step, o->dt, o->dt_over_fair, o->sweeps, o->coarse,
-                o->newton, o->cg, o->halved, stage, o->mm_mean, o->mm_min, o->runout_ratio, o->height_ratio, o->wall_ps,
-                o->cpu_ps, o->cpu_over_fair, status);
+        strcpy(ratio[0], "-"), strcpy(ratio[1], "-"), strcpy(ratio[2], "-"), strcpy(ratio[3], "-");
+        if (o->dt_over_fair > 0) snprintf(ratio[0], sizeof ratio[0], "%.3g", o->dt_over_fair);
+        if (scored) {
+            snprintf(ratio[1], sizeof ratio[1], "%.3f / %.3f", o->mm_mean, o->mm_min);
+            snprintf(ratio[2], sizeof ratio[2], "%.3f | %.3f", o->runout_ratio, o->height_ratio);
+        } else strcpy(ratio[2], "- | -");
+        if (o->cpu_over_fair > 0) snprintf(ratio[3], sizeof ratio[3], "%.3g", o->cpu_over_fair);
+        fprintf(f, "| %d | %d | %lu | %.0e | %s | %s | %.3g | %s | %.1f / %.2f | %.1f / %.1f | %.2f | %s | %s | "
+                   "%s | %.3g | %.3g | %s | %s |\n",
+                o->dim, o->res, o->particles, o->E, o->run, o->step, o->dt, ratio[0], o->sweeps, o->coarse,
+                o->newton, o->cg, o->halved, stage, ratio[1], ratio[2], o->wall_ps, o->cpu_ps, ratio[3], status);
     }
     free(rows);
     fclose(f);
@@ -1529,7 +1545,8 @@ static void usage(void) {
                     "       [--sweep-scene sand|snow] [--sweep-tol X] [--cell-relax X] [--energy-rise-tol X]\n"
                     "       [--materials]\n"
                     "       bench_mpm --scale [--scale-dim 2|3] [--scale-res2 N,N,..] [--scale-res3 N,N,..]\n"
-                    "       [--sweep-E E,E,..] [--duration S] [--max-run-seconds S] [--out DIR] [--scale-count]\n");
+                    "       [--sweep-E E,E,..] [--duration S] [--max-run-seconds S] [--out DIR] [--scale-count]\n"
+                    "       [--scale-implicit-only]\n");
 }
 
 /* a comma-separated list of up to 8 positive numbers; its length, 0 if malformed */
@@ -1604,6 +1621,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--materials")) materials = 1;
         else if (!strcmp(a, "--scale")) scale = 1;
         else if (!strcmp(a, "--scale-count")) scale = scale_count = 1;
+        else if (!strcmp(a, "--scale-implicit-only")) scale = cfg.scale_implicit_only = 1;
         else if (!v) { usage(); return 2; }
         else if (!strcmp(a, "--only")) only = !strcmp(v, "sand") ? 0 : !strcmp(v, "snow") ? 1 : 2, ++k;
         else if (!strcmp(a, "--dim")) dim_only = atoi(v), ++k;
