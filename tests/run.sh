@@ -27,9 +27,10 @@
 # -Werror, test_float the same in float, tests/cross_compiler.sh builds with gcc, clang and g++
 # (C++11) at -O2 with -Werror.
 #
-# How: two phases of jobs, each phase run TEST_JOBS at a time (xargs -P), the longest first:
-# phase 1 builds (and runs what needs nothing else), phase 2 runs test_main's tests, one process
-# each, and what needs the examples. Each job writes build/run/JOB.log ending in its own
+# How: one queue of jobs run TEST_JOBS at a time (xargs -P), the longest first: phase 1 builds
+# (and runs what needs nothing else), phase 2 runs test_main's tests, one process each, and what
+# needs the examples. Phase 2's jobs join the queue as soon as test_main is built (its list comes
+# from the binary), so they fill the slots phase 1's last jobs leave idle. Each job writes build/run/JOB.log ending in its own
 # "N passed, N failed"; the logs are printed after, in a fixed order (the same output as one
 # process, whatever the timing).
 cd "$(dirname "$0")/.." || exit 1
@@ -321,10 +322,11 @@ fi
 RUN_FILTER=$1
 export RUN_FILTER
 rm -f "$R"/*.log "$R"/t/*.log
-# run_phase LIST: run the jobs of file LIST, TEST_JOBS at a time, each into its log
-run_phase() {
+# run_queue: run the job names read from stdin, TEST_JOBS at a time, each into its log (xargs
+# starts each as a slot frees, reading the names as they come)
+run_queue() {
     # shellcheck disable=SC2016
-    xargs -P "${TEST_JOBS:-2}" -n 1 sh -c 'sh tests/run.sh --job "$1" >"build/run/$(echo "$1" | tr ":" "_").log" 2>&1' sh <"$1"
+    xargs -P "${TEST_JOBS:-2}" -n 1 sh -c 'sh tests/run.sh --job "$1" >"build/run/$(echo "$1" | tr ":" "_").log" 2>&1' sh
 }
 # phase 1, the longest first (CPU seconds on one core, measured: examples 15-30 each, a compile
 # check about 20, test_main's build about 45)
@@ -342,20 +344,28 @@ if [ -z "$SANITIZE" ] && [ -z "$1" ]; then
 else
     for j in build_main float render; do echo $j >>"$R/phase1"; done
 fi
-run_phase "$R/phase1"
-# phase 2: test_main's tests (the list in registration order; run the slowest first), the front door
-: >"$R/phase2"
-[ -z "$SANITIZE" ] && [ -z "$1" ] && echo front_door >>"$R/phase2"
-if [ -x "build/test_main$suffix" ]; then
-    "./build/test_main$suffix" --list ${1:+"$1"} >"$R/tests"
-    # the slowest first, then the rest in order (CPU seconds measured, the full sweeps)
-    for n in fem_explicit_implicit transfer_threads_identical implicit_failed_step_no_trace scene_stable_dt \
-        stress_hydrostatic couple_explicit_implicit couple_threads_identical; do
-        grep -qx "$n" "$R/tests" && echo "t:$n" >>"$R/phase2"
+# phase 2: test_main's tests (the list in registration order; run the slowest first), the front
+# door; written once build_main's job has ended (its log's last line is its summary; at most
+# an hour, should that job die without one)
+phase2() {
+    k=0
+    while ! tail -n 1 "$R/build_main.log" 2>/dev/null | grep -q '^[0-9]* passed, [0-9]* failed$' && [ $k -lt 3600 ]; do
+        sleep 1; k=$((k + 1))
     done
-    sed 's/^/t:/' "$R/tests" | grep -vxF -f "$R/phase2" >>"$R/phase2"
-fi
-run_phase "$R/phase2"
+    : >"$R/phase2"
+    [ -z "$SANITIZE" ] && [ -z "$1" ] && echo front_door >>"$R/phase2"
+    if [ -x "build/test_main$suffix" ]; then
+        "./build/test_main$suffix" --list ${1:+"$1"} >"$R/tests"
+        # the slowest first, then the rest in order (CPU seconds measured, the full sweeps)
+        for n in fem_explicit_implicit transfer_threads_identical implicit_failed_step_no_trace scene_stable_dt \
+            stress_hydrostatic couple_explicit_implicit couple_threads_identical; do
+            grep -qx "$n" "$R/tests" && echo "t:$n" >>"$R/phase2"
+        done
+        sed 's/^/t:/' "$R/tests" | grep -vxF -f "$R/phase2" >>"$R/phase2"
+    fi
+    cat "$R/phase2"
+}
+{ cat "$R/phase1"; phase2 "$1"; } | run_queue
 # the logs, in a fixed order: phase 1's, then the test_main tests in registration order, then
 # the front door
 print_log() { # JOB
