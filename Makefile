@@ -6,7 +6,7 @@ CFLAGS ?= -std=c99 -O2 -Wall -Wextra -pedantic
 CXXFLAGS ?= -std=c++17 -O2 -Wall -Wextra -pedantic
 LDLIBS = -lm
 
-.PHONY: all run run-material-point run-game-loop pictures test test-all test-sanitize bench-core bench-mpm bench-scale bench-fem bench-coupling bench-explicit bench-deposit bench-coarse bench-rom rom-data clean examples models model-report crosscheck web test-web
+.PHONY: all run run-material-point run-game-loop pictures test test-all test-sanitize bench-core bench-mpm bench-scale bench-fem bench-coupling bench-explicit bench-deposit bench-energies bench-coarse bench-rom rom-data clean examples models model-report crosscheck web test-web
 # torch comes from Debian (apt-get install -y python3-torch); only gen/ and the cross-check use it
 PY ?= /usr/bin/python3
 
@@ -165,6 +165,13 @@ build/bench_explicit: bench/bench_explicit.c plastinet.h plastinet_mpm.h
 build/bench_explicit_float: bench/bench_explicit.c plastinet.h plastinet_mpm.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) -fopenmp -DPN_REAL=float bench/bench_explicit.c $(LDLIBS) -o $@
+
+# The implicit energies in the sand column at aspect ratios 0.5-8 (bench/energies_in_scenes.sh):
+# PlasticityNet (1 and 2 passes), frozen-yield DP, lagged and the stress formulation at dt 1e-3 s
+# and 1/60 s against the explicit reference. bench/results/energies_in_scenes_2d.md;
+# BENCH_ENERGIES_FLAGS="--dim 3" for 3D (aspects 0.5-2 at res 24, 4 and 8 narrower at res 48).
+bench-energies: build/sand_column
+	sh bench/energies_in_scenes.sh $(BENCH_ENERGIES_FLAGS)
 
 # Is the explicit reference converged? (bench/bench_deposit.c): the 2D sand column's deposit at
 # res 64/128/256 and at step halvings, the settled pile, the snow press at step halvings.

@@ -1,4 +1,4 @@
-/* plastinet.h - v0.12 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.13 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -183,7 +183,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 12
+#define PN_VERSION_MINOR 13
 
 #ifdef __cplusplus
 extern "C" {
@@ -519,7 +519,11 @@ typedef enum pn_model_base {
     /* pn_von_mises_energy of the material with StVK-Hencky elasticity (same nu, yield and
        hardening), from the point's h: exact for StVK-Hencky, and within second order in the
        strain of any von Mises metal whose elasticity linearizes alike (Neo-Hookean) */
-    PN_MODEL_BASE_VON_MISES_HENCKY = 1
+    PN_MODEL_BASE_VON_MISES_HENCKY = 1,
+    /* pn_dp_energy of the material, its yield stress frozen at the point's F0 (pn_dp_prepare):
+       a Drucker-Prager sand's return-mapped stress up to the friction lag, kinks and apex
+       included, so the network fits only what a frozen yield misses */
+    PN_MODEL_BASE_DP_FROZEN = 2
 } pn_model_base;
 
 /* A trained model as a generated header in models/ describes it (see models/README.md). The
@@ -576,7 +580,7 @@ PN_API void pn_model_param_set(pn_material_desc *d, int kind, double value);
 /* PlasticityNet (Li et al. 2022): the energy
      Psi(F; F0, h) = N(F, F0, h) - (grad_F N(F0, F0, h) - T(F0)) : F + R(F, F0)
    (Eqs. 8 and 11) whose gradient at F = F0 is exactly T(F0) = tau(Z(F0)) F0^-T and approximates
-   T(F) nearby. A model with a base energy B (pn_model.base) adds B(F; h) to N, in the
+   T(F) nearby. A model with a base energy B (pn_model.base) adds B(F; F0, h) to N, in the
    correction too. N is a function of rotation invariants of F and F0 (exactly objective and
    isotropic), scaled by E / E_train. R is the regularizer, zero with zero gradient at F0:
      PN_PNET_REG_DISPLACEMENT  w mu/2 |F - F0|^2 (Eq. 11): it also resists rotating F, a
@@ -618,6 +622,7 @@ typedef struct pn_pnet_point {
     pn_real h;                       /* hardening state (the network sees it clamped to the
                                         model's range; T(F0) used it as given)            */
     pn_real C[9];                    /* linear correction (E-scaled grad N(F0) - T(F0))      */
+    pn_real tau_y;                   /* PN_MODEL_BASE_DP_FROZEN: the base's yield stress at F0 */
 } pn_pnet_point;
 
 /* Bind a model to a material. The material must match the model's training material (models,
@@ -3159,7 +3164,10 @@ static int pn__model_params_ok(const pn_model *mo) {
             if (mo->param[j].kind == q->kind) return 0;
     }
     if (mo->base != PN_MODEL_BASE_NONE &&
-        (mo->base != PN_MODEL_BASE_VON_MISES_HENCKY || mo->kind != PN_MODEL_ENERGY || mo->plastic != PN_PLASTIC_VON_MISES))
+        (mo->kind != PN_MODEL_ENERGY ||
+         !((mo->base == PN_MODEL_BASE_VON_MISES_HENCKY && mo->plastic == PN_PLASTIC_VON_MISES) ||
+           (mo->base == PN_MODEL_BASE_DP_FROZEN && mo->plastic == PN_PLASTIC_DRUCKER_PRAGER &&
+            mo->elastic == PN_ELASTIC_STVK_HENCKY))))
         return 0;
     return mo->output == PN_MODEL_OUTPUT_LINEAR || mo->output == PN_MODEL_OUTPUT_SOFTPLUS;
 }
@@ -3630,15 +3638,25 @@ static pn_result pn__pnet_network(const pn_pnet *net, const pn_pnet_point *pt, i
     return PN_OK;
 }
 
-/* Add the model's base energy B(F; h) (pn_model.base) at a point to e, g (level > 0) and H
-   (level > 1). */
+/* The point's frozen yield stress of a PN_MODEL_BASE_DP_FROZEN base (0 for the others) */
+static pn_result pn__pnet_base_prepare(const pn_pnet *net, pn_pnet_point *pt) {
+    pt->tau_y = 0;
+    if (net->energy->base != PN_MODEL_BASE_DP_FROZEN) return PN_OK;
+    return pn_dp_prepare(&net->base, net->energy->dim, pt->F0, pt->h, &pt->tau_y);
+}
+
+/* Add the model's base energy B(F; F0, h) (pn_model.base) at a point to e, g (level > 0) and
+   H (level > 1). */
 static pn_result pn__pnet_base(const pn_pnet *net, const pn_pnet_point *pt, const pn_real *F, int level, pn_real *e,
                                pn_real *g, pn_real *H) {
     int d = net->energy->dim, n = d * d, a;
     pn_real b, gb[9], Hb[81];
     pn_result r;
     if (net->energy->base == PN_MODEL_BASE_NONE) return PN_OK;
-    r = pn_von_mises_energy(&net->base, d, F, pt->h, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
+    if (net->energy->base == PN_MODEL_BASE_DP_FROZEN)
+        r = pn_dp_energy(&net->base, d, F, pt->h, pt->tau_y, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
+    else
+        r = pn_von_mises_energy(&net->base, d, F, pt->h, &b, level > 0 ? gb : NULL, level > 1 ? Hb : NULL, 0);
     if (r != PN_OK) return r;
     *e += b;
     for (a = 0; level > 0 && a < n; ++a) g[a] += gb[a];
@@ -3670,6 +3688,7 @@ PN__DEF pn_result pn_pnet_prepare(const pn_pnet *net, const pn_real *F0, pn_real
     for (i = 0; i < f.nf; ++i) p.x0[i] = f.x[i];
     memset(gN, 0, sizeof gN); /* gcc cannot always see that the network fills the d^2 the base adds to */
     r = pn__pnet_network(net, &p, d, &f, 1, &N, gN, NULL, NULL);
+    if (r == PN_OK) r = pn__pnet_base_prepare(net, &p);
     if (r == PN_OK) r = pn__pnet_base(net, &p, F0, 1, &N, gN, NULL);
     if (r != PN_OK) return r;
     for (i = 0; i < n; ++i) p.C[i] = gN[i] - T[i];
@@ -3872,6 +3891,7 @@ PN__DEF pn_result pn_pnet_prepare_lanes(const pn_pnet *net, int n, const pn_real
             for (k = 0; k < nd; ++k) io[i].gm[k] = (pn_real)gm[k * L + i];
             memset(gN, 0, sizeof gN);
             status[i] = pn__pnet_network(net, &q[i], d, &f[i], 1, &N, gN, NULL, &io[i]);
+            if (status[i] == PN_OK) status[i] = pn__pnet_base_prepare(net, &q[i]);
             if (status[i] == PN_OK) status[i] = pn__pnet_base(net, &q[i], q[i].F0, 1, &N, gN, NULL);
             for (k = 0; status[i] == PN_OK && k < dd; ++k) q[i].C[k] = gN[k] - T[i][k];
             if (status[i] == PN_OK && !pn__all_finite(dd, q[i].C)) status[i] = PN_ERROR_OVERFLOW;

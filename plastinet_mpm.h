@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.12 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.13 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -4589,8 +4589,11 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol,
    first pass comes from F^n, not F(v*): v* is free fall onto the held floor nodes, which
    compresses the bottom cells by g dt^2 / dx (0.17 at dt = 1/60 s, res 64), a pressure
    hundreds of times the hydrostatic one, and the column then stands as if elastic (runout
-   -32% at 1/60 s; from F^n -2% with 3 contact rounds). */
-static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real dt, int first,
+   -32% at 1/60 s; from F^n -2% with 3 contact rounds). For the same reason PlasticityNet's
+   first F0 is F(va) when va is given: the step's motion without gravity's kick (at dt 1e-3
+   s the kick's compression, 6e-4 at res 64, is twice the column's elastic strain, and the
+   network's error, relative to the pair's strain, then dwarfs the stress at the solution). */
+static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, const pn_real *va, pn_real dt, int first,
                                       pn_real *res) {
     int d = w->dim, dd = d * d;
     long l, nblk = (long)((w->n + PN_MLP_LANES - 1) / PN_MLP_LANES);
@@ -4611,12 +4614,12 @@ static pn_result pn__mpm_prepare_pass(pn_mpm_world *w, const pn_real *v, pn_real
             w->s.pstat[q] = 0;
             w->s.pscal[q] = 0;
             if (!w->active[q]) continue;
-            pn__mpm_push(w, q, v, dt, w->F + q * (size_t)dd, F0);
+            en = pn__mpm_energy_of(g);
+            pn__mpm_push(w, q, first && va && en == PN_ENERGY_PNET ? va : v, dt, w->F + q * (size_t)dd, F0);
             if (!first)
                 for (i = 0; i < dd; ++i) diff = PN__MAX(diff, PN__FABS(F0[i] - old[i]));
             w->s.pscal[q] = diff;
             memcpy(old, F0, sizeof(pn_real) * (size_t)dd);
-            en = pn__mpm_energy_of(g);
             if (en == PN_ENERGY_PNET && w->s.tok && w->s.tok[q]) { /* keep a point F0 has not left */
                 const pn_pnet_point *pt = &w->s.ppt[q];
                 int keep = w->s.reuse_tol > 0 && pt->h == w->h[q];
@@ -6234,17 +6237,27 @@ static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_impl
 /* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
 static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
                                        pn_mpm_stats *st) {
-    int d = w->dim, pass, has_sep, capped = 0; /* capped: the last linear solve stopped at cg_max */
+    int d = w->dim, pass, has_sep, capped = 0, any_pnet = 0, g, i; /* capped: the last linear solve stopped at cg_max */
     size_t k, nd;
     pn_result r;
     pn_real vscale = o->newton_tol * w->desc.dx_m / dt, last_res = 0;
     has_sep = pn__mpm_implicit_begin(w, dt, o, st);
+    for (g = 0; g < w->n_groups; ++g) any_pnet |= pn__mpm_energy_of(&w->groups[g]) == PN_ENERGY_PNET;
     nd = w->s.n_act * (size_t)d;
     for (pass = 0; pass < o->fixed_point_iters; ++pass) {
         pn_real fp_res = 0;
         int round;
         pn__mpm_mark(w, st, PN_MPM_STAGE_SETUP);
-        r = pn__mpm_prepare_pass(w, w->s.vsol, dt, pass == 0, &fp_res);
+        if (pass == 0 && any_pnet) { /* PlasticityNet's anchor: v* without gravity's kick */
+            for (k = 0; k < w->s.n_act; ++k) {
+                for (i = 0; i < d; ++i) {
+                    size_t c = k * (size_t)d + (size_t)i;
+                    w->s.vtry[c] = w->s.grid_m[k] > 0 ? w->s.vstar[c] - dt * w->desc.gravity[i] : 0;
+                }
+                pn__mpm_hold(w, k, w->s.vtry + k * (size_t)d);
+            }
+        }
+        r = pn__mpm_prepare_pass(w, w->s.vsol, pass == 0 && any_pnet ? w->s.vtry : NULL, dt, pass == 0, &fp_res);
         pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
         if (r != PN_OK) return r;
         if (pass > 0) st->fixed_point_residual = PN__MAX(st->fixed_point_residual, fp_res);
@@ -10982,7 +10995,7 @@ static pn_result pn__cpl_passes(pn_coupled *c, const pn_mpm_implicit_desc *o, in
         pn_real fp = 0;
         int round;
         pn__cpl_positions(c, 1, k->z, NULL);
-        r = pn__mpm_prepare_pass(w, k->z, dt, pass == 0, &fp);
+        r = pn__mpm_prepare_pass(w, k->z, NULL, dt, pass == 0, &fp);
         if (r == PN_OK) r = pn__fem_prepare(m, k->xf);
         if (r != PN_OK) return PN__FAIL(c, r, "coupled implicit step: preparing the energies at F0 failed (%s)",
                                             w->error[0] ? w->error : m->error);
@@ -11030,7 +11043,7 @@ static pn_result pn__cpl_start_forces(pn_coupled *c) {
     pn_result r;
     memset(k->zt, 0, sizeof(pn_real) * k->nz);
     pn__cpl_positions(c, 1, k->zt, NULL);
-    r = pn__mpm_prepare_pass(w, k->zt, k->dt, 1, &fp);
+    r = pn__mpm_prepare_pass(w, k->zt, NULL, k->dt, 1, &fp);
     if (r == PN_OK) r = pn__fem_prepare(m, k->xf);
     if (r == PN_OK) r = pn__cpl_find(c, 0);
     if (r != PN_OK) return r;

@@ -71,6 +71,38 @@ BENCH_UNUSED static void bench_box_sample(bench_rng *r, int d, double e_box, dou
     bench_compose(d, R1, e2, R2, Fa);
 }
 
+/* A pair as an implicit solve visits it (gen/train.py sample_solver): F0 = R1 diag(exp(e0)) R2
+   with e0 = tr/d + dev, |tr| uniform below r0 (r0 log-uniform over 4 decades below e_box), |dev|
+   / r0 log-uniform in [0.03, 100] (at most e_box): trial states far outside a yield surface;
+   F = R1 (I + D) diag(exp(e0)) R2, D Gaussian of norm |e0| 10^U[-3, 0] (at most de_box). */
+BENCH_UNUSED static void bench_solver_sample(bench_rng *r, int d, double e_box, double de_box, pn_real *F0,
+                                             pn_real *F) {
+    pn_real R1[9], R2[9], S[9] = {0}, T[9], D[9];
+    double e[3], v[3], m = 0, nv = 0, ne = 0, nd = 0, r0, tr, dev, size;
+    int i, j;
+    r0 = e_box * pow(10, -4 * bench_uniform(r));
+    tr = (2 * bench_uniform(r) - 1) * r0;
+    for (i = 0; i < d; ++i) m += (v[i] = bench_gauss(r)) / d;
+    for (i = 0; i < d; ++i) nv += (v[i] - m) * (v[i] - m);
+    dev = fmin(r0 * pow(10, -1.5 + 3.5 * bench_uniform(r)), e_box);
+    for (i = 0; i < d; ++i) {
+        e[i] = tr / d + (v[i] - m) / sqrt(nv) * dev;
+        ne += e[i] * e[i];
+    }
+    for (i = 0; i < d * d; ++i) {
+        D[i] = (pn_real)bench_gauss(r);
+        nd += D[i] * D[i];
+    }
+    size = fmin(sqrt(ne) * pow(10, -3 * bench_uniform(r)), de_box);
+    bench_rotation(r, d, R1);
+    bench_rotation(r, d, R2);
+    bench_compose(d, R1, e, R2, F0);
+    for (i = 0; i < d; ++i)
+        for (j = 0; j < d; ++j) S[i * d + j] = (pn_real)((i == j) + D[i * d + j] * size / sqrt(nd)) * (pn_real)exp(e[j]);
+    pn_mat_mul(d, R1, S, T);
+    pn_mat_mul(d, T, R2, F);
+}
+
 BENCH_UNUSED static double bench_seconds(void) { return (double)clock() / CLOCKS_PER_SEC; }
 
 #endif

@@ -130,14 +130,16 @@ static void usage(FILE *f, const pn_ex_cli *d) {
                "  --energy pnet|lagged|dp|elastic   what implicit steps minimize; selects the energy\n"
                "                             formulation unless --formulation is given [none: stress]\n"
                "  --aspect A                 column height / width [2]\n"
+               "  --width M  --domain M      column width and domain size (m) [0.12; 1 in 2D, 0.5 in 3D]\n"
                "  --reference  --no-reference   run the explicit reference after the run and compare\n"
                "                             [on; off when the run is explicit at the stable step]\n");
     pn_ex_cli_usage(f, d);
 }
 
-/* The command line into c, *aspect, *reference (-1: not given) and *energy_given. Returns -1
-   to go on, else the exit code (0 after --help, 2 for a bad flag, said on stderr). */
-static int flags(int argc, char **argv, pn_ex_cli *c, double *aspect, int *reference, int *energy_given) {
+/* The command line into c, col (aspect, width, domain; 0: the scene's), *reference (-1: not
+   given) and *energy_given. Returns -1 to go on, else the exit code (0 after --help, 2 for a
+   bad flag, said on stderr). */
+static int flags(int argc, char **argv, pn_ex_cli *c, double col[3], int *reference, int *energy_given) {
     const char *prog = "sand_column";
     pn_ex_cli d;
     int k, formulation_given = 0;
@@ -156,7 +158,9 @@ static int flags(int argc, char **argv, pn_ex_cli *c, double *aspect, int *refer
         formulation_given |= !strcmp(a, "--formulation");
         used = pn_ex_cli_flag(prog, c, a, v);
         if (used < 0) return 2;
-        if (used == 0 && !strcmp(a, "--aspect")) used = pn_ex_number(prog, a, v, aspect) ? 2 : -1;
+        if (used == 0 && !strcmp(a, "--aspect")) used = pn_ex_number(prog, a, v, &col[0]) ? 2 : -1;
+        if (used == 0 && !strcmp(a, "--width")) used = pn_ex_number(prog, a, v, &col[1]) ? 2 : -1;
+        if (used == 0 && !strcmp(a, "--domain")) used = pn_ex_number(prog, a, v, &col[2]) ? 2 : -1;
         if (used == 0 && !strcmp(a, "--reference")) used = 1, *reference = 1;
         if (used == 0 && !strcmp(a, "--no-reference")) used = 1, *reference = 0;
         if (used < 0) return 2;
@@ -177,7 +181,7 @@ int main(int argc, char **argv) {
     const char *prog = "sand_column";
     int energy, energy_given = 0, reference = -1, stress, stable, frame, ok = 1, exit_code;
     long k, per_frame;
-    double aspect = 2, dt, wall_s = 0, lo0[3], hi0[3], runout, height, ref_runout = 0, ref_height = 0, ref_wall = 0;
+    double col[3] = {2, 0, 0}, aspect, dt, wall_s = 0, lo0[3], hi0[3], runout, height, ref_runout = 0, ref_height = 0, ref_wall = 0;
     pn_ex_cli c;
     pn_ex_scene sc;
     pn_ex_view view;
@@ -185,17 +189,25 @@ int main(int argc, char **argv) {
     pn_ex_tally tally, ref_tally;
     pn_ex_iou_scores iou = {0, 0, 0};
     pn_mpm_world *w, *ref = NULL;
-    if ((exit_code = flags(argc, argv, &c, &aspect, &reference, &energy_given)) >= 0) return exit_code;
+    if ((exit_code = flags(argc, argv, &c, col, &reference, &energy_given)) >= 0) return exit_code;
+    aspect = col[0];
     if ((energy = pn_ex_choice(prog, "--energy", c.energy, energies, 4)) < 0) return 2;
     stress = c.implicit && c.solver.formulation == PN_MPM_FORMULATION_STRESS;
     if (reference < 0) reference = c.implicit || c.dt > 0;
     pn_ex_scene_default(&sc, PN_EX_SAND_COLUMN, c.dim == 3 ? 3 : 2);
     if (!pn_ex_cli_apply(prog, &c, &sc)) return 2;
-    if (!(aspect > 0)) {
-        fprintf(stderr, "%s: --aspect must be > 0\n", prog);
+    if (!(aspect > 0) || !(col[1] >= 0) || !(col[2] >= 0)) {
+        fprintf(stderr, "%s: --aspect, --width and --domain must be > 0\n", prog);
         return 2;
     }
     sc.aspect = aspect;
+    if (col[1] > 0) sc.width_m = col[1];
+    if (col[2] > 0) sc.domain_m = col[2];
+    if ((aspect + 0.5) * sc.width_m + 2 * PN_EX_WALL_CELLS * pn_ex_scene_dx(&sc) > sc.domain_m) {
+        fprintf(stderr, "%s: a column %g m tall does not fit a domain of %g m (--domain)\n", prog, aspect * sc.width_m,
+                sc.domain_m);
+        return 2;
+    }
     pn_ex_scene_view(&sc, &view);
     if (!pn_ex_output_open(prog, &c, &view, &out)) return 1;
     /* the stress formulation has no energy: bind one that needs no network */

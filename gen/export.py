@@ -115,6 +115,17 @@ def export(cfg, quality_path=None):
         banner += [
             "   Sampling: half with log singular values uniform in [-%g, %g]^%d, half with |e_hat|" % (cfg["e_box"], cfg["e_box"], d),
             "   log-uniform in [1e-3, 2] (near the yield surface) and tr e in [-%g, %g]; h uniform." % (cfg["e_box"], cfg["e_box"])]
+    if cfg.get("solver"):
+        banner += [
+            "   A fraction %g of every batch: pairs as an implicit solve visits them (train.sample_solver:" % cfg["solver"],
+            "   F0 a trial state, |dev e0| up to 100x |tr e0|; F within 1e-3..1 |e0| of it), their error",
+            "   relative to |F - F0|: the network's Hessian where the solver steps."]
+    if cfg.get("target") == "dp_frozen":
+        banner += [
+            "   Target: the frozen-yield Drucker-Prager energy's gradient, its yield at F0 (T(F0) at F0),",
+            "   in place of T(F)."]
+    if cfg.get("loss") == "stress":
+        banner += ["   Loss relative to |T(F)|^2 + 1e-2 of the scale's mean |T|^2, not the strain scale."]
     if cfg.get("params"):
         banner += [
             "   Conditioned: the network also takes %s," % ", ".join(
@@ -122,6 +133,10 @@ def export(cfg, quality_path=None):
             "   drawn uniformly per sample; pn_pnet_init accepts any material inside these ranges.",
             "   Softplus output: N >= 0, so Psi >= -C:F0 - |C|^2 / (2 w mu) with the regularizer on"
             if cfg.get("output") == "softplus" else "   Linear output."]
+    if cfg.get("base") == "dp_frozen":
+        banner += [
+            "   On a base: N fits T - grad B, B the frozen-yield Drucker-Prager energy with its yield",
+            "   stress taken at F0 (pn_dp_prepare, pn_dp_energy); plastinet.h adds B back (pn_model.base)."]
     if cfg.get("base") == "von_mises_hencky":
         banner += [
             "   On a base: N fits T - grad B, B the exact StVK-Hencky von Mises potential at the same",
@@ -182,7 +197,8 @@ def export(cfg, quality_path=None):
         "{" + ", ".join(["{%s, %s, %s}" % (pt.PARAMS[p[0]][1], g17(p[1]), g17(p[2])) for p in cfg.get("params", ())] +
                         ["{0, 0, 0}"] * (4 - len(cfg.get("params", ())))) + "}",
         "PN_MODEL_OUTPUT_SOFTPLUS" if cfg.get("output") == "softplus" else "PN_MODEL_OUTPUT_LINEAR",
-        "PN_MODEL_BASE_VON_MISES_HENCKY" if cfg.get("base") == "von_mises_hencky" else "PN_MODEL_BASE_NONE",
+        {"von_mises_hencky": "PN_MODEL_BASE_VON_MISES_HENCKY", "dp_frozen": "PN_MODEL_BASE_DP_FROZEN"}.get(
+            cfg.get("base"), "PN_MODEL_BASE_NONE"),
     ]
     out.append("PN__DEF const pn_model *pn_model_%s(void) {\n" % name)
     out.append("    static const pn_model m = {\n        " + ",\n        ".join(fields) + "};\n")

@@ -35,18 +35,27 @@ MODELS = {}
 
 def _add(name, material, dim, kind="energy", hidden=(32, 32, 32), iters=20000, batch=2048,
          lr=2e-3, activation="silu", seed=1, return_map=None, encoding="raw", e_box=1.0,
-         params=(), output="linear", ship=True, base=None):
+         params=(), output="linear", ship=True, base=None, solver=0.0, target=None, loss=None):
     m = MATERIALS[material]
     MODELS[name] = dict(name=name, material=material, mat=m["mat"], dim=dim, kind=kind,
                         hidden=tuple(hidden), iters=iters, batch=batch, lr=lr,
                         activation=activation, seed=seed, h=m["h"], de=m["de"], e_box=e_box,
                         return_map=return_map, encoding=encoding, params=tuple(params), output=output,
-                        ship=ship, base=base)
+                        ship=ship, base=base, solver=solver, target=target, loss=loss)
 
 
 _add("sand_2d", "sand", 2, encoding="scaled")
 _add("sand_2d_small", "sand", 2, hidden=(16, 16))
 _add("sand_3d", "sand", 3, encoding="scaled")
+# Experiments on the sand column (docs/notebook.md, "PlasticityNet sand in the column"), not
+# shipped: solver pairs (train.sample_solver) in half of each batch; a network on the frozen-yield
+# DP base; trained on the frozen-yield energy's gradient (target="dp_frozen") instead of T; the
+# same with the loss relative to the stresses (loss="stress").
+_add("sand_2d_solver", "sand", 2, encoding="scaled", solver=0.5, ship=False)
+_add("sand_2d_dp", "sand", 2, encoding="scaled", solver=0.5, base="dp_frozen", ship=False)
+_add("sand_2d_fy", "sand", 2, encoding="scaled", solver=0.5, target="dp_frozen", ship=False)
+_add("sand_3d_fy", "sand", 3, encoding="scaled", solver=0.5, target="dp_frozen", ship=False)
+_add("sand_2d_fys", "sand", 2, encoding="scaled", solver=0.5, target="dp_frozen", loss="stress", ship=False)
 _add("snow_2d", "snow", 2)
 _add("snow_3d", "snow", 3)
 _add("metal_2d", "metal", 2, encoding="scaled", e_box=0.1)

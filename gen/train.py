@@ -65,6 +65,52 @@ def sample_box(cfg, n, gen):
     return torch.exp(e), torch.exp(e + de), h, A, B, sample_params(cfg, n, gen)
 
 
+def sample_solver(cfg, n, gen):
+    """Pairs as an implicit solve visits them (measured on the sand column, docs/notebook.md):
+    F0 is a step's trial deformation, often far outside the yield surface (a flowing material's
+    deviatoric trial strain is up to 100x its volumetric one), and the solve moves F only a
+    little from it (|F - F0| / |e0| from 1e-3 to 1, median about 0.05). So e0 = tr/d + dev with
+    |tr| uniform below r0 (r0 over the decades of the box) and |dev| / r0 log-uniform in
+    [0.03, 100] (capped at e_box), and F = (I + D) diag(exp(e0)) with D a Gaussian matrix of norm
+    |e0| 10^U[-3, 0] (capped at de). Returns s0, s, the relative rotations A, B (F0 = diag(s0),
+    F = A^T diag(s) B^T) and |D|^2, the scale the loss is taken relative to: near F0 the error
+    is the Hessian's, (H_N - dT/dF) D, and this measures it whatever |D| is."""
+    d = cfg["dim"]
+    r0 = cfg["e_box"] * 10.0 ** (-SCALE_DECADES * torch.rand(n, 1, dtype=DT, generator=gen))
+    tr = (torch.rand(n, 1, dtype=DT, generator=gen) * 2 - 1) * r0
+    v = torch.randn(n, d, dtype=DT, generator=gen)
+    v = v - v.mean(-1, keepdim=True)
+    v = v / torch.linalg.vector_norm(v, dim=-1, keepdim=True)
+    dev = torch.clamp(r0 * 10.0 ** (-1.5 + 3.5 * torch.rand(n, 1, dtype=DT, generator=gen)), max=cfg["e_box"])
+    e0 = tr / d + v * dev
+    D = torch.randn(n, d, d, dtype=DT, generator=gen)
+    size = torch.linalg.vector_norm(e0, dim=-1, keepdim=True) * 10.0 ** (-3.0 * torch.rand(n, 1, dtype=DT, generator=gen))
+    size = torch.clamp(size, max=cfg["de"])
+    D = D / torch.linalg.matrix_norm(D).reshape(n, 1, 1) * size.unsqueeze(-1)
+    s0 = torch.exp(e0)
+    F = (torch.eye(d, dtype=DT) + D) * s0.unsqueeze(-2)
+    U, s, V = pt.svd_rot(F)
+    return s0, s, U.transpose(-1, -2), V, (size * size)[:, 0]
+
+
+def sample_pairs(cfg, n, gen):
+    """A training batch: the box (sample_box) and, for a model with solver = f > 0, a fraction f
+    of solver pairs (sample_solver) in place of the first box samples, drawn after everything
+    else (the other models' batches do not change). W: per sample, what the squared error is
+    taken relative to (None: the box's own measure)."""
+    s0, s, h, A, B, prm = sample_box(cfg, n, gen)
+    f = cfg.get("solver", 0.0)
+    if not f:
+        return s0, s, h, A, B, prm, None
+    k = int(round(n * f))
+    s0k, sk, Ak, Bk, Wk = sample_solver(cfg, k, gen)
+    s0, s, A, B = s0.clone(), s.clone(), A.clone(), B.clone()
+    s0[:k], s[:k], A[:k], B[:k] = s0k, sk, Ak, Bk
+    W = torch.full((n,), float("nan"), dtype=DT)
+    W[:k] = Wk
+    return s0, s, h, A, B, prm, W
+
+
 def sample_params(cfg, n, gen):
     """A conditioned model's material parameters, uniform over their ranges ([n, P]; [n, 0]
     for a single material). Drawn after everything else, so a single-material model's
@@ -201,8 +247,8 @@ def energy_stats(cfg, mat, learned):
     mat = material_of(cfg, prm)
     x, x0 = pt.features(s), pt.features(s0)
     lo, hi = cfg["h"]
-    t = pt.target_principal(mat, s, h, learned)
-    r = t - base_principal(cfg, mat, s, h)   # what the network fits (t without a base)
+    t = target_of(cfg, mat, s, h, learned, s0)
+    r = t - base_principal(cfg, mat, s, h, s0)   # what the network fits (t without a base)
     ps = cfg.get("params", ())   # parameters to [-1, 1]
     cond = {} if not ps else dict(
         mp=torch.tensor([(p[1] + p[2]) / 2 for p in ps], dtype=DT),
@@ -223,11 +269,15 @@ def energy_stats(cfg, mat, learned):
                 t_rms=torch.sqrt((t * t).sum(-1).mean()).reshape(1), **cond)
 
 
-def base_principal(cfg, mat, s, h):
-    """The principal gradient of a model's analytic base energy B(F; h) (0 without one):
+def base_principal(cfg, mat, s, h, s0):
+    """The principal gradient of a model's analytic base energy B(F; F0, h) (0 without one):
     "von_mises_hencky" is the exact incremental potential of the StVK-Hencky von Mises return
-    (plastinet.h pn_von_mises_energy) at the material's nu, yield and hardening. Its gradient
-    is coaxial with F, as the network's is, so the residual T - grad B stays learnable."""
+    (plastinet.h pn_von_mises_energy) at the material's nu, yield and hardening; "dp_frozen"
+    the frozen-yield Drucker-Prager energy (pn_dp_energy) with its yield stress taken at F0
+    (pn_dp_prepare), whose gradient at F0 is T(F0). Either gradient is coaxial with F, as the
+    network's is, so the residual T - grad B stays learnable."""
+    if cfg.get("base") == "dp_frozen":
+        return dp_frozen_principal(mat, s, s0)
     if cfg.get("base") != "von_mises_hencky":
         return torch.zeros_like(s)
     import copy
@@ -236,15 +286,47 @@ def base_principal(cfg, mat, s, h):
     return pt.target_principal(mh, s, h)
 
 
-def energy_error(model, mat, learned, s0, s, h, A, B, prm, create_graph=False):
+def dp_frozen_principal(mat, s, s0):
+    """grad of plastinet.h pn_dp_energy at s with tau_y from s0 (pn_dp_prepare), principal:
+    Psi = kappa/2 min(tr e, 0)^2 + d kappa c tr e + psi_dev(|e_hat|; tau_y) in e = log s - c,
+    psi_dev = mu r^2 up to 2 mu r = tau_y and tau_y r - tau_y^2 / (4 mu) beyond."""
+    d = s.shape[-1]
+    c = mat.cohesion_strain
+    kappa = mat.kappa(d)
+    tr0 = (torch.log(s0) - c).sum(-1, keepdim=True)
+    tau_y = torch.clamp(-d * kappa * pt.dp_alpha(mat.sin_phi, d) * tr0, min=0)
+    e = torch.log(s) - c
+    tr = e.sum(-1, keepdim=True)
+    ehat = e - tr / d
+    r = torch.linalg.vector_norm(ehat, dim=-1, keepdim=True)
+    rsafe = torch.where(r > 0, r, torch.ones_like(r))
+    dev = torch.where(2 * mat.mu * r <= tau_y, 2 * mat.mu * ehat, tau_y * ehat / rsafe)
+    ge = kappa * (torch.clamp(tr, max=0) + d * c) + dev
+    return ge / s
+
+
+def target_of(cfg, mat, s, h, learned, s0):
+    """What grad Psi(F; F0) is trained to: T(F) (PlasticityNet Eq. 9), or with target =
+    "dp_frozen" the gradient of the frozen-yield Drucker-Prager energy with its yield at F0,
+    which equals T(F0) at F0 and drops the return's non-associative part (the yield's
+    dependence on tr e within the step): the best potential of T has that part's symmetric
+    half, a coupling of the free plastic shear to the volume that turns the energy's minimum
+    into a saddle (docs/notebook.md)."""
+    if cfg.get("target") == "dp_frozen":
+        return dp_frozen_principal(mat, s, s0)
+    return pt.target_principal(mat, s, h, learned)
+
+
+def energy_error(model, mat, learned, s0, s, h, A, B, prm, create_graph=False, W=None):
     """|grad Psi(F, F0) - T(F)|^2 per sample, in the principal frames (see README); mat is the
     batch's material (material_of), prm its parameter inputs. With a base energy the network
-    fits T - grad B (both coaxial with F, so the same principal-frame algebra holds)."""
+    fits T - grad B (both coaxial with F, so the same principal-frame algebra holds). W (from
+    sample_pairs): where finite, the error is taken relative to it (solver pairs)."""
     cfg = model.cfg
     with torch.no_grad():
-        t_full = pt.target_principal(mat, s, h, learned)
-        t = t_full - base_principal(cfg, mat, s, h)
-        t0 = pt.target_principal(mat, s0, h, learned) - base_principal(cfg, mat, s0, h)
+        t_full = target_of(cfg, mat, s, h, learned, s0)
+        t = t_full - base_principal(cfg, mat, s, h, s0)
+        t0 = pt.target_principal(mat, s0, h, learned) - base_principal(cfg, mat, s0, h, s0)
     diff = model.grad_s(s, s0, h, prm, create_graph) - t
     c = model.grad_s(s0, s0, h, prm, create_graph) - t0
     cross = torch.einsum("bi,bij,bj,bji->b", diff, A, c, B)
@@ -252,6 +334,16 @@ def energy_error(model, mat, learned, s0, s, h, A, B, prm, create_graph=False):
     if cfg.get("encoding") == "scaled":   # relative to the strain scale of the pair
         _, S = pt.scaled_raw(pt.features(s), pt.features(s0))
         err2, t_full = err2 / S[:, 0], t_full / torch.sqrt(S)
+    if cfg.get("loss") == "stress":   # relative to the stresses themselves, floored at 10% of the scale's
+        with torch.no_grad():
+            t2 = (t_full * t_full).sum(-1) + 1e-2 * float(model.t_rms) ** 2
+        return err2 / t2, t_full
+    if W is not None:   # solver pairs: relative to |F - F0|^2 instead
+        solver = torch.isfinite(W)
+        if cfg.get("encoding") == "scaled":
+            err2 = torch.where(solver, err2 * S[:, 0] / torch.where(solver, W, torch.ones_like(W)), err2)
+        else:
+            err2 = torch.where(solver, err2 / torch.where(solver, W, torch.ones_like(W)), err2)
     return err2, t_full
 
 
@@ -314,8 +406,8 @@ def batch_loss(cfg, model, learned, it, norm):
     if cfg["kind"] == "return_map":
         s, h = sample_return(cfg, cfg["batch"], gen)
         return return_loss(model, cfg["mat"], s, h)
-    s0, s, h, A, B, prm = sample_box(cfg, cfg["batch"], gen)
-    err2, _ = energy_error(model, material_of(cfg, prm), learned, s0, s, h, A, B, prm, create_graph=True)
+    s0, s, h, A, B, prm, W = sample_pairs(cfg, cfg["batch"], gen)
+    err2, _ = energy_error(model, material_of(cfg, prm), learned, s0, s, h, A, B, prm, create_graph=True, W=W)
     return err2.mean() / norm
 
 

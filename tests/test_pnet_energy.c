@@ -493,20 +493,22 @@ PN_TEST(pnet_conditioned) {
 }
 
 /* ================================================================================================
-   A base energy (pn_model.base = PN_MODEL_BASE_VON_MISES_HENCKY): a Neo-Hookean von Mises
-   model whose network is a correction to the exact StVK-Hencky von Mises potential B. Against
-   the same network without the base, Psi changes by exactly B(F; h) - grad B(F0; h) : F
-   (pn_von_mises_energy of an independently described StVK-Hencky material), P by
-   grad B(F) - grad B(F0) and dP/dF by the Hessian of B (B is only C1 across the yield surface,
-   so finite differences of the sum are not a fair check there); exact at F0; the float lanes
-   against the double path;
-   a base on a material that is not von Mises is refused.
+   A base energy (pn_model.base): a network that is a correction to an analytic energy B.
+   PN_MODEL_BASE_VON_MISES_HENCKY: a Neo-Hookean von Mises model on the exact StVK-Hencky von
+   Mises potential; PN_MODEL_BASE_DP_FROZEN: a Drucker-Prager sand on the frozen-yield energy,
+   its yield stress taken at F0. Against the same network without the base, Psi changes by
+   exactly B(F; F0, h) - grad B(F0; F0, h) : F (pn_von_mises_energy of an independently described
+   StVK-Hencky material; pn_dp_energy with pn_dp_prepare's yield at F0), P by grad B(F) -
+   grad B(F0) and dP/dF by the Hessian of B (B is only C1 across the yield surface, so finite
+   differences of the sum are not a fair check there); exact at F0; the float lanes against the
+   double path; a base on a material it does not describe is refused.
    ================================================================================================ */
 
 PN_TEST(pnet_base_energy) {
     double worst_diff = 0, worst_exact = 0, worst_g = 0, worst_h = 0, worst_lanes[3] = {0, 0, 0}, prep = 0, moved = 0;
     long fails = 0, samples = 0, refused = 0;
-    int dim, scaled, i, k;
+    int dim, scaled, dp, i, k;
+    for (dp = 0; dp <= 1; ++dp)
     for (dim = 2; dim <= 3; ++dim)
         for (scaled = 0; scaled <= 1; ++scaled) {
             const int n2 = dim * dim, n4 = n2 * n2;
@@ -518,8 +520,8 @@ PN_TEST(pnet_base_energy) {
             pn_pnet_desc pd;
             pn_test_rng rng;
             char why[256] = "";
-            rng.s = 4400 + 10 * (unsigned long long)dim + (unsigned long long)scaled;
-            t_pn_desc(&md, T_PN_METAL, E); /* Neo-Hookean + von Mises */
+            rng.s = 4400 + 100 * (unsigned long long)dp + 10 * (unsigned long long)dim + (unsigned long long)scaled;
+            t_pn_desc(&md, dp ? T_PN_SAND : T_PN_METAL, E); /* StVK-Hencky + DP, or Neo-Hookean + von Mises */
             hd = md;
             hd.elastic = PN_ELASTIC_STVK_HENCKY;
             if (pn_material_init(&m, &md, NULL, 0) != PN_OK || pn_material_init(&mh, &hd, NULL, 0) != PN_OK) {
@@ -530,7 +532,7 @@ PN_TEST(pnet_base_energy) {
             tm.model.e_box = 0.05;
             tm.model.out_scale = 1e-3; /* a correction: small against B */
             plain = tm; /* the same network: its weights stay in tm.buf */
-            tm.model.base = PN_MODEL_BASE_VON_MISES_HENCKY;
+            tm.model.base = dp ? PN_MODEL_BASE_DP_FROZEN : PN_MODEL_BASE_VON_MISES_HENCKY;
             memset(&pd, 0, sizeof pd);
             pd.energy = &tm.model;
             pd.regularizer = -1;
@@ -548,14 +550,17 @@ PN_TEST(pnet_base_energy) {
                 const double r = i % 4 == 3 ? 1e-3 : 0.03;
                 double R[4][9], s0[3], sv[3], F0[9], F[9], h = pn_test_rng_range(&rng, 0, 1), T0[9];
                 double psi, psi0, P[9], H[81], P0[9], H0[9 * 9], B, gB[9], HB[81], B0, gB0[9], ref, cf = 0, dP[9], dH[81];
+                pn_real ty = 0;
                 pn_pnet_point pt, pt0;
                 t_pn_near_pair(&rng, dim, r, R, s0, sv, F0, F);
+                if (dp) h = 0;
                 ++samples;
                 if (pn_pnet_prepare(&net, F0, h, &pt, NULL, T0) != PN_OK || pn_pnet_prepare(&net0, F0, h, &pt0, NULL, NULL) != PN_OK ||
                     pn_pnet_energy(&net, &pt, F, &psi, P, H, 0) != PN_OK ||
                     pn_pnet_energy(&net0, &pt0, F, &psi0, P0, H0, 0) != PN_OK ||
-                    pn_von_mises_energy(&mh, dim, F, h, &B, gB, HB, 0) != PN_OK ||
-                    pn_von_mises_energy(&mh, dim, F0, h, &B0, gB0, NULL, 0) != PN_OK) {
+                    (dp && pn_dp_prepare(&mh, dim, F0, h, &ty) != PN_OK) ||
+                    (dp ? pn_dp_energy(&mh, dim, F, h, ty, &B, gB, HB, 0) : pn_von_mises_energy(&mh, dim, F, h, &B, gB, HB, 0)) != PN_OK ||
+                    (dp ? pn_dp_energy(&mh, dim, F0, h, ty, &B0, gB0, NULL, 0) : pn_von_mises_energy(&mh, dim, F0, h, &B0, gB0, NULL, 0)) != PN_OK) {
                     ++fails;
                     continue;
                 }
@@ -565,29 +570,35 @@ PN_TEST(pnet_base_energy) {
                 moved = fmax(moved, fabs(psi - psi0) / (fabs(psi0) + 1e-300));
                 for (k = 0; k < n2; ++k) dP[k] = P[k] - P0[k], gB[k] -= gB0[k];
                 for (k = 0; k < n4; ++k) dH[k] = H[k] - H0[k];
-                t_pn_worst(&worst_g, t_pn_rel(n2, dP, gB, t_pn_maxabs(n2, gB0)));
-                t_pn_worst(&worst_h, t_pn_rel(n4, dH, HB, 0));
+                /* floors at 1e-6 E: a sand point in tension has B = 0 about it */
+                t_pn_worst(&worst_g, t_pn_rel(n2, dP, gB, fmax(t_pn_maxabs(n2, gB0), 1e-6 * E)));
+                t_pn_worst(&worst_h, t_pn_rel(n4, dH, HB, 1e-6 * E));
                 if (pn_pnet_energy(&net, &pt, F0, NULL, P, NULL, 0) != PN_OK) ++fails;
                 t_pn_worst(&worst_exact, t_pn_rel(n2, P, T0, t_pn_maxabs(n2, T0) + t_pn_maxabs(n2, pt.C)));
             }
             for (i = 0; i < 4; ++i) t_lanes_block(pn__t, &net, dim, PN_MLP_LANES, &rng, i % 2 ? 1e-3 : 0.03, -1, worst_lanes);
             for (i = 1; i <= PN_MLP_LANES; ++i) prep = fmax(prep, t_prepare_lanes(pn__t, &net, dim, i, -1, &rng));
-            { /* a base needs a von Mises model; an unknown base is malformed */
+            { /* each base needs its own plasticity (DP: and StVK-Hencky); an unknown base is malformed */
                 t_pn_model bad = tm;
-                bad.model.plastic = PN_PLASTIC_DRUCKER_PRAGER;
+                bad.model.plastic = dp ? PN_PLASTIC_VON_MISES : PN_PLASTIC_DRUCKER_PRAGER;
                 refused += pn_model_check(&bad.model, 0, why, sizeof why) == PN_ERROR_FORMAT && why[0] && strstr(why, "base");
-                bad.model.plastic = PN_PLASTIC_VON_MISES;
+                bad.model.plastic = tm.model.plastic;
                 bad.model.base = 7;
                 refused += pn_model_check(&bad.model, 0, why, sizeof why) == PN_ERROR_FORMAT;
+                if (dp) {
+                    bad.model.base = PN_MODEL_BASE_DP_FROZEN;
+                    bad.model.elastic = PN_ELASTIC_NEO_HOOKEAN;
+                    refused += pn_model_check(&bad.model, 0, why, sizeof why) == PN_ERROR_FORMAT;
+                }
             }
         }
     PN_REPORT("%ld samples (2D, 3D; raw, scaled): Psi - Psi without the base vs B(F) - grad B(F0):F %.2e (the base "
               "moves Psi by up to %.2f); exact at F0 %.2e; P %.2e, dP/dF %.2e; lanes psi %.1e, P %.1e, "
-              "dP/dF %.1e, prepare %.1e; %ld of 8 malformed bases refused; failed %ld",
+              "dP/dF %.1e, prepare %.1e; %ld of 20 malformed bases refused; failed %ld (von Mises and DP bases)",
               samples, worst_diff, moved, worst_exact, worst_g, worst_h, worst_lanes[0], worst_lanes[1], worst_lanes[2],
               prep, refused, fails);
     PN_CHECK(fails == 0);
-    PN_CHECK(refused == 8);
+    PN_CHECK(refused == 20);
     PN_CHECK(moved > 1e-2);
     PN_CHECK_LE(worst_diff, 1e-9);
     PN_CHECK_LE(worst_exact, T_PN_EXACT_TOL);
