@@ -18,9 +18,9 @@
    Why these: measured at res 64 on one core, the stress formulation's deposit is within 2%
    of the reference's in runout and height (runout 0.358 m against 0.353 m, height 0.086 m
    against 0.086 m) in about a second of steps. PlasticityNet at dt 1e-3 s stops short
-   (runout 0.139 m, 39% of the reference's), at 2.5e-4 s is still 22% short after 14 s of
-   steps, and comes within 6% only at 1e-4 s, below the explicit stable step (1.5e-4 s),
-   after 21 s: `--energy pnet` runs it (the energy formulation with the embedded model;
+   (runout 0.205 m, 58% of the reference's; 0.139 m before its first pass left out
+   gravity's kick), and at 2.5e-4 s was still 22% short after 14 s of steps; it came within
+   6% only at 1e-4 s, below the explicit stable step (1.5e-4 s), after 21 s: `--energy pnet` runs it (the energy formulation with the embedded model;
    PlasticityNet's regularizer w = 1, --regularizer -1: off). Particles on the lattice
    (--lattice) collapse in vertical strands with every integrator, the reference's included
    (seen at res 64); jittered, none of them does. The old demo: --energy pnet --lattice.
@@ -123,7 +123,7 @@ static void usage(FILE *f, const pn_ex_cli *d) {
                "  defaults: implicit at 1e-3 s in the stress formulation (Drucker-Prager as a return mapping\n"
                "  of the stress: no energy), jittered particles, res 64; its deposit is within 2%% of the\n"
                "  explicit reference's. PlasticityNet (the energy formulation with the embedded model) is\n"
-               "  one flag away, --energy pnet, but at 1e-3 s its deposit stops short (runout 0.14 m against\n"
+               "  one flag away, --energy pnet, but at 1e-3 s its deposit stops short (runout 0.20 m against\n"
                "  the reference's 0.35 m); it comes within 10%% only at --dt 1e-4, below the explicit stable\n"
                "  step, more than 20 times slower. Particles on the lattice (--lattice) collapse in vertical strands.\n"
                "  The old demo: --energy pnet --lattice.\n"
