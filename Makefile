@@ -31,7 +31,7 @@ run: build/sand_column
 EXAMPLE_DEPS = examples/common/pn_example.h examples/common/pn_render.h examples/common/pn_png.h plastinet.h plastinet_mpm.h models/pn_model_sand_2d.h \
     models/pn_model_sand_3d.h models/pn_model_snow_2d.h models/pn_model_snow_3d.h
 
-build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS)
+build/sand_column: examples/sand_column.c $(EXAMPLE_DEPS) models/pn_models.h
 	@mkdir -p build
 	$(CC) $(CFLAGS) examples/sand_column.c $(LDLIBS) -o $@
 

@@ -34,12 +34,13 @@
 #define PLASTINET_IMPLEMENTATION
 #define PN_NO_FEM /* particles only: FEM and coupling left out of the build */
 #include "common/pn_example.h" /* plastinet.h, plastinet_mpm.h, the sand models, the plumbing */
+#include "../models/pn_models.h" /* every model in models/, for --model */
 
 /* The column's world, with the library's calls: s holds the numbers the flags set (res, E,
    walls, jitter, aspect; pn_ex_scene_default gives the rest), energy what implicit steps
    minimize. NULL after a failure, said on stderr. Made twice: the run and its reference. */
 static pn_mpm_world *column_world(const char *prog, const pn_ex_scene *s, pn_energy energy) {
-    const pn_model *model = s->dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
+    const pn_model *model = s->model ? s->model : s->dim == 2 ? pn_model_sand_2d() : pn_model_sand_3d();
     double dx = s->domain_m / s->res, sp = dx / 2, floor_m = PN_EX_WALL_CELLS * dx;
     int across = (int)(s->width_m / sp), up = (int)(s->aspect * s->width_m / sp), d = s->dim, i, g;
     double left = floor((s->domain_m / 2 - across * sp / 2) / sp + 0.5) * sp; /* on a lattice line */
@@ -131,6 +132,7 @@ static void usage(FILE *f, const pn_ex_cli *d) {
                "                             formulation unless --formulation is given [none: stress]\n"
                "  --aspect A                 column height / width [2]\n"
                "  --width M  --domain M      column width and domain size (m) [0.12; 1 in 2D, 0.5 in 3D]\n"
+               "  --model NAME               the PlasticityNet sand model, any in models/ [sand_2d, sand_3d]\n"
                "  --reference  --no-reference   run the explicit reference after the run and compare\n"
                "                             [on; off when the run is explicit at the stable step]\n");
     pn_ex_cli_usage(f, d);
@@ -139,7 +141,8 @@ static void usage(FILE *f, const pn_ex_cli *d) {
 /* The command line into c, col (aspect, width, domain; 0: the scene's), *reference (-1: not
    given) and *energy_given. Returns -1 to go on, else the exit code (0 after --help, 2 for a
    bad flag, said on stderr). */
-static int flags(int argc, char **argv, pn_ex_cli *c, double col[3], int *reference, int *energy_given) {
+static int flags(int argc, char **argv, pn_ex_cli *c, double col[3], const char **model, int *reference,
+                 int *energy_given) {
     const char *prog = "sand_column";
     pn_ex_cli d;
     int k, formulation_given = 0;
@@ -161,6 +164,13 @@ static int flags(int argc, char **argv, pn_ex_cli *c, double col[3], int *refere
         if (used == 0 && !strcmp(a, "--aspect")) used = pn_ex_number(prog, a, v, &col[0]) ? 2 : -1;
         if (used == 0 && !strcmp(a, "--width")) used = pn_ex_number(prog, a, v, &col[1]) ? 2 : -1;
         if (used == 0 && !strcmp(a, "--domain")) used = pn_ex_number(prog, a, v, &col[2]) ? 2 : -1;
+        if (used == 0 && !strcmp(a, "--model")) {
+            if (!v) {
+                fprintf(stderr, "%s: --model needs a model's name\n", prog);
+                return 2;
+            }
+            *model = v, used = 2;
+        }
         if (used == 0 && !strcmp(a, "--reference")) used = 1, *reference = 1;
         if (used == 0 && !strcmp(a, "--no-reference")) used = 1, *reference = 0;
         if (used < 0) return 2;
@@ -181,6 +191,7 @@ int main(int argc, char **argv) {
     const char *prog = "sand_column";
     int energy, energy_given = 0, reference = -1, stress, stable, frame, ok = 1, exit_code;
     long k, per_frame;
+    const char *model_name = NULL;
     double col[3] = {2, 0, 0}, aspect, dt, wall_s = 0, lo0[3], hi0[3], runout, height, ref_runout = 0, ref_height = 0, ref_wall = 0;
     pn_ex_cli c;
     pn_ex_scene sc;
@@ -189,7 +200,7 @@ int main(int argc, char **argv) {
     pn_ex_tally tally, ref_tally;
     pn_ex_iou_scores iou = {0, 0, 0};
     pn_mpm_world *w, *ref = NULL;
-    if ((exit_code = flags(argc, argv, &c, col, &reference, &energy_given)) >= 0) return exit_code;
+    if ((exit_code = flags(argc, argv, &c, col, &model_name, &reference, &energy_given)) >= 0) return exit_code;
     aspect = col[0];
     if ((energy = pn_ex_choice(prog, "--energy", c.energy, energies, 4)) < 0) return 2;
     stress = c.implicit && c.solver.formulation == PN_MPM_FORMULATION_STRESS;
@@ -201,6 +212,20 @@ int main(int argc, char **argv) {
         return 2;
     }
     sc.aspect = aspect;
+    if (model_name) { /* a sand energy model of the run's dimension */
+        int k;
+        for (k = 0; pn_models_all[k]; ++k) {
+            const pn_model *mo = pn_models_all[k]();
+            if (!strcmp(mo->name, model_name) && mo->kind == PN_MODEL_ENERGY && mo->dim == sc.dim &&
+                mo->plastic == PN_PLASTIC_DRUCKER_PRAGER && mo->n_params == 0)
+                sc.model = mo;
+        }
+        if (!sc.model) {
+            fprintf(stderr, "%s: --model %s: no %dD single-material sand energy of that name in models/\n", prog,
+                    model_name, sc.dim);
+            return 2;
+        }
+    }
     if (col[1] > 0) sc.width_m = col[1];
     if (col[2] > 0) sc.domain_m = col[2];
     if ((aspect + 0.5) * sc.width_m + 2 * PN_EX_WALL_CELLS * pn_ex_scene_dx(&sc) > sc.domain_m) {
