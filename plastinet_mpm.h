@@ -58,7 +58,8 @@
      >>advance       pn_mpm_advance                  a frame in as many steps as it needs
      >>fem                                           (PN_NO_FEM leaves out every room from
                                                      here on) the mesh's internals, messages
-     >>fem-mesh      pn_fem_grid_mesh                the structured mesh builder
+     >>fem-mesh      pn_fem_grid_mesh,               the structured mesh builder; linear to
+                     _quadratic_mesh                 quadratic
      >>fem-create    pn_fem_create, _destroy,        reference shapes, masses, boundary, RCM
                      _error, _group_set_energy       order, solver storage
      >>fem-nodes     pn_fem_fix_nodes, _spin_nodes,  held and driven nodes
@@ -834,10 +835,11 @@ PN_API void pn_mpm_totals(const pn_mpm_world *w, pn_real *mass, pn_real *momentu
    ###################################################################################### */
 
 /* ======================================================================================
-   FEM: linear triangles (2D) and tetrahedra (3D) with the same materials, energies and
-   return mappings as the particle groups, incremental-potential contact (IPC, Li et al.
-   2020) against analytic obstacles, an explicit and an implicit integrator. Positions are
-   the unknowns; F = Ds(x) Dm^-1 per element, F = Fe Fp with Fp^-1 and h stored per element.
+   FEM: triangles (2D) and tetrahedra (3D), linear or quadratic, with the same materials,
+   energies and return mappings as the particle groups, incremental-potential contact (IPC,
+   Li et al. 2020) against analytic obstacles, an explicit and an implicit integrator.
+   Positions are the unknowns; F = sum_a x_a grad N_a at each integration point (linear
+   elements: one, F = Ds(x) Dm^-1), F = Fe Fp with Fp^-1 and h stored per point.
    ====================================================================================== */
 
 #define PN_FEM_MAX_GROUPS 16
@@ -850,7 +852,16 @@ typedef struct pn_fem_desc {
     int dim;                     /* 2 (triangles; plane strain, per metre of thickness) or 3 */
     size_t n_nodes, n_elements;
     const pn_real *rest_m;       /* dim reals per node: the rest (and start) positions      */
-    const int *elements;         /* dim + 1 node indices per element                        */
+    const int *elements;         /* per element its corners, then with order 2 one node per
+                                    edge (Gmsh's order: triangles 01 12 20, tetrahedra 01 12
+                                    20 30 32 31): 3 / 4 nodes (order 1), 6 / 10 (order 2)  */
+    int order;                   /* 1: linear elements, one integration point (stiff in
+                                    bending: a beam needs many through its depth); 2:
+                                    quadratic, 3 / 4 points, HRZ-lumped masses (mid-edge
+                                    nodes may sit off the edge's middle: curved elements);
+                                    contact sees each quadratic side as 2 segments (2D) or
+                                    4 triangles (3D) through its nodes [0: 1]; or build a
+                                    quadratic mesh from a linear one: pn_fem_quadratic_mesh */
     const int *element_group;    /* per element, into groups [NULL: all group 0]            */
     const pn_group *groups;  /* materials; energy and pnet as for pn_mpm_group_set_energy */
     int n_groups;                /* 1 .. PN_FEM_MAX_GROUPS                                  */
@@ -927,7 +938,8 @@ typedef struct pn_fem_stats {
     pn_real newton_residual;     /* max |dx| / l at the last Newton iteration               */
     pn_real min_distance_m;      /* the smallest node-obstacle distance at the step's end
                                     (and over its line searches: never <= 0)                */
-    size_t plastic;              /* elements the return mapping projected                   */
+    size_t plastic;              /* integration points the return mapping projected (linear
+                                    elements: one each)                                    */
     pn_real dt_over_cfl;         /* the step over pn_fem_stable_dt                          */
     pn_real kappa;               /* the barrier stiffness used                              */
 } pn_fem_stats;
@@ -936,11 +948,15 @@ typedef struct pn_fem_mesh {
     pn_fem_desc desc;            /* the arrays of desc are not kept                          */
     int dim;
     size_t n_nodes, n_elems;
+    int order, nodes_per_element, points_per_element; /* 1, dim + 1, 1 or 2, 6 / 10, 3 / 4 */
+    size_t n_points;             /* integration points: n_elems x points_per_element; element
+                                    e's are e * points_per_element ..                       */
     pn_real *x, *v, *X;          /* positions, velocities, rest positions (dim per node)    */
     pn_real *mass;               /* lumped node mass (kg; per metre in 2D)                  */
-    int *elem, *egroup;
-    pn_real *Dm_inv, *vol0;      /* per element: rest shape inverse (dim^2), rest volume    */
-    pn_real *Fp_inv, *h;         /* per element: inverse plastic deformation, plastic state */
+    int *elem, *egroup;          /* nodes_per_element node indices per element; its group   */
+    pn_real *Dm_inv, *vol0;      /* per point: the inverse of the rest Jacobian dX/dxi (dim^2;
+                                    linear elements: Ds(X)^-1), its share of the rest volume */
+    pn_real *Fp_inv, *h;         /* per point: inverse plastic deformation, plastic state   */
     pn_group groups[PN_FEM_MAX_GROUPS];
     int n_groups;
     unsigned char *fixed;        /* per node: 0 free, 1 driven (held: velocity 0), 2 spun    */
@@ -1029,6 +1045,15 @@ typedef struct pn_fem_grid {
 } pn_fem_grid;
 PN_API pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *elements, size_t *n_nodes,
                                   size_t *n_elements);
+
+/* A quadratic mesh (pn_fem_desc.order 2) from a linear one: the corners keep their indices,
+   a node at the middle of each edge follows them, and each element lists its corners, then
+   its edge nodes in pn_fem_desc's order. nodes_out (dim reals per node) and elements_out
+   ((dim + 1)(dim + 2) / 2 per element) NULL: only the count *n_nodes_out. Scratch from al
+   (NULL: malloc). PN_ERROR_INVALID_ARGUMENT for a node index out of range. */
+PN_API pn_result pn_fem_quadratic_mesh(int dim, const pn_real *nodes, size_t n_nodes, const int *elements,
+                                       size_t n_elements, const pn_allocator *al, pn_real *nodes_out, int *elements_out,
+                                       size_t *n_nodes_out);
 
 /* Meshes from files users have, parsed from memory (read the file yourself): Gmsh ASCII .msh
    of versions 2.2 and 4.1 (3-node triangles, type 2, for dim 2; 4-node tetrahedra, type 4, for
@@ -6697,16 +6722,16 @@ typedef struct pn__fem {
     size_t *gstart, *gitem, gcap; /* the items' grid: CSR of item indices by cell (gcap cells) */
     pn_real glo[3], gcs;         /* its origin and cell size                                 */
     long gn[3];                  /* cells per axis                                           */
-    pn_real *B, *q;              /* per element: Dm^-1 Fp^-1 (dd), q_a (d (d+1))             */
+    pn_real *B, *q;              /* per point: Dm^-1 Fp^-1 (dd), q_a (d per element node)    */
     const pn_real *fext;         /* >>couple: nodal forces for the next explicit step (or NULL) */
-    pn_real *eP, *eH;            /* per element: P (dd) and dP/dF (dd^2)                     */
-    pn_real *pG, *phG, *pty, *F0; /* per element: lagged G, h_G; DP yield; the pass's F0     */
+    pn_real *eP, *eH;            /* per point: P (dd) and dP/dF (dd^2)                       */
+    pn_real *pG, *phG, *pty, *F0; /* per point: lagged G, h_G; DP yield; the pass's F0       */
     pn_pnet_point *ppt;
     pn_real *bx, *bv, *bFp, *bh; /* the state before the step (restored on failure)         */
     pn_real bt;
-    unsigned char *elast;        /* per element: needs det Fe > 0 (all but fixed corotated)  */
-    pn_real *epsi;               /* per element: Psi (the threaded loop's output)            */
-    int *estat;                  /* per element: what the threaded loop found (0: fine)      */
+    unsigned char *elast;        /* per point: needs det Fe > 0 (all but fixed corotated)    */
+    pn_real *epsi;               /* per point: Psi (the threaded loop's output)              */
+    int *estat;                  /* per point: what the threaded loop found (0: fine)        */
     pn_real al_k;                /* augmented Lagrangian stiffness of the obstacle unknowns  */
     pn_real al_lam[PN_FEM_MAX_OBSTACLES * 3], target[PN_FEM_MAX_OBSTACLES * 3];
     pn_real dt, t_end;           /* this step's dt and end time                              */
@@ -6715,10 +6740,94 @@ typedef struct pn__fem {
                                     near a minimum (pn__fem_minimize)                       */
 } pn__fem;
 
-/* Ds of element e at positions x (columns x_a - x_0, row-major d x d) */
+/* Element shapes. The reference simplex has its corners at 0 and the unit vectors of xi;
+   in barycentric coordinates l (l_0 = 1 - sum xi, l_a = xi_a) the linear shape functions
+   are N_a = l_a; the quadratic ones N_a = l_a (2 l_a - 1) at corner a and 4 l_a l_b at the
+   node of edge (a, b), listed in Gmsh's order. Quadratic elements integrate at the points
+   of the degree-2 rules (exact for the products of their strains at small strain): a
+   triangle's 3 at l = (2/3, 1/6, 1/6) and its turns, weights 1/3; a tetrahedron's 4 at
+   (a, b, b, b), a = (5 + 3 sqrt 5) / 20, b = (5 - sqrt 5) / 20, weights 1/4. Linear
+   elements: one point, weight 1. */
+static const int pn__fem_edge2[3][2] = {{0, 1}, {1, 2}, {2, 0}};
+static const int pn__fem_edge3[6][2] = {{0, 1}, {1, 2}, {2, 0}, {3, 0}, {3, 2}, {3, 1}};
+/* quadratic elements cut into linear ones through their nodes (corner pieces, then the
+   middle: a triangle, or an octahedron cut along its 4 - 8 diagonal): where contact,
+   obstacles and the stable step see them */
+static const int pn__fem_sub2[4][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
+static const int pn__fem_sub3[8][4] = {{0, 4, 6, 7}, {4, 1, 5, 9}, {6, 5, 2, 8}, {7, 9, 8, 3},
+                                       {4, 8, 5, 6}, {4, 8, 6, 7}, {4, 8, 7, 9}, {4, 8, 9, 5}};
+static const int pn__fem_sub1[4] = {0, 1, 2, 3};
+
+static int pn__fem_nodes_of(int d, int order) { return order == 2 ? (d + 1) * (d + 2) / 2 : d + 1; }
+static int pn__fem_points_of(int d, int order) { return order == 2 ? d + 1 : 1; }
+
+/* the local node on the edge between corners a and b (order 2) */
+static int pn__fem_edge_node(int d, int a, int b) {
+    int k, ne = d == 2 ? 3 : 6;
+    for (k = 0; k < ne; ++k) {
+        const int *ed = d == 2 ? pn__fem_edge2[k] : pn__fem_edge3[k];
+        if ((ed[0] == a && ed[1] == b) || (ed[0] == b && ed[1] == a)) return d + 1 + k;
+    }
+    return -1;
+}
+
+/* the linear pieces of an element: how many, and piece k's d + 1 local nodes */
+static int pn__fem_nsub(const pn_fem_mesh *m) { return m->order == 2 ? (m->dim == 2 ? 4 : 8) : 1; }
+static const int *pn__fem_sub(const pn_fem_mesh *m, int k) {
+    return m->order != 2 ? pn__fem_sub1 : m->dim == 2 ? pn__fem_sub2[k] : pn__fem_sub3[k];
+}
+
+/* the weight of integration point k (its share of the element) and the reference gradients
+   dN_a / dxi (a row of d per element node) there */
+static pn_real pn__fem_ref_grad(int d, int order, int k, pn_real *dN) {
+    int a, j, nn = pn__fem_nodes_of(d, order);
+    pn_real l[4], dl[4][3];
+    for (a = 0; a <= d; ++a) {
+        for (j = 0; j < d; ++j) dl[a][j] = a == 0 ? -1 : (a - 1 == j);
+        l[a] = d == 2 ? (a == k ? (pn_real)2 / 3 : (pn_real)1 / 6)
+                      : (a == k ? (5 + 3 * PN__SQRT((pn_real)5)) / 20 : (5 - PN__SQRT((pn_real)5)) / 20);
+    }
+    if (order != 2) {
+        for (a = 0; a < nn; ++a)
+            for (j = 0; j < d; ++j) dN[a * d + j] = dl[a][j];
+        return 1;
+    }
+    for (a = 0; a <= d; ++a)
+        for (j = 0; j < d; ++j) dN[a * d + j] = (4 * l[a] - 1) * dl[a][j];
+    for (a = d + 1; a < nn; ++a) {
+        const int *ed = d == 2 ? pn__fem_edge2[a - d - 1] : pn__fem_edge3[a - d - 1];
+        for (j = 0; j < d; ++j) dN[a * d + j] = 4 * (l[ed[0]] * dl[ed[1]][j] + l[ed[1]] * dl[ed[0]][j]);
+    }
+    return (pn_real)1 / (d + 1);
+}
+
+/* HRZ lumping (Hinton, Rock and Zienkiewicz 1976) of a quadratic element: each node's share
+   of the mass in proportion to the consistent mass matrix's diagonal, int N_a^2: a
+   triangle's corner 1/30 A, edge node 8/45 A, so 3/57 and 16/57 of the mass; a
+   tetrahedron's 1/70 V and 8/105 V, so 1/36 and 4/27. (Row sums would give the corners a
+   share <= 0.) */
+static pn_real pn__fem_mass_share(int d, int order, int a) {
+    if (order != 2) return (pn_real)1 / (d + 1);
+    if (a <= d) return d == 2 ? (pn_real)3 / 57 : (pn_real)1 / 36;
+    return d == 2 ? (pn_real)16 / 57 : (pn_real)4 / 27;
+}
+
+/* the Jacobian dx / dxi (row-major d x d) of point p's element at positions x */
+static void pn__fem_jac(const pn_fem_mesh *m, size_t p, const pn_real *x, pn_real *J) {
+    int d = m->dim, nn = m->nodes_per_element, a, i, j;
+    const int *el = m->elem + (p / (size_t)m->points_per_element) * (size_t)nn;
+    pn_real dN[30];
+    pn__fem_ref_grad(d, m->order, (int)(p % (size_t)m->points_per_element), dN);
+    for (i = 0; i < d * d; ++i) J[i] = 0;
+    for (a = 0; a < nn; ++a)
+        for (i = 0; i < d; ++i)
+            for (j = 0; j < d; ++j) J[i * d + j] += x[(size_t)el[a] * (size_t)d + (size_t)i] * dN[a * d + j];
+}
+
+/* Ds of element e's corners at positions x (columns x_a - x_0, row-major d x d) */
 static void pn__fem_ds(const pn_fem_mesh *m, size_t e, const pn_real *x, pn_real *Ds) {
     int d = m->dim, a, i;
-    const int *n = m->elem + e * (size_t)(d + 1);
+    const int *n = m->elem + e * (size_t)m->nodes_per_element;
     for (a = 1; a <= d; ++a)
         for (i = 0; i < d; ++i) Ds[i * d + a - 1] = x[(size_t)n[a] * (size_t)d + i] - x[(size_t)n[0] * (size_t)d + i];
 }
@@ -6765,7 +6874,8 @@ static void pn__fem_sort_longs(long *a, size_t n, int w, int keys) {
 
 /* ======================================================================================
    >>fem-mesh: the structured mesh builder (pn_fem_grid_mesh): a box of cells, each split
-   into triangles or Kuhn tetrahedra, cells kept by a user callback.
+   into triangles or Kuhn tetrahedra, cells kept by a user callback; a linear mesh made
+   quadratic (pn_fem_quadratic_mesh).
    ====================================================================================== */
 
 /* the 6 tetrahedra of a cube around its diagonal 0 - 7 (corners by bits x, y, z): conforming
@@ -6890,6 +7000,48 @@ PN__DEF pn_result pn_fem_grid_mesh(const pn_fem_grid *g, pn_real *nodes, int *el
     return PN_OK;
 }
 
+/* the quadratic mesh of a linear one: every element's edges as records (lower node, upper
+   node, element, local edge), sorted; each run of one edge gets the next new node */
+PN__DEF pn_result pn_fem_quadratic_mesh(int dim, const pn_real *nodes, size_t n_nodes, const int *elements,
+                                        size_t n_elements, const pn_allocator *al, pn_real *nodes_out, int *elements_out,
+                                        size_t *n_nodes_out) {
+    static const pn_allocator none = {NULL, NULL, NULL};
+    int dp = dim + 1, ned = dim == 2 ? 3 : 6, nn = (dim + 1) * (dim + 2) / 2, k, i;
+    size_t ne = n_elements * (size_t)ned, e, q, j, nnew = 0;
+    long *rec;
+    if ((dim != 2 && dim != 3) || !elements || !n_nodes_out || (nodes_out && !nodes) || n_elements < 1)
+        return PN_ERROR_INVALID_ARGUMENT;
+    if (!al) al = &none;
+    if ((al->alloc == NULL) != (al->free == NULL)) return PN_ERROR_INVALID_ARGUMENT;
+    for (e = 0; e < n_elements * (size_t)dp; ++e)
+        if (elements[e] < 0 || (size_t)elements[e] >= n_nodes) return PN_ERROR_INVALID_ARGUMENT;
+    rec = (long *)pn_alloc(al, sizeof(long) * 4 * ne);
+    if (!rec) return PN_ERROR_OUT_OF_MEMORY;
+    for (e = 0; e < n_elements; ++e)
+        for (k = 0; k < ned; ++k) {
+            const int *ed = dim == 2 ? pn__fem_edge2[k] : pn__fem_edge3[k];
+            long u = elements[e * (size_t)dp + (size_t)ed[0]], v = elements[e * (size_t)dp + (size_t)ed[1]], *r = rec + 4 * (e * (size_t)ned + (size_t)k);
+            r[0] = PN__MIN(u, v), r[1] = PN__MAX(u, v), r[2] = (long)e, r[3] = k;
+        }
+    pn__fem_sort_longs(rec, ne, 4, 2);
+    for (q = 0; q < ne; q = j, ++nnew) {
+        size_t id = n_nodes + nnew;
+        for (j = q; j < ne && rec[4 * j] == rec[4 * q] && rec[4 * j + 1] == rec[4 * q + 1]; ++j)
+            if (elements_out) elements_out[(size_t)rec[4 * j + 2] * (size_t)nn + (size_t)dp + (size_t)rec[4 * j + 3]] = (int)id;
+        if (nodes_out)
+            for (i = 0; i < dim; ++i)
+                nodes_out[id * (size_t)dim + (size_t)i] =
+                    (nodes[(size_t)rec[4 * q] * (size_t)dim + (size_t)i] + nodes[(size_t)rec[4 * q + 1] * (size_t)dim + (size_t)i]) / 2;
+    }
+    pn_free(al, rec);
+    if (nodes_out) memcpy(nodes_out, nodes, sizeof(pn_real) * n_nodes * (size_t)dim);
+    if (elements_out)
+        for (e = 0; e < n_elements; ++e)
+            for (k = 0; k < dp; ++k) elements_out[e * (size_t)nn + (size_t)k] = elements[e * (size_t)dp + (size_t)k];
+    *n_nodes_out = n_nodes + nnew;
+    return n_nodes + nnew > 0x7fffffff ? PN_ERROR_CAPACITY : PN_OK;
+}
+
 /* ======================================================================================
    >>fem-create: a mesh from nodes and elements (pn_fem_create, pn_fem_destroy,
    pn_fem_error): the reference shapes, masses, the boundary (edges, faces), the RCM order
@@ -6982,8 +7134,8 @@ static void pn__fem_sort3(int *v, int n) { /* n <= 3 ints, ascending */
 /* the arrays of the solver: one block per type (freed in pn_fem_destroy) */
 static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     const pn_allocator *al = &m->desc.allocator;
-    int d = m->dim, dd = d * d, dp = d + 1;
-    size_t n = m->n_nodes, ne = m->n_elems, nu = n * (size_t)d + (size_t)(PN_FEM_MAX_OBSTACLES * d), i, k, e;
+    int d = m->dim, dd = d * d, nn = m->nodes_per_element;
+    size_t n = m->n_nodes, ne = m->n_elems, np = m->n_points, nu = n * (size_t)d + (size_t)(PN_FEM_MAX_OBSTACLES * d), i, k, e;
     size_t *xadj, *adj, *deg, *cnt;
     unsigned char *seen;
     pn__fem *s = (pn__fem *)pn_alloc(al, sizeof(pn__fem));
@@ -6994,15 +7146,15 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->perm = (size_t *)pn_alloc(al, sizeof(size_t) * 2 * n);
     s->fc = (size_t *)pn_alloc(al, sizeof(size_t) * (2 * nu + 1));
     s->xt = (pn_real *)pn_alloc(al, sizeof(pn_real) * (11 * PN__FEM_ALIGN(nu)));
-    s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * ne * (size_t)(dd + d * dp + dd + dd * dd + dd + 1 + 1 + dd + 1));
-    s->estat = (int *)pn_alloc(al, sizeof(int) * (ne + 1));
-    s->ppt = (pn_pnet_point *)pn_alloc(al, sizeof(pn_pnet_point) * ne);
-    s->elast = (unsigned char *)pn_alloc(al, ne);
-    s->bx = (pn_real *)pn_alloc(al, sizeof(pn_real) * (2 * n * (size_t)d + ne * (size_t)(dd + 1)));
+    s->B = (pn_real *)pn_alloc(al, sizeof(pn_real) * np * (size_t)(dd + d * nn + dd + dd * dd + dd + 1 + 1 + dd + 1));
+    s->estat = (int *)pn_alloc(al, sizeof(int) * (np + 1));
+    s->ppt = (pn_pnet_point *)pn_alloc(al, sizeof(pn_pnet_point) * np);
+    s->elast = (unsigned char *)pn_alloc(al, np);
+    s->bx = (pn_real *)pn_alloc(al, sizeof(pn_real) * (2 * n * (size_t)d + np * (size_t)(dd + 1)));
     if (!s->perm || !s->fc || !s->xt || !s->B || !s->ppt || !s->elast || !s->bx || !s->estat) return PN_ERROR_OUT_OF_MEMORY;
     s->bv = s->bx + n * (size_t)d;
     s->bFp = s->bv + n * (size_t)d;
-    s->bh = s->bFp + ne * (size_t)dd;
+    s->bh = s->bFp + np * (size_t)dd;
     s->iperm = s->perm + n;
     s->rs = s->fc + nu;
     s->g = s->xt + PN__FEM_ALIGN(nu);
@@ -7014,18 +7166,18 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     s->cgz = s->cgx + PN__FEM_ALIGN(nu);
     s->cgp = s->cgz + PN__FEM_ALIGN(nu);
     s->cgq = s->cgp + PN__FEM_ALIGN(nu);
-    s->q = s->B + ne * (size_t)dd;
-    s->eP = s->q + ne * (size_t)(d * dp);
-    s->eH = s->eP + ne * (size_t)dd;
-    s->pG = s->eH + ne * (size_t)(dd * dd);
-    s->phG = s->pG + ne * (size_t)dd;
-    s->pty = s->phG + ne;
-    s->F0 = s->pty + ne;
-    s->epsi = s->F0 + ne * (size_t)dd;
+    s->q = s->B + np * (size_t)dd;
+    s->eP = s->q + np * (size_t)(d * nn);
+    s->eH = s->eP + np * (size_t)dd;
+    s->pG = s->eH + np * (size_t)(dd * dd);
+    s->phG = s->pG + np * (size_t)dd;
+    s->pty = s->phG + np;
+    s->F0 = s->pty + np;
+    s->epsi = s->F0 + np * (size_t)dd;
     /* node graph (CSR) for the ordering: temporary */
     xadj = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
     cnt = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
-    adj = (size_t *)pn_alloc(al, sizeof(size_t) * (ne * (size_t)(dp * d) + 1));
+    adj = (size_t *)pn_alloc(al, sizeof(size_t) * (ne * (size_t)(nn * (nn - 1)) + 1));
     deg = (size_t *)pn_alloc(al, sizeof(size_t) * (n + 1));
     seen = (unsigned char *)pn_alloc(al, n + 1);
     if (!xadj || !adj || !deg || !seen || !cnt) {
@@ -7034,14 +7186,14 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     }
     memset(cnt, 0, sizeof(size_t) * (n + 1));
     for (e = 0; e < ne; ++e)
-        for (i = 0; i < (size_t)dp; ++i) cnt[m->elem[e * (size_t)dp + i]] += (size_t)d;
+        for (i = 0; i < (size_t)nn; ++i) cnt[m->elem[e * (size_t)nn + i]] += (size_t)(nn - 1);
     xadj[0] = 0;
     for (i = 0; i < n; ++i) xadj[i + 1] = xadj[i] + cnt[i];
     for (i = 0; i < n; ++i) cnt[i] = xadj[i];
     for (e = 0; e < ne; ++e) /* with repeats: RCM only needs the neighbour sets */
-        for (i = 0; i < (size_t)dp; ++i)
-            for (k = 0; k < (size_t)dp; ++k)
-                if (k != i) adj[cnt[m->elem[e * (size_t)dp + i]]++] = (size_t)m->elem[e * (size_t)dp + k];
+        for (i = 0; i < (size_t)nn; ++i)
+            for (k = 0; k < (size_t)nn; ++k)
+                if (k != i) adj[cnt[m->elem[e * (size_t)nn + i]]++] = (size_t)m->elem[e * (size_t)nn + k];
     for (i = 0; i < n; ++i) { /* drop repeats: node i's neighbours are adj[xadj[i] .. cnt[i]) */
         size_t w = xadj[i], r, j;
         for (r = xadj[i]; r < cnt[i]; ++r) {
@@ -7098,32 +7250,73 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
     }
     s->brows = (int)n;
     pn_free(al, xadj), pn_free(al, adj), pn_free(al, deg), pn_free(al, seen), pn_free(al, cnt);
-    { /* the boundary: the sides (2D edges, 3D faces) of one element only, then (3D) their
-         edges; sorted node tuples, counted */
-        int w = d, nsd = d + 1, sv[3], c0;
-        size_t ns = (size_t)nsd * ne, q, j, nb = 0;
-        long *key = (long *)pn_alloc(al, sizeof(long) * 3 * 3 * (ns + 1));
+    { /* the boundary: the sides (2D edges, 3D faces) of one element only, by their sorted
+         corners; each side's facets (itself; order 2: the 2 segments or 4 triangles through
+         its nodes); then (3D) the facets' edges. Sorted node tuples, counted. */
+        int w = d, nsd = d + 1, W = d + 2, nfs = m->order == 2 ? (d == 2 ? 2 : 4) : 1, sv[6], c0;
+        size_t ns = (size_t)nsd * ne, q, j, nb = 0, nfc;
+        long *key = (long *)pn_alloc(al, sizeof(long) * ((size_t)W * ns + 1)), *fac;
         unsigned char *on = (unsigned char *)pn_alloc(al, n);
         if (!key || !on) {
             pn_free(al, key), pn_free(al, on);
             return PN_ERROR_OUT_OF_MEMORY;
         }
         for (e = 0; e < ne; ++e)
-            for (i = 0; i < (size_t)nsd; ++i) { /* side i: all nodes but node i */
+            for (i = 0; i < (size_t)nsd; ++i) { /* side i: all corners but corner i */
                 int c = 0, a0;
+                long *kr = key + (size_t)W * (e * (size_t)nsd + i);
                 for (a0 = 0; a0 < nsd; ++a0)
-                    if ((size_t)a0 != i) sv[c++] = m->elem[e * (size_t)nsd + (size_t)a0];
+                    if ((size_t)a0 != i) sv[c++] = m->elem[e * (size_t)nn + (size_t)a0];
                 pn__fem_sort3(sv, w);
-                for (c = 0; c < w; ++c) key[(size_t)w * (e * (size_t)nsd + i) + (size_t)c] = sv[c];
+                for (c = 0; c < w; ++c) kr[c] = sv[c];
+                kr[w] = (long)e, kr[w + 1] = (long)i;
             }
-        pn__fem_sort_longs(key, ns, w, w);
+        pn__fem_sort_longs(key, ns, W, w);
         for (q = 0; q < ns; q = j) {
-            for (j = q + 1; j < ns && !pn__fem_cmp_longs(key + (size_t)w * j, key + (size_t)w * q, w); ++j) {}
+            for (j = q + 1; j < ns && !pn__fem_cmp_longs(key + (size_t)W * j, key + (size_t)W * q, w); ++j) {}
             if (j - q == 1) { /* a boundary side: compacted to the front */
-                for (c0 = 0; c0 < w; ++c0) key[(size_t)w * nb + (size_t)c0] = key[(size_t)w * q + (size_t)c0];
+                for (c0 = 0; c0 < W; ++c0) key[(size_t)W * nb + (size_t)c0] = key[(size_t)W * q + (size_t)c0];
                 nb++;
             }
         }
+        nfc = nb * (size_t)nfs;
+        fac = (long *)pn_alloc(al, sizeof(long) * ((size_t)w * nfc + 6 * nfc + 1));
+        if (!fac) {
+            pn_free(al, key), pn_free(al, on);
+            return PN_ERROR_OUT_OF_MEMORY;
+        }
+        for (q = 0; q < nb; ++q) {
+            const long *kr = key + (size_t)W * q;
+            const int *el = m->elem + (size_t)kr[w] * (size_t)nn;
+            int lc[3], c = 0, a0, f, t;
+            long *fr = fac + (size_t)w * (size_t)nfs * q;
+            for (a0 = 0; a0 < nsd; ++a0)
+                if (a0 != (int)kr[w + 1]) lc[c++] = a0;
+            if (m->order != 2) {
+                for (c = 0; c < w; ++c) fr[c] = kr[c];
+                continue;
+            }
+            if (d == 2) { /* corner, edge node, corner: 2 segments */
+                int mid = pn__fem_edge_node(2, lc[0], lc[1]);
+                int seg[2][2] = {{lc[0], mid}, {mid, lc[1]}};
+                for (f = 0; f < 2; ++f) {
+                    sv[0] = el[seg[f][0]], sv[1] = el[seg[f][1]];
+                    pn__fem_sort3(sv, 2);
+                    fr[2 * f] = sv[0], fr[2 * f + 1] = sv[1];
+                }
+            } else { /* 3 corners and 3 edge nodes: 4 triangles */
+                int m01 = pn__fem_edge_node(3, lc[0], lc[1]), m12 = pn__fem_edge_node(3, lc[1], lc[2]);
+                int m20 = pn__fem_edge_node(3, lc[2], lc[0]);
+                int tri[4][3] = {{lc[0], m01, m20}, {m01, lc[1], m12}, {m20, m12, lc[2]}, {m01, m12, m20}};
+                for (f = 0; f < 4; ++f) {
+                    for (t = 0; t < 3; ++t) sv[t] = el[tri[f][t]];
+                    pn__fem_sort3(sv, 3);
+                    for (t = 0; t < 3; ++t) fr[3 * f + t] = sv[t];
+                }
+            }
+        }
+        pn_free(al, key);
+        key = fac, nb = nfc;
         if (d == 2) s->nbe = nb;
         else { /* 3D: the faces' edges after them, sorted, once each */
             long *ek = key + 3 * nb;
@@ -7173,8 +7366,8 @@ static pn_result pn__fem_alloc_solver(pn_fem_mesh *m) {
 PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char *why, size_t why_cap) {
     pn_fem_mesh *m;
     const pn_allocator *al;
-    int d, dd, dp, g;
-    size_t n, ne, i, e;
+    int d, dd, dp, g, nn, nq;
+    size_t n, ne, np, i, e;
     pn_real lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0}, diag = 0, emax = 0, esum = 0;
     long nedge = 0;
     pn_result r;
@@ -7186,10 +7379,15 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
         pn__msg(why, why_cap, "pn_fem_desc.dim is %d: 2 or 3 (and not compiled out by PN_NO_2D / PN_NO_3D)", d);
         return PN_ERROR_DIMENSION;
     }
+    if (desc->order < 0 || desc->order > 2) {
+        pn__msg(why, why_cap, "pn_fem_desc.order is %d: 1 (linear elements, 0 says the same) or 2 (quadratic)", desc->order);
+        return PN_ERROR_INVALID_ARGUMENT;
+    }
     dd = d * d, dp = d + 1, n = desc->n_nodes, ne = desc->n_elements;
-    if (!desc->rest_m || !desc->elements || n < (size_t)dp || ne < 1 || n > 0x7fffffff) {
+    nn = pn__fem_nodes_of(d, desc->order), nq = pn__fem_points_of(d, desc->order), np = ne * (size_t)nq;
+    if (!desc->rest_m || !desc->elements || n < (size_t)nn || ne < 1 || n > 0x7fffffff) {
         pn__msg(why, why_cap, "pn_fem_desc: rest_m and elements are required, with at least %d nodes and one element "
-                    "(fewer than 2^31 nodes)", dp);
+                    "(fewer than 2^31 nodes)", nn);
         return PN_ERROR_INVALID_ARGUMENT;
     }
     if (!desc->groups || desc->n_groups < 1 || desc->n_groups > PN_FEM_MAX_GROUPS) {
@@ -7235,10 +7433,10 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     for (g = 0; g < d; ++g) diag += (hi[g] - lo[g]) * (hi[g] - lo[g]);
     diag = PN__SQRT(diag);
     for (e = 0; e < ne; ++e) {
-        const int *el = desc->elements + e * (size_t)dp;
+        const int *el = desc->elements + e * (size_t)nn;
         pn_real Ds[9], vol, lmax = 0;
         int a, b;
-        for (a = 0; a < dp; ++a) {
+        for (a = 0; a < nn; ++a) {
             if (el[a] < 0 || (size_t)el[a] >= n) {
                 pn__msg(why, why_cap, "element %lu: node index %d is out of range (%lu nodes)", (unsigned long)e, el[a],
                             (unsigned long)n);
@@ -7267,7 +7465,7 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
                     l2 += t * t;
                 }
                 lmax = PN__MAX(lmax, PN__SQRT(l2));
-                esum += PN__SQRT(l2), nedge++;
+                esum += PN__SQRT(l2) / (nn > dp ? 2 : 1), nedge++; /* order 2: the nodes' spacing */
             }
         vol = pn__fem_volume(d, Ds);
         /* degenerate: volume below 1e-9 of the longest edge's cube (square) */
@@ -7281,6 +7479,21 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
                         (double)vol, d == 2 ? "counter-clockwise" : "so that (x1-x0) x (x2-x0) . (x3-x0) > 0");
             return PN_ERROR_INVALID_ARGUMENT;
         }
+        for (a = 0; a < nq && nn > dp; ++a) { /* quadratic: positive at every point */
+            pn_real dN[30], J[9];
+            int i2, j2, c;
+            pn__fem_ref_grad(d, 2, a, dN);
+            for (i2 = 0; i2 < dd; ++i2) J[i2] = 0;
+            for (c = 0; c < nn; ++c)
+                for (i2 = 0; i2 < d; ++i2)
+                    for (j2 = 0; j2 < d; ++j2) J[i2 * d + j2] += desc->rest_m[(size_t)el[c] * (size_t)d + (size_t)i2] * dN[c * d + j2];
+            if (!(pn_mat_det(d, J) > (pn_real)1e-3 * pn_mat_det(d, Ds))) {
+                pn__msg(why, why_cap, "element %lu: its Jacobian at integration point %d is %g of its corners' (an edge "
+                            "node far from its edge's middle, or listed out of order)", (unsigned long)e, a,
+                            (double)(pn_mat_det(d, J) / pn_mat_det(d, Ds)));
+                return PN_ERROR_INVALID_ARGUMENT;
+            }
+        }
         emax = PN__MAX(emax, lmax);
     }
     al = &desc->allocator;
@@ -7290,11 +7503,13 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     m->desc = *desc;
     m->desc.rest_m = NULL, m->desc.elements = NULL, m->desc.element_group = NULL, m->desc.groups = NULL;
     m->dim = d, m->n_nodes = n, m->n_elems = ne;
+    m->order = nn > dp ? 2 : 1, m->desc.order = m->order, m->nodes_per_element = nn, m->points_per_element = nq;
+    m->n_points = np;
     m->error_element = m->error_node = -1;
     m->n_groups = desc->n_groups;
     for (g = 0; g < desc->n_groups; ++g) m->groups[g] = desc->groups[g];
-    m->x = (pn_real *)pn_alloc(al, sizeof(pn_real) * (n * (size_t)(4 * d + 1 + 6) + ne * (size_t)(2 * dd + 2)));
-    m->elem = (int *)pn_alloc(al, sizeof(int) * ne * (size_t)(dp + 1));
+    m->x = (pn_real *)pn_alloc(al, sizeof(pn_real) * (n * (size_t)(4 * d + 1 + 6) + np * (size_t)(2 * dd + 2)));
+    m->elem = (int *)pn_alloc(al, sizeof(int) * ne * (size_t)(nn + 1));
     m->fixed = (unsigned char *)pn_alloc(al, n);
     if (!m->x || !m->elem || !m->fixed) {
         pn_fem_destroy(m);
@@ -7305,11 +7520,11 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     m->drive = m->X + n * (size_t)d;
     m->mass = m->drive + n * (size_t)d;
     m->Dm_inv = m->mass + n;
-    m->Fp_inv = m->Dm_inv + ne * (size_t)dd;
-    m->vol0 = m->Fp_inv + ne * (size_t)dd;
-    m->h = m->vol0 + ne;
-    m->spin = m->h + ne;
-    m->egroup = m->elem + ne * (size_t)dp;
+    m->Fp_inv = m->Dm_inv + np * (size_t)dd;
+    m->vol0 = m->Fp_inv + np * (size_t)dd;
+    m->h = m->vol0 + np;
+    m->spin = m->h + np;
+    m->egroup = m->elem + ne * (size_t)nn;
     memcpy(m->x, desc->rest_m, sizeof(pn_real) * n * (size_t)d);
     memcpy(m->X, desc->rest_m, sizeof(pn_real) * n * (size_t)d);
     memset(m->v, 0, sizeof(pn_real) * n * (size_t)d);
@@ -7317,18 +7532,24 @@ PN__DEF pn_result pn_fem_create(const pn_fem_desc *desc, pn_fem_mesh **out, char
     memset(m->spin, 0, sizeof(pn_real) * n * 6);
     memset(m->mass, 0, sizeof(pn_real) * n);
     memset(m->fixed, 0, n);
-    memcpy(m->elem, desc->elements, sizeof(int) * ne * (size_t)dp);
+    memcpy(m->elem, desc->elements, sizeof(int) * ne * (size_t)nn);
     for (e = 0; e < ne; ++e) {
-        pn_real Ds[9], mass;
+        pn_real mass = 0;
         int a, gi = desc->element_group ? desc->element_group[e] : 0;
         m->egroup[e] = gi;
-        pn__fem_ds(m, e, m->X, Ds);
-        m->vol0[e] = pn__fem_volume(d, Ds);
-        pn_mat_inverse(d, Ds, m->Dm_inv + e * (size_t)dd);
-        for (a = 0; a < dd; ++a) m->Fp_inv[e * (size_t)dd + (size_t)a] = (a % (d + 1)) == 0;
-        m->h[e] = 0;
-        mass = m->vol0[e] * m->groups[gi].density_kg_m3 / dp; /* lumped: an equal share per node */
-        for (a = 0; a < dp; ++a) m->mass[m->elem[e * (size_t)dp + (size_t)a]] += mass;
+        for (a = 0; a < nq; ++a) {
+            size_t p = e * (size_t)nq + (size_t)a;
+            pn_real J[9], dN[30], wq = pn__fem_ref_grad(d, m->order, a, dN);
+            int i2;
+            pn__fem_jac(m, p, m->X, J);
+            m->vol0[p] = wq * pn__fem_volume(d, J);
+            pn_mat_inverse(d, J, m->Dm_inv + p * (size_t)dd);
+            for (i2 = 0; i2 < dd; ++i2) m->Fp_inv[p * (size_t)dd + (size_t)i2] = (i2 % (d + 1)) == 0;
+            m->h[p] = 0;
+            mass += m->vol0[p] * m->groups[gi].density_kg_m3;
+        }
+        for (a = 0; a < nn; ++a) /* lumped: linear, an equal share per node; quadratic, HRZ */
+            m->mass[m->elem[e * (size_t)nn + (size_t)a]] += mass * pn__fem_mass_share(d, m->order, a);
     }
     for (i = 0; i < n; ++i)
         if (!(m->mass[i] > 0)) {
@@ -7550,11 +7771,11 @@ static int pn__fem_box_meets_simplex(int d, const pn_real *lo, const pn_real *hi
     return 1;
 }
 
-/* the first element whose interior a box obstacle's (at time t) meets, or -1: its nodes may
-   all be outside the box (a small box inside a large element), where the nodes' barrier
-   cannot see it */
+/* the first element whose interior a box obstacle's (at time t) meets (a quadratic one: one
+   of its linear pieces), or -1: its nodes may all be outside the box (a small box inside a
+   large element), where the nodes' barrier cannot see it */
 static long pn__fem_obstacle_in_element(const pn_fem_mesh *m, const pn_collider *c, pn_real t) {
-    int d = m->dim, i, a;
+    int d = m->dim, i, a, k;
     pn_real lo[3], hi[3], P[12];
     size_t e;
     if (c->shape != PN_SHAPE_BOX) return -1; /* a half-space meets an element only where a node is inside */
@@ -7562,18 +7783,19 @@ static long pn__fem_obstacle_in_element(const pn_fem_mesh *m, const pn_collider 
         pn_real ci = c->center_m[i] + t * c->velocity_m_s[i];
         lo[i] = ci - c->half_extent_m[i], hi[i] = ci + c->half_extent_m[i];
     }
-    for (e = 0; e < m->n_elems; ++e) {
-        const int *el = m->elem + e * (size_t)(d + 1);
-        int out = 0;
-        for (a = 0; a <= d; ++a)
-            for (i = 0; i < d; ++i) P[a * d + i] = m->x[(size_t)el[a] * (size_t)d + (size_t)i];
-        for (i = 0; i < d && !out; ++i) { /* the bounding boxes first */
-            pn_real emin = P[i], emax = P[i];
-            for (a = 1; a <= d; ++a) emin = PN__MIN(emin, P[a * d + i]), emax = PN__MAX(emax, P[a * d + i]);
-            out = emax <= lo[i] || emin >= hi[i];
+    for (e = 0; e < m->n_elems; ++e)
+        for (k = 0; k < pn__fem_nsub(m); ++k) {
+            const int *el = m->elem + e * (size_t)m->nodes_per_element, *sub = pn__fem_sub(m, k);
+            int out = 0;
+            for (a = 0; a <= d; ++a)
+                for (i = 0; i < d; ++i) P[a * d + i] = m->x[(size_t)el[sub[a]] * (size_t)d + (size_t)i];
+            for (i = 0; i < d && !out; ++i) { /* the bounding boxes first */
+                pn_real emin = P[i], emax = P[i];
+                for (a = 1; a <= d; ++a) emin = PN__MIN(emin, P[a * d + i]), emax = PN__MAX(emax, P[a * d + i]);
+                out = emax <= lo[i] || emin >= hi[i];
+            }
+            if (!out && pn__fem_box_meets_simplex(d, lo, hi, P)) return (long)e;
         }
-        if (!out && pn__fem_box_meets_simplex(d, lo, hi, P)) return (long)e;
-    }
     return -1;
 }
 
@@ -7617,46 +7839,55 @@ PN__DEF pn_result pn_fem_add_obstacle(pn_fem_mesh *m, const pn_collider *c, int 
 }
 
 /* ======================================================================================
-   >>fem-energy: per element, F = Ds Dm^-1, the elastic energy density of Fe and the
-   group's implicit energy (its F0 and network state) prepared for a step.
+   >>fem-energy: per integration point, F = sum_a x_a grad N_a (linear elements: Ds Dm^-1),
+   the elastic energy density of Fe and the group's implicit energy (its F0 and network
+   state) prepared for a step.
    ====================================================================================== */
 
-/* Psi of element e at Fe with the group's energy (P and the Hessian when asked, PSD-projected
+#define PN__FEM_ELEM(m, p) ((p) / (size_t)(m)->points_per_element) /* point p's element */
+
+/* Psi of point p at Fe with its group's energy (P and the Hessian when asked, PSD-projected
    unless the Newton iteration asked for the full one: s->hflags) */
-static pn_result pn__fem_psi(const pn_fem_mesh *m, size_t e, const pn_real *Fe, pn_real *psi, pn_real *P, pn_real *H) {
+static pn_result pn__fem_psi(const pn_fem_mesh *m, size_t p, const pn_real *Fe, pn_real *psi, pn_real *P, pn_real *H) {
     const pn__fem *s = (const pn__fem *)m->impl;
     int dd = m->dim * m->dim;
-    return pn__group_psi(&m->groups[m->egroup[e]], m->dim, Fe, m->h[e], s->pG + e * (size_t)dd, s->phG[e], &s->ppt[e],
-                         s->pty[e], psi, P, H, s->hflags);
+    return pn__group_psi(&m->groups[m->egroup[PN__FEM_ELEM(m, p)]], m->dim, Fe, m->h[p], s->pG + p * (size_t)dd, s->phG[p],
+                         &s->ppt[p], s->pty[p], psi, P, H, s->hflags);
 }
 
-/* Fe = sum_a x_a q_a^T of element e */
-static void pn__fem_fe(const pn_fem_mesh *m, size_t e, const pn_real *x, pn_real *Fe) {
+/* Fe = sum_a x_a q_a^T at point p */
+static void pn__fem_fe(const pn_fem_mesh *m, size_t p, const pn_real *x, pn_real *Fe) {
     const pn__fem *s = (const pn__fem *)m->impl;
-    int d = m->dim, dp = d + 1, a, i, j;
-    const int *el = m->elem + e * (size_t)dp;
-    const pn_real *q = s->q + e * (size_t)(d * dp);
+    int d = m->dim, nn = m->nodes_per_element, a, i, j;
+    const int *el = m->elem + PN__FEM_ELEM(m, p) * (size_t)nn;
+    const pn_real *q = s->q + p * (size_t)(d * nn);
     for (i = 0; i < d * d; ++i) Fe[i] = 0;
-    for (a = 0; a < dp; ++a) {
+    for (a = 0; a < nn; ++a) {
         const pn_real *xa = x + (size_t)el[a] * (size_t)d;
         for (i = 0; i < d; ++i)
             for (j = 0; j < d; ++j) Fe[i * d + j] += xa[i] * q[a * d + j];
     }
 }
 
-/* per step: B = Dm^-1 Fp^-1 and the q_a of each element */
+/* per step: B = Dm^-1 Fp^-1 and the q_a = B^T dN_a / dxi of each point */
 static void pn__fem_setup(pn_fem_mesh *m) {
     pn__fem *s = (pn__fem *)m->impl;
-    int d = m->dim, dd = d * d, dp = d + 1, a, j;
-    size_t e;
-    for (e = 0; e < m->n_elems; ++e) {
-        pn_real *B = s->B + e * (size_t)dd, *q = s->q + e * (size_t)(d * dp);
-        pn_mat_mul(d, m->Dm_inv + e * (size_t)dd, m->Fp_inv + e * (size_t)dd, B);
-        for (j = 0; j < d; ++j) q[j] = 0;
-        for (a = 1; a <= d; ++a)
-            for (j = 0; j < d; ++j) q[a * d + j] = B[(a - 1) * d + j], q[j] -= B[(a - 1) * d + j];
-        s->elast[e] = m->groups[m->egroup[e]].material.elastic != PN_ELASTIC_FIXED_COROTATED ||
-                      m->groups[m->egroup[e]].material.plastic != PN_PLASTIC_NONE;
+    int d = m->dim, dd = d * d, nn = m->nodes_per_element, nq = m->points_per_element, a, j, k;
+    pn_real dN[4][30];
+    size_t p;
+    for (k = 0; k < nq; ++k) pn__fem_ref_grad(d, m->order, k, dN[k]);
+    for (p = 0; p < m->n_points; ++p) {
+        const pn_material *mt = &m->groups[m->egroup[PN__FEM_ELEM(m, p)]].material;
+        const pn_real *g = dN[p % (size_t)nq];
+        pn_real *B = s->B + p * (size_t)dd, *q = s->q + p * (size_t)(d * nn);
+        pn_mat_mul(d, m->Dm_inv + p * (size_t)dd, m->Fp_inv + p * (size_t)dd, B);
+        for (a = 0; a < nn; ++a)
+            for (j = 0; j < d; ++j) {
+                pn_real acc = 0;
+                for (k = 0; k < d; ++k) acc += g[a * d + k] * B[k * d + j];
+                q[a * d + j] = acc;
+            }
+        s->elast[p] = mt->elastic != PN_ELASTIC_FIXED_COROTATED || mt->plastic != PN_PLASTIC_NONE;
     }
 }
 
@@ -8924,7 +9155,7 @@ static void pn__fem_off_apply(const pn_fem_mesh *m, const pn_real *x, pn_real *y
    both). */
 static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, pn_real *E_out) {
     pn__fem *s = (pn__fem *)m->impl;
-    int d = m->dim, dd = d * d, dp = d + 1, a, b, i, j, o;
+    int d = m->dim, dd = d * d, nn = m->nodes_per_element, a, b, i, j, o;
     size_t n = m->n_nodes, nd = n * (size_t)d, k, e, nu = s->nu;
     pn_real dt2 = s->dt * s->dt, E = 0, dmin = PN__FEM_FAR;
     if (mode >= 1) memset(s->g, 0, sizeof(pn_real) * nu);
@@ -8940,8 +9171,8 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
             if (mode >= 2) pn__fem_hadd(s, pn__fem_row(m, c), pn__fem_row(m, c), m->mass[k]);
         }
     }
-    PN__FEM_OMP_FOR /* each element's Psi, P and H on threads; summed below in element order */
-    for (e = 0; e < m->n_elems; ++e) {
+    PN__FEM_OMP_FOR /* each point's Psi, P and H on threads; summed below in point order */
+    for (e = 0; e < m->n_points; ++e) {
         pn_real Fe[9];
         pn_result r;
         pn__fem_fe(m, e, x, Fe);
@@ -8953,18 +9184,18 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
                         mode >= 2 ? s->eH + e * (size_t)(dd * dd) : NULL);
         s->estat[e] = r != PN_OK ? (int)r : !pn__finite(s->epsi[e]) ? (int)PN_ERROR_OVERFLOW : 0;
     }
-    for (e = 0; e < m->n_elems; ++e) {
+    for (e = 0; e < m->n_points; ++e) { /* (e: the point) */
         const pn_real *P = s->eP + e * (size_t)dd, *H = s->eH + e * (size_t)(dd * dd);
-        const int *el = m->elem + e * (size_t)dp;
-        const pn_real *q = s->q + e * (size_t)(d * dp);
+        const int *el = m->elem + PN__FEM_ELEM(m, e) * (size_t)nn;
+        const pn_real *q = s->q + e * (size_t)(d * nn);
         pn_real V = m->vol0[e] * dt2;
         if (s->estat[e]) {
-            m->error_element = (long)e;
+            m->error_element = (long)PN__FEM_ELEM(m, e);
             return (pn_result)s->estat[e];
         }
         E += V * s->epsi[e];
         if (mode >= 1)
-            for (a = 0; a < dp; ++a) {
+            for (a = 0; a < nn; ++a) {
                 size_t na = (size_t)el[a];
                 if (!PN__FEM_FREE(m, na)) continue;
                 for (i = 0; i < d; ++i) {
@@ -8974,12 +9205,12 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
                 }
             }
         if (mode >= 2)
-            for (a = 0; a < dp; ++a) {
+            for (a = 0; a < nn; ++a) {
                 size_t na = (size_t)el[a];
                 if (!PN__FEM_FREE(m, na)) continue;
                 for (b = 0; b <= a; ++b) {
                     size_t nb = (size_t)el[b];
-                    int kk, mm, nn;
+                    int kk, mm, ll;
                     if (!PN__FEM_FREE(m, nb)) continue;
                     for (i = 0; i < d; ++i)
                         for (kk = 0; kk < d; ++kk) {
@@ -8987,7 +9218,7 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
                             size_t ra, cb;
                             if (a == b && kk > i) continue; /* the diagonal block's upper half */
                             for (mm = 0; mm < d; ++mm)
-                                for (nn = 0; nn < d; ++nn) acc += H[(i * d + mm) * dd + kk * d + nn] * q[a * d + mm] * q[b * d + nn];
+                                for (ll = 0; ll < d; ++ll) acc += H[(i * d + mm) * dd + kk * d + ll] * q[a * d + mm] * q[b * d + ll];
                             ra = pn__fem_row(m, na * (size_t)d + (size_t)i);
                             cb = pn__fem_row(m, nb * (size_t)d + (size_t)kk);
                             pn__fem_hadd(s, ra, cb, V * acc);
@@ -9112,7 +9343,7 @@ static pn_result pn__fem_objective_value(void *ctx, const pn_real *x, pn_real *E
 /* the state before a step, kept (restore = 0) or put back (restore = 1) */
 static void pn__fem_keep(pn_fem_mesh *m, int restore) {
     pn__fem *s = (pn__fem *)m->impl;
-    size_t nd = m->n_nodes * (size_t)m->dim, ne = m->n_elems, dd = (size_t)(m->dim * m->dim);
+    size_t nd = m->n_nodes * (size_t)m->dim, ne = m->n_points, dd = (size_t)(m->dim * m->dim);
     pn_real *live[4], *kept[4];
     size_t len[4];
     int i;
@@ -9128,17 +9359,17 @@ static void pn__fem_keep(pn_fem_mesh *m, int restore) {
 #define pn__fem_backup(m) pn__fem_keep(m, 0)
 #define pn__fem_restore(m) pn__fem_keep(m, 1)
 
-/* The return mapping of every element at the new positions (F = Fe Fp: Fp^-1 <- Fp^-1 Fe^-1 Z);
-   the count of projected elements in *plastic. */
+/* The return mapping of every integration point at the new positions (F = Fe Fp: Fp^-1 <-
+   Fp^-1 Fe^-1 Z); the count of projected points in *plastic. */
 static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
     pn__fem *s = (pn__fem *)m->impl;
     int d = m->dim, dd = d * d;
     size_t e;
     enum { KEPT = 0, PROJECTED, INVERTED, SINGULAR, FAILED }; /* estat: FAILED + the pn_result */
     *plastic = 0;
-    PN__FEM_OMP_FOR /* each element's own state on threads; counted and judged below in order */
-    for (e = 0; e < m->n_elems; ++e) {
-        const pn_group *g = &m->groups[m->egroup[e]];
+    PN__FEM_OMP_FOR /* each point's own state on threads; counted and judged below in order */
+    for (e = 0; e < m->n_points; ++e) { /* (e: the point) */
+        const pn_group *g = &m->groups[m->egroup[PN__FEM_ELEM(m, e)]];
         pn_real Fe[9], Z[9], Fi[9], T[9], hn, moved = 0;
         pn_result r;
         int i;
@@ -9167,57 +9398,61 @@ static pn_result pn__fem_return(pn_fem_mesh *m, size_t *plastic) {
         pn_mat_mul(d, T, Z, m->Fp_inv + e * (size_t)dd);
         m->h[e] = hn;
     }
-    for (e = 0; e < m->n_elems; ++e) {
+    for (e = 0; e < m->n_points; ++e) {
         int st = s->estat[e];
+        unsigned long el = (unsigned long)PN__FEM_ELEM(m, e);
         if (st == PROJECTED) (*plastic)++;
         if (st <= PROJECTED) continue;
-        m->error_element = (long)e;
+        m->error_element = (long)el;
         if (st == INVERTED) {
             pn_real Fe[9];
             pn__fem_fe(m, e, m->x, Fe);
-            return PN__FAIL(m, PN_ERROR_INVERTED, "element %lu turned inside out (det Fe = %g)", (unsigned long)e,
-                                (double)pn_mat_det(d, Fe));
+            return PN__FAIL(m, PN_ERROR_INVERTED, "element %lu turned inside out (det Fe = %g)", el, (double)pn_mat_det(d, Fe));
         }
-        if (st == SINGULAR) return PN__FAIL(m, PN_ERROR_INVERTED, "element %lu: Fe is singular", (unsigned long)e);
-        return PN__FAIL(m, (pn_result)(st - FAILED), "element %lu: the return mapping failed (%s)", (unsigned long)e,
+        if (st == SINGULAR) return PN__FAIL(m, PN_ERROR_INVERTED, "element %lu: Fe is singular", el);
+        return PN__FAIL(m, (pn_result)(st - FAILED), "element %lu: the return mapping failed (%s)", el,
                             pn_result_string((pn_result)(st - FAILED)));
     }
     return PN_OK;
 }
 
 PN__DEF pn_result pn_fem_stable_dt(const pn_fem_mesh *m, pn_real *dt_s) {
-    int d, dp, a, b, c;
+    int d, dp, a, b, c, k;
     size_t e;
     pn_real best = PN__FEM_FAR;
     if (!m || !dt_s) return PN_ERROR_INVALID_ARGUMENT;
     d = m->dim, dp = d + 1;
-    for (e = 0; e < m->n_elems; ++e) { /* the smallest altitude over the P-wave speed */
-        const pn_group *g = &m->groups[m->egroup[e]];
-        const int *el = m->elem + e * (size_t)dp;
-        pn_real Ds[9], vol, fmax = 0, cp, alt;
-        pn__fem_ds(m, e, m->x, Ds);
-        vol = PN__FABS(pn__fem_volume(d, Ds));
-        for (a = 0; a < dp; ++a) { /* the face opposite node a: its length (2D) or area (3D) */
-            pn_real p[3][3], f;
-            int nf = 0;
-            for (b = 0; b < dp; ++b)
-                if (b != a) {
-                    for (c = 0; c < d; ++c) p[nf][c] = m->x[(size_t)el[b] * (size_t)d + (size_t)c];
-                    nf++;
+    for (e = 0; e < m->n_elems; ++e) /* the smallest altitude of a linear piece over the P-wave speed */
+        for (k = 0; k < pn__fem_nsub(m); ++k) {
+            const pn_group *g = &m->groups[m->egroup[e]];
+            const int *sub = pn__fem_sub(m, k), *en = m->elem + e * (size_t)m->nodes_per_element;
+            int el[4];
+            pn_real Ds[9], vol, fmax = 0, cp, alt;
+            for (a = 0; a < dp; ++a) el[a] = en[sub[a]];
+            for (a = 1; a <= d; ++a)
+                for (c = 0; c < d; ++c) Ds[c * d + a - 1] = m->x[(size_t)el[a] * (size_t)d + (size_t)c] - m->x[(size_t)el[0] * (size_t)d + (size_t)c];
+            vol = PN__FABS(pn__fem_volume(d, Ds));
+            for (a = 0; a < dp; ++a) { /* the face opposite node a: its length (2D) or area (3D) */
+                pn_real p[3][3], f;
+                int nf = 0;
+                for (b = 0; b < dp; ++b)
+                    if (b != a) {
+                        for (c = 0; c < d; ++c) p[nf][c] = m->x[(size_t)el[b] * (size_t)d + (size_t)c];
+                        nf++;
+                    }
+                if (d == 2) f = PN__SQRT((p[1][0] - p[0][0]) * (p[1][0] - p[0][0]) + (p[1][1] - p[0][1]) * (p[1][1] - p[0][1]));
+                else {
+                    pn_real u[3], v[3], w[3];
+                    for (c = 0; c < 3; ++c) u[c] = p[1][c] - p[0][c], v[c] = p[2][c] - p[0][c];
+                    w[0] = u[1] * v[2] - u[2] * v[1], w[1] = u[2] * v[0] - u[0] * v[2], w[2] = u[0] * v[1] - u[1] * v[0];
+                    f = PN__SQRT(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / 2;
                 }
-            if (d == 2) f = PN__SQRT((p[1][0] - p[0][0]) * (p[1][0] - p[0][0]) + (p[1][1] - p[0][1]) * (p[1][1] - p[0][1]));
-            else {
-                pn_real u[3], v[3], w[3];
-                for (c = 0; c < 3; ++c) u[c] = p[1][c] - p[0][c], v[c] = p[2][c] - p[0][c];
-                w[0] = u[1] * v[2] - u[2] * v[1], w[1] = u[2] * v[0] - u[0] * v[2], w[2] = u[0] * v[1] - u[1] * v[0];
-                f = PN__SQRT(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) / 2;
+                fmax = PN__MAX(fmax, f);
             }
-            fmax = PN__MAX(fmax, f);
+            alt = d * vol / fmax;
+            cp = PN__SQRT((g->material.lambda + 2 * g->material.mu) / g->density_kg_m3);
+            best = PN__MIN(best, (pn_real)0.5 * alt / cp);
         }
-        alt = d * vol / fmax;
-        cp = PN__SQRT((g->material.lambda + 2 * g->material.mu) / g->density_kg_m3);
-        best = PN__MIN(best, (pn_real)0.5 * alt / cp);
-    }
     { /* contacts: no node closes more than a quarter of its gap per step; the barrier's spring */
         pn_real gs = PN__FEM_FAR, sp = PN__FEM_FAR;
         pn__fem_contacts(m, m->time_s, &gs, &sp);
@@ -9264,7 +9499,7 @@ static pn_result pn__fem_check_step(pn_fem_mesh *m, pn_real dt, const char *who)
 
 PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats *stats) {
     pn__fem *s;
-    int d, dp, a, i, j, o;
+    int d, nn, a, i, j, o;
     size_t e, k, plastic = 0;
     pn_result r;
     pn_real *f;
@@ -9273,7 +9508,7 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     m->error_element = m->error_node = -1;
     if ((r = pn__fem_check_step(m, dt, "pn_fem_step_explicit")) != PN_OK) return r;
     s = (pn__fem *)m->impl;
-    d = m->dim, dp = d + 1;
+    d = m->dim, nn = m->nodes_per_element;
     if (stats) memset(stats, 0, sizeof *stats);
     pn__fem_setup(m);
     pn__fem_backup(m);
@@ -9281,22 +9516,22 @@ PN__DEF pn_result pn_fem_step_explicit(pn_fem_mesh *m, pn_real dt, pn_fem_stats 
     for (k = 0; k < m->n_nodes; ++k)
         for (i = 0; i < d; ++i)
             f[k * (size_t)d + (size_t)i] = m->mass[k] * m->desc.gravity[i] + (s->fext ? s->fext[k * (size_t)d + (size_t)i] : 0);
-    PN__FEM_OMP_FOR /* each element's P on threads; the forces gathered below in element order */
-    for (e = 0; e < m->n_elems; ++e) {
+    PN__FEM_OMP_FOR /* each point's P on threads; the forces gathered below in point order */
+    for (e = 0; e < m->n_points; ++e) {
         pn_real Fe[9];
         pn__fem_fe(m, e, m->x, Fe);
-        s->estat[e] = (int)pn_elastic_energy(&m->groups[m->egroup[e]].material, d, Fe, m->h[e], NULL, s->eP + e * (size_t)(d * d),
-                                             NULL, 0);
+        s->estat[e] = (int)pn_elastic_energy(&m->groups[m->egroup[PN__FEM_ELEM(m, e)]].material, d, Fe, m->h[e], NULL,
+                                             s->eP + e * (size_t)(d * d), NULL, 0);
     }
-    for (e = 0; e < m->n_elems; ++e) {
-        const int *el = m->elem + e * (size_t)dp;
-        const pn_real *q = s->q + e * (size_t)(d * dp), *P = s->eP + e * (size_t)(d * d);
+    for (e = 0; e < m->n_points; ++e) { /* (e: the point) */
+        const int *el = m->elem + PN__FEM_ELEM(m, e) * (size_t)nn;
+        const pn_real *q = s->q + e * (size_t)(d * nn), *P = s->eP + e * (size_t)(d * d);
         if (s->estat[e]) {
-            m->error_element = (long)e;
-            return PN__FAIL(m, (pn_result)s->estat[e], "pn_fem_step_explicit: element %lu: %s", (unsigned long)e,
+            m->error_element = (long)PN__FEM_ELEM(m, e);
+            return PN__FAIL(m, (pn_result)s->estat[e], "pn_fem_step_explicit: element %lu: %s", (unsigned long)m->error_element,
                                 pn_result_string((pn_result)s->estat[e]));
         }
-        for (a = 0; a < dp; ++a)
+        for (a = 0; a < nn; ++a)
             for (i = 0; i < d; ++i) {
                 pn_real acc = 0;
                 for (j = 0; j < d; ++j) acc += P[i * d + j] * q[a * d + j];
@@ -9519,14 +9754,14 @@ static pn_result pn__fem_minimize(pn_fem_mesh *m, const pn_fem_implicit_desc *o,
                         (double)(res / m->edge_mean), (double)o->newton_tol);
 }
 
-/* each element's energy prepared at F0 = Fe(x) (fixed point); elements x inverts use x^n */
+/* each point's energy prepared at F0 = Fe(x) (fixed point); points x inverts use x^n */
 static pn_result pn__fem_prepare(pn_fem_mesh *m, const pn_real *x) {
     pn__fem *s = (pn__fem *)m->impl;
     int d = m->dim, dd = d * d;
     size_t e;
     PN__FEM_OMP_FOR
-    for (e = 0; e < m->n_elems; ++e) {
-        const pn_group *g = &m->groups[m->egroup[e]];
+    for (e = 0; e < m->n_points; ++e) { /* (e: the point) */
+        const pn_group *g = &m->groups[m->egroup[PN__FEM_ELEM(m, e)]];
         pn_real F0[9];
         pn_result r = PN_OK;
         pn_energy en = pn__mpm_energy_of(g);
@@ -9539,11 +9774,11 @@ static pn_result pn__fem_prepare(pn_fem_mesh *m, const pn_real *x) {
         else r = pn_dp_prepare(&g->material, d, F0, m->h[e], &s->pty[e]);
         s->estat[e] = (int)r;
     }
-    for (e = 0; e < m->n_elems; ++e)
+    for (e = 0; e < m->n_points; ++e)
         if (s->estat[e]) {
-            m->error_element = (long)e;
-            return PN__FAIL(m, (pn_result)s->estat[e], "element %lu: preparing its energy at F0 failed (%s)", (unsigned long)e,
-                                pn_result_string((pn_result)s->estat[e]));
+            m->error_element = (long)PN__FEM_ELEM(m, e);
+            return PN__FAIL(m, (pn_result)s->estat[e], "element %lu: preparing its energy at F0 failed (%s)",
+                                (unsigned long)m->error_element, pn_result_string((pn_result)s->estat[e]));
         }
     return PN_OK;
 }
@@ -9596,7 +9831,7 @@ static int pn__fem_new_friction(const pn_fem_mesh *m) {
 
 static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_implicit_desc *o, pn_fem_stats *st) {
     pn__fem *s = (pn__fem *)m->impl;
-    int d = m->dim, dp = d + 1, i, j, pass, round, a;
+    int d = m->dim, i, j, pass, round, a;
     size_t n = m->n_nodes, nd = n * (size_t)d, k, e, plastic = 0;
     pn_real kmax = 0, tol = o->newton_tol * m->edge_mean;
     pn_result r;
@@ -9636,11 +9871,11 @@ static pn_result pn__fem_implicit_once(pn_fem_mesh *m, pn_real dt, const pn_fem_
         }
     }
     /* the obstacles' pull: 1e4 times the stiffest node's diagonal (mass, elements, barrier) */
-    for (e = 0; e < m->n_elems; ++e) {
-        const pn_material *mt = &m->groups[m->egroup[e]].material;
-        const pn_real *q = s->q + e * (size_t)(d * dp);
+    for (e = 0; e < m->n_points; ++e) {
+        const pn_material *mt = &m->groups[m->egroup[PN__FEM_ELEM(m, e)]].material;
+        const pn_real *q = s->q + e * (size_t)(d * m->nodes_per_element);
         pn_real qq = 0;
-        for (a = 0; a < d * dp; ++a) qq = PN__MAX(qq, q[a] * q[a]);
+        for (a = 0; a < d * m->nodes_per_element; ++a) qq = PN__MAX(qq, q[a] * q[a]);
         kmax = PN__MAX(kmax, dt * dt * m->vol0[e] * (mt->lambda + 2 * mt->mu) * qq * d);
     }
     for (k = 0; k < n; ++k) kmax = PN__MAX(kmax, m->mass[k]);
@@ -9771,12 +10006,13 @@ PN__DEF pn_result pn_fem_energy(const pn_fem_mesh *m, pn_real *elastic_j, pn_rea
     pn_real el = 0, kin = 0;
     if (!m) return PN_ERROR_INVALID_ARGUMENT;
     d = m->dim, dd = d * d;
-    for (e = 0; e < m->n_elems; ++e) {
-        pn_real Ds[9], F[9], Fe[9], psi = 0;
-        pn__fem_ds(m, e, m->x, Ds);
-        pn_mat_mul(d, Ds, m->Dm_inv + e * (size_t)dd, F);
+    for (e = 0; e < m->n_points; ++e) { /* (e: the point) */
+        pn_real J[9], F[9], Fe[9], psi = 0;
+        pn__fem_jac(m, e, m->x, J);
+        pn_mat_mul(d, J, m->Dm_inv + e * (size_t)dd, F);
         pn_mat_mul(d, F, m->Fp_inv + e * (size_t)dd, Fe);
-        if (pn_elastic_energy(&m->groups[m->egroup[e]].material, d, Fe, m->h[e], &psi, NULL, NULL, 0) != PN_OK) return PN_ERROR_INVERTED;
+        if (pn_elastic_energy(&m->groups[m->egroup[PN__FEM_ELEM(m, e)]].material, d, Fe, m->h[e], &psi, NULL, NULL, 0) != PN_OK)
+            return PN_ERROR_INVERTED;
         el += m->vol0[e] * psi;
     }
     for (k = 0; k < m->n_nodes * (size_t)d; ++k) kin += m->mass[k / (size_t)d] * m->v[k] * m->v[k] / 2;
@@ -10388,11 +10624,14 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
         pn_coupled_destroy(c);
         return r != PN_OK ? r : PN_ERROR_INVALID_ARGUMENT;
     }
-    for (e = 0; e < m->n_elems; ++e) {
+    for (e = 0; e < m->n_elems * (size_t)pn__fem_nsub(m); ++e) { /* each element's linear pieces */
         pn_real Ds[9], Di[9], lo[3], hi[3];
-        const int *el = m->elem + e * (size_t)(d + 1);
-        int a, j;
-        pn__fem_ds(m, e, m->x, Ds);
+        const int *en = m->elem + (e / (size_t)pn__fem_nsub(m)) * (size_t)m->nodes_per_element;
+        const int *sub = pn__fem_sub(m, (int)(e % (size_t)pn__fem_nsub(m)));
+        int a, j, el[4];
+        for (j = 0; j <= d; ++j) el[j] = en[sub[j]];
+        for (j = 1; j <= d; ++j)
+            for (a = 0; a < d; ++a) Ds[a * d + j - 1] = m->x[(size_t)el[j] * (size_t)d + (size_t)a] - m->x[(size_t)el[0] * (size_t)d + (size_t)a];
         if (pn_mat_inverse(d, Ds, Di) != PN_OK) continue;
         for (a = 0; a < d; ++a) lo[a] = hi[a] = m->x[(size_t)el[0] * (size_t)d + (size_t)a];
         for (j = 1; j <= d; ++j)
@@ -10415,7 +10654,7 @@ PN__DEF pn_result pn_coupled_create(pn_mpm_world *w, pn_fem_mesh *m, const pn_co
             }
             if (in && sum <= 1) {
                 pn__msg(why, why_cap, "pn_coupled_create: particle %lu lies inside element %lu of the mesh",
-                            (unsigned long)p, (unsigned long)e);
+                            (unsigned long)p, (unsigned long)(e / (size_t)pn__fem_nsub(m)));
                 pn_coupled_destroy(c);
                 return PN_ERROR_INVALID_ARGUMENT;
             }

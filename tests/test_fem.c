@@ -23,7 +23,8 @@ static pn_group t_fem_group(pn_elastic_model e, pn_plastic_model p, double E, do
     return g;
 }
 
-static int t_fem_make(t_fem *t, const pn_fem_grid *g, const pn_group *grp, double gy) {
+/* the grid's mesh, made quadratic (pn_fem_quadratic_mesh) when order is 2 */
+static int t_fem_make_order(t_fem *t, const pn_fem_grid *g, const pn_group *grp, double gy, int order) {
     pn_fem_desc fd;
     char why[256];
     memset(t, 0, sizeof *t);
@@ -31,14 +32,32 @@ static int t_fem_make(t_fem *t, const pn_fem_grid *g, const pn_group *grp, doubl
     t->X = (pn_real *)malloc(sizeof(pn_real) * t->nn * (size_t)g->dim);
     t->el = (int *)malloc(sizeof(int) * t->ne * (size_t)(g->dim + 1));
     if (!t->X || !t->el || pn_fem_grid_mesh(g, t->X, t->el, &t->nn, &t->ne) != PN_OK) return 0;
+    if (order == 2) {
+        size_t n2;
+        pn_real *X2;
+        int *el2;
+        if (pn_fem_quadratic_mesh(g->dim, t->X, t->nn, t->el, t->ne, NULL, NULL, NULL, &n2) != PN_OK) return 0;
+        X2 = (pn_real *)malloc(sizeof(pn_real) * n2 * (size_t)g->dim);
+        el2 = (int *)malloc(sizeof(int) * t->ne * (size_t)((g->dim + 1) * (g->dim + 2) / 2));
+        if (!X2 || !el2 || pn_fem_quadratic_mesh(g->dim, t->X, t->nn, t->el, t->ne, NULL, X2, el2, &n2) != PN_OK) {
+            free(X2), free(el2);
+            return 0;
+        }
+        free(t->X), free(t->el);
+        t->X = X2, t->el = el2, t->nn = n2;
+    }
     memset(&fd, 0, sizeof fd);
-    fd.dim = g->dim, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el;
+    fd.dim = g->dim, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el, fd.order = order;
     fd.groups = grp, fd.n_groups = 1, fd.gravity[1] = (pn_real)gy;
     if (pn_fem_create(&fd, &t->m, why, sizeof why) != PN_OK) {
         fprintf(stderr, "  t_fem_make: %s\n", why);
         return 0;
     }
     return 1;
+}
+
+static int t_fem_make(t_fem *t, const pn_fem_grid *g, const pn_group *grp, double gy) {
+    return t_fem_make_order(t, g, grp, gy, 1);
 }
 
 static void t_fem_free(t_fem *t) {
@@ -191,11 +210,11 @@ static double t_fem_hget(const pn__fem *s, size_t r, size_t c) {
    obstacle within dhat of some nodes and a moving one (its offset an unknown), both with
    friction (sliding and in the smoothed stick range), in 2D and 3D,
    for Neo-Hookean (convex here: the projection changes nothing) and exact von Mises; the
-   Hessian as the skyline holds it and as PCG's blocks do. */
+   Hessian as the skyline holds it and as PCG's blocks do; linear and quadratic elements. */
 PN_TEST(fem_objective_fd) {
     int dim, mat;
     for (dim = 2; dim <= 3; ++dim)
-        for (mat = 0; mat < 4; ++mat) {
+        for (mat = 0; mat < 8; ++mat) {
             pn_fem_grid g = t_fem_grid(dim, 2, 2, 1, 0.02, 0.02, 0.01);
             pn_group grp = mat & 1 ? t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e6, 1000)
                                    : t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
@@ -207,7 +226,7 @@ PN_TEST(fem_objective_fd) {
             pn_real *x, *g0, *gp;
             unsigned long seed = 7;
             g.lo_m[1] = (pn_real)2e-5;
-            if (!t_fem_make(&t, &g, &grp, -9.81)) {
+            if (!t_fem_make_order(&t, &g, &grp, -9.81, mat & 4 ? 2 : 1)) {
                 PN_CHECK(0);
                 continue;
             }
@@ -217,7 +236,8 @@ PN_TEST(fem_objective_fd) {
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
             memset(&c, 0, sizeof c); /* a box coming down from above */
             c.shape = PN_SHAPE_BOX, c.center_m[0] = (pn_real)0.01, c.center_m[1] = (pn_real)(0.02 + 2e-5 + 1.5e-5 + 0.005);
-            c.center_m[2] = (pn_real)0.005, c.half_extent_m[0] = c.half_extent_m[1] = (pn_real)0.005, c.half_extent_m[2] = (pn_real)0.01;
+            c.center_m[2] = (pn_real)0.005, c.half_extent_m[0] = (pn_real)0.004, c.half_extent_m[1] = (pn_real)0.005;
+            c.half_extent_m[2] = (pn_real)0.01; /* no node below its edges: the distance's curvature there is dropped */
             c.velocity_m_s[1] = (pn_real)-0.01, c.friction = (pn_real)0.3;
             PN_CHECK(pn_fem_add_obstacle(t.m, &c, NULL) == PN_OK);
             s = (pn__fem *)t.m->impl;
@@ -277,6 +297,8 @@ PN_TEST(fem_objective_fd) {
             PN_CHECK(gmax > 0 && hmax > 0);
             PN_CHECK_LE(gerr, 1e-5 * gmax);
             PN_CHECK_LE(herr, 1e-4 * hmax);
+            if (mat & 4) PN_REPORT("%dD quadratic, %s: gradient %.1e, Hessian %.1e of their largest entries", dim,
+                                   mat & 1 ? "von Mises" : "Neo-Hookean", gerr / gmax, herr / hmax);
             free(x);
             t_fem_free(&t);
         }
@@ -513,11 +535,139 @@ PN_TEST(fem_cantilever) {
     PN_CHECK_LE(2.5 * e8, e4);
 }
 
+/* Quadratic elements (pn_fem_quadratic_mesh, pn_fem_desc.order 2): the node count (corners,
+   then one per edge of the grid's triangulation, counted by hand: alternating diagonals in
+   2D, Kuhn's one diagonal per face and per cube in 3D), the rest volume over the points, the
+   HRZ masses (positive, summing to rho V), and exactness: positions quadratic in X give every
+   integration point F = dx/dX there, to rounding (quadratic elements reproduce quadratic
+   fields); the points' positions from the degree-2 rules' barycentric coordinates. */
+PN_TEST(fem_quadratic_mesh) {
+    int dim;
+    for (dim = 2; dim <= 3; ++dim) {
+        pn_fem_grid g = t_fem_grid(dim, 3, 2, 2, 0.3, 0.2, 0.2);
+        pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+        size_t corners = dim == 2 ? 4 * 3 : 4 * 3 * 3, edges, k, p;
+        double vol = 0, mass = 0, mmin = 1e9, ferr = 0, box = dim == 2 ? 0.06 : 0.012;
+        t_fem t;
+        int i, j, nq = dim + 1;
+        edges = dim == 2 ? 3 * 3 + 4 * 2 + 3 * 2 /* horizontal, vertical, diagonal */
+                         : (3 * 3 * 3 + 4 * 2 * 3 + 4 * 3 * 2) + (3 * 2 * 3 + 3 * 3 * 2 + 4 * 2 * 2) + 3 * 2 * 2;
+        if (!t_fem_make_order(&t, &g, &grp, 0, 2)) {
+            PN_CHECK(0);
+            continue;
+        }
+        PN_CHECK(t.nn == corners + edges);
+        PN_CHECK(t.m->order == 2 && t.m->nodes_per_element == (dim == 2 ? 6 : 10) && t.m->points_per_element == nq);
+        PN_CHECK(t.m->n_points == t.ne * (size_t)nq);
+        for (p = 0; p < t.m->n_points; ++p) vol += t.m->vol0[p];
+        for (k = 0; k < t.nn; ++k) mass += t.m->mass[k], mmin = fmin(mmin, t.m->mass[k]);
+        PN_CHECK_NEAR(vol, box, 1e-12);
+        PN_CHECK_NEAR(mass, 1000 * box, 1e-9);
+        PN_CHECK(mmin > 0);
+        for (k = 0; k < t.nn; ++k) { /* x = X + u(X), u quadratic */
+            const pn_real *X = t.X + k * (size_t)dim;
+            pn_real *x = t.m->x + k * (size_t)dim;
+            double z = dim == 3 ? X[2] : 0;
+            x[0] = X[0] + (pn_real)(0.3 * X[0] * X[1] + 0.2 * z * z);
+            x[1] = X[1] + (pn_real)(0.1 * X[0] * X[0] - 0.25 * X[1] * z + 0.05 * X[1] * X[1]);
+            if (dim == 3) x[2] = X[2] + (pn_real)(0.15 * X[0] * X[2] + 0.05 * X[1] * X[1]);
+        }
+        for (p = 0; p < t.m->n_points; ++p) {
+            const int *el = t.el + (p / (size_t)nq) * (size_t)t.m->nodes_per_element;
+            double Xq[3] = {0, 0, 0}, Fa[9], lam;
+            pn_real J[9], F[9];
+            int q = (int)(p % (size_t)nq);
+            for (i = 0; i <= dim; ++i) { /* the point: barycentric (2/3, 1/6, 1/6) or (a, b, b, b) */
+                lam = dim == 2 ? (i == q ? 2.0 / 3 : 1.0 / 6) : (i == q ? (5 + 3 * sqrt(5.0)) / 20 : (5 - sqrt(5.0)) / 20);
+                for (j = 0; j < dim; ++j) Xq[j] += lam * t.X[(size_t)el[i] * (size_t)dim + (size_t)j];
+            }
+            for (i = 0; i < 9; ++i) Fa[i] = 0;
+            Fa[0] = 1 + 0.3 * Xq[1], Fa[1] = 0.3 * Xq[0];
+            Fa[dim + 0] = 0.2 * Xq[0], Fa[dim + 1] = 1 - 0.25 * Xq[2] + 0.1 * Xq[1];
+            if (dim == 3) {
+                Fa[2] = 0.4 * Xq[2], Fa[5] = -0.25 * Xq[1];
+                Fa[6] = 0.15 * Xq[2], Fa[7] = 0.1 * Xq[1], Fa[8] = 1 + 0.15 * Xq[0];
+            }
+            pn__fem_jac(t.m, p, t.m->x, J);
+            pn_mat_mul(dim, J, t.m->Dm_inv + p * (size_t)(dim * dim), F);
+            for (i = 0; i < dim * dim; ++i) ferr = fmax(ferr, fabs(F[i] - Fa[i]));
+        }
+        PN_REPORT("%dD: %lu nodes, volume and mass exact, F of a quadratic field off by %.1e", dim, (unsigned long)t.nn, ferr);
+        PN_CHECK_LE(ferr, 1e-13);
+        t_fem_free(&t);
+    }
+    { /* bad input: an index out of range; a mid-edge node placed past its edge's far corner */
+        pn_real X[8] = {0, 0, 1, 0, 0, 1, 1, 1};
+        int el[3] = {0, 1, 4}, el2[6];
+        size_t n2 = 0;
+        PN_CHECK(pn_fem_quadratic_mesh(2, X, 4, el, 1, NULL, NULL, NULL, &n2) == PN_ERROR_INVALID_ARGUMENT);
+        el[2] = 2;
+        PN_CHECK(pn_fem_quadratic_mesh(2, X, 4, el, 1, NULL, NULL, NULL, &n2) == PN_OK && n2 == 7);
+        {
+            pn_real X2[14];
+            pn_fem_desc fd;
+            pn_fem_mesh *m = NULL;
+            pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e6, 1000);
+            char why[256];
+            PN_CHECK(pn_fem_quadratic_mesh(2, X, 4, el, 1, NULL, X2, el2, &n2) == PN_OK);
+            X2[2 * el2[3]] = (pn_real)1.3; /* edge 0-1's node beyond corner 1 */
+            memset(&fd, 0, sizeof fd);
+            fd.dim = 2, fd.n_nodes = n2, fd.n_elements = 1, fd.rest_m = X2, fd.elements = el2, fd.order = 2;
+            fd.groups = &grp, fd.n_groups = 1;
+            PN_CHECK(pn_fem_create(&fd, &m, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && m == NULL);
+            PN_CHECK(strstr(why, "element 0") != NULL && strstr(why, "Jacobian") != NULL);
+            fd.order = 3;
+            PN_CHECK(pn_fem_create(&fd, &m, why, sizeof why) == PN_ERROR_INVALID_ARGUMENT && strstr(why, "order") != NULL);
+        }
+    }
+}
+
+/* A 3D cantilever, 1 x 0.1 x 0.1 m, clamped at x = 0, under its own weight (E 1e9 Pa, nu 0.3,
+   1000 kg/m^3: the tip moves 1.5 mm, linear theory holds), settled by one implicit step of
+   10 s (backward Euler: the step leaves 1e-6 of the static deflection to go), against
+   Timoshenko's tip deflection q L^4 / (8 E I) + q L^2 / (2 k G A), k = 10 (1 + nu) / (12 +
+   11 nu) for a rectangle. Linear tetrahedra lock in bending: far short with 2 or 4 through
+   the depth. Quadratic ones: within 5% at 4 through the depth (and at 2). */
+static double t_fem_cantilever_3d(int nx, int nyz, int order) {
+    pn_fem_grid g = t_fem_grid(3, nx, nyz, nyz, 1, 0.1, 0.1);
+    pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e9, 1000);
+    t_fem t;
+    int *fix;
+    size_t k, nf = 0, nt = 0;
+    double tip = 0;
+    if (!t_fem_make_order(&t, &g, &grp, -9.81, order)) return 1e9;
+    fix = (int *)malloc(sizeof(int) * t.nn);
+    for (k = 0; k < t.nn; ++k)
+        if (t.X[3 * k] == 0) fix[nf++] = (int)k;
+    if (!fix || pn_fem_fix_nodes(t.m, nf, fix, NULL) != PN_OK || pn_fem_step_implicit(t.m, (pn_real)10, NULL, NULL) != PN_OK) {
+        fprintf(stderr, "  t_fem_cantilever_3d: %s\n", pn_fem_error(t.m));
+        tip = 1e9;
+    } else
+        for (k = 0; k < t.nn; ++k) /* the mean deflection of the tip section's nodes */
+            if (t.X[3 * k] == 1) tip += t.m->x[3 * k + 1] - t.X[3 * k + 1], nt++;
+    free(fix);
+    t_fem_free(&t);
+    return tip == 1e9 ? tip : tip / (double)nt;
+}
+
+PN_TEST(fem_cantilever_3d) {
+    double E = 1e9, nu = 0.3, H = 0.1, A = H * H, I = H * H * H * H / 12, q = 1000 * 9.81 * A, G = E / (2 * (1 + nu));
+    double kap = 10 * (1 + nu) / (12 + 11 * nu), tim = -(q / (8 * E * I) + q / (2 * kap * G * A));
+    double l2 = t_fem_cantilever_3d(20, 2, 1) / tim, l4 = t_fem_cantilever_3d(20, 4, 1) / tim;
+    double q2 = t_fem_cantilever_3d(10, 2, 2) / tim, q4 = t_fem_cantilever_3d(10, 4, 2) / tim;
+    PN_REPORT("tip deflection over Timoshenko's: linear tetrahedra %.3f (2 through the depth), %.3f (4); quadratic %.3f (2), "
+              "%.3f (4)", l2, l4, q2, q4);
+    PN_CHECK_LE(fabs(q4 - 1), 0.05);
+    PN_CHECK_LE(fabs(q2 - 1), 0.05);
+    PN_CHECK(l2 < l4 && l4 < 0.9); /* the locking the quadratic elements remove */
+}
+
 /* explicit and implicit agree at a small step: an elastic block dropped on the floor (2D; 3D
    too with PN_TEST_FULL=1: make test-all, CI) */
 PN_TEST(fem_explicit_implicit) {
-    int dim;
-    for (dim = 2; dim <= (pn_test_full() ? 3 : 2); ++dim) {
+    int dim, order;
+    for (dim = 2; dim <= (pn_test_full() ? 3 : 2); ++dim)
+        for (order = 1; order <= 2; ++order) {
         pn_fem_grid g = t_fem_grid(dim, 3, 3, 3, 0.03, 0.03, 0.03);
         pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e5, 1000);
         t_fem a, b;
@@ -526,7 +676,7 @@ PN_TEST(fem_explicit_implicit) {
         double T = 0.06, dt_e, err = 0, t_now;
         long k;
         g.lo_m[1] = (pn_real)0.01;
-        if (!t_fem_make(&a, &g, &grp, -9.81) || !t_fem_make(&b, &g, &grp, -9.81)) {
+        if (!t_fem_make_order(&a, &g, &grp, -9.81, order) || !t_fem_make_order(&b, &g, &grp, -9.81, order)) {
             PN_CHECK(0);
             continue;
         }
@@ -554,6 +704,8 @@ PN_TEST(fem_explicit_implicit) {
         PN_CHECK(a.m->x[1] < 0.004); /* it fell onto the floor (at 0.045 s) and bounced */
         PN_CHECK(a.m->x[1] > 0);
         PN_CHECK_LE(err, 0.03 * 0.03 * sqrt((double)dim)); /* 3% of the block's diagonal */
+        PN_REPORT("%dD, %s elements: explicit and implicit %.1e m apart (bar 3%% of the diagonal, %.1e)", dim,
+                  order == 2 ? "quadratic" : "linear", err, 0.03 * 0.03 * sqrt((double)dim));
         t_fem_free(&a);
         t_fem_free(&b);
     }
@@ -566,9 +718,10 @@ PN_TEST(fem_explicit_implicit) {
    linear_solver is refused with the mesh unchanged; stats say which solver ran, and the
    default switches to PCG where the factor would cost more than PN_FEM_CHOLESKY_MAX_GFLOP_*. */
 PN_TEST(fem_pcg) {
-    int dim;
-    for (dim = 2; dim <= 3; ++dim) {
-        pn_fem_grid g = t_fem_grid(dim, 5, 5, 3, 0.03, 0.03, 0.018);
+    int dim, order;
+    for (dim = 2; dim <= 3; ++dim)
+        for (order = 1; order <= 2; ++order) { /* quadratic: as many nodes on half the cells */
+        pn_fem_grid g = order == 2 ? t_fem_grid(dim, 3, 3, 2, 0.03, 0.03, 0.018) : t_fem_grid(dim, 5, 5, 3, 0.03, 0.03, 0.018);
         pn_group grp = t_fem_group(PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_VON_MISES, 1e8, 1000);
         t_fem a[2];
         pn_collider c;
@@ -579,7 +732,7 @@ PN_TEST(fem_pcg) {
         size_t k;
         g.lo_m[1] = (pn_real)1e-4;
         for (s = 0; s < 2; ++s) {
-            if (!t_fem_make(&a[s], &g, &grp, -9.81)) {
+            if (!t_fem_make_order(&a[s], &g, &grp, -9.81, order)) {
                 PN_CHECK(0);
                 return;
             }
@@ -613,9 +766,9 @@ PN_TEST(fem_pcg) {
             for (i = 0; i < dim; ++i) d2 += pow(a[0].m->x[k * (size_t)dim + (size_t)i] - a[1].m->x[k * (size_t)dim + (size_t)i], 2);
             apart = fmax(apart, sqrt(d2) / a[0].m->edge_mean);
         }
-        for (k = 0; k < a[0].ne; ++k) plastic = fmax(plastic, a[0].m->h[k]);
-        printf("    [fem_pcg] %dD: after 12 steps PCG and Cholesky %.2g of an edge apart; plate %.1f mm down, max plastic "
-               "state %.3f\n", dim, apart, 12 * 5e-3 * 0.1 * 1e3, plastic);
+        for (k = 0; k < a[0].m->n_points; ++k) plastic = fmax(plastic, a[0].m->h[k]);
+        printf("    [fem_pcg] %dD %s: after 12 steps PCG and Cholesky %.2g of an edge apart; plate %.1f mm down, max plastic "
+               "state %.3f\n", dim, order == 2 ? "quadratic" : "linear", apart, 12 * 5e-3 * 0.1 * 1e3, plastic);
         PN_CHECK(plastic > 0.01);          /* crushed past yield */
         PN_CHECK_LE(apart, 1e-2);          /* newton_tol 1e-5 of an edge per step, a 100x margin */
         { /* the default: Cholesky unless its factor would be too costly (here: made to look so) */
@@ -1623,6 +1776,8 @@ static const pn_test_case pn_tests_fem[] = {
     {"fem_line_search", fem_line_search},
     {"fem_newton_tail", fem_newton_tail},
     {"fem_cantilever", fem_cantilever},
+    {"fem_quadratic_mesh", fem_quadratic_mesh},
+    {"fem_cantilever_3d", fem_cantilever_3d},
     {"fem_explicit_implicit", fem_explicit_implicit},
     {"fem_pcg", fem_pcg},
     {"fem_friction_slide", fem_friction_slide},
