@@ -6824,14 +6824,6 @@ static void pn__fem_jac(const pn_fem_mesh *m, size_t p, const pn_real *x, pn_rea
             for (j = 0; j < d; ++j) J[i * d + j] += x[(size_t)el[a] * (size_t)d + (size_t)i] * dN[a * d + j];
 }
 
-/* Ds of element e's corners at positions x (columns x_a - x_0, row-major d x d) */
-static void pn__fem_ds(const pn_fem_mesh *m, size_t e, const pn_real *x, pn_real *Ds) {
-    int d = m->dim, a, i;
-    const int *n = m->elem + e * (size_t)m->nodes_per_element;
-    for (a = 1; a <= d; ++a)
-        for (i = 0; i < d; ++i) Ds[i * d + a - 1] = x[(size_t)n[a] * (size_t)d + i] - x[(size_t)n[0] * (size_t)d + i];
-}
-
 /* signed volume of a simplex with edge matrix Ds: det / d! */
 static pn_real pn__fem_volume(int d, const pn_real *Ds) { return pn_mat_det(d, Ds) / (d == 2 ? 2 : 6); }
 

@@ -26,7 +26,8 @@
    steps (pn_fem_implicit_desc.fixed_point_iters; lagged and PlasticityNet) [1]; --solver: the
    implicit steps' linear solver (pn_fem_implicit_desc.linear_solver) [the default]; --yield R:
    the frame's yield stress over E [3e-3] (pnet and pnet_nh serve 3e-3 only, pnet_nh_any its
-   range: they are left out elsewhere). */
+   range: they are left out elsewhere); --order 2: quadratic elements on the same cells, the
+   reference too. */
 #define PLASTINET_IMPLEMENTATION
 #include "../examples/common/pn_example.h"
 #include "../examples/common/pn_frame.h"
@@ -38,27 +39,32 @@ typedef struct run {
     const char *role;      /* reference, ref_check, implicit, fair, implicit_real */
     int energy, implicit, ok;
     double dt, E, courant;
+    int order;             /* 1 linear, 2 quadratic elements                              */
     double err_mean, err_max, wall, sim, newton, dmin, hmax;
     long steps;
 } run;
 
 typedef struct cfg {
-    int dim, quick, no_check, no_speed, passes;
+    int dim, quick, no_check, no_speed, passes, order, ref_order;
+    unsigned orders;             /* --orders: the implicit runs' element orders (bit 1, 2)    */
+    double ref_dt;               /* --ref-dt: the reference implicit (exact) at this step [0:
+                                    explicit]                                              */
     pn_fem_linear_solver solver; /* --solver: the implicit steps' (0: the default)          */
     unsigned energies, dts;      /* the implicit energies (bit PN_FRAME_*) and steps (bit of dts[]) run */
     double soft_E, window, T, speed, h, yield;
     const char *out, *ref_cache, *only;
 } cfg;
 
-static void scene(const cfg *c, int energy, double E, pn_frame_desc *d) {
+static void scene(const cfg *c, int energy, double E, int order, pn_frame_desc *d) {
     pn_frame_default(d, c->dim);
-    d->energy = energy, d->E = E, d->speed = c->speed, d->yield_ratio = c->yield;
+    d->energy = energy, d->E = E, d->speed = c->speed, d->yield_ratio = c->yield, d->order = order;
     if (c->h > 0) d->h = c->h;
 }
 
 /* One run to time T, recording the node positions at each frame (traj, frames x nodes x dim)
-   or comparing them with ref; stop after max_sim simulated seconds if > 0. */
-static void run_one(const cfg *c, run *r, double *traj, const double *ref, double max_sim) {
+   or comparing them with ref (ref_nd reals a frame: a quadratic reference's first nodes are a
+   linear run's); stop after max_sim simulated seconds if > 0. */
+static void run_one(const cfg *c, run *r, double *traj, const double *ref, size_t ref_nd, double max_sim) {
     pn_frame_desc d;
     pn_fem_mesh *m = NULL;
     pn_fem_implicit_desc id;
@@ -70,7 +76,7 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
     r->ok = 1, r->err_mean = r->err_max = r->wall = r->sim = r->newton = r->hmax = 0, r->steps = 0, r->dmin = 1e300;
     memset(&id, 0, sizeof id);
     id.fixed_point_iters = c->passes, id.linear_solver = c->solver;
-    scene(c, r->energy, r->E, &d);
+    scene(c, r->energy, r->E, r->order, &d);
     if (!pn_frame_create(&d, &m, &net, why, sizeof why)) {
         fprintf(stderr, "bench_fem: %s\n", why);
         exit(1);
@@ -94,7 +100,7 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
         r->wall += pn_ex_seconds() - t0;
         r->newton += (double)newton;
         r->sim = (double)m->time_s;
-        for (k = 0; k < m->n_elems; ++k) r->hmax = fmax(r->hmax, (double)m->h[k]);
+        for (k = 0; k < m->n_points; ++k) r->hmax = fmax(r->hmax, (double)m->h[k]);
         if (traj)
             for (k = 0; k < nd; ++k) traj[(size_t)(f - 1) * nd + k] = (double)m->x[k];
         if (ref) {
@@ -103,7 +109,7 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
                 double e2 = 0;
                 int i;
                 for (i = 0; i < c->dim; ++i) {
-                    double dx = (double)m->x[k * (size_t)c->dim + (size_t)i] - ref[(size_t)(f - 1) * nd + k * (size_t)c->dim + (size_t)i];
+                    double dx = (double)m->x[k * (size_t)c->dim + (size_t)i] - ref[(size_t)(f - 1) * ref_nd + k * (size_t)c->dim + (size_t)i];
                     e2 += dx * dx;
                 }
                 s += sqrt(e2);
@@ -126,6 +132,8 @@ static void run_one(const cfg *c, run *r, double *traj, const double *ref, doubl
 static void ref_path(const cfg *c, int fam, char *path, size_t cap) {
     char y[32] = "";
     if (c->yield != 3e-3) snprintf(y, sizeof y, "_Y%g", c->yield); /* the default's name is the older runs' */
+    if (c->ref_order == 2) snprintf(y + strlen(y), sizeof y - strlen(y), "_o2");
+    if (c->ref_dt > 0) snprintf(y + strlen(y), sizeof y - strlen(y), "_dt%g", c->ref_dt);
     snprintf(path, cap, "%s/bench_fem_ref_%dd_%s_E%g_T%g_h%g%s.bin", c->ref_cache, c->dim, fam ? "nh" : "vm", c->soft_E, c->T,
              c->h > 0 ? c->h : (c->dim == 3 ? 5e-3 : 2.5e-3), y);
 }
@@ -160,9 +168,9 @@ static void ref_save(const cfg *c, int fam, const double *ref, size_t nd, const 
 }
 
 static void progress(const run *r) {
-    fprintf(stderr, "  %-13s %-7s E %-7.3g dt %-8.3g courant %-4.3g: error mean %.4f max %.4f, wall %.3g s for %.3g s, Newton %.1f, "
+    fprintf(stderr, "  %-13s %-7s %s E %-7.3g dt %-8.3g courant %-4.3g: error mean %.4f max %.4f, wall %.3g s for %.3g s, Newton %.1f, "
                     "min distance %.3g m, max plastic strain %.3f%s\n",
-            r->role, r->implicit ? pn_frame_energy_names[r->energy] : "return", r->E, r->dt, r->courant, r->err_mean, r->err_max,
+            r->role, r->implicit ? pn_frame_energy_names[r->energy] : "return", r->order == 2 ? "P2" : "P1", r->E, r->dt, r->courant, r->err_mean, r->err_max,
             r->wall, r->sim, r->newton, r->dmin, r->hmax, r->ok ? "" : " (FAILED)");
 }
 
@@ -225,7 +233,7 @@ int main(int argc, char **argv) {
         else if (!v) {
             fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
                             "                 [--energies exact,pnet,lagged,pnet_nh,nh,pnet_nh_any] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n"
-                            "                 [--passes N] [--solver cholesky|pcg] [--yield R]\n");
+                            "                 [--passes N] [--solver cholesky|pcg] [--yield R] [--order 1|2]\n");
             return 2;
         } else if (!strcmp(a, "--dim")) dim_arg = atoi(v), ++k;
         else if (!strcmp(a, "--soft-E")) c.soft_E = atof(v), ++k;
@@ -234,6 +242,10 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
         else if (!strcmp(a, "--passes")) c.passes = atoi(v), ++k;
         else if (!strcmp(a, "--yield")) c.yield = atof(v), ++k;
+        else if (!strcmp(a, "--order")) c.order = atoi(v), ++k;
+        else if (!strcmp(a, "--ref-order")) c.ref_order = atoi(v), ++k;
+        else if (!strcmp(a, "--ref-dt")) c.ref_dt = atof(v), ++k;
+        else if (!strcmp(a, "--orders")) c.orders = (strchr(v, '1') ? 2u : 0u) | (strchr(v, '2') ? 4u : 0u), ++k;
         else if (!strcmp(a, "--solver") && (!strcmp(v, "cholesky") || !strcmp(v, "pcg")))
             c.solver = !strcmp(v, "pcg") ? PN_FEM_LINEAR_PCG : PN_FEM_LINEAR_CHOLESKY, ++k;
         else if (!strcmp(a, "--energies") || !strcmp(a, "--dts")) { /* comma lists */
@@ -256,13 +268,21 @@ int main(int argc, char **argv) {
         } else {
             fprintf(stderr, "usage: bench_fem [--dim 2|3] [--soft-E PA] [--window S] [--out DIR] [--ref-cache DIR] [--no-check] [--quick]\n"
                             "                 [--energies exact,pnet,lagged,pnet_nh,nh,pnet_nh_any] [--dts 1e-3,1e-2,1e-1] [--no-speed]\n"
-                            "                 [--passes N] [--solver cholesky|pcg] [--yield R]\n");
+                            "                 [--passes N] [--solver cholesky|pcg] [--yield R] [--order 1|2]\n");
             return 2;
         }
     }
     c.dim = dim_arg ? dim_arg : 2;
-    if ((c.dim != 2 && c.dim != 3) || c.soft_E < 0 || !(c.window > 0) || !(c.yield > 0)) {
-        fprintf(stderr, "bench_fem: bad --dim, --soft-E, --window or --yield\n");
+    if ((c.dim != 2 && c.dim != 3) || c.soft_E < 0 || !(c.window > 0) || !(c.yield > 0) || c.order < 0 || c.order > 2 ||
+        c.ref_order < 0 || c.ref_order > 2 || !(c.ref_dt >= 0)) {
+        fprintf(stderr, "bench_fem: bad --dim, --soft-E, --window, --yield, --order, --ref-order or --ref-dt\n");
+        return 2;
+    }
+    if (!c.order) c.order = 1;
+    if (!c.ref_order) c.ref_order = c.order;
+    if (!c.orders) c.orders = 1u << c.order;
+    if ((c.orders & 4u) && c.ref_order != 2) {
+        fprintf(stderr, "bench_fem: quadratic runs need a quadratic reference (--ref-order 2)\n");
         return 2;
     }
     if (!c.soft_E) c.soft_E = c.dim == 2 ? 2e9 : 2e8;
@@ -286,7 +306,7 @@ int main(int argc, char **argv) {
             double *ref;
             for (e = 0; e < 3 && fam_energies[fam][e] >= 0; ++e) any |= c.energies >> fam_energies[fam][e] & 1;
             if (!any) continue;
-            scene(&c, ref_energy, c.soft_E, &d);
+            scene(&c, ref_energy, c.soft_E, c.ref_order, &d);
             if (!pn_frame_create(&d, &m, &net, why, sizeof why)) return 1;
             nd = m->n_nodes * (size_t)c.dim;
             pn_fem_destroy(m);
@@ -294,26 +314,30 @@ int main(int argc, char **argv) {
             if (!ref) return 1;
             memset(&runs[n], 0, 2 * sizeof runs[0]);
             runs[n].role = "reference", runs[n].energy = ref_energy, runs[n].E = c.soft_E, runs[n].courant = 0.5;
+            runs[n].order = c.ref_order, runs[n].implicit = c.ref_dt > 0, runs[n].dt = c.ref_dt;
             if (!ref_load(&c, fam, ref, nd, &runs[n])) {
-                run_one(&c, &runs[n], ref, NULL, 0);
+                run_one(&c, &runs[n], ref, NULL, nd, 0);
                 ref_save(&c, fam, ref, nd, &runs[n]);
             }
             progress(&runs[n++]);
-            runs[n].role = "ref_check", runs[n].energy = ref_energy, runs[n].E = c.soft_E, runs[n].courant = 1;
+            runs[n] = runs[n - 1]; /* the check: the reference at twice its step */
+            runs[n].role = "ref_check", runs[n].courant = 1, runs[n].dt = 2 * c.ref_dt;
             if (!c.no_check) { /* --no-check: no row (not a check that passed) */
-                run_one(&c, &runs[n], NULL, ref, 0);
+                run_one(&c, &runs[n], NULL, ref, nd, 0);
                 progress(&runs[n++]);
             }
             for (e = 0; e < 3 && fam_energies[fam][e] >= 0; ++e)
-                for (i = 0; i < 3; ++i) {
+                for (i = 0; i < 3 * 2; ++i) {
                     run *r = &runs[n++];
                     memset(r, 0, sizeof *r);
-                    r->role = "implicit", r->energy = fam_energies[fam][e], r->E = c.soft_E, r->implicit = 1, r->dt = dts[i];
-                    if ((c.quick && dts[i] > 1e-2) || !(c.energies >> r->energy & 1) || !(c.dts >> i & 1)) {
+                    r->role = "implicit", r->energy = fam_energies[fam][e], r->E = c.soft_E, r->implicit = 1, r->dt = dts[i % 3];
+                    r->order = 1 + i / 3;
+                    if ((c.quick && dts[i % 3] > 1e-2) || !(c.energies >> r->energy & 1) || !(c.dts >> (i % 3) & 1) ||
+                        !(c.orders >> r->order & 1)) {
                         n--;
                         continue;
                     }
-                    run_one(&c, r, NULL, ref, 0);
+                    run_one(&c, r, NULL, ref, nd, 0);
                     progress(r);
                 }
             free(ref);
@@ -324,19 +348,20 @@ int main(int argc, char **argv) {
         for (i = 0; i < 4 && !best && !c.no_speed; ++i) {
             run *r = &runs[n];
             memset(r, 0, sizeof *r);
-            r->role = "fair", r->energy = PN_FRAME_EXACT, r->E = 2e11, r->courant = courants[i];
-            run_one(&c, r, NULL, NULL, c.window);
+            r->role = "fair", r->energy = PN_FRAME_EXACT, r->E = 2e11, r->courant = courants[i], r->order = c.order;
+            run_one(&c, r, NULL, NULL, 0, c.window);
             progress(r);
             n++;
             if (r->ok) best = r;
         }
-        for (e = 0; e < PN_FRAME_ENERGIES; ++e) {
+        for (e = 0; e < PN_FRAME_ENERGIES * 2; ++e) {
             run *r;
-            if (c.no_speed || !(c.energies >> e & 1)) continue;
+            if (c.no_speed || !(c.energies >> (e % PN_FRAME_ENERGIES) & 1) || !(c.orders >> (1 + e / PN_FRAME_ENERGIES) & 1)) continue;
             r = &runs[n++];
             memset(r, 0, sizeof *r);
-            r->role = "implicit_real", r->energy = e, r->E = 2e11, r->implicit = 1, r->dt = 1e-2;
-            run_one(&c, r, NULL, NULL, 0);
+            r->role = "implicit_real", r->energy = e % PN_FRAME_ENERGIES, r->E = 2e11, r->implicit = 1, r->dt = 1e-2;
+            r->order = 1 + e / PN_FRAME_ENERGIES;
+            run_one(&c, r, NULL, NULL, 0, 0);
             progress(r);
         }
         snprintf(path, sizeof path, "%s/bench_fem_%dd.csv", c.out, c.dim);
@@ -345,36 +370,40 @@ int main(int argc, char **argv) {
         md = fopen(path, "w");
         if (!csv || !md) return 1;
         fprintf(csv, "dim,role,integrator,energy,E,dt,courant,error_mean,error_max,wall_s,sim_s,wall_per_sim_s,x_fair,newton_per_step,"
-                     "min_distance_m,max_plastic_strain,ok\n");
-        fprintf(md, "<!-- written by bench/bench_fem.c (make bench-fem) -->\n**Metal frame %dD** (examples/common/pn_frame.h), yield "
+                     "min_distance_m,max_plastic_strain,ok,order\n");
+        fprintf(md, "<!-- written by bench/bench_fem.c (make bench-fem) -->\n**Metal frame %dD%s** (examples/common/pn_frame.h), yield "
                     "stress %g E: plate at %g m/s for %g s. Error: mean over frames (every %g s) and nodes of the nodal position error over the rest "
-                    "bounding-box diagonal, against the explicit reference of the same material at E = %g Pa. *x fair*: wall time "
+                    "bounding-box diagonal (a linear run: its nodes, the corners of a quadratic reference), against the %s "
+                    "reference of the same material at E = %g Pa%s. *x fair*: wall time "
                     "per simulated second over the fair explicit baseline's at 200 GPa%s.\n\n",
-                c.dim, c.yield, c.speed, c.T, FRAME_DT, c.soft_E,
+                c.dim, c.order == 2 ? ", quadratic elements" : "", c.yield, c.speed, c.T, FRAME_DT,
+                c.ref_dt > 0 ? "implicit (exact energy)" : "explicit", c.soft_E,
+                c.ref_order == 2 ? " on quadratic elements" : "",
                 best ? "" : c.no_speed ? " (not measured: --no-speed)" : " (no explicit step fraction stayed finite: no ratio)");
         if (best)
             fprintf(md, "Fair explicit baseline at 200 GPa: %g of pn_fem_stable_dt at each step, timed over the first %g s (%ld "
                         "steps) and scaled to the whole run: %.4g wall s per simulated s.\n\n",
                     best->courant, best->sim, best->steps, best->wall / best->sim);
-        fprintf(md, "| role | integrator | energy | E (Pa) | dt (s) | error mean / max | wall s / sim s | x fair | Newton / step | "
-                    "min distance (m) | max plastic strain | finite |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        fprintf(md, "| role | integrator | elements | energy | E (Pa) | dt (s) | error mean / max | wall s / sim s | x fair | Newton / step | "
+                    "min distance (m) | max plastic strain | finite |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for (k = 0; k < n; ++k) {
             const run *r = &runs[k];
             double wps = r->sim > 0 ? r->wall / r->sim : 0, xf = best && wps > 0 ? wps / (best->wall / best->sim) : 0;
             char dts_s[32];
             if (r->implicit) snprintf(dts_s, sizeof dts_s, "%g", r->dt);
             else snprintf(dts_s, sizeof dts_s, "%g x bound", r->courant);
-            fprintf(csv, "%d,%s,%s,%s,%g,%g,%g,%.6g,%.6g,%.6g,%.6g,%.6g,%.4g,%.3g,%.4g,%.4g,%d\n", c.dim, r->role,
+            fprintf(csv, "%d,%s,%s,%s,%g,%g,%g,%.6g,%.6g,%.6g,%.6g,%.6g,%.4g,%.3g,%.4g,%.4g,%d,%d\n", c.dim, r->role,
                     r->implicit ? "implicit" : "explicit", r->implicit ? pn_frame_energy_names[r->energy] : "return_mapping", r->E,
                     r->implicit ? r->dt : 0, r->courant, r->err_mean, r->err_max, r->wall, r->sim, wps, xf, r->newton, r->dmin,
-                    r->hmax, r->ok);
+                    r->hmax, r->ok, r->order == 2 ? 2 : 1);
             {
                 char err_s[48] = "-", xf_s[32] = "-";
                 if (strcmp(r->role, "reference") && strcmp(r->role, "fair") && strcmp(r->role, "implicit_real"))
                     snprintf(err_s, sizeof err_s, "%.4f / %.4f", r->err_mean, r->err_max);
                 if (xf > 0 && (r == best || !strcmp(r->role, "implicit_real"))) snprintf(xf_s, sizeof xf_s, "%.4f", xf);
-                fprintf(md, "| %s | %s | %s | %g | %s | %s | %.4g | %s | %.1f | %.3g | %.3f | %s |\n", r->role,
-                        r->implicit ? "implicit" : "explicit", r->implicit ? pn_frame_energy_names[r->energy] : "return mapping",
+                fprintf(md, "| %s | %s | %s | %s | %g | %s | %s | %.4g | %s | %.1f | %.3g | %.3f | %s |\n", r->role,
+                        r->implicit ? "implicit" : "explicit", r->order == 2 ? "quadratic" : "linear",
+                        r->implicit ? pn_frame_energy_names[r->energy] : "return mapping",
                         r->E, dts_s, err_s, wps, xf_s, r->newton, r->dmin, r->hmax, r->ok ? "yes" : "no");
             }
         }

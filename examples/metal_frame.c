@@ -63,7 +63,7 @@ int main(int argc, char **argv) {
     /* the mesh (it copies the arrays), then what implicit steps minimize for its one group */
     memset(&md, 0, sizeof md);
     md.dim = o.dim, md.n_nodes = n_nodes, md.n_elements = n_elems, md.rest_m = X, md.elements = el;
-    md.groups = &steel, md.n_groups = 1;
+    md.groups = &steel, md.n_groups = 1, md.order = fd.order;
     md.gravity[1] = (pn_real)-9.81;
     if (pn_fem_create(&md, &m, why, sizeof why) == PN_OK) {
         if (fd.energy == PN_FRAME_PNET || fd.energy == PN_FRAME_PNET_NH || fd.energy == PN_FRAME_PNET_NH_ANY) {
@@ -134,7 +134,7 @@ int main(int argc, char **argv) {
         wall_s += pn_ex_seconds() - t0;
         if (fails) break;
         /* results: the elements' equivalent plastic strain (m->h), the nodes (m->x) */
-        for (e = 0; e < m->n_elems; ++e) hmax = fmax(hmax, (double)m->h[e]);
+        for (e = 0; e < m->n_points; ++e) hmax = fmax(hmax, (double)m->h[e]);
         fprintf(stderr, "\r  frame %d/%d  t %.3f s  steps %ld  wall %.1f s  max plastic strain %.3f", f, frames, (double)m->time_s,
                 steps, wall_s, hmax);
         if (o.png && o.dim == 2) {

@@ -15,7 +15,7 @@ typedef struct t_cpl {
 } t_cpl;
 
 typedef struct t_cpl_scene {
-    int dim, res, cells[3];
+    int dim, res, cells[3], order; /* order: the block's elements (0, 1: linear; 2: quadratic) */
     double gy, sand_lo[3], sand_size[3], block_lo[3], block_size[3], block_v[3], E_sand, E_block, friction;
     pn_boundary boundary;
     pn_allocator allocator;      /* the world's and the mesh's (zero: malloc)               */
@@ -84,6 +84,20 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     t->X = (pn_real *)malloc(sizeof(pn_real) * t->nn * (size_t)d);
     t->el = (int *)malloc(sizeof(int) * t->ne * (size_t)(d + 1));
     if (!t->X || !t->el || pn_fem_grid_mesh(&g, t->X, t->el, &t->nn, &t->ne) != PN_OK) return 0;
+    if (sc->order == 2) { /* a node on each edge */
+        size_t n2;
+        pn_real *X2 = NULL;
+        int *el2 = NULL;
+        if (pn_fem_quadratic_mesh(d, t->X, t->nn, t->el, t->ne, NULL, NULL, NULL, &n2) != PN_OK) return 0;
+        X2 = (pn_real *)malloc(sizeof(pn_real) * n2 * (size_t)d);
+        el2 = (int *)malloc(sizeof(int) * t->ne * (size_t)((d + 1) * (d + 2) / 2));
+        if (!X2 || !el2 || pn_fem_quadratic_mesh(d, t->X, t->nn, t->el, t->ne, NULL, X2, el2, &n2) != PN_OK) {
+            free(X2), free(el2);
+            return 0;
+        }
+        free(t->X), free(t->el);
+        t->X = X2, t->el = el2, t->nn = n2;
+    }
     memset(&fg, 0, sizeof fg);
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_NEO_HOOKEAN, md.youngs_modulus_pa = (pn_real)sc->E_block, md.poisson_ratio = (pn_real)0.3;
@@ -91,7 +105,7 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     fg.density_kg_m3 = 3000;
     memset(&fd, 0, sizeof fd);
     fd.dim = d, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el;
-    fd.groups = &fg, fd.n_groups = 1, fd.gravity[1] = (pn_real)sc->gy, fd.allocator = sc->allocator;
+    fd.groups = &fg, fd.n_groups = 1, fd.gravity[1] = (pn_real)sc->gy, fd.allocator = sc->allocator, fd.order = sc->order;
     if (pn_fem_create(&fd, &t->m, msg, sizeof msg) != PN_OK) return 0;
     for (k = 0; k < t->nn; ++k)
         for (i = 0; i < d; ++i) t->m->v[k * (size_t)d + (size_t)i] = (pn_real)sc->block_v[i];
@@ -141,12 +155,15 @@ static t_cpl_scene t_cpl_collision(int dim) {
 }
 
 PN_TEST(couple_momentum) {
-    int dim, implicit; /* 0: explicit; 1: implicit, backward Euler; 2: the trapezoidal rule */
-    static const char *const names[3] = {"explicit dt 1e-5", "implicit dt 1e-3", "implicit dt 1e-3, theta 0.5"};
+    int dim, implicit; /* 0: explicit; 1: implicit, backward Euler; 2: the trapezoidal rule; 3: 1 with
+                          quadratic elements */
+    static const char *const names[4] = {"explicit dt 1e-5", "implicit dt 1e-3", "implicit dt 1e-3, theta 0.5",
+                                         "implicit dt 1e-3, quadratic elements"};
     for (dim = 2; dim <= 3; ++dim)
-        for (implicit = 0; implicit <= 2; ++implicit) {
+        for (implicit = 0; implicit <= 3; ++implicit) {
             t_cpl t;
             t_cpl_scene sc = t_cpl_collision(dim);
+            if (implicit == 3) sc.order = 2;
             double p0[3], p1[3], b0, b1, scale, err = 0, dmin = 1e30;
             int s, nsteps = implicit ? 40 : 4000, i, contact = 0;
             pn_coupled_implicit_desc od;

@@ -144,7 +144,7 @@ PN_TEST(fem_patch) {
             }
         for (e = 0; e < t.ne; ++e) {
             pn_real Ds[9], F[9];
-            pn__fem_ds(t.m, e, t.m->x, Ds);
+            pn__fem_jac(t.m, e, t.m->x, Ds); /* linear elements: one point each, J = Ds */
             pn_mat_mul(dim, Ds, t.m->Dm_inv + e * (size_t)(dim * dim), F);
             for (i = 0; i < dim; ++i)
                 for (j = 0; j < dim; ++j) ferr = fmax(ferr, fabs(F[i * dim + j] - A[i * 3 + j]));
@@ -503,15 +503,16 @@ PN_TEST(fem_newton_tail) {
    0.1 s settle it to the static solution (3 s, 5 periods). Euler-Bernoulli: tip deflection q L^4 / (8 E' I), E' =
    E / (1 - nu^2), q = rho g H. Linear triangles are stiff in bending (locking): the error
    is O(h^2), 13% at 4 elements through the depth, 4.1% at 8; so: below 6% at 8, and
-   halving h cuts it by more than 2.5. */
-static double t_fem_cantilever(int nx, int ny) {
+   halving h cuts it by more than 2.5. Quadratic triangles: within 3% at 2 through the
+   depth. */
+static double t_fem_cantilever(int nx, int ny, int order) {
     pn_fem_grid g = t_fem_grid(2, nx, ny, 1, 1, 0.1, 1);
     pn_group grp = t_fem_group(PN_ELASTIC_NEO_HOOKEAN, PN_PLASTIC_NONE, 1e7, 1000);
     t_fem t;
     int fix[256], nf = 0;
     size_t k;
     double tip = 0;
-    if (!t_fem_make(&t, &g, &grp, -9.81)) return 1e9;
+    if (!t_fem_make_order(&t, &g, &grp, -9.81, order)) return 1e9;
     for (k = 0; k < t.nn; ++k)
         if (t.X[2 * k] == 0) fix[nf++] = (int)k;
     if (pn_fem_fix_nodes(t.m, (size_t)nf, fix, NULL) != PN_OK) return 1e9;
@@ -522,17 +523,21 @@ static double t_fem_cantilever(int nx, int ny) {
             return 1e9;
         }
     for (k = 0; k < t.nn; ++k) /* the mean deflection of the tip section */
-        if (t.X[2 * k] == 1) tip += (t.m->x[2 * k + 1] - t.X[2 * k + 1]) / (ny + 1);
+        if (t.X[2 * k] == 1) tip += (t.m->x[2 * k + 1] - t.X[2 * k + 1]) / (order * ny + 1);
     t_fem_free(&t);
     return tip;
 }
 
 PN_TEST(fem_cantilever) {
     double E = 1e7, nu = 0.3, H = 0.1, eb = -(1000 * 9.81 * H) / (8 * (E / (1 - nu * nu)) * (H * H * H / 12));
-    double e4 = fabs(t_fem_cantilever(40, 4) / eb - 1), e8 = fabs(t_fem_cantilever(80, 8) / eb - 1);
-    printf("    [fem_cantilever] tip deflection against Euler-Bernoulli: %.1f%% (4 elements deep), %.1f%% (8)\n", 100 * e4, 100 * e8);
+    double e4 = fabs(t_fem_cantilever(40, 4, 1) / eb - 1), e8 = fabs(t_fem_cantilever(80, 8, 1) / eb - 1);
+    double q2 = fabs(t_fem_cantilever(20, 2, 2) / eb - 1), q4 = fabs(t_fem_cantilever(40, 4, 2) / eb - 1);
+    printf("    [fem_cantilever] tip deflection against Euler-Bernoulli: linear %.1f%% (4 elements deep), %.1f%% (8); "
+           "quadratic %.1f%% (2), %.1f%% (4)\n", 100 * e4, 100 * e8, 100 * q2, 100 * q4);
     PN_CHECK_LE(e8, 0.06);
     PN_CHECK_LE(2.5 * e8, e4);
+    PN_CHECK_LE(q2, 0.03);
+    PN_CHECK_LE(q4, 0.03);
 }
 
 /* Quadratic elements (pn_fem_quadratic_mesh, pn_fem_desc.order 2): the node count (corners,

@@ -757,12 +757,13 @@ PN_EX_UNUSED static int pn_ex_output_close(const char *prog, pn_ex_output *o, in
 #ifndef PN_NO_FEM /* the examples that simulate only particles leave FEM out */
 /* ---- FEM meshes: VTU (ParaView) with per-element fields, OBJ surfaces (Blender) ---- */
 
-/* VTK unstructured grid of mesh m at its positions, n_fields per-element arrays (names[f],
-   fields[f][e]); 1 on success */
+/* VTK unstructured grid of mesh m at its positions (quadratic elements as VTK's quadratic
+   cells), n_fields per-element arrays (names[f], fields[f][e]); 1 on success */
 PN_EX_UNUSED static int pn_ex_write_vtu(const char *path, const pn_fem_mesh *m, int n_fields, const char *const *names,
                                         const double *const *fields) {
     FILE *f = fopen(path, "w");
-    int d = m->dim, dp = d + 1, a, q;
+    static const int vtk10[10] = {0, 1, 2, 3, 4, 5, 6, 7, 9, 8}; /* VTK's edge order: 01 12 20 30 31 32 */
+    int d = m->dim, dp = m->nodes_per_element, a, q;
     size_t k, e;
     if (!f) return 0;
     fprintf(f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
@@ -773,13 +774,14 @@ PN_EX_UNUSED static int pn_ex_write_vtu(const char *path, const pn_fem_mesh *m, 
         fprintf(f, "%.9g %.9g %.9g\n", (double)m->x[k * (size_t)d], (double)m->x[k * (size_t)d + 1], d == 3 ? (double)m->x[k * 3 + 2] : 0.0);
     fprintf(f, "</DataArray></Points>\n<Cells><DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
     for (e = 0; e < m->n_elems; ++e) {
-        for (a = 0; a < dp; ++a) fprintf(f, "%d ", m->elem[e * (size_t)dp + (size_t)a]);
+        for (a = 0; a < dp; ++a) fprintf(f, "%d ", m->elem[e * (size_t)dp + (size_t)(dp == 10 ? vtk10[a] : a)]);
         fputc('\n', f);
     }
     fprintf(f, "</DataArray><DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
     for (e = 0; e < m->n_elems; ++e) fprintf(f, "%lu\n", (unsigned long)((e + 1) * (size_t)dp));
     fprintf(f, "</DataArray><DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for (e = 0; e < m->n_elems; ++e) fprintf(f, "%d\n", d == 2 ? 5 : 10); /* VTK_TRIANGLE, VTK_TETRA */
+    for (e = 0; e < m->n_elems; ++e) /* VTK_TRIANGLE, VTK_TETRA, VTK_QUADRATIC_TRIANGLE, _TETRA */
+        fprintf(f, "%d\n", m->order == 2 ? (d == 2 ? 22 : 24) : (d == 2 ? 5 : 10));
     fprintf(f, "</DataArray></Cells>\n<CellData>");
     for (q = 0; q < n_fields; ++q) {
         fprintf(f, "<DataArray type=\"Float64\" Name=\"%s\" format=\"ascii\">\n", names[q]);
@@ -798,18 +800,20 @@ PN_EX_UNUSED static int pn_ex__cmp3(const void *pa, const void *pb) {
     return 0;
 }
 
-/* OBJ of mesh m: 3D its surface (the faces of one tetrahedron only), 2D the triangles */
+/* OBJ of mesh m: 3D its surface (the faces of one tetrahedron only), 2D the triangles (of
+   quadratic elements: their corners) */
 PN_EX_UNUSED static int pn_ex_write_mesh_obj(const char *path, const pn_fem_mesh *m) {
     FILE *f = fopen(path, "w");
     static const int face[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}}; /* outward for det > 0 */
-    int d = m->dim;
+    int d = m->dim, np = m->nodes_per_element;
     size_t k, e, nf;
     int *keys;
     if (!f) return 0;
     for (k = 0; k < m->n_nodes; ++k)
         fprintf(f, "v %.9g %.9g %.9g\n", (double)m->x[k * (size_t)d], (double)m->x[k * (size_t)d + 1], d == 3 ? (double)m->x[k * 3 + 2] : 0.0);
     if (d == 2) {
-        for (e = 0; e < m->n_elems; ++e) fprintf(f, "f %d %d %d\n", m->elem[3 * e] + 1, m->elem[3 * e + 1] + 1, m->elem[3 * e + 2] + 1);
+        for (e = 0; e < m->n_elems; ++e)
+            fprintf(f, "f %d %d %d\n", m->elem[np * e] + 1, m->elem[np * e + 1] + 1, m->elem[np * e + 2] + 1);
         return fclose(f) == 0;
     }
     nf = 4 * m->n_elems; /* sorted keys: a face is on the surface when it occurs once */
@@ -821,7 +825,7 @@ PN_EX_UNUSED static int pn_ex_write_mesh_obj(const char *path, const pn_fem_mesh
     for (e = 0; e < m->n_elems; ++e)
         for (k = 0; k < 4; ++k) {
             int *q = keys + 4 * (4 * e + k), a, b, t;
-            for (a = 0; a < 3; ++a) q[a] = m->elem[4 * e + (size_t)face[k][a]];
+            for (a = 0; a < 3; ++a) q[a] = m->elem[(size_t)np * e + (size_t)face[k][a]];
             for (a = 0; a < 3; ++a) /* sort the three for the comparison */
                 for (b = a + 1; b < 3; ++b)
                     if (q[b] < q[a]) t = q[a], q[a] = q[b], q[b] = t;
@@ -832,8 +836,8 @@ PN_EX_UNUSED static int pn_ex_write_mesh_obj(const char *path, const pn_fem_mesh
         int *q = keys + 4 * k, same = (k > 0 && !pn_ex__cmp3(q, q - 4)) || (k + 1 < nf && !pn_ex__cmp3(q, q + 4));
         if (!same) {
             size_t ee = (size_t)q[3] / 4, ff = (size_t)q[3] % 4;
-            fprintf(f, "f %d %d %d\n", m->elem[4 * ee + (size_t)face[ff][0]] + 1, m->elem[4 * ee + (size_t)face[ff][1]] + 1,
-                    m->elem[4 * ee + (size_t)face[ff][2]] + 1);
+            fprintf(f, "f %d %d %d\n", m->elem[(size_t)np * ee + (size_t)face[ff][0]] + 1,
+                    m->elem[(size_t)np * ee + (size_t)face[ff][1]] + 1, m->elem[(size_t)np * ee + (size_t)face[ff][2]] + 1);
         }
     }
     free(keys);

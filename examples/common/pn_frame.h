@@ -45,6 +45,9 @@ typedef struct pn_frame_desc {
     double imperfection;         /* the side walls bow out by this much at mid-height (m): a
                                     perfect frame buckles either way, decided by rounding, so
                                     two integrators could take opposite ways [5e-4]        */
+    int order;                   /* 2: quadratic elements (pn_fem_quadratic_mesh of the same
+                                    cells: linear tetrahedra two through a wall lock in
+                                    bending) [0: linear]                                   */
 } pn_frame_desc;
 
 PN_EX_UNUSED static void pn_frame_default(pn_frame_desc *d, int dim) {
@@ -64,9 +67,10 @@ PN_EX_UNUSED static void pn_frame_default(pn_frame_desc *d, int dim) {
 PN_EX_UNUSED static double pn_frame_plate(const pn_frame_desc *d, double t) { return 3 * PN_FRAME_GAP + d->height - d->speed * t; }
 
 /* The frame's nodes and elements at rest: a grid of cells of about h (pn_fem_grid_mesh)
-   without the frame's hole, the side walls bowed out by d->imperfection. *X (nn x dim
-   coordinates) and *el (ne x (dim + 1) node indices) are malloc'd: the caller frees them.
-   0 and a message in why on failure (nothing to free). */
+   without the frame's hole, the side walls bowed out by d->imperfection; with d->order 2 made
+   quadratic (pn_fem_quadratic_mesh). *X (nn x dim coordinates) and *el (ne x the element's
+   node count) are malloc'd: the caller frees them. 0 and a message in why on failure
+   (nothing to free). */
 PN_EX_UNUSED static int pn_frame_mesh(const pn_frame_desc *d, pn_real **X_out, int **el_out, size_t *nn_out, size_t *ne_out,
                                       char *why, size_t cap) {
     pn_fem_grid g;
@@ -99,6 +103,22 @@ PN_EX_UNUSED static int pn_frame_mesh(const pn_frame_desc *d, pn_real **X_out, i
         pn_real *p = X + k * (size_t)dim;
         double s = sin(3.14159265358979323846 * (p[1] - PN_FRAME_GAP) / d->height);
         p[0] += (pn_real)(d->imperfection * s * (p[0] < d->width / 2 ? -1 : 1));
+    }
+    if (d->order == 2) { /* a node on each edge's middle */
+        size_t n2 = 0;
+        pn_real *X2 = NULL;
+        int *el2 = NULL;
+        if (pn_fem_quadratic_mesh(dim, X, nn, el, ne, NULL, NULL, NULL, &n2) == PN_OK) {
+            X2 = (pn_real *)malloc(sizeof(pn_real) * n2 * (size_t)dim);
+            el2 = (int *)malloc(sizeof(int) * ne * (size_t)((dim + 1) * (dim + 2) / 2));
+        }
+        if (!X2 || !el2 || pn_fem_quadratic_mesh(dim, X, nn, el, ne, NULL, X2, el2, &n2) != PN_OK) {
+            snprintf(why, cap, "out of memory");
+            free(X), free(el), free(X2), free(el2);
+            return 0;
+        }
+        free(X), free(el);
+        X = X2, el = el2, nn = n2;
     }
     *X_out = X, *el_out = el, *nn_out = nn, *ne_out = ne;
     return 1;
@@ -141,7 +161,7 @@ PN_EX_UNUSED static int pn_frame_create(const pn_frame_desc *d, pn_fem_mesh **ou
     grp.density_kg_m3 = (pn_real)d->density;
     memset(&fd, 0, sizeof fd);
     fd.dim = dim, fd.n_nodes = nn, fd.n_elements = ne, fd.rest_m = X, fd.elements = el, fd.groups = &grp, fd.n_groups = 1;
-    fd.gravity[1] = (pn_real)-9.81;
+    fd.gravity[1] = (pn_real)-9.81, fd.order = d->order;
     if (pn_fem_create(&fd, out, why, cap) != PN_OK) goto done;
     if (d->energy == PN_FRAME_PNET || d->energy == PN_FRAME_PNET_NH || d->energy == PN_FRAME_PNET_NH_ANY) {
         pn_pnet_desc pd;
@@ -202,7 +222,7 @@ PN_EX_UNUSED static int pn_frame_advance(pn_fem_mesh *m, double t, int implicit,
 
 /* metal_frame's command line */
 typedef struct pn_frame_cli {
-    int dim, implicit, frames_per_s, png, vtu, obj, pass, alternating;
+    int dim, implicit, frames_per_s, png, vtu, obj, pass, alternating, order;
     const char *energy, *out, *solver;
     int energy_id, solver_id; /* PN_FRAME_*; pn_fem_linear_solver */
     double dt, E, speed, wall, h, depth, crush, friction, newton_tol, regularizer, yield, hardening;
@@ -237,6 +257,7 @@ PN_EX_UNUSED static void pn_frame_usage(FILE *f) {
                "  --regularizer W           PlasticityNet's w, strain form (-1: off) [1]\n"
                "  --fps N                   frames per simulated second [25]\n"
                "  --alternating             2D: two triangles per square, not four (crossed)\n"
+               "  --order 1|2               linear or quadratic elements [1]\n"
                "  --png --vtu --obj         outputs (DIR/frame_NNNN.*)\n"
                "  --out DIR                 [build/metal_frame_frames]\n"
                "  --help                    this text\n");
@@ -292,6 +313,7 @@ PN_EX_UNUSED static int pn_frame_cli_parse(int argc, char **argv, pn_frame_cli *
             else if (!strcmp(a, "--yield")) o->yield = x;
             else if (!strcmp(a, "--hardening")) o->hardening = x;
             else if (!strcmp(a, "--fps")) o->frames_per_s = (int)x;
+            else if (!strcmp(a, "--order")) o->order = (int)x;
             else {
                 fprintf(stderr, "metal_frame: unknown flag '%s' (--help lists them)\n", a);
                 return 2;
@@ -304,30 +326,42 @@ PN_EX_UNUSED static int pn_frame_cli_parse(int argc, char **argv, pn_frame_cli *
     if (!o->h) o->h = fd->h;
     if ((o->dim != 2 && o->dim != 3) || !(o->dt > 0) || !(o->E > 0) || !(o->speed > 0) || !(o->crush > 0 && o->crush < 0.9) ||
         !(o->wall > 0 && 2 * o->wall < fd->width) || !(o->h > 0 && o->h <= o->wall) || !(o->depth > 0) || !(o->friction >= 0) ||
-        o->frames_per_s < 1 || o->pass < 1 || !(o->yield > 0) || !(o->hardening >= 0)) {
+        o->frames_per_s < 1 || o->pass < 1 || !(o->yield > 0) || !(o->hardening >= 0) || o->order < 0 || o->order > 2) {
         fprintf(stderr, "metal_frame: a flag is out of range (--help)\n");
         return 2;
     }
     fd->energy = o->energy_id, fd->E = o->E, fd->speed = o->speed, fd->wall = o->wall, fd->h = o->h, fd->depth = o->depth, fd->friction = o->friction;
-    fd->regularizer = o->regularizer, fd->alternating = o->alternating;
+    fd->regularizer = o->regularizer, fd->alternating = o->alternating, fd->order = o->order;
     fd->yield_ratio = o->yield, fd->hardening_ratio = o->hardening;
     return -1;
 }
 
-/* the element's equivalent plastic strain: h for von Mises */
-PN_EX_UNUSED static double pn_frame_plastic_strain(const pn_fem_mesh *m, size_t e) { return (double)m->h[e]; }
+/* the element's equivalent plastic strain: h for von Mises (quadratic elements: the mean
+   over their integration points) */
+PN_EX_UNUSED static double pn_frame_plastic_strain(const pn_fem_mesh *m, size_t e) {
+    double h = 0;
+    int q;
+    for (q = 0; q < m->points_per_element; ++q) h += (double)m->h[e * (size_t)m->points_per_element + (size_t)q];
+    return h / m->points_per_element;
+}
 
-/* von Mises stress of the element's Kirchhoff stress (Pa) */
+/* von Mises stress of the element's Kirchhoff stress (Pa; linear elements: F = Ds Dm^-1;
+   quadratic ones: at their corners' mean, their first point's plastic state) */
 PN_EX_UNUSED static double pn_frame_mises(const pn_fem_mesh *m, size_t e) {
     int d = m->dim, dd = d * d, i, j, a;
-    const int *el = m->elem + e * (size_t)(d + 1);
-    pn_real Ds[9], F[9], Fe[9], tau[9];
+    size_t p = e * (size_t)m->points_per_element;
+    const int *el = m->elem + e * (size_t)m->nodes_per_element;
+    pn_real Ds[9], Di[9], F[9], Fe[9], tau[9], X0[9];
     double tr = 0, s2 = 0;
-    for (a = 1; a <= d; ++a)
-        for (i = 0; i < d; ++i) Ds[i * d + a - 1] = m->x[(size_t)el[a] * (size_t)d + (size_t)i] - m->x[(size_t)el[0] * (size_t)d + (size_t)i];
-    pn_mat_mul(d, Ds, m->Dm_inv + e * (size_t)dd, F);
-    pn_mat_mul(d, F, m->Fp_inv + e * (size_t)dd, Fe);
-    if (pn_kirchhoff_stress(&m->groups[m->egroup[e]].material, d, Fe, m->h[e], tau) != PN_OK) return 0;
+    for (a = 1; a <= d; ++a) /* F of the corners' simplex, from rest and current edges */
+        for (i = 0; i < d; ++i) {
+            Ds[i * d + a - 1] = m->x[(size_t)el[a] * (size_t)d + (size_t)i] - m->x[(size_t)el[0] * (size_t)d + (size_t)i];
+            X0[i * d + a - 1] = m->X[(size_t)el[a] * (size_t)d + (size_t)i] - m->X[(size_t)el[0] * (size_t)d + (size_t)i];
+        }
+    if (pn_mat_inverse(d, X0, Di) != PN_OK) return 0;
+    pn_mat_mul(d, Ds, Di, F);
+    pn_mat_mul(d, F, m->Fp_inv + p * (size_t)dd, Fe);
+    if (pn_kirchhoff_stress(&m->groups[m->egroup[e]].material, d, Fe, m->h[p], tau) != PN_OK) return 0;
     for (i = 0; i < d; ++i) tr += tau[i * d + i];
     for (i = 0; i < d; ++i)
         for (j = 0; j < d; ++j) {
@@ -368,8 +402,8 @@ PN_EX_UNUSED static int pn_frame_write_png(const char *path, const pn_fem_mesh *
         unsigned char rgb[3];
         int a;
         for (a = 0; a < 3; ++a) {
-            x[a] = ox + k * m->x[2 * (size_t)m->elem[3 * e + (size_t)a]];
-            y[a] = oy - k * m->x[2 * (size_t)m->elem[3 * e + (size_t)a] + 1];
+            x[a] = ox + k * m->x[2 * (size_t)m->elem[(size_t)m->nodes_per_element * e + (size_t)a]];
+            y[a] = oy - k * m->x[2 * (size_t)m->elem[(size_t)m->nodes_per_element * e + (size_t)a] + 1];
         }
         pn_render_colormap(pn_frame_plastic_strain(m, e) / strain_max, rgb);
         pn_canvas_triangle(&c, x, y, rgb[0], rgb[1], rgb[2], 1);
