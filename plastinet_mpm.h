@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.13 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.14 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -1057,15 +1057,17 @@ PN_API pn_result pn_fem_quadratic_mesh(int dim, const pn_real *nodes, size_t n_n
 
 /* Meshes from files users have, parsed from memory (read the file yourself): Gmsh ASCII .msh
    of versions 2.2 and 4.1 (3-node triangles, type 2, for dim 2; 4-node tetrahedra, type 4, for
-   dim 3; other element types skipped; x, y of each node in 2D) and TetGen .node / .ele
-   (3D; 10-node tetrahedra keep their corners). Elements are reordered to positive
+   dim 3; or their quadratic kinds, 6-node triangles, type 9, and 10-node tetrahedra, type 11:
+   order 2, in pn_fem_desc's node order, which is Gmsh's; a file with both kinds is refused;
+   other element types skipped; x, y of each node in 2D) and TetGen .node / .ele (3D; 10-node
+   tetrahedra keep their corners). Elements are reordered to positive
    orientation; element_tags holds Gmsh's physical tag or TetGen's region attribute (0 when
    none). The arrays are allocated through al (NULL: malloc): free them with
    pn_fem_mesh_data_free. A file that does not parse is refused with PN_ERROR_FORMAT and why
    names its line (and the node or element); nothing is allocated then. Pass the arrays to
    pn_fem_desc (rest_m = nodes, elements, element_group from element_tags as you map them). */
 typedef struct pn_fem_mesh_data {
-    int dim;
+    int dim, order;              /* order 1 (dim + 1 nodes per element) or 2 (pn_fem_desc.order) */
     size_t n_nodes, n_elements;
     pn_real *nodes;
     int *elements, *element_tags;
@@ -10107,7 +10109,7 @@ static long pn__fem_find(const long *pairs, size_t n, long id) {
 /* The loaders' common end: element node ids to indices, orientation, duplicates of ids */
 static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, char *why, size_t cap) {
     size_t k, e;
-    int dp = d->dim + 1, a;
+    int dp = pn__fem_nodes_of(d->dim, d->order), a;
     pn__fem_sort_longs(ids, d->n_nodes, 2, 1);
     for (k = 1; k < d->n_nodes; ++k)
         if (ids[2 * k] == ids[2 * k - 2]) {
@@ -10130,9 +10132,14 @@ static pn_result pn__fem_finish(pn_fem_mesh_data *d, long *ids, char *why, size_
             for (i = 0; i < d->dim; ++i)
                 Ds[i * d->dim + a - 1] = d->nodes[(size_t)el[a] * (size_t)d->dim + (size_t)i] - d->nodes[(size_t)el[0] * (size_t)d->dim + (size_t)i];
         }
-        if (pn_mat_det(d->dim, Ds) < 0) {
+        if (pn_mat_det(d->dim, Ds) < 0) { /* corners 1 and 2 swap; so do the edge nodes they name */
             int t = el[1];
             el[1] = el[2], el[2] = t;
+            if (d->order == 2 && d->dim == 2) t = el[3], el[3] = el[5], el[5] = t;    /* 01 <-> 02 */
+            if (d->order == 2 && d->dim == 3) {
+                t = el[4], el[4] = el[6], el[6] = t; /* 01 <-> 02 */
+                t = el[8], el[8] = el[9], el[9] = t; /* 32 <-> 31 */
+            }
         }
     }
     return PN_OK;
@@ -10175,6 +10182,7 @@ PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const 
     pn_real version = 0;
     size_t cap_el = 0, cap_tag = 0, nn = 0;
     int want = dim == 2 ? 2 : 4, v4; /* Gmsh element types: 2 the 3-node triangle, 4 the 4-node tetrahedron */
+    int want2 = dim == 2 ? 9 : 11;   /* 9 the 6-node triangle, 11 the 10-node tetrahedron */
     pn_result r = PN_ERROR_FORMAT;
     if (why && cap) why[0] = 0;
     if (!out || (!text && len)) return PN_ERROR_INVALID_ARGUMENT;
@@ -10182,7 +10190,7 @@ PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const 
     if (!pn__dim_ok(dim)) return PN_ERROR_DIMENSION;
     if (al && (al->alloc == NULL) != (al->free == NULL)) return PN_ERROR_INVALID_ARGUMENT;
     memset(&d, 0, sizeof d);
-    d.dim = dim;
+    d.dim = dim, d.order = 1;
     L.p = text, L.end = text ? text + len : text, L.line = 1; /* NULL + 0 is undefined in C */
 #define PN__MSH_FAIL(...) do { pn__msg(why, cap, __VA_ARGS__); goto fail; } while (0)
     if (!pn__fem_section(&L, "$MeshFormat") || !pn__fem_real(&L, &version, 0)) PN__MSH_FAIL("line %ld: no $MeshFormat", L.line);
@@ -10265,15 +10273,19 @@ PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const 
                8 line3, 9 tri6, 11 tet10 */
             nv = type == 15 ? 1 : type == 1 ? 2 : type == 2 ? 3 : type == 3 ? 4 : type == 4 ? 4 : type == 5 ? 8 : type == 6 ? 6
                  : type == 7 ? 5 : type == 8 ? 3 : type == 9 ? 6 : type == 11 ? 10 : -1;
-            if (nv < 0) PN__MSH_FAIL("line %ld: element %ld: type %ld is not read (linear triangles and tetrahedra are)", L.line, id, type);
-            if (type == want) {
-                int *el;
-                if (!pn__fem_grow(al, (void **)&d.elements, &cap_el, (d.n_elements + 1) * (size_t)(dim + 1), sizeof(int)) ||
+            if (nv < 0) PN__MSH_FAIL("line %ld: element %ld: type %ld is not read (triangles and tetrahedra are)", L.line, id, type);
+            if (type == want || type == want2) {
+                int *el, o = type == want2 ? 2 : 1;
+                if (d.n_elements && o != d.order)
+                    PN__MSH_FAIL("line %ld: element %ld: the file has both linear and quadratic %s", L.line, id,
+                                 dim == 2 ? "triangles" : "tetrahedra");
+                d.order = o;
+                if (!pn__fem_grow(al, (void **)&d.elements, &cap_el, (d.n_elements + 1) * (size_t)nv, sizeof(int)) ||
                     !pn__fem_grow(al, (void **)&d.element_tags, &cap_tag, d.n_elements + 1, sizeof(int))) {
                     r = PN_ERROR_OUT_OF_MEMORY;
                     PN__MSH_FAIL("out of memory at element %ld", id);
                 }
-                el = d.elements + d.n_elements * (size_t)(dim + 1);
+                el = d.elements + d.n_elements * (size_t)nv;
                 for (t = 0; t < nv; ++t) {
                     if (!pn__fem_long(&L, &q, 0) || q < -0x7fffffffL || q > 0x7fffffffL)
                         PN__MSH_FAIL("line %ld: element %ld: a bad node tag", L.line, id);
@@ -10285,7 +10297,8 @@ PN__DEF pn_result pn_fem_parse_msh(const char *text, size_t len, int dim, const 
                     if (!pn__fem_long(&L, &q, 0)) PN__MSH_FAIL("line %ld: element %ld: a bad node tag", L.line, id);
         }
     }
-    if (!d.n_elements) PN__MSH_FAIL("the file has no %s", dim == 2 ? "3-node triangles (type 2)" : "4-node tetrahedra (type 4)");
+    if (!d.n_elements)
+        PN__MSH_FAIL("the file has no %s", dim == 2 ? "3- or 6-node triangles (type 2, 9)" : "4- or 10-node tetrahedra (type 4, 11)");
     return pn__fem_loaded(&d, ids, al, PN_OK, out, why, cap);
 fail:
 #undef PN__MSH_FAIL
@@ -10304,7 +10317,7 @@ PN__DEF pn_result pn_fem_parse_tetgen(const char *node_text, size_t node_len, co
     if (al && (al->alloc == NULL) != (al->free == NULL)) return PN_ERROR_INVALID_ARGUMENT;
     if (!pn__dim_ok(3)) return PN_ERROR_DIMENSION;
     memset(&d, 0, sizeof d);
-    d.dim = 3;
+    d.dim = 3, d.order = 1;
 #define PN__TG_FAIL(...) do { pn__msg(why, cap, __VA_ARGS__); goto fail; } while (0)
     L.p = node_text, L.end = node_text ? node_text + node_len : node_text, L.line = 1;
     if (!pn__fem_long(&L, &n, 1) || !pn__fem_long(&L, &dimf, 1) || !pn__fem_long(&L, &nattr, 1) || !pn__fem_long(&L, &nmark, 1) ||

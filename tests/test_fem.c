@@ -1655,6 +1655,13 @@ static const char t_fem_msh2[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n
 static const char t_fem_msh4[] = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n2 5 1 5\n0 1 0 1\n1\n0 0 0\n2 1 1 4\n2\n3\n4\n5\n"
                                  "1 0 0 0.5 0.5\n0 1 0 0.5 0.5\n0 0 1 0.5 0.5\n1 1 1 0.5 0.5\n$EndNodes\n$Elements\n1 2 1 2\n3 1 4 2\n1 1 2 3 4\n"
                                  "2 2 3 4 5\n$EndElements\n";
+/* quadratic elements listed clockwise (the loader turns them, corners and edge nodes): a
+   10-node tetrahedron and a 6-node triangle, Gmsh 2.2 */
+static const char t_fem_msh_tet10[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n10\n1 0 0 0\n2 0 1 0\n3 1 0 0\n4 0 0 1\n"
+                                      "5 0 0.5 0\n6 0.5 0.5 0\n7 0.5 0 0\n8 0 0 0.5\n9 0.5 0 0.5\n10 0 0.5 0.5\n$EndNodes\n"
+                                      "$Elements\n1\n1 11 2 3 1 1 2 3 4 5 6 7 8 9 10\n$EndElements\n";
+static const char t_fem_msh_tri6[] = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n6\n1 0 0 0\n2 0 1 0\n3 1 0 0\n4 0 0.5 0\n"
+                                     "5 0.5 0.5 0\n6 0.5 0 0\n$EndNodes\n$Elements\n2\n1 9 2 3 1 1 2 3 4 5 6\n2 2 2 3 1 1 2 3\n$EndElements\n";
 static const char t_fem_node[] = "# a TetGen mesh\n5 3 0 1\n1 0 0 0 0\n2 1 0 0 0\n3 0 1 0 0\n4 0 0 1 1\n5 1 1 1 0\n";
 static const char t_fem_ele[] = "2 4 1\n1 1 2 3 4 7\n2 2 4 3 5 8\n";
 
@@ -1688,6 +1695,42 @@ PN_TEST(fem_loaders) {
         pn_fem_destroy(m);
         pn_fem_mesh_data_free(&d, NULL);
     }
+    for (pass = 0; pass < 2; ++pass) { /* quadratic elements, turned; a file with both kinds refused */
+        pn_fem_desc fd;
+        pn_fem_mesh *m = NULL;
+        pn_result r = pass ? pn_fem_parse_msh(t_fem_msh_tet10, sizeof t_fem_msh_tet10 - 1, 3, NULL, &d, why, sizeof why)
+                           : pn_fem_parse_msh(t_fem_msh_tri6, sizeof t_fem_msh_tri6 - 1, 2, NULL, &d, why, sizeof why);
+        if (!pass) { /* the triangle file has a linear triangle too */
+            if (!strstr(why, "both")) fprintf(stderr, "  fem_loaders: '%s' does not say the file has both kinds\n", why);
+            PN_CHECK(r == PN_ERROR_FORMAT && strstr(why, "both") != NULL && d.nodes == NULL);
+            { /* the file without its linear triangle */
+                char one[512];
+                size_t n = strstr(t_fem_msh_tri6, "$Elements") - t_fem_msh_tri6;
+                memcpy(one, t_fem_msh_tri6, n);
+                snprintf(one + n, sizeof one - n, "$Elements\n1\n1 9 2 3 1 1 2 3 4 5 6\n$EndElements\n");
+                r = pn_fem_parse_msh(one, strlen(one), 2, NULL, &d, why, sizeof why);
+            }
+        }
+        PN_CHECK(r == PN_OK);
+        if (r != PN_OK) {
+            fprintf(stderr, "  fem_loaders quadratic %d: %s\n", pass, why);
+            continue;
+        }
+        PN_CHECK(d.order == 2 && d.n_elements == 1 && d.n_nodes == (size_t)(pass ? 10 : 6));
+        memset(&fd, 0, sizeof fd);
+        fd.dim = d.dim, fd.n_nodes = d.n_nodes, fd.n_elements = d.n_elements, fd.rest_m = d.nodes, fd.elements = d.elements;
+        fd.groups = &grp, fd.n_groups = 1, fd.order = d.order;
+        if (pn_fem_create(&fd, &m, why, sizeof why) != PN_OK) fprintf(stderr, "  fem_loaders quadratic %d: %s\n", pass, why);
+        PN_CHECK(m != NULL); /* turned whole: the Jacobian is the corners' at every point */
+        if (m) {
+            double vol = 0;
+            size_t p;
+            for (p = 0; p < m->n_points; ++p) vol += m->vol0[p];
+            PN_CHECK_NEAR(vol, pass ? 1.0 / 6 : 0.5, 1e-14);
+        }
+        pn_fem_destroy(m);
+        pn_fem_mesh_data_free(&d, NULL);
+    }
     { /* bad files name their line */
         static const char *bad[] = {"$MeshFormat\n3.0 0 8\n$EndMeshFormat\n",
                                     "$MeshFormat\n2.2 1 8\n$EndMeshFormat\n",
@@ -1706,7 +1749,7 @@ PN_TEST(fem_loaders) {
         }
     }
     for (pass = 0; pass < 100000; ++pass) { /* mutation fuzz */
-        const char *src = pass % 3 == 0 ? t_fem_msh2 : pass % 3 == 1 ? t_fem_msh4 : t_fem_ele;
+        const char *src = pass % 4 == 0 ? t_fem_msh2 : pass % 4 == 1 ? t_fem_msh4 : pass % 4 == 2 ? t_fem_ele : t_fem_msh_tet10;
         size_t n = strlen(src), k;
         int muts, q;
         pn_result r;
@@ -1724,17 +1767,18 @@ PN_TEST(fem_loaders) {
             default: n = k; break;                                              /* truncation          */
             }
         }
-        r = pass % 3 == 2 ? pn_fem_parse_tetgen(t_fem_node, sizeof t_fem_node - 1, buf, n, NULL, &d, why, sizeof why)
-                          : pn_fem_parse_msh(buf, n, pass % 3 == 0 ? 2 : 3, NULL, &d, why, sizeof why);
+        r = pass % 4 == 2 ? pn_fem_parse_tetgen(t_fem_node, sizeof t_fem_node - 1, buf, n, NULL, &d, why, sizeof why)
+                          : pn_fem_parse_msh(buf, n, pass % 4 == 0 ? 2 : 3, NULL, &d, why, sizeof why);
         if (r == PN_OK) {
             pn_fem_desc fd;
             pn_fem_mesh *m = NULL;
             size_t e;
             ok_parse++;
-            for (e = 0; e < d.n_elements * (size_t)(d.dim + 1); ++e) PN_CHECK(d.elements[e] >= 0 && (size_t)d.elements[e] < d.n_nodes);
+            for (e = 0; e < d.n_elements * (size_t)(d.order == 2 ? (d.dim + 1) * (d.dim + 2) / 2 : d.dim + 1); ++e)
+                PN_CHECK(d.elements[e] >= 0 && (size_t)d.elements[e] < d.n_nodes);
             memset(&fd, 0, sizeof fd);
             fd.dim = d.dim, fd.n_nodes = d.n_nodes, fd.n_elements = d.n_elements, fd.rest_m = d.nodes, fd.elements = d.elements;
-            fd.groups = &grp, fd.n_groups = 1;
+            fd.groups = &grp, fd.n_groups = 1, fd.order = d.order;
             if (pn_fem_create(&fd, &m, why, sizeof why) == PN_OK) created++;
             pn_fem_destroy(m);
             pn_fem_mesh_data_free(&d, NULL);

@@ -19,7 +19,8 @@ static void pn_fuzz_use_mesh(const pn_fem_mesh_data *d, int dim) {
     char why[256];
     size_t k;
     if (d->dim != dim || !d->n_nodes || !d->n_elements || !d->nodes || !d->elements || !d->element_tags) abort();
-    for (k = 0; k < d->n_elements * (size_t)(dim + 1); ++k)
+    if (d->order != 1 && d->order != 2) abort();
+    for (k = 0; k < d->n_elements * (size_t)(d->order == 2 ? (dim + 1) * (dim + 2) / 2 : dim + 1); ++k)
         if (d->elements[k] < 0 || (size_t)d->elements[k] >= d->n_nodes) abort();
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_NEO_HOOKEAN, md.youngs_modulus_pa = 1e6, md.poisson_ratio = (pn_real)0.3;
@@ -28,7 +29,7 @@ static void pn_fuzz_use_mesh(const pn_fem_mesh_data *d, int dim) {
     grp.density_kg_m3 = 1000;
     memset(&fd, 0, sizeof fd);
     fd.dim = dim, fd.n_nodes = d->n_nodes, fd.n_elements = d->n_elements, fd.rest_m = d->nodes, fd.elements = d->elements;
-    fd.groups = &grp, fd.n_groups = 1, fd.gravity[1] = (pn_real)-9.81;
+    fd.groups = &grp, fd.n_groups = 1, fd.gravity[1] = (pn_real)-9.81, fd.order = d->order;
     why[0] = 0;
     if (pn_fem_create(&fd, &m, why, sizeof why) != PN_OK) {
         if (m) abort(); /* all or nothing */
