@@ -7921,6 +7921,26 @@ static void pn__fem_hadd(pn__fem *s, size_t r, size_t c, pn_real v) {
     s->L[s->rs[r] + c - s->fc[r]] += v;
 }
 
+/* node block (na, nb) of the Hessian += v (d x d, row i for na's unknown i; na == nb: the
+   lower half only): one block lookup where pn__fem_hadd makes one per entry, the same sums */
+static void pn__fem_hadd_block(const pn_fem_mesh *m, pn__fem *s, size_t na, size_t nb, const pn_real *v) {
+    int d = m->dim, i, k;
+    if (s->sparse) {
+        size_t pa = s->iperm[na], pb = s->iperm[nb];
+        pn_real *b = pn__fem_blk(s, PN__MAX(pa, pb), PN__MIN(pa, pb));
+        if (!b) {
+            s->bmiss += na == nb ? d * (d + 1) / 2 : d * d;
+            return;
+        }
+        for (i = 0; i < d; ++i)
+            for (k = 0; k < (na == nb ? i + 1 : d); ++k) b[pa >= pb ? i * d + k : k * d + i] += v[i * d + k];
+        return;
+    }
+    for (i = 0; i < d; ++i)
+        for (k = 0; k < (na == nb ? i + 1 : d); ++k)
+            pn__fem_hadd(s, pn__fem_row(m, na * (size_t)d + (size_t)i), pn__fem_row(m, nb * (size_t)d + (size_t)k), v[i * d + k]);
+}
+
 /* is node k's unknown free (not driven)? */
 #define PN__FEM_FREE(m, node) (!(m)->fixed[node])
 
@@ -9206,17 +9226,16 @@ static pn_result pn__fem_objective(pn_fem_mesh *m, const pn_real *x, int mode, p
                     size_t nb = (size_t)el[b];
                     int kk, mm, ll;
                     if (!PN__FEM_FREE(m, nb)) continue;
+                    pn_real blk[9];
                     for (i = 0; i < d; ++i)
                         for (kk = 0; kk < d; ++kk) {
                             pn_real acc = 0;
-                            size_t ra, cb;
                             if (a == b && kk > i) continue; /* the diagonal block's upper half */
                             for (mm = 0; mm < d; ++mm)
                                 for (ll = 0; ll < d; ++ll) acc += H[(i * d + mm) * dd + kk * d + ll] * q[a * d + mm] * q[b * d + ll];
-                            ra = pn__fem_row(m, na * (size_t)d + (size_t)i);
-                            cb = pn__fem_row(m, nb * (size_t)d + (size_t)kk);
-                            pn__fem_hadd(s, ra, cb, V * acc);
+                            blk[i * d + kk] = V * acc;
                         }
+                    pn__fem_hadd_block(m, s, na, nb, blk);
                 }
             }
     }
