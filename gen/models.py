@@ -77,6 +77,9 @@ _add("sand_any_2d", "sand", 2, encoding="scaled", params=SAND_RANGES, output="so
 # the parameters drawn denser at the range ends, compressed states weighted 3x, or on the
 # frozen-yield DP energy as a base (docs/notebook.md): not shipped
 _add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000, ship=False)
+# the same with twice the width: is the small-strain bar a matter of capacity?
+_add("sand_any_3d_w64", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000,
+     hidden=(64, 64, 64), ship=False)
 # snow: xi <= 3 keeps p0 = kappa sinh(xi 0.15) < kappa / 2 over h in [-0.15, 0] (the tip exists)
 SNOW_RANGES = (("nu", 0.2, 0.4), ("friction_deg", 30.0, 50.0), ("beta", 0.1, 0.5), ("xi", 1.5, 3.0))
 _add("snow_any_2d", "snow", 2, params=SNOW_RANGES, output="softplus")
