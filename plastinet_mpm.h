@@ -562,6 +562,8 @@ typedef struct pn__mpm_solver {
     int mg_max, mg_levels, mg_on; /* levels the grid allows, built, in use this step         */
     int mg_current;              /* the finest level is this Newton iteration's Hessian     */
     int pnet_lanes;              /* implicit: PlasticityNet in float lanes this step         */
+    int full_h, curv;            /* implicit: the particles' Hessians unprojected (Newton near
+                                    its minimum); the last CG met negative curvature         */
     pn_real reuse_tol;           /* implicit: pn_mpm_implicit_desc.pnet_reuse_tol this step
                                     (0: off)                                                */
     /* >>implicit, PlasticityNet's Taylor models: where the network was last evaluated with
@@ -4196,12 +4198,13 @@ static pn_result pn__group_psi(const pn_group *g, int d, const pn_real *F, pn_re
     }
 }
 
-/* Psi_p at F (energy density), with P and the PSD dP/dF when asked. */
+/* Psi_p at F (energy density), with P and dP/dF when asked (PSD-projected unless Newton asked
+   for the full Hessian: w->s.full_h). */
 static pn_result pn__mpm_psi(const pn_mpm_world *w, size_t p, const pn_real *F, pn_real *psi,
                              pn_real *P, pn_real *H) {
     int dd = w->dim * w->dim;
     return pn__group_psi(&w->groups[w->group[p]], w->dim, F, w->h[p], w->s.pG + p * (size_t)dd, w->s.phG[p], &w->s.ppt[p],
-                         w->s.pty[p], psi, P, H, PN_EVAL_PROJECT_PSD);
+                         w->s.pty[p], psi, P, H, w->s.full_h ? 0u : (unsigned)PN_EVAL_PROJECT_PSD);
 }
 
 /* The Taylor models' storage (pn_mpm_implicit_desc.pnet_reuse_tol), once a step needs it:
@@ -4451,13 +4454,13 @@ static pn_result pn__mpm_objective(pn_mpm_world *w, const pn_real *v, pn_real dt
         if (nl) {
             int keep = reuse && with_derivs > 1; /* a new Taylor model: dP/dF unprojected, then projected here */
             pn_pnet_energy_lanes(&w->groups[gl].pnet, nl, ptl, Fl, psil, with_derivs ? Pl : NULL,
-                                 with_derivs > 1 ? Hl : NULL, keep ? 0u : (unsigned)PN_EVAL_PROJECT_PSD, stl);
+                                 with_derivs > 1 ? Hl : NULL, keep || w->s.full_h ? 0u : (unsigned)PN_EVAL_PROJECT_PSD, stl);
             for (k = 0; k < nl; ++k) {
                 pn_real *H = w->s.pH + (p = lp[k]) * (size_t)(dd * dd);
                 if (keep) pn__mpm_touch(w, p); /* before pH and the model change */
                 if (stl[k] == PN_OK && with_derivs > 1) {
                     memcpy(H, Hl + k * dd * dd, sizeof(pn_real) * (size_t)(dd * dd));
-                    if (keep) stl[k] = pn_sym_project_psd(dd, H);
+                    if (keep && !w->s.full_h) stl[k] = pn_sym_project_psd(dd, H);
                 }
                 w->s.pstat[p] = (int)stl[k];
                 if (stl[k] != PN_OK) continue;
@@ -4607,7 +4610,8 @@ static int pn__mpm_pcg(pn_mpm_world *w, pn_real dt, int max_it, pn_real rel_tol,
         pn__mpm_filter(w, k, w->s.cg_r + k * (size_t)d);
     }
     c.w = w, c.dt = dt;
-    op.ctx = &c, op.apply = pn__mpm_cg_apply, op.precond = pn__mpm_cg_precond, op.dot = pn__mpm_cg_dot, op.curv = NULL;
+    w->s.curv = 0; /* set when a Hessian of unprojected particles is not positive definite */
+    op.ctx = &c, op.apply = pn__mpm_cg_apply, op.precond = pn__mpm_cg_precond, op.dot = pn__mpm_cg_dot, op.curv = &w->s.curv;
     return pn__pcg(&op, w->s.n_act * (size_t)d, w->s.dir, w->s.cg_r, w->s.cg_z, w->s.cg_p, w->s.cg_q, max_it, rel_tol, warm, capped);
 }
 
@@ -6261,6 +6265,12 @@ static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_impl
     return has_sep;
 }
 
+/* Newton's step (max |dv| dt / dx, cells) under which the particles' Hessians are used as
+   they are, not PSD-projected: near the minimum projection only slows Newton (linear
+   convergence where an energy is not convex: a network without its regularizer), as in FEM
+   (PN__FEM_FULL_H) */
+#define PN__MPM_FULL_H ((pn_real)1e-2)
+
 /* One implicit step without fallback; the world is unchanged unless it returns PN_OK. */
 static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o,
                                        pn_mpm_stats *st) {
@@ -6292,27 +6302,36 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         for (round = 0; round < o->contact_rounds; ++round) {
             int it, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0;
             pn_real eta = 0, gprev = 0, pred = 0; /* forcing: last eta, |S g|, predicted |S g| */
+            pn_real full_below = PN__MPM_FULL_H; /* Newton's steps (cells) under which Hessians go unprojected */
             if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->s.vsol);
             st->solves++;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0, gnorm;
+                int full = it > 0 && last_res <= full_below, redo = 0;
                 if (w->s.newton_left-- <= 0)
                     return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step: its newton_budget of %d Newton iterations "
                                         "is spent (over its attempts and substeps): take a smaller step", o->newton_budget);
                 pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR); /* the last iteration's bookkeeping */
-                r = pn__mpm_objective(w, w->s.vsol, dt, 2, &E0);
-                pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
-                if (r != PN_OK) return r;
-                gnorm = pn__mpm_model_norm(w, 0);
-                eta = pn__mpm_forcing(o, it, eta, gprev, pred, gnorm);
+                for (;;) { /* near the minimum the Hessian as it is (quadratic convergence); where it is
+                              not positive definite, projected until the steps are 10x shorter */
+                    w->s.full_h = full;
+                    r = pn__mpm_objective(w, w->s.vsol, dt, 2, &E0);
+                    w->s.full_h = 0;
+                    pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
+                    if (r != PN_OK) return r;
+                    gnorm = pn__mpm_model_norm(w, 0);
+                    eta = pn__mpm_forcing(o, it, eta, gprev, pred, gnorm);
+                    fresh = it == 0 || o->mg_rebuild || stale || redo;
+                    if (w->s.mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
+                        return PN__FAIL(w, r, "implicit step: out of memory for the multigrid hierarchy of %lu active "
+                                            "nodes", (unsigned long)w->s.n_act);
+                    cg = pn__mpm_pcg(w, dt, o->cg_max, eta, 0, &capped);
+                    st->cg_iters += cg;
+                    st->mg_builds += w->s.mg_on && fresh;
+                    if (!full || !w->s.curv) break;
+                    full = 0, full_below = last_res / 10, redo = 1; /* and a hierarchy of the projected H */
+                }
                 gprev = gnorm;
-                fresh = it == 0 || o->mg_rebuild || stale;
-                if (w->s.mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
-                    return PN__FAIL(w, r, "implicit step: out of memory for the multigrid hierarchy of %lu active "
-                                        "nodes", (unsigned long)w->s.n_act);
-                cg = pn__mpm_pcg(w, dt, o->cg_max, eta, 0, &capped);
-                st->cg_iters += cg;
-                st->mg_builds += w->s.mg_on && fresh;
                 /* a lagged hierarchy that costs half as many iterations again as a fresh one is
                    rebuilt at every Newton iteration from then on (the energy's Hessian moves
                    fast: DP's kinks), retried every 16 steps */
@@ -6326,6 +6345,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 }
                 st->cg_capped += capped;
                 last_res = dmax / (w->desc.dx_m / dt);
+                if (last_res > PN__MPM_FULL_H) full_below = PN__MPM_FULL_H; /* moved on */
                 if (o->trace) o->trace(o->trace_user, st->solves, it, E0, last_res);
                 if (!pn__finite(dmax))
                     return PN__FAIL(w, PN_ERROR_OVERFLOW, "implicit step of %g s: the Newton direction is not finite "
