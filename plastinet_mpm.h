@@ -913,7 +913,8 @@ typedef struct pn_fem_implicit_desc {
     int fixed_point_iters;       /* passes of the F0 fixed point (lagged, PlasticityNet) [1] */
     int newton_max;              /* Newton iterations per minimization [100]                */
     pn_real newton_tol;          /* stop when max |dx| < newton_tol l dt-free: l the mean
-                                    rest edge length [1e-5]                                 */
+                                    rest edge length (quadratic elements: half, the nodes'
+                                    spacing; pn_fem_mesh.edge_mean) [1e-5]                  */
     int max_halvings;            /* a failed step is retried as 2, 4, .. substeps [5; < 0:
                                     none]                                                   */
     pn_fem_linear_solver linear_solver; /* [PN_FEM_LINEAR_DEFAULT]                          */
@@ -966,7 +967,7 @@ typedef struct pn_fem_mesh {
     pn_real *spin;               /* per node: the spin's centre (3 reals), angular velocity (3) */
     pn_collider obstacles[PN_FEM_MAX_OBSTACLES];
     int n_obstacles;
-    pn_real time_s, dhat, kappa, edge_mean;
+    pn_real time_s, dhat, kappa, edge_mean; /* edge_mean: of the rest edges (quadratic: half) */
     long steps;
     long error_element, error_node; /* the culprit of the last failure, -1: none             */
     char error[256];
