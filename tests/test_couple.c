@@ -84,20 +84,7 @@ static int t_cpl_make(t_cpl *t, const t_cpl_scene *sc) {
     t->X = (pn_real *)malloc(sizeof(pn_real) * t->nn * (size_t)d);
     t->el = (int *)malloc(sizeof(int) * t->ne * (size_t)(d + 1));
     if (!t->X || !t->el || pn_fem_grid_mesh(&g, t->X, t->el, &t->nn, &t->ne) != PN_OK) return 0;
-    if (sc->order == 2) { /* a node on each edge */
-        size_t n2;
-        pn_real *X2 = NULL;
-        int *el2 = NULL;
-        if (pn_fem_quadratic_mesh(d, t->X, t->nn, t->el, t->ne, NULL, NULL, NULL, &n2) != PN_OK) return 0;
-        X2 = (pn_real *)malloc(sizeof(pn_real) * n2 * (size_t)d);
-        el2 = (int *)malloc(sizeof(int) * t->ne * (size_t)((d + 1) * (d + 2) / 2));
-        if (!X2 || !el2 || pn_fem_quadratic_mesh(d, t->X, t->nn, t->el, t->ne, NULL, X2, el2, &n2) != PN_OK) {
-            free(X2), free(el2);
-            return 0;
-        }
-        free(t->X), free(t->el);
-        t->X = X2, t->el = el2, t->nn = n2;
-    }
+    if (sc->order == 2 && !t_fem_quadratic(d, &t->X, &t->el, &t->nn, t->ne)) return 0; /* test_fem.c */
     memset(&fg, 0, sizeof fg);
     memset(&md, 0, sizeof md);
     md.elastic = PN_ELASTIC_NEO_HOOKEAN, md.youngs_modulus_pa = (pn_real)sc->E_block, md.poisson_ratio = (pn_real)0.3;

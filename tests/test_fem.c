@@ -23,6 +23,24 @@ static pn_group t_fem_group(pn_elastic_model e, pn_plastic_model p, double E, do
     return g;
 }
 
+/* *X, *el (malloc'd, a linear mesh of *nn nodes and ne elements) replaced by the quadratic mesh
+   (pn_fem_quadratic_mesh); 0 on failure (the linear arrays kept). Also test_couple.c's. */
+static int t_fem_quadratic(int dim, pn_real **X, int **el, size_t *nn, size_t ne) {
+    size_t n2;
+    pn_real *X2;
+    int *el2;
+    if (pn_fem_quadratic_mesh(dim, *X, *nn, *el, ne, NULL, NULL, NULL, &n2) != PN_OK) return 0;
+    X2 = (pn_real *)malloc(sizeof(pn_real) * n2 * (size_t)dim);
+    el2 = (int *)malloc(sizeof(int) * ne * (size_t)((dim + 1) * (dim + 2) / 2));
+    if (!X2 || !el2 || pn_fem_quadratic_mesh(dim, *X, *nn, *el, ne, NULL, X2, el2, &n2) != PN_OK) {
+        free(X2), free(el2);
+        return 0;
+    }
+    free(*X), free(*el);
+    *X = X2, *el = el2, *nn = n2;
+    return 1;
+}
+
 /* the grid's mesh, made quadratic (pn_fem_quadratic_mesh) when order is 2 */
 static int t_fem_make_order(t_fem *t, const pn_fem_grid *g, const pn_group *grp, double gy, int order) {
     pn_fem_desc fd;
@@ -32,20 +50,7 @@ static int t_fem_make_order(t_fem *t, const pn_fem_grid *g, const pn_group *grp,
     t->X = (pn_real *)malloc(sizeof(pn_real) * t->nn * (size_t)g->dim);
     t->el = (int *)malloc(sizeof(int) * t->ne * (size_t)(g->dim + 1));
     if (!t->X || !t->el || pn_fem_grid_mesh(g, t->X, t->el, &t->nn, &t->ne) != PN_OK) return 0;
-    if (order == 2) {
-        size_t n2;
-        pn_real *X2;
-        int *el2;
-        if (pn_fem_quadratic_mesh(g->dim, t->X, t->nn, t->el, t->ne, NULL, NULL, NULL, &n2) != PN_OK) return 0;
-        X2 = (pn_real *)malloc(sizeof(pn_real) * n2 * (size_t)g->dim);
-        el2 = (int *)malloc(sizeof(int) * t->ne * (size_t)((g->dim + 1) * (g->dim + 2) / 2));
-        if (!X2 || !el2 || pn_fem_quadratic_mesh(g->dim, t->X, t->nn, t->el, t->ne, NULL, X2, el2, &n2) != PN_OK) {
-            free(X2), free(el2);
-            return 0;
-        }
-        free(t->X), free(t->el);
-        t->X = X2, t->el = el2, t->nn = n2;
-    }
+    if (order == 2 && !t_fem_quadratic(g->dim, &t->X, &t->el, &t->nn, t->ne)) return 0;
     memset(&fd, 0, sizeof fd);
     fd.dim = g->dim, fd.n_nodes = t->nn, fd.n_elements = t->ne, fd.rest_m = t->X, fd.elements = t->el, fd.order = order;
     fd.groups = grp, fd.n_groups = 1, fd.gravity[1] = (pn_real)gy;
