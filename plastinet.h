@@ -1,4 +1,4 @@
-/* plastinet.h - v0.14 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.15 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -183,7 +183,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 14
+#define PN_VERSION_MINOR 15
 
 #ifdef __cplusplus
 extern "C" {
@@ -933,6 +933,11 @@ typedef pn_result (*pn__objective_fn)(void *ctx, const pn_real *x, pn_real *E);
         return 0;                                                                              \
     }
 PN__ARMIJO_DEF(pn__armijo, pn_real)
+
+/* Newton's predicted decrease -gd (gd = grad . dir) is below the rounding of an energy of
+   size E0 summed in precision eps: the values can no longer judge a step (near the minimum
+   of a large energy) */
+PN__KIT int pn__unresolved(pn_real gd, pn_real E0, pn_real eps) { return -gd <= (pn_real)1e3 * eps * PN__FABS(E0); }
 
 /* A rigid drive's motion (particles held, translated and spun; MPM's and the reduced models'
    drives, whose struct D has center, vel, omega and t0): at(D, d, t, x0, c, x) gives the

@@ -7,15 +7,22 @@
 # explicit run at a fixed step below the stable one: how converged the reference is in dt.
 #
 #   sh bench/energies_in_scenes.sh [--dim 2|3] [--aspects "0.5 1 2 4 8"] [--seconds S]
-#                                  [--energies "pnet dp lagged stress"] [--out FILE]
+#                                  [--energies "pnet dp lagged stress"] [--dts "1e-3 1/60"]
+#                                  [--pnet-flags "..."] [--out FILE]
+#
+# --pnet-flags go to the PlasticityNet rows' sand_column (another model: "--model sand_2d_fy
+# --regularizer -1"); --dts picks the steps (1/60 is 1/60 s).
 #
 # make bench-energies runs it (2D); docs/results.md quotes the tables.
 set -e
+args="$*"
 dim=2
 aspects="0.5 1 2 4 8"
 energies="pnet pnet2 dp lagged stress"
 seconds=1
 out=""
+dts="1e-3 1/60"
+pnet_flags=""
 while [ $# -gt 0 ]; do
     case "$1" in
     --dim) dim=$2; shift 2 ;;
@@ -23,7 +30,9 @@ while [ $# -gt 0 ]; do
     --energies) energies=$2; shift 2 ;;
     --seconds) seconds=$2; shift 2 ;;
     --out) out=$2; shift 2 ;;
-    *) echo "usage: energies_in_scenes.sh [--dim 2|3] [--aspects LIST] [--energies LIST] [--seconds S] [--out FILE]" >&2; exit 2 ;;
+    --dts) dts=$2; shift 2 ;;
+    --pnet-flags) pnet_flags=$2; shift 2 ;;
+    *) echo "usage: energies_in_scenes.sh [--dim 2|3] [--aspects LIST] [--energies LIST] [--seconds S] [--dts LIST] [--pnet-flags S] [--out FILE]" >&2; exit 2 ;;
     esac
 done
 [ -x build/sand_column ] || make build/sand_column >&2
@@ -47,7 +56,7 @@ geometry() { # geometry ASPECT -> flags
 {
     echo "# The implicit energies in the sand column, ${dim}D, ${seconds} s"
     echo
-    echo "\`sh bench/energies_in_scenes.sh --dim $dim\` at $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%d)."
+    echo "\`sh bench/energies_in_scenes.sh $args\` at $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%d)."
     echo "Every ratio against the explicit reference at its stable step, run beside each row."
     echo
     echo "| aspect | particles | run | dt (s) | passes | runout | height | IoU | force error | Newton / step | wall s | reference wall s |"
@@ -71,13 +80,15 @@ row() { # row ASPECT GEOMETRY LABEL DT PASSES FLAGS...
 for a in $aspects; do
     geo=$(geometry "$a")
     row "$a" "$geo" "explicit, fixed step" 5e-5 - --integrator explicit --dt 5e-5
-    for dt in 1e-3 0.016666666666666666; do
-        t=$dt
-        [ "$dt" = 1e-3 ] || t=1/60
+    for t in $dts; do
+        dt=$t
+        [ "$t" = 1/60 ] && dt=0.016666666666666666
         for e in $energies; do
             case "$e" in
-            pnet) row "$a" "$geo" "PlasticityNet" "$t" 1 --energy pnet --dt "$dt" ;;
-            pnet2) row "$a" "$geo" "PlasticityNet" "$t" 2 --energy pnet --fixed-point 2 --dt "$dt" ;;
+            # shellcheck disable=SC2086
+            pnet) row "$a" "$geo" "PlasticityNet" "$t" 1 --energy pnet --dt "$dt" $pnet_flags ;;
+            # shellcheck disable=SC2086
+            pnet2) row "$a" "$geo" "PlasticityNet" "$t" 2 --energy pnet --fixed-point 2 --dt "$dt" $pnet_flags ;;
             dp) row "$a" "$geo" "frozen-yield DP" "$t" 1 --energy dp --dt "$dt" ;;
             lagged) row "$a" "$geo" "lagged" "$t" 1 --energy lagged --dt "$dt" ;;
             stress) row "$a" "$geo" "stress formulation" "$t" - --dt "$dt" ;;
