@@ -6270,6 +6270,22 @@ static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_impl
     return has_sep;
 }
 
+/* After a line search from E0 along a direction with gd = grad . dir that took alpha: 0 go
+   on; 1 stop, converged; 2 the rest of the attempt evaluates PlasticityNet in pn_real. A
+   shortened step whose predicted decrease is below about 1e-6 of the energy: the float
+   lanes' rounding now decides the line search, and Newton would stall at it (the snow press:
+   50 iterations at one residual; a nonconvex energy's genuine backtracking is at 1e-5 and
+   above). Within the acceptance band (in_band) that is convergence; short of it, the network
+   in pn_real, without the Taylor models the lanes left (their values jump by that rounding). */
+static int pn__mpm_lanes_stall(pn_mpm_world *w, pn_real gd, pn_real E0, pn_real alpha, int in_band) {
+    int g, any = 0;
+    for (g = 0; g < w->n_groups; ++g) any |= pn__mpm_energy_of(&w->groups[g]) == PN_ENERGY_PNET;
+    if (!any || !w->s.pnet_lanes || !(alpha < 1) || !pn__unresolved(gd, E0, (pn_real)FLT_EPSILON / 100)) return 0;
+    if (in_band) return 1;
+    w->s.pnet_lanes = 0, w->s.reuse_tol = 0;
+    return 2;
+}
+
 /* Newton's step (max |dv| dt / dx, cells) under which the particles' Hessians are used as
    they are, not PSD-projected: near the minimum projection only slows Newton (linear
    convergence where an energy is not convex: a network without its regularizer), as in FEM
@@ -6312,7 +6328,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
             st->solves++;
             for (it = 0; it < o->newton_max; ++it) {
                 pn_real E0, E1, gd, alpha = 1, dmax = 0, gnorm;
-                int full = it > 0 && last_res <= full_below, redo = 0;
+                int full = it > 0 && last_res <= full_below, redo = 0, stall;
                 if (w->s.newton_left-- <= 0)
                     return PN__FAIL(w, PN_ERROR_NOT_CONVERGED, "implicit step: its newton_budget of %d Newton iterations "
                                         "is spent (over its attempts and substeps): take a smaller step", o->newton_budget);
@@ -6368,18 +6384,8 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                     alpha = pn__armijo(pn__mpm_value, &c, nd, w->s.vsol, w->s.dir, E0, gd, 1, (pn_real)1e-10, w->s.vtry, &E1);
                 }
                 pn__mpm_mark(w, st, PN_MPM_STAGE_ENERGY);
-                if (w->s.pnet_lanes && any_pnet && alpha < 1 && pn__unresolved(gd, E0, (pn_real)FLT_EPSILON / 100)) {
-                    /* a shortened step whose decrease is below about 1e-6 of the energy: the
-                       float lanes' rounding now decides the line search, and Newton would stall
-                       at it (the snow press: 50 iterations at one residual; a nonconvex energy's
-                       genuine backtracking is at 1e-5 and above). Within the acceptance band
-                       that is convergence; short of it, PlasticityNet in pn_real for the rest
-                       of this attempt, without the Taylor models the lanes left (their values
-                       jump by that rounding) */
-                    if (last_res <= 100 * o->newton_tol) break;
-                    w->s.pnet_lanes = 0, w->s.reuse_tol = 0;
-                    if (alpha == 0) continue;
-                }
+                if ((stall = pn__mpm_lanes_stall(w, gd, E0, alpha, last_res <= 100 * o->newton_tol)) == 1) break;
+                if (stall == 2 && alpha == 0) continue; /* again, in pn_real */
                 if (alpha == 0) { /* no decrease: keep v, count it, stop this round */
                     st->line_search_failures++;
                     break;
@@ -11223,7 +11229,7 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
     pn__fem *s = (pn__fem *)m->impl;
     pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt, res = 0;
     size_t i, nz = k->nz;
-    int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0;
+    int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0, stall;
     pn_result r;
     pn__cg_ops op;
     op.ctx = c, op.apply = pn__cpl_apply, op.precond = pn__cpl_precond, op.dot = pn__cpl_dot, op.curv = NULL;
@@ -11268,10 +11274,13 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
             return PN__FAIL(c, PN_ERROR_OVERFLOW, "coupled implicit step of %g s: the Newton direction is not finite",
                                 (double)dt);
         if (res <= vscale && !capped) break;
+        if (res <= 100 * vscale && pn__unresolved(gd, E0, PN__EPS) && !capped) break; /* as the grid's own */
         pn__cpl_positions(c, 1, k->z, k->dir);
         if ((r = pn__cpl_find(c, 1)) != PN_OK) return r;
         a0 = pn__cpl_ccd(c);
         alpha = a0 > 0 ? pn__armijo(pn__cpl_value, c, nz, k->z, k->dir, E0, gd, a0, (pn_real)1e-10, k->zt, &E1) : 0;
+        if ((stall = pn__mpm_lanes_stall(w, gd, E0, alpha, res <= 100 * vscale)) == 1) break;
+        if (stall == 2 && alpha == 0) continue;
         if (alpha == 0) {
             st->line_search_failures++;
             break;
