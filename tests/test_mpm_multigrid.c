@@ -9,7 +9,8 @@
    coarse matrix equals restriction of the fine one applied to a prolonged vector
    (P^T A P xc, from the separately written prolongation and restriction, which must be each
    other's transposes); and the V-cycle is symmetric positive definite (x.By = y.Bx,
-   x.Bx > 0), which CG needs. */
+   x.Bx > 0), which CG needs. The levels store their blocks in float: products agree to
+   float rounding, the V-cycle's symmetry to far below it. */
 typedef struct t_mg_probe {
     pn_mpm_world *w;
     pn_real dt;
@@ -125,10 +126,12 @@ PN_TEST(multigrid_operators) {
         id.trace_user = &pr;
         PN_CHECK(pn_mpm_step_implicit(w, 1e-3, &id, NULL) == PN_OK);
         PN_CHECK(pr.done && pr.levels >= 2);
-        PN_CHECK_LE(pr.op_err, 1e-12);
-        PN_CHECK_LE(pr.galerkin_err, 1e-12);
+        /* the levels' blocks are stored in float (each entry to 6e-8 of itself; a row's product
+           sums 125 blocks of mixed sign); the prolongation and restriction are exact */
+        PN_CHECK_LE(pr.op_err, 1e-6);
+        PN_CHECK_LE(pr.galerkin_err, 1e-6);
         PN_CHECK_LE(pr.transpose_err, 1e-12);
-        PN_CHECK_LE(pr.sym_err, 1e-12);
+        PN_CHECK_LE(pr.sym_err, 1e-9);
         PN_CHECK(pr.min_xbx > 0);
         PN_REPORT("%dD, %lu particles, %d levels: assembled vs matrix-free %.1e, P^T A P vs coarse %.1e, restriction vs "
                   "P^T %.1e, V-cycle asymmetry %.1e, min x.Bx / x.x %.2e", dim, (unsigned long)w->n, pr.levels,
