@@ -15,7 +15,10 @@
 #
 # make bench-energies runs it (2D); docs/results.md quotes the tables.
 set -e
-args="$*"
+args=""
+for a in "$@"; do
+    case "$a" in *" "*) args="$args \"$a\"" ;; *) args="$args $a" ;; esac
+done
 dim=2
 aspects="0.5 1 2 4 8"
 energies="pnet pnet2 dp lagged stress"
@@ -56,7 +59,7 @@ geometry() { # geometry ASPECT -> flags
 {
     echo "# The implicit energies in the sand column, ${dim}D, ${seconds} s"
     echo
-    echo "\`sh bench/energies_in_scenes.sh $args\` at $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%d)."
+    echo "\`sh bench/energies_in_scenes.sh$args\` at $(git rev-parse --short HEAD 2>/dev/null || echo '?'), $(date -u +%Y-%m-%d)."
     echo "Every ratio against the explicit reference at its stable step, run beside each row."
     echo
     echo "| aspect | particles | run | dt (s) | passes | runout | height | IoU | force error | Newton / step | wall s | reference wall s |"
