@@ -45,7 +45,8 @@
    1e9 Pa (--sweep-E). Per (dim, res, E), with the sweep's machinery: the fair explicit
    baseline (bench_fair), the explicit reference at half its step (the sweep's rule), and the
    stress formulation (the group's Drucker-Prager) per particle at the advection limit and at
-   1/60 s, and per cell (stress_unknowns cells) at both. The advection limit: the library has
+   1/60 s, per cell (stress_unknowns cells) at both, and cells then particles at the
+   advection limit. The advection limit: the library has
    no helper that returns it (pn_mpm_advance picks such steps inside), so
    dt = dx / (2 sqrt(2 g H)), H the column height (the free fall from its top at half a cell
    per step), rounded down to whole steps per frame. Per run: particles, dt, dt / dt_CFL
@@ -1111,10 +1112,12 @@ static void bench_materials(const bench_cfg *cfg, int n_dts, const double *dts, 
 #define SCALE_FPS 20 /* 0.05 s frames: a 1/60 s step is 3 of a frame */
 
 /* the runs of each (dim, res, E), in this order; the CSV's run and step columns */
-enum { SCALE_FAIR = 0, SCALE_REF, SCALE_ADVECTION, SCALE_FRAME, SCALE_CELLS_ADVECTION, SCALE_CELLS, SCALE_RUNS };
+enum { SCALE_FAIR = 0, SCALE_REF, SCALE_ADVECTION, SCALE_FRAME, SCALE_CELLS_ADVECTION, SCALE_CELLS, SCALE_CASCADE, SCALE_RUNS };
 static const char *const scale_kinds[SCALE_RUNS] = {"explicit_fair", "explicit_reference", "stress_particles",
-                                                    "stress_particles", "stress_cells", "stress_cells"};
-static const char *const scale_steps[SCALE_RUNS] = {"fair", "fair/2", "advection", "1/60", "advection", "1/60"};
+                                                    "stress_particles", "stress_cells", "stress_cells",
+                                                    "stress_cells_particles"};
+static const char *const scale_steps[SCALE_RUNS] = {"fair", "fair/2", "advection", "1/60", "advection", "1/60",
+                                                    "advection"};
 
 /* one row of DIR/bench_scale.csv: written as each run ends, read back on start (resume) */
 typedef struct scale_row {
@@ -1308,7 +1311,8 @@ static void scale_cache_write(const char *path, const double *fields, size_t nod
 /* The runs of one (dim, res, E) that the CSV does not have yet: the fair explicit baseline
    (searched as bench_fair does; it is kept only once the reference exists to score it), the
    reference at half its step (the sweep's rule; its fields cached), then the stress
-   formulation per particle at the advection limit and at 1/60 s, and per cell at both. */
+   formulation per particle at the advection limit and at 1/60 s, per cell at both, and cells
+   then particles at the advection limit. */
 static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, double E, int frames) {
     double frame_s = 1.0 / SCALE_FPS, dts[SCALE_RUNS], fair_dt, fair_cpu, ref_runout, ref_height, *ref, *fair_f = NULL;
     int have[SCALE_RUNS], k, todo = 0;
@@ -1319,7 +1323,7 @@ static void scale_group(const bench_cfg *cfg, scale_csv *t, int dim, int res, do
     char path[1024];
     unsigned long n = (unsigned long)scale_scene(cfg, dim, res, E, &s, &nodes);
     dts[SCALE_FAIR] = dts[SCALE_REF] = 0;
-    dts[SCALE_ADVECTION] = dts[SCALE_CELLS_ADVECTION] = scale_advection_dt(&s, frame_s);
+    dts[SCALE_ADVECTION] = dts[SCALE_CELLS_ADVECTION] = dts[SCALE_CASCADE] = scale_advection_dt(&s, frame_s);
     dts[SCALE_FRAME] = dts[SCALE_CELLS] = 1.0 / 60;
     have[SCALE_FAIR] = scale_find(t, dim, res, E, SCALE_FAIR, 0);
     fair_dt = have[SCALE_FAIR] >= 0 ? t->rows[have[SCALE_FAIR]].dt : 0;
@@ -1398,7 +1402,9 @@ implicit: /* 3. the stress formulation (its law: the group's Drucker-Prager, as 
         r.fp = 1;
         r.frame_s = frame_s;
         r.dt = dts[k];
-        id.stress_unknowns = k == SCALE_CELLS || k == SCALE_CELLS_ADVECTION ? PN_MPM_STRESS_CELLS : PN_MPM_STRESS_PARTICLES;
+        id.stress_unknowns = k == SCALE_CELLS || k == SCALE_CELLS_ADVECTION ? PN_MPM_STRESS_CELLS
+                             : k == SCALE_CASCADE                            ? PN_MPM_STRESS_CELLS_THEN_PARTICLES
+                                                                             : PN_MPM_STRESS_PARTICLES;
         bench_run_scene(&s, &r, frames, cfg->max_run_s, &id, NULL, cfg->scale_implicit_only ? NULL : ref);
         bench_progress("sand", dim, &r);
         scale_row_of(&o, &s, k, &r, fair_dt, fair_cpu, ref_runout, ref_height);
@@ -1443,7 +1449,8 @@ static void scale_md(const char *path, const scale_csv *t) {
                "is the mean / min min/max mass IoU against it, at %d frames per second), and the stress formulation "
                "(`PN_MPM_FORMULATION_STRESS`, the group's Drucker-Prager) with its stresses per particle at the "
                "advection limit (dx / (2 sqrt(2 g H)), H the column height, in whole steps per frame) and at "
-               "1/60 s, and per cell at both. *dt / dt_CFL*: the step over the fair explicit step. *per step*: "
+               "1/60 s, per cell at both, and cells then particles (`stress_cells_particles`) at the advection "
+               "limit. *dt / dt_CFL*: the step over the fair explicit step. *per step*: "
                "Gauss-Seidel sweeps, coarse corrections (`pn_mpm_stats.coarse_corrections`), Newton and CG "
                "iterations (of a step retried as substeps, for all of them), and *substepped*: the share of the "
                "steps that were (one that would move material more than a cell is). *stage %%*: the share of the step's time in setup / energy / linear / sweeps / g2p "

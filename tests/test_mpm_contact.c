@@ -155,7 +155,7 @@ PN_TEST(contact_floor_plane) {
         for (kind = 0; kind < 2; ++kind)
             for (impl = 0; impl < 2; ++impl) {
                 pn_mpm_world *w = t_mpm_world(dim, dim == 2 ? 32 : 16, -9.81, PN_BOUNDARY_SEPARATE);
-                double lo[3] = {0.4, 0.25, 0.4}, sz[3] = {0.2, 0.2, 0.2}, v[3] = {0, kind ? -8 : 0, 0}, deepest = 1e9;
+                double lo[3] = {0.4, 0.25, 0.4}, sz[3] = {0.2, 0.2, 0.2}, v[3] = {0, kind ? -8.0 : 0.0, 0}, deepest = 1e9;
                 double floor_y, t = 0, end = 0.3;
                 size_t n, p;
                 int g, bad = 0;

@@ -1224,7 +1224,7 @@ PN_TEST(return_extremes_fuzz) {
         for (k = 0; k < 81; ++k) H[k] = 7;
         for (k = 0; k < 9; ++k) P[k] = 7;
         psi = 7;
-        r[2] = pn_elastic_energy(&m, d, F, h, &psi, P, H, (t & 2) ? PN_EVAL_PROJECT_PSD : 0u);
+        r[2] = pn_elastic_energy(&m, d, F, h, &psi, P, H, (t & 2) ? (unsigned)PN_EVAL_PROJECT_PSD : 0u);
         bad += r[2] == PN_OK ? !(t_finite(1, &psi) && t_finite(n, P) && t_finite(n * n, H))
                              : !(psi == 7 && t_ex_untouched(n, P) && t_ex_untouched(n * n, H));
         r[3] = pn_lagged_prepare(&m, d, F, h, G, &hG);
