@@ -5169,16 +5169,20 @@ static void pn__mpm_mg_fine_store(pn_mpm_world *w, size_t k, pn_real *A, float *
    m_k I on the diagonal; gathered per row over the row's incidences (their fixed order). */
 static void pn__mpm_mg_fine(pn_mpm_world *w, pn_real dt) {
     pn__mpm_level *L = w->s.mg;
-    int d = w->dim, dd = d * d, ns = w->s.ns, nb = PN__MPM_NB(d), ctr = nb / 2, pair[27 * 27], s, s2;
+    int d = w->dim, dd = d * d, ns = w->s.ns, nb = PN__MPM_NB(d), ctr = nb / 2, s, s2;
+    int up[27][27], nup[27]; /* per slot s: the slots t whose neighbour index from s is >= the centre's */
     long lk;
     for (s = 0; s < ns; ++s) /* the neighbour index of slot t seen from slot s */
-        for (s2 = 0; s2 < ns; ++s2) {
-            int o = 0, a, t = s2;
-            for (a = 0; a < d; ++a) o = o * 5 + w->s.slot[t][a] - w->s.slot[s][a] + 2;
-            pair[s * ns + t] = o;
+        for (nup[s] = 0, s2 = 0; s2 < ns; ++s2) {
+            int o = 0, a;
+            for (a = 0; a < d; ++a) o = o * 5 + w->s.slot[s2][a] - w->s.slot[s][a] + 2;
+            if (o >= ctr) up[s][nup[s]++] = s2 * 128 + o; /* slot and neighbour index */
         }
     L->n = w->s.n_act;
     pn__mpm_mg_rows(w, 0);
+    /* Blocks are symmetric, A_lk = A_kl^T (each particle's H is): a row assembles its
+       blocks from the centre on (t >= ctr) and takes the others from its neighbours'. The
+       contact filter keeps the symmetry: (S_k^T A_kl S_l)^T = S_l^T A_lk S_k. */
     PN__OMP_FOR
     for (lk = 0; lk < (long)L->n; ++lk) {
         size_t k = (size_t)lk, e;
@@ -5187,35 +5191,49 @@ static void pn__mpm_mg_fine(pn_mpm_world *w, pn_real dt) {
         memset(A, 0, sizeof(pn_real) * (size_t)(nb * dd));
         for (e = w->s.inc_start[k]; e < w->s.inc_start[k + 1]; ++e) {
             size_t ps = w->s.inc[e], j = ps / (size_t)ns, p = w->s.order[j];
+            int sk = (int)(ps - j * (size_t)ns), n2 = nup[sk];
             const pn_real *H = w->s.pH + p * (size_t)(dd * dd), *qs = w->s.pq + ps * (size_t)d;
             const pn_real *q = w->s.pq + j * (size_t)(ns * d);
-            const int *pr = pair + (ps - j * (size_t)ns) * (size_t)ns;
+            const int *pr = up[sk];
             pn_real c = w->vol0[p] * dt * dt, u[27];
             if (d == 2) { /* u_abe = c sum_c H[(a c),(b e)] qs_c; block_ab += sum_e u_abe q_e */
                 for (i = 0; i < 8; ++i) {
                     int ab = i >> 1, be = (ab & 1) * 2 + (i & 1), row = (ab >> 1) * 2;
                     u[i] = c * (H[row * 4 + be] * qs[0] + H[(row + 1) * 4 + be] * qs[1]);
                 }
-                for (t = 0; t < 9; ++t, q += 2) {
-                    pn_real *B = A + pr[t] * 4;
-                    B[0] += u[0] * q[0] + u[1] * q[1];
-                    B[1] += u[2] * q[0] + u[3] * q[1];
-                    B[2] += u[4] * q[0] + u[5] * q[1];
-                    B[3] += u[6] * q[0] + u[7] * q[1];
+                for (t = 0; t < n2; ++t) {
+                    const pn_real *qt = q + (pr[t] >> 7) * 2;
+                    pn_real *B = A + (pr[t] & 127) * 4;
+                    B[0] += u[0] * qt[0] + u[1] * qt[1];
+                    B[1] += u[2] * qt[0] + u[3] * qt[1];
+                    B[2] += u[4] * qt[0] + u[5] * qt[1];
+                    B[3] += u[6] * qt[0] + u[7] * qt[1];
                 }
             } else {
-                for (i = 0; i < 27; ++i) {
-                    int ab = i / 3, be = (ab % 3) * 3 + i % 3, row = (ab / 3) * 3;
+                for (i = 0; i < 27; ++i) { /* u[9 e + ab], ab = 3 a + b */
+                    int ab = i % 9, be = (ab % 3) * 3 + i / 9, row = (ab / 3) * 3;
                     u[i] = c * (H[row * 9 + be] * qs[0] + H[(row + 1) * 9 + be] * qs[1] + H[(row + 2) * 9 + be] * qs[2]);
                 }
-                for (t = 0; t < 27; ++t, q += 3) {
-                    pn_real *B = A + pr[t] * 9;
-                    for (i = 0; i < 9; ++i) B[i] += u[3 * i] * q[0] + u[3 * i + 1] * q[1] + u[3 * i + 2] * q[2];
+                for (t = 0; t < n2; ++t) {
+                    const pn_real *qt = q + (pr[t] >> 7) * 3;
+                    pn_real *B = A + (pr[t] & 127) * 9, q0 = qt[0], q1 = qt[1], q2 = qt[2];
+                    for (i = 0; i < 9; ++i) B[i] += u[i] * q0 + u[9 + i] * q1 + u[18 + i] * q2;
                 }
             }
         }
         for (i = 0; i < d; ++i) A[ctr * dd + i * d + i] += w->s.grid_m[k];
         pn__mpm_mg_fine_store(w, k, A, L->A + k * (size_t)(nb * dd), L->Dinv + k * (size_t)dd);
+    }
+    PN__OMP_FOR
+    for (lk = 0; lk < (long)L->n; ++lk) { /* the blocks before the centre: A_kt = A_lt'^T, l = nbr[t] */
+        float *Ak = L->A + (size_t)lk * (size_t)(nb * dd);
+        const long *nbr = L->nbr + (size_t)lk * (size_t)nb;
+        int t, a, b;
+        for (t = 0; t < ctr; ++t) {
+            const float *Bl = nbr[t] < 0 ? NULL : L->A + ((size_t)nbr[t] * (size_t)nb + (size_t)(nb - 1 - t)) * (size_t)dd;
+            for (a = 0; a < d; ++a)
+                for (b = 0; b < d; ++b) Ak[t * dd + a * d + b] = Bl ? Bl[b * d + a] : 0;
+        }
     }
 }
 
@@ -5246,6 +5264,7 @@ static pn_result pn__mpm_mg_coarsen(pn_mpm_world *w, int l) {
     const long *fdof = l ? F->dof : w->s.dof;
     size_t k, n = 0, flat;
     long lk;
+    int toff[125][3], tt, ax;
     pn_result r;
     for (k = 0; k < C->n; ++k) C->dof[C->node[k]] = -1;
     C->n = 0;
@@ -5271,39 +5290,53 @@ static pn_result pn__mpm_mg_coarsen(pn_mpm_world *w, int l) {
             C->node[C->n++] = flat;
         }
     pn__mpm_mg_rows(w, l + 1);
+    /* Per axis, a child at 2I + a and its neighbour at offset o sit at s = a + o in -3..3
+       from 2I: s even has one parent, I + s/2 (weight 1); s odd two, I + (s -+ 1)/2 (1/2
+       each). The parents of a neighbour are then products of at most two per axis. */
+    for (tt = 0; tt < nb; ++tt) {
+        int q = tt;
+        for (ax = d - 1; ax >= 0; --ax, q /= 5) toff[tt][ax] = q % 5 - 2;
+    }
     PN__OMP_FOR
     for (lk = 0; lk < (long)C->n; ++lk) { /* row I gathers w_iI A_ij w_jJ over its children i */
-        int I[3], c, nc = d == 2 ? 9 : 27, a, t, m;
+        int I[3], c, nc = d == 2 ? 9 : 27, a, t;
         size_t fi;
         pn_real A[125 * 9]; /* the row in pn_real, then stored */
         float *out = C->A + (size_t)lk * (size_t)(nb * dd);
         memset(A, 0, sizeof(pn_real) * (size_t)(nb * dd));
         pn__mpm_mg_idx(C, d, C->node[lk], I);
         for (c = 0; c < nc; ++c) {
-            int i[3], ok = 1, r5 = c;
+            int i[3], ao[3] = {0, 0, 0}, ok = 1, r5 = c;
             long ri;
             pn_real wi = 1;
+            const long *nbr;
+            const float *Ai;
             for (fi = 0, a = d - 1; a >= 0; --a, r5 /= 3) {
-                int o = r5 % 3 - 1;
-                i[a] = 2 * I[a] + o;
+                ao[a] = r5 % 3 - 1;
+                i[a] = 2 * I[a] + ao[a];
                 ok &= i[a] >= 0 && i[a] < F->nn[a];
-                if (o) wi *= (pn_real)0.5;
+                if (ao[a]) wi *= (pn_real)0.5;
                 fi += (size_t)((long)i[a] * (long)F->stride[a]);
             }
             if (!ok || (ri = fdof[fi]) < 0) continue;
+            nbr = F->nbr + (size_t)ri * (size_t)nb;
+            Ai = F->A + (size_t)ri * (size_t)(nb * dd);
             for (t = 0; t < nb; ++t) {
-                long rj = F->nbr[(size_t)ri * (size_t)nb + (size_t)t];
-                const float *B = F->A + ((size_t)ri * (size_t)nb + (size_t)t) * (size_t)dd;
-                int j[3], q = t;
-                if (rj < 0) continue;
-                for (a = d - 1; a >= 0; --a, q /= 5) j[a] = i[a] + q % 5 - 2;
-                for (m = 0; m < 1 << d; ++m) {
-                    int J[3], tJ = 0, e;
-                    pn_real wgt = pn__mpm_mg_parent(d, j, m, J) * wi;
-                    if (wgt == 0) continue;
-                    for (a = 0; a < d; ++a) tJ = tJ * 5 + J[a] - I[a] + 2;
-                    for (e = 0; e < dd; ++e) A[tJ * dd + e] += wgt * B[e];
-                }
+                const float *B = Ai + t * dd;
+                int sx = ao[0] + toff[t][0], sy = ao[1] + toff[t][1], sz = d == 3 ? ao[2] + toff[t][2] : 0;
+                int nx = ((sx + 4) & 1) + 1, ny = ((sy + 4) & 1) + 1, nz = ((sz + 4) & 1) + 1, ex, ey, ez, e;
+                pn_real wt = wi * (nx == 2 ? (pn_real)0.5 : 1) * (ny == 2 ? (pn_real)0.5 : 1) *
+                             (nz == 2 ? (pn_real)0.5 : 1);
+                if (nbr[t] < 0) continue;
+                for (ez = 0; ez < nz; ++ez)
+                    for (ey = 0; ey < ny; ++ey)
+                        for (ex = 0; ex < nx; ++ex) { /* parent I + (s - (n - 1) + 2 e) / 2 per axis */
+                            int tJ = ((sx - nx + 1) / 2 + ex + 2) * 5 + (sy - ny + 1) / 2 + ey + 2;
+                            pn_real *Cb;
+                            if (d == 3) tJ = tJ * 5 + (sz - nz + 1) / 2 + ez + 2;
+                            Cb = A + tJ * dd;
+                            for (e = 0; e < dd; ++e) Cb[e] += wt * B[e];
+                        }
             }
         }
         pn__mpm_mg_dinv(d, A + ctr * dd, C->Dinv + (size_t)lk * (size_t)dd);
