@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.15 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.16 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -5172,7 +5172,7 @@ static void pn__mpm_mg_fine(pn_mpm_world *w, pn_real dt) {
     int d = w->dim, dd = d * d, ns = w->s.ns, nb = PN__MPM_NB(d), ctr = nb / 2, s, s2;
     int up[27][27], nup[27]; /* per slot s: the slots t whose neighbour index from s is >= the centre's */
     long lk;
-    for (s = 0; s < ns; ++s) /* the neighbour index of slot t seen from slot s */
+    for (s = 0; s < ns; ++s) /* the neighbour index o of slot s2 seen from slot s: the pairs with o >= ctr */
         for (nup[s] = 0, s2 = 0; s2 < ns; ++s2) {
             int o = 0, a;
             for (a = 0; a < d; ++a) o = o * 5 + w->s.slot[s2][a] - w->s.slot[s][a] + 2;
@@ -5217,7 +5217,8 @@ static void pn__mpm_mg_fine(pn_mpm_world *w, pn_real dt) {
                 for (t = 0; t < n2; ++t) {
                     const pn_real *qt = q + (pr[t] >> 7) * 3;
                     pn_real *B = A + (pr[t] & 127) * 9, q0 = qt[0], q1 = qt[1], q2 = qt[2];
-                    for (i = 0; i < 9; ++i) B[i] += u[i] * q0 + u[9 + i] * q1 + u[18 + i] * q2;
+                    for (i = 0; i < 8; ++i) B[i] += u[i] * q0 + u[9 + i] * q1 + u[18 + i] * q2; /* 8 + 1: vectorizes at -O2 */
+                    B[8] += u[8] * q0 + u[17] * q1 + u[26] * q2;
                 }
             }
         }
