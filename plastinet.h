@@ -939,6 +939,21 @@ PN__ARMIJO_DEF(pn__armijo, pn_real)
    of a large energy) */
 PN__KIT int pn__unresolved(pn_real gd, pn_real E0, pn_real eps) { return -gd <= (pn_real)1e3 * eps * PN__FABS(E0); }
 
+/* Newton's stop without one more solve: after a full step of size step (a norm of the
+   update), the last full step's size prev (0: none) gives the contraction theta =
+   step / prev; while Newton contracts (theta <= 1/2), what is left of the error is at most
+   theta / (1 - theta) step, the steps still to come summed at that rate (Deuflhard's error
+   estimate; quadratic convergence only shrinks them faster). Converged when that is at most
+   tol: *left gets it. The solve that would have measured the next step is saved. */
+PN__KIT int pn__newton_done(pn_real step, pn_real prev, pn_real tol, pn_real *left) {
+    pn_real theta;
+    if (!(prev > 0)) return 0;
+    theta = step / prev;
+    if (!(theta <= (pn_real)0.1)) return 0;
+    *left = theta / (1 - theta) * step;
+    return *left <= tol;
+}
+
 /* A rigid drive's motion (particles held, translated and spun; MPM's and the reduced models'
    drives, whose struct D has center, vel, omega and t0): at(D, d, t, x0, c, x) gives the
    centre c(t) = center + (t - t0) vel and, unless x is NULL, where a point that was at x0 at

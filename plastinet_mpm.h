@@ -258,9 +258,14 @@ typedef struct pn_mpm_desc {
 /* Analytic collider: grid nodes inside it take its velocity as the boundary says. */
 /* How the implicit step solves each Newton system (conjugate gradients, preconditioned). */
 typedef enum pn_mpm_linear_solver {
-    PN_MPM_LINEAR_DEFAULT = 0,   /* multigrid, or Jacobi for systems of fewer than 4096
-                                    unknowns (about 2000 active nodes in 2D), where assembling
-                                    costs more than the CG iterations it saves              */
+    PN_MPM_LINEAR_DEFAULT = 0,   /* Jacobi for systems of fewer than 4096 unknowns (about
+                                    2000 active nodes in 2D), where assembling costs more
+                                    than the CG iterations it saves; above, multigrid in 2D;
+                                    in 3D, where a particle's Hessian spreads over 27 x 27
+                                    node pairs, Jacobi until its solves take more than 200
+                                    CG iterations per Newton iteration (or one stops at
+                                    cg_max), then multigrid, Jacobi tried again every 16
+                                    steps (docs/results.md#multigrid-preconditioned-newton) */
     PN_MPM_LINEAR_JACOBI,        /* matrix-free products over the particles, Jacobi (diagonal)
                                     preconditioner: no assembly; iterations grow like
                                     dt / dt_CFL                                              */
@@ -476,6 +481,8 @@ typedef struct pn__mpm_load {
 #define PN__MPM_MG_DENSE 192 /* the coarsest level is factored (Cholesky) up to these unknowns */
 #define PN__MPM_MG_MIN 4096  /* PN_MPM_LINEAR_DEFAULT: multigrid from this many unknowns, where
                                 it overtakes Jacobi (docs/results.md#multigrid-preconditioned-newton) */
+#define PN__MPM_JACOBI_MAX 200 /* PN_MPM_LINEAR_DEFAULT, 3D: Jacobi while its solves take at most
+                                this many CG iterations per Newton iteration (the same place) */
 typedef struct pn__mpm_level {
     int nn[3];                   /* nodes per axis (level l + 1: nn_l / 2 + 1)                */
     size_t stride[3], nodes;     /* flat node = sum idx_a stride_a                             */
@@ -582,6 +589,10 @@ typedef struct pn__mpm_solver {
     pn_pnet_point *jppt;
     unsigned char *jst;
     int mg_stale;                /* a lagged hierarchy cost too many CG iterations lately    */
+    int lin_auto;                /* this step's solver is LINEAR_DEFAULT's 3D choice, which
+                                    may move to multigrid within the step                   */
+    int lin_mg;                  /* LINEAR_DEFAULT in 3D: Jacobi cost too many CG iterations
+                                    per Newton iteration lately, so multigrid               */
     double clock_last;           /* pn_mpm_desc.clock_s at the last stage mark                */
     int stress_on;               /* this implicit step is FORMULATION_STRESS: pq holds g, not
                                     F^nT g (>>stress); 2: by cells, whose L makes F          */
@@ -6278,6 +6289,20 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
    the step into substeps.
    ====================================================================================== */
 
+/* LINEAR_DEFAULT in 3D: a step solved with Jacobi at more than PN__MPM_JACOBI_MAX CG iterations
+   per Newton iteration (cg of them over newton) hands the next steps to multigrid; a
+   multigrid step leaves the choice as it was (Jacobi's retry every 16 steps decides). A
+   Jacobi solve capped at cg_max moves the step itself to multigrid (pn__mpm_lin_escape). */
+static void pn__mpm_lin_record(pn_mpm_world *w, long cg, long newton) {
+    if (w->s.lin_auto && !w->s.mg_on) w->s.lin_mg = cg > (long)PN__MPM_JACOBI_MAX * newton;
+}
+static int pn__mpm_lin_escape(pn_mpm_world *w, int capped) {
+    if (!capped || !w->s.lin_auto || w->s.mg_on) return 0;
+    w->s.mg_on = w->s.lin_mg = 1;
+    w->s.mg_levels = 0;
+    return 1;
+}
+
 /* The start of an implicit step (the coupled one's too): bin, setup, particle to grid,
    contact; v* = momentum / mass + dt g, separating contacts held where they approach, vsol
    = v* with the holds and (friction) the first friction lag. Returns 1 when a node has a
@@ -6293,8 +6318,10 @@ static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_impl
     nd = w->s.n_act * (size_t)d;
     w->s.pnet_lanes = !o->pnet_double; /* (a solve may turn both off: >>implicit-step) */
     w->s.reuse_tol = pn__mpm_reuse_tol(o);
+    w->s.lin_auto = o->linear_solver == PN_MPM_LINEAR_DEFAULT && nd >= PN__MPM_MG_MIN && d == 3;
     w->s.mg_on = o->linear_solver == PN_MPM_LINEAR_MULTIGRID ||
-               (o->linear_solver == PN_MPM_LINEAR_DEFAULT && nd >= PN__MPM_MG_MIN);
+                 (o->linear_solver == PN_MPM_LINEAR_DEFAULT && nd >= PN__MPM_MG_MIN &&
+                  (d == 2 || (w->s.lin_mg && w->steps % 16 != 0)));
     w->s.mg_levels = 0; /* a new active set: the hierarchy is built afresh */
     st->active_nodes = w->s.n_act;
     /* v* = momentum / mass + dt g; separating contacts start held where they approach */
@@ -6374,6 +6401,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
         for (round = 0; round < o->contact_rounds; ++round) {
             int it, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0;
             pn_real eta = 0, gprev = 0, pred = 0; /* forcing: last eta, |S g|, predicted |S g| */
+            pn_real dprev = 0, left = 0; /* the last full Newton step's max |dv| (0: none yet) */
             pn_real full_below = PN__MPM_FULL_H; /* Newton's steps (cells) under which Hessians go unprojected */
             if (has_sep && pass + round > 0) pn__mpm_friction_update(w, w->s.vsol);
             st->solves++;
@@ -6400,6 +6428,10 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                     cg = pn__mpm_pcg(w, dt, o->cg_max, eta, 0, &capped);
                     st->cg_iters += cg;
                     st->mg_builds += w->s.mg_on && fresh;
+                    if (pn__mpm_lin_escape(w, capped)) { /* Jacobi gave up: this iteration again by multigrid */
+                        redo = 1;
+                        continue;
+                    }
                     if (!full || !w->s.curv) break;
                     full = 0, full_below = last_res / 10, redo = 1; /* and a hierarchy of the projected H */
                 }
@@ -6443,6 +6475,11 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 }
                 pred = pn__mpm_model_norm(w, alpha);
                 memcpy(w->s.vsol, w->s.vtry, sizeof(pn_real) * nd);
+                if (alpha == 1 && !capped && pn__newton_done(dmax, dprev, vscale, &left)) { /* no solve to confirm it */
+                    last_res = left / (w->desc.dx_m / dt);
+                    break;
+                }
+                dprev = alpha == 1 ? dmax : 0;
             }
             if (!has_sep || !pn__mpm_active_set(w, w->s.vsol, vscale)) break;
             if (round + 1 < o->contact_rounds) st->active_set_rounds++;
@@ -6458,6 +6495,7 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                             "(newton_tol %g, newton_max %d; %d line searches failed): a smaller step converges",
                             (double)dt, (double)last_res, (double)o->newton_tol, o->newton_max, st->line_search_failures);
     if (o->measure_force_error) pn__mpm_force_error(w, w->s.vsol, dt, st);
+    pn__mpm_lin_record(w, st->cg_iters, st->newton_iters);
     pn__mpm_mark(w, st, PN_MPM_STAGE_LINEAR);
     r = pn__mpm_g2p(w, w->s.vsol, NULL, dt, st);
     if (r == PN_OK) r = pn__mpm_energy_guard(w, o, dt, st);
@@ -6511,7 +6549,7 @@ typedef struct pn__mpm_retry {
     pn_mpm_stats *st, first;     /* the current try's stats; the first try's               */
     long steps0, culprit;
     size_t left0;
-    int stale0, rec0;
+    int stale0, rec0, lin0;
     char why[sizeof ((pn_mpm_world *)0)->error];
 } pn__mpm_retry;
 
@@ -6548,7 +6586,7 @@ static void pn__mpm_untry(void *ctx, int n_sub) {
     pn_mpm_world *w = t->w;
     if (n_sub > 1) pn__mpm_backup(w, 1); /* a failed whole step changed nothing but the models */
     pn__mpm_journal_undo(w);
-    w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0;
+    w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0, w->s.lin_mg = t->lin0;
     if (n_sub > 1) w->time_s = t->t0, w->steps = t->steps0, w->left_total = t->left0;
 }
 
@@ -6664,7 +6702,7 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     memset(&t, 0, sizeof t);
     t.w = w, t.o = &o, t.dt = dt, t.cfl = cfl, t.st = &st;
     t.t0 = w->time_s, t.steps0 = w->steps, t.left0 = w->left_total;
-    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok; /* what a failed call must also leave as it was */
+    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok, t.lin0 = w->s.lin_mg; /* what a failed call must also leave as it was */
     h.ctx = &t, h.try_step = pn__mpm_try, h.undo = pn__mpm_untry, h.keep_first = pn__mpm_keep_first;
     h.stop = pn__mpm_spent;
     r = pn__halve(&h, o.max_halvings);
@@ -11278,9 +11316,9 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
     pn_mpm_world *w = c->mpm;
     pn_fem_mesh *m = c->fem;
     pn__fem *s = (pn__fem *)m->impl;
-    pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt, res = 0;
+    pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt, res = 0, rprev = 0, left = 0;
     size_t i, nz = k->nz;
-    int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0, stall;
+    int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0, stall, redo = 0;
     pn_result r;
     pn__cg_ops op;
     op.ctx = c, op.apply = pn__cpl_apply, op.precond = pn__cpl_precond, op.dot = pn__cpl_dot, op.curv = NULL;
@@ -11296,7 +11334,8 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
                                 "particle %ld, element %ld)", (double)dt, pn_result_string(r),
                                 w->error_particle, m->error_element);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
-        fresh = it == 0 || o->mg_rebuild || stale; /* the grid's hierarchy lagged as its own step does */
+        fresh = it == 0 || o->mg_rebuild || stale || redo; /* the grid's hierarchy lagged as its own step does */
+        redo = 0;
         if (w->s.mg_on && (r = pn__mpm_mg_build(w, dt, fresh, o->mg_levels)) != PN_OK)
             return PN__FAIL(c, r, "coupled implicit step: out of memory for the grid's multigrid hierarchy");
         if (!w->s.mg_on) pn__mpm_diagonal(w, dt);
@@ -11316,6 +11355,11 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         for (i = 0; i < w->s.n_act; ++i) pn__mpm_filter(w, i, k->r + i * (size_t)w->dim);
         cg = pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, o->cg_rel_tol, 0, &capped);
         st->cg_iters += cg;
+        if (pn__mpm_lin_escape(w, capped)) { /* Jacobi gave up: this iteration again by multigrid */
+            redo = 1;
+            --it;
+            continue;
+        }
         if (fresh) cg_fresh = cg;
         else w->s.mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
         st->newton_iters++;
@@ -11338,6 +11382,11 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         }
         memcpy(k->z, k->zt, sizeof(pn_real) * nz);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
+        if (alpha == 1 && !capped && pn__newton_done(res, rprev, vscale, &left)) { /* as the grid's own */
+            res = left;
+            break;
+        }
+        rprev = alpha == 1 ? res : 0;
     }
     *res_out = res / (w->desc.dx_m / dt);
     *capped_out = capped;
@@ -11380,6 +11429,7 @@ static pn_result pn__cpl_passes(pn_coupled *c, const pn_mpm_implicit_desc *o, in
             memcpy(k->z, w->s.vsol, sizeof(pn_real) * k->nv);
         }
     }
+    pn__mpm_lin_record(w, st->cg_iters, st->newton_iters);
     return PN_OK;
 }
 
@@ -11542,7 +11592,7 @@ typedef struct pn__cpl_retry {
     pn_coupled_stats *st, first; /* the current try's stats; the first try's               */
     long steps0, fsteps0;
     size_t left0;
-    int stale0, rec0;
+    int stale0, rec0, lin0;
     int stopped;                 /* a step that worked failed a check halving cannot pass   */
     char why[sizeof ((pn_coupled *)0)->error];
 } pn__cpl_retry;
@@ -11585,7 +11635,7 @@ static void pn__cpl_untry(void *ctx, int n_sub) {
     pn__mpm_journal_undo(w);
     pn__fem_restore(m);
     w->time_s = t->t0, w->steps = t->steps0, w->left_total = t->left0, m->steps = t->fsteps0;
-    w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0;
+    w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0, w->s.lin_mg = t->lin0;
 }
 
 static void pn__cpl_keep_first(void *ctx) {
@@ -11655,7 +11705,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     memset(&t, 0, sizeof t);
     t.c = c, t.od = &od, t.dt = dt, t.st = &st;
     t.t0 = w->time_s, t.steps0 = w->steps, t.fsteps0 = m->steps, t.left0 = w->left_total;
-    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok;
+    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok, t.lin0 = w->s.lin_mg;
     pn__mpm_backup(w, 0);
     pn__mpm_journal_begin(w);
     pn__fem_backup(m);

@@ -220,7 +220,72 @@ PN_TEST(multigrid_iterations) {
 #endif
 }
 
+/* LINEAR_DEFAULT in 3D above PN__MPM_MG_MIN unknowns: Jacobi while its solves are cheap,
+   multigrid once they are not. An elastic block on a sticky floor (res 26, about 12,000
+   particles). Soft (E 1e5 Pa) at 1e-3 s: Jacobi, no hierarchy built. Stiff (E 1e9 Pa) at
+   1e-2 s, dt / dt_CFL in the hundreds: Jacobi's first solve needs more than
+   PN__MPM_JACOBI_MAX CG iterations per Newton iteration or stops at cg_max, and the next
+   step builds the hierarchy; both steps land where MULTIGRID's do (the same minimum, to the
+   Newton tolerance). A call that fails (newton_max 1, no fallback) leaves the choice as it
+   was: the next world state is not the failed try's. */
+PN_TEST(multigrid_default_3d) {
+    int k, g, s, builds[2] = {0, 0}, lin_after_fail = -1;
+    double per_soft = 0, worst = 0;
+    pn_real *x[2] = {NULL, NULL};
+    size_t n = 0, p;
+    pn_mpm_implicit_desc id;
+    pn_mpm_stats st;
+    pn_mpm_world *w = t_mg_scene(3, 32, 1e5, 1, PN_BOUNDARY_STICKY, &g);
+    PN_CHECK(w != NULL);
+    if (!w) return;
+    memset(&id, 0, sizeof id);
+    PN_CHECK(pn_mpm_step_implicit(w, 1e-3, &id, &st) == PN_OK);
+    PN_CHECK(w->s.n_act * 3 >= PN__MPM_MG_MIN); /* the size where the choice is made */
+    per_soft = st.newton_iters ? (double)st.cg_iters / st.newton_iters : 0;
+    PN_CHECK(st.mg_builds == 0 && w->s.lin_mg == 0);
+    PN_CHECK_LE(per_soft, PN__MPM_JACOBI_MAX);
+    PN_REPORT("E 1e5 Pa, dt 1e-3 s (dt / dt_CFL %.1f): Jacobi, %.1f CG per Newton iteration, %d hierarchies",
+              (double)st.dt_over_cfl, per_soft, st.mg_builds);
+    pn_mpm_destroy(w);
+    for (k = 0; k < 2; ++k) {
+        w = t_mg_scene(3, 32, 1e8, 1, PN_BOUNDARY_STICKY, &g);
+        PN_CHECK(w != NULL);
+        if (!w) break;
+        memset(&id, 0, sizeof id);
+        id.linear_solver = k ? PN_MPM_LINEAR_MULTIGRID : PN_MPM_LINEAR_DEFAULT;
+        id.newton_tol = 1e-7;
+        id.cg_rel_tol = 1e-5;
+        if (k == 0) { /* a failed call first */
+            id.newton_max = 1, id.max_halvings = -1;
+            PN_CHECK(pn_mpm_step_implicit(w, 1e-2, &id, NULL) == PN_ERROR_NOT_CONVERGED);
+            lin_after_fail = w->s.lin_mg;
+            id.newton_max = 0, id.max_halvings = 0;
+        }
+        for (s = 0; s < 2; ++s) {
+            PN_CHECK(pn_mpm_step_implicit(w, 1e-2, &id, &st) == PN_OK);
+            if (k == 0) builds[s] = st.mg_builds;
+            if (k == 0 && s == 0)
+                PN_REPORT("E 1e8 Pa, dt 1e-2 s (dt / dt_CFL %.0f), the default's first step: %d CG in %d Newton "
+                          "iterations, %d capped, %d hierarchies", (double)st.dt_over_cfl, st.cg_iters, st.newton_iters,
+                          st.cg_capped, st.mg_builds);
+        }
+        n = w->n * 3;
+        x[k] = (pn_real *)malloc(sizeof(pn_real) * n);
+        if (x[k]) memcpy(x[k], w->v, sizeof(pn_real) * n);
+        pn_mpm_destroy(w);
+    }
+    if (x[0] && x[1])
+        for (p = 0; p < n; ++p) worst = fmax(worst, fabs((double)(x[0][p] - x[1][p])) * 1e-2 * 32);
+    free(x[0]), free(x[1]);
+    PN_REPORT("the default's second step built %d hierarchies; its velocities against MULTIGRID's: %.1e dx per step; "
+              "the choice after a failed call: %d", builds[1], worst, lin_after_fail);
+    PN_CHECK(lin_after_fail == 0);
+    PN_CHECK(builds[1] > 0);
+    PN_CHECK_LE(worst, 1e-6);
+}
+
 static const pn_test_case pn_tests_mpm_multigrid[] = {
     {"multigrid_operators", multigrid_operators},
     {"multigrid_iterations", multigrid_iterations},
+    {"multigrid_default_3d", multigrid_default_3d},
 };

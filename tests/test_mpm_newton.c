@@ -279,6 +279,60 @@ PN_TEST(implicit_newton_tail) {
     pn_mpm_destroy(w);
 }
 
+/* Newton's stop without a confirming solve (pn__newton_done): after a full step that shrank
+   to at most a tenth of the one before, Newton stops once the steps still to come, summed at
+   that contraction, are below newton_tol dx / dt. An elastic 2D block (StVK-Hencky, E 1e5
+   Pa) thrown at a sticky floor at 10 speeds, one step of 1e-2 s each at the default
+   newton_tol (1e-5) beside the same step solved to 1e-8 (Newton and CG): some solves end
+   that way (their last traced step above the bound, which a solve that measured its last
+   step never leaves), and every step's positions are within newton_tol dx of the tight ones
+   (the stop's promise: x = x^n + dt v). */
+typedef struct t_mpm_stop {
+    int solves, early;
+    double last, bound;
+} t_mpm_stop;
+
+static void t_mpm_on_stop(void *user, int solve, int iteration, pn_real energy_j, pn_real residual) {
+    t_mpm_stop *t = (t_mpm_stop *)user;
+    (void)solve, (void)energy_j;
+    if (iteration == 0 && t->solves++ > 0) t->early += t->last > t->bound;
+    t->last = (double)residual;
+}
+
+PN_TEST(implicit_newton_stop) {
+    int g, s, k, ok = 1;
+    double lo[2] = {0.4, 3.0 / 32 + 0.01}, sz[2] = {0.2, 0.2}, worst = 0, dx = 1.0 / 32;
+    t_mpm_stop tr;
+    memset(&tr, 0, sizeof tr);
+    tr.bound = 1e-5;
+    for (s = 0; s < 10 && ok; ++s) {
+        double v[2] = {0.1 * s, -0.5 - 0.2 * s};
+        pn_mpm_world *w[2];
+        size_t p;
+        for (k = 0; k < 2; ++k) {
+            pn_mpm_implicit_desc id;
+            w[k] = t_mpm_world(2, 32, (pn_real)-9.81, PN_BOUNDARY_STICKY);
+            ok &= w[k] != NULL;
+            if (!w[k]) break;
+            g = t_mpm_group(w[k], PN_ELASTIC_STVK_HENCKY, PN_PLASTIC_NONE, 1e5);
+            t_mpm_block(w[k], g, lo, sz, v);
+            memset(&id, 0, sizeof id);
+            if (k == 0) id.trace = t_mpm_on_stop, id.trace_user = &tr;
+            else id.newton_tol = 1e-8, id.cg_rel_tol = 1e-8;
+            ok &= pn_mpm_step_implicit(w[k], 1e-2, &id, NULL) == PN_OK;
+        }
+        for (p = 0; ok && p < w[0]->n * 2; ++p) worst = fmax(worst, fabs((double)(w[0]->x[p] - w[1]->x[p])) / dx);
+        pn_mpm_destroy(w[0]);
+        if (k == 2) pn_mpm_destroy(w[1]);
+    }
+    tr.early += tr.last > tr.bound;
+    PN_REPORT("%d of %d solves stopped on the contraction; positions against newton_tol and cg_rel_tol 1e-8: at most %.2e dx "
+              "(the promise: 1e-5)", tr.early, tr.solves, worst);
+    PN_CHECK(ok);
+    PN_CHECK(tr.early > 0);
+    PN_CHECK_LE(worst, 1e-5);
+}
+
 /* PlasticityNet in float lanes near Newton's minimum: the lanes round each particle's
    energy to about 1e-7 of its network's value, so once Newton's predicted decrease is below
    about 1e-6 of the energy the line search sees rounding, and Newton stalled at one
@@ -520,6 +574,7 @@ PN_TEST(implicit_stage_clock) {
 }
 
 static const pn_test_case pn_tests_mpm_newton[] = {
+    {"implicit_newton_stop", implicit_newton_stop},
     {"implicit_fallback", implicit_fallback},
     {"implicit_failed_step_no_trace", implicit_failed_step_no_trace},
     {"newton_line_search_descends", newton_line_search_descends},
