@@ -6477,6 +6477,9 @@ static pn_result pn__mpm_implicit_once(pn_mpm_world *w, pn_real dt, const pn_mpm
                 memcpy(w->s.vsol, w->s.vtry, sizeof(pn_real) * nd);
                 if (alpha == 1 && !capped && pn__newton_done(dmax, dprev, vscale, &left)) { /* no solve to confirm it */
                     last_res = left / (w->desc.dx_m / dt);
+                    /* the gradient at the solution, without the Hessian: the contact's
+                       active set and the friction it records for the next step read it */
+                    if (has_sep && (r = pn__mpm_objective(w, w->s.vsol, dt, 1, &E1)) != PN_OK) return r;
                     break;
                 }
                 dprev = alpha == 1 ? dmax : 0;
@@ -11384,6 +11387,8 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
         if (alpha == 1 && !capped && pn__newton_done(res, rprev, vscale, &left)) { /* as the grid's own */
             res = left;
+            pn__cpl_positions(c, 1, k->z, NULL); /* the gradient at the solution (contact, friction) */
+            if ((r = pn__cpl_objective(c, k->z, 1, &E1)) != PN_OK) return r;
             break;
         }
         rprev = alpha == 1 ? res : 0;
