@@ -1,4 +1,4 @@
-/* plastinet.h - v0.16 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.17 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -183,7 +183,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 16
+#define PN_VERSION_MINOR 17
 
 #ifdef __cplusplus
 extern "C" {
@@ -941,7 +941,8 @@ PN__KIT int pn__unresolved(pn_real gd, pn_real E0, pn_real eps) { return -gd <= 
 
 /* Newton's stop without one more solve: after a full step of size step (a norm of the
    update), the last full step's size prev (0: none) gives the contraction theta =
-   step / prev; while Newton contracts (theta <= 1/2), what is left of the error is at most
+   step / prev; once Newton contracts fast (theta <= 0.1: quadratic convergence near the
+   minimum; a kinked energy's linear phases stay above), what is left of the error is at most
    theta / (1 - theta) step, the steps still to come summed at that rate (Deuflhard's error
    estimate; quadratic convergence only shrinks them faster). Converged when that is at most
    tol: *left gets it. The solve that would have measured the next step is saved. */
