@@ -107,6 +107,24 @@ static pn_mpm_world *t_mg_scene(int dim, int res, double E, int elastic, pn_boun
     return w;
 }
 
+/* the velocities of a world, kept (NULL when out of memory), and the largest gap between
+   two kept sets in cells per step (dt / dx scale), freeing both */
+static pn_real *t_mg_keep_v(const pn_mpm_world *w, size_t *n) {
+    pn_real *x;
+    *n = w->n * (size_t)w->dim;
+    x = (pn_real *)malloc(sizeof(pn_real) * *n);
+    if (x) memcpy(x, w->v, sizeof(pn_real) * *n);
+    return x;
+}
+static double t_mg_gap(pn_real *x[2], size_t n, double scale) {
+    double worst = 0;
+    size_t p;
+    if (x[0] && x[1])
+        for (p = 0; p < n; ++p) worst = fmax(worst, fabs((double)(x[0][p] - x[1][p])) * scale);
+    free(x[0]), free(x[1]);
+    return worst;
+}
+
 PN_TEST(multigrid_operators) {
     int dim;
     for (dim = 2; dim <= 3; ++dim) {
@@ -151,7 +169,7 @@ PN_TEST(multigrid_iterations) {
     int e, k, dim = 2;
     for (e = 0; e < 3; ++e) {
         pn_real *x[2] = {NULL, NULL};
-        size_t n = 0, p;
+        size_t n = 0;
         double ratio = 0;
         for (k = 0; k < 2; ++k) {
             int g;
@@ -168,14 +186,10 @@ PN_TEST(multigrid_iterations) {
             PN_CHECK(pn_mpm_step_implicit(w, 1e-2, &id, &st) == PN_OK);
             per[k][e] = st.newton_iters ? (double)st.cg_iters / st.newton_iters : 0;
             ratio = (double)st.dt_over_cfl;
-            n = w->n * (size_t)dim;
-            x[k] = (pn_real *)malloc(sizeof(pn_real) * n);
-            if (x[k]) memcpy(x[k], w->v, sizeof(pn_real) * n);
+            x[k] = t_mg_keep_v(w, &n);
             pn_mpm_destroy(w);
         }
-        if (x[0] && x[1])
-            for (p = 0; p < n; ++p) worst = fmax(worst, fabs((double)(x[0][p] - x[1][p])) * 1e-2 * 64);
-        free(x[0]), free(x[1]);
+        worst = fmax(worst, t_mg_gap(x, n, 1e-2 * 64));
         PN_REPORT("E %.0e Pa, dt / dt_CFL %.0f: CG iterations per Newton step, Jacobi %.0f, multigrid %.1f", Es[e], ratio,
                   per[0][e], per[1][e]);
     }
@@ -232,7 +246,7 @@ PN_TEST(multigrid_default_3d) {
     int k, g, s, builds[2] = {0, 0}, lin_after_fail = -1;
     double per_soft = 0, worst = 0;
     pn_real *x[2] = {NULL, NULL};
-    size_t n = 0, p;
+    size_t n = 0;
     pn_mpm_implicit_desc id;
     pn_mpm_stats st;
     pn_mpm_world *w = t_mg_scene(3, 32, 1e5, 1, PN_BOUNDARY_STICKY, &g);
@@ -269,14 +283,10 @@ PN_TEST(multigrid_default_3d) {
                           "iterations, %d capped, %d hierarchies", (double)st.dt_over_cfl, st.cg_iters, st.newton_iters,
                           st.cg_capped, st.mg_builds);
         }
-        n = w->n * 3;
-        x[k] = (pn_real *)malloc(sizeof(pn_real) * n);
-        if (x[k]) memcpy(x[k], w->v, sizeof(pn_real) * n);
+        x[k] = t_mg_keep_v(w, &n);
         pn_mpm_destroy(w);
     }
-    if (x[0] && x[1])
-        for (p = 0; p < n; ++p) worst = fmax(worst, fabs((double)(x[0][p] - x[1][p])) * 1e-2 * 32);
-    free(x[0]), free(x[1]);
+    worst = t_mg_gap(x, n, 1e-2 * 32);
     PN_REPORT("the default's second step built %d hierarchies; its velocities against MULTIGRID's: %.1e dx per step; "
               "the choice after a failed call: %d", builds[1], worst, lin_after_fail);
     PN_CHECK(lin_after_fail == 0);
