@@ -7,6 +7,8 @@
 #                                                and UBSan (CI), the sweeps' representative subsets
 #   tests/run.sh NAME                            the test binaries' tests whose name contains NAME
 #   TEST_JOBS=N                                  jobs at a time (default 2: the two cores)
+#   build/run/times                              each job's end, start and name (CI prints the
+#                                                slowest jobs before the last line)
 #
 # What runs where (CI runs test-all and test-sanitize, so every check runs there at least once):
 #   check                                          make test    test-all     test-sanitize
@@ -342,13 +344,13 @@ fi
 # ---- the driver ----------------------------------------------------------------------------------
 RUN_FILTER=$1
 export RUN_FILTER
-rm -f "$R"/*.log "$R"/t/*.log
+rm -f "$R"/*.log "$R"/t/*.log "$R/times"
 rm -rf "$R/ex"
 # run_queue: run the job names read from stdin, TEST_JOBS at a time, each into its log (xargs
 # starts each as a slot frees, reading the names as they come)
 run_queue() {
     # shellcheck disable=SC2016
-    xargs -P "${TEST_JOBS:-2}" -n 1 sh -c 'sh tests/run.sh --job "$1" >"build/run/$(echo "$1" | tr ":" "_").log" 2>&1' sh
+    xargs -P "${TEST_JOBS:-2}" -n 1 sh -c 't0=$(date +%s.%N); sh tests/run.sh --job "$1" >"build/run/$(echo "$1" | tr ":" "_").log" 2>&1; echo "$(date +%s.%N) $t0 $1" >>build/run/times' sh
 }
 # phase 1, the longest first (CPU seconds on one core, measured: examples 15-30 each with make,
 # 0.5-3 at -O0, a compile
@@ -379,9 +381,11 @@ phase2() {
     [ -z "$SANITIZE" ] && [ -z "$1" ] && echo front_door >>"$R/phase2"
     if [ -x "build/test_main$suffix" ]; then
         "./build/test_main$suffix" --list ${1:+"$1"} >"$R/tests"
-        # the slowest first, then the rest in order (CPU seconds measured, the full sweeps)
-        for n in fem_explicit_implicit transfer_threads_identical implicit_failed_step_no_trace scene_stable_dt \
-            stress_hydrostatic couple_explicit_implicit couple_threads_identical; do
+        # the slowest first, then the rest in order (wall seconds measured in make test-all and
+        # make test-sanitize: build/run/times)
+        for n in multigrid_default_3d fem_explicit_implicit rom_cylinder_vs_mpm stress_coarse stress_anderson \
+            fem_self_contact_3d transfer_threads_identical couple_explicit_implicit implicit_pnet_sand_column \
+            implicit_failed_step_no_trace scene_stable_dt stress_hydrostatic couple_threads_identical; do
             grep -qx "$n" "$R/tests" && echo "t:$n" >>"$R/phase2"
         done
         sed 's/^/t:/' "$R/tests" | grep -vxF -f "$R/phase2" >>"$R/phase2"
@@ -401,5 +405,11 @@ done
 print_log build_main
 [ -f "$R/tests" ] && for n in $(cat "$R/tests"); do print_log "t:$n"; done
 grep -qx front_door "$R/phase2" && print_log front_door
+# each job's wall seconds: build/run/times ("end start job"); CI prints the slowest, so that the
+# time budget (make test 5 min, CI 30) can be kept by looking
+if [ "${CI:-}" = true ] && [ -f "$R/times" ]; then
+    echo "slowest jobs (wall s):"
+    awk '{ printf "  %7.1f %s\n", $1 - $2, $3 }' "$R/times" | sort -rn | head -12
+fi
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
