@@ -156,8 +156,10 @@ job_lanes_native() { build test_lanes_native tests/test_lanes.c "$models -march=
 job_lanes_portable() {
     build test_lanes_portable tests/test_lanes.c "$models -DPN_NO_VECTOR_EXTENSIONS" && run_bin test_lanes_portable
 }
-job_t() { # NAME: one test of test_main, in its own process
-    ./build/test_main$suffix "=$1" >"$R/t/$1.out" 2>&1
+job_t() { # NAME: one test of test_main, in its own process, on one thread: jobs run TEST_JOBS at a
+    # time, and two OpenMP teams spinning on two cores took multigrid_default_3d from 5 s to 140
+    # (the tests of thread counts set their own)
+    OMP_NUM_THREADS=1 OMP_WAIT_POLICY=passive ./build/test_main$suffix "=$1" >"$R/t/$1.out" 2>&1
     tally "$1" "$R/t/$1.out" $?
     rm -f "$R/t/$1.out"
 }
