@@ -1,6 +1,6 @@
 #!/bin/sh
 # The one test runner. Last line: N passed, N failed.
-#   make test           tests/run.sh             the loop of minutes: about 4 min on 2 idle cores
+#   make test           tests/run.sh             the loop of minutes: about 3.5 min on 2 idle cores
 #   make test-all       FULL=1 tests/run.sh      what CI runs: make test, the whole compile matrix
 #                                                and every case of the test binaries' sweeps
 #   make test-sanitize  SANITIZE=1 tests/run.sh  the test binaries alone, under AddressSanitizer
