@@ -1136,8 +1136,8 @@ typedef struct pn_coupled_implicit_desc {
                                     linear_solver (the grid block's preconditioner),
                                     max_halvings, pnet_double, trace as for
                                     pn_mpm_step_implicit, with other defaults where the
-                                    coupled system needs them: cg_max [1000], cg_rel_tol
-                                    [1e-4] (pn_mpm_step_implicit: 500, 1e-3); the energy
+                                    coupled system needs them: cg_max [1000] (pn_mpm_step_
+                                    implicit: 500), cg_rel_tol [1e-3]; the energy
                                     formulation only                                        */
     pn_fem_linear_solver fem_linear_solver; /* the mesh block's preconditioner: its exact
                                     factor (Cholesky) or block IC (PCG) [DEFAULT]            */
@@ -11757,7 +11757,7 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     if (!(od.theta >= (pn_real)0.5 && od.theta <= 1))
         return PN__FAIL(c, PN_ERROR_INVALID_ARGUMENT, "pn_coupled_implicit_desc: theta %g is not in [0.5, 1] (0: 1, "
                             "backward Euler)", (double)od.theta);
-    pn__mpm_implicit_defaults(o, 1000, (pn_real)1e-4); /* the coupled system's CG defaults */
+    pn__mpm_implicit_defaults(o, 1000, (pn_real)1e-3); /* the coupled system's CG defaults */
     if ((r = pn__mpm_check_state(w)) != PN_OK) return PN__FAIL(c, r, "pn_coupled_step_implicit: %s", w->error);
     if ((r = pn__cpl_check_mesh(c, "pn_coupled_step_implicit")) != PN_OK) return r;
     if ((r = pn__mpm_alloc_implicit(w)) != PN_OK || (r = pn__mpm_reuse_on(w, o)) != PN_OK)
