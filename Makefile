@@ -121,7 +121,7 @@ bench-fem: build/bench_fem build/bench_fem_linear
 
 # MPM-FEM coupling: the block dropped on sand, the explicit reference and the fair explicit
 # baseline against implicit at 1e-3 and 1e-2 s (bench/bench_coupling.c; 2D then 3D, about 1.5
-# hours; BENCH_COUPLING_FLAGS=--quick for a smoke test; the references are kept in build/ref_cache).
+# hours; --dts and --thetas choose the implicit runs; BENCH_COUPLING_FLAGS=--quick for a smoke test; the references are kept in build/ref_cache).
 bench-coupling: build/bench_coupling
 	build/bench_coupling --dim 2 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)
 	build/bench_coupling --dim 3 --res 24 --T 0.05 --out build --ref-cache build/ref_cache $(BENCH_COUPLING_FLAGS)

@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.18 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.19 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -1132,7 +1132,10 @@ typedef struct pn_coupled_implicit_desc {
     pn_mpm_implicit_desc mpm;    /* fixed_point_iters, newton_max, newton_tol (the step stops
                                     when max |dv| and max |dx| / dt over particles' nodes and
                                     mesh nodes are below newton_tol dx / dt), cg_max,
-                                    cg_rel_tol (CG on the coupled system), contact_rounds,
+                                    cg_rel_tol (CG on the coupled system), cg_forcing_max
+                                    (pays for the lagged energy in 3D, not for PlasticityNet,
+                                    whose extra Newton iterations cost more than the CG
+                                    saved: docs/notebook.md, "Session eight"), contact_rounds,
                                     linear_solver (the grid block's preconditioner),
                                     max_halvings, pnet_double, trace as for
                                     pn_mpm_step_implicit, with other defaults where the
@@ -10550,6 +10553,7 @@ fail:
 typedef struct pn__cpl {
     size_t nv, nu, nz, zcap;     /* unknowns: grid velocities (n_act dim), mesh (nodes dim)  */
     pn_real *z, *g, *dir, *zt, *r, *zz, *pp, *qq; /* iterate, gradient, direction, try, CG  */
+    pn_real *gf;                 /* Newton: the filtered gradient's negative, -S g             */
     pn_real *xf, *xd, *pa, *pb;  /* mesh positions, its direction in positions, row scratch */
     pn_real *y, *yd;             /* per particle: y_p, and its motion along the direction   */
     size_t *cp, *ck, nc, ccap;   /* candidate pairs: particle, boundary target               */
@@ -10691,7 +10695,7 @@ static pn_result pn__cpl_alloc(pn_coupled *c) {
     int d = c->mpm->dim;
     size_t nd = c->fem->n_nodes * (size_t)d, np = c->mpm->cap * (size_t)d, zc = c->mpm->s.nodes * (size_t)d + nd;
     if (k->z) return PN_OK;
-    k->z = (pn_real *)pn_alloc(al, sizeof(pn_real) * (11 * zc + 4 * nd + 4 * np + 8));
+    k->z = (pn_real *)pn_alloc(al, sizeof(pn_real) * (12 * zc + 4 * nd + 4 * np + 8));
     k->fidx = (size_t *)pn_alloc(al, sizeof(size_t) * (c->mpm->cap + 1));
     if (!k->z || !k->fidx) {
         pn_free(al, k->z), pn_free(al, k->fidx);
@@ -10702,7 +10706,7 @@ static pn_result pn__cpl_alloc(pn_coupled *c) {
     k->g = k->z + zc, k->dir = k->g + zc, k->zt = k->dir + zc, k->r = k->zt + zc, k->zz = k->r + zc, k->pp = k->zz + zc;
     k->qq = k->pp + zc, k->xf = k->qq + zc, k->xd = k->xf + nd, k->pa = k->xd + nd, k->pb = k->pa + nd;
     k->y = k->pb + nd, k->yd = k->y + np, k->fx = k->yd + np, k->vn = k->fx + 2 * np, k->g0 = k->vn + zc;
-    k->m0 = k->g0 + zc;
+    k->m0 = k->g0 + zc, k->gf = k->m0 + zc;
     return pn__cpl_reserve(c);
 }
 
@@ -11351,6 +11355,7 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
     pn_real dt = k->dt, vscale = o->newton_tol * w->desc.dx_m / dt, res = 0, rprev = 0, left = 0;
     size_t i, nz = k->nz;
     pn_real full_h = PN__MPM_FULL_H * w->desc.dx_m / dt, full_below = full_h; /* steps (max |dz|): Hessians whole */
+    pn_real eta = 0, gprev = 0, pred = 0, gnorm; /* forcing (pn__mpm_forcing): last eta, |S g|, predicted |S g| */
     int it, capped = 0, cg, cg_fresh = 0, fresh, stale = w->s.mg_stale && w->steps % 16 != 0, stall, redo = 0, curv;
     int full = 0, again = 0;
     pn_result r;
@@ -11403,8 +11408,12 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         }
         for (i = 0; i < nz; ++i) k->r[i] = -k->g[i];
         for (i = 0; i < w->s.n_act; ++i) pn__mpm_filter(w, i, k->r + i * (size_t)w->dim);
+        memcpy(k->gf, k->r, sizeof(pn_real) * nz); /* -S g, for the model's prediction */
+        gnorm = PN__SQRT(pn__cpl_dot(c, nz, k->r, k->r));
+        eta = pn__mpm_forcing(o, it, eta, gprev, pred, gnorm);
+        gprev = gnorm;
         curv = 0;
-        cg = pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, o->cg_rel_tol, 0, &capped);
+        cg = pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, eta, 0, &capped);
         st->cg_iters += cg;
         for (gd = 0, i = 0; i < nz; ++i) gd += k->g[i] * k->dir[i];
         if (full && (curv || !(gd < 0))) {
@@ -11420,6 +11429,11 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
         else w->s.mg_stale = stale = 2 * cg > 3 * cg_fresh + 4;
         st->newton_iters++;
         for (res = 0, i = 0; i < nz; ++i) res = PN__MAX(res, PN__FABS(k->dir[i]));
+        if (res <= vscale && eta > o->cg_rel_tol && !curv) { /* a loose solve may stop Newton early */
+            memcpy(k->r, k->gf, sizeof(pn_real) * nz); /* the right side again: the solve resumes from dir */
+            st->cg_iters += pn__pcg(&op, nz, k->dir, k->r, k->zz, k->pp, k->qq, o->cg_max, o->cg_rel_tol, 1, &capped);
+            for (res = 0, i = 0; i < nz; ++i) res = PN__MAX(res, PN__FABS(k->dir[i]));
+        }
         if (o->trace) o->trace(o->trace_user, st->solves, it, E0, res / (w->desc.dx_m / dt));
         if (!pn__finite(res))
             return PN__FAIL(c, PN_ERROR_OVERFLOW, "coupled implicit step of %g s: the Newton direction is not finite",
@@ -11440,6 +11454,11 @@ static pn_result pn__cpl_newton(pn_coupled *c, const pn_mpm_implicit_desc *o, pn
             st->line_search_failures++;
             break;
         }
+        for (pred = 0, i = 0; i < nz; ++i) { /* |S g| the linear model predicts after the step */
+            pn_real e = -(1 - alpha) * k->gf[i] - alpha * k->r[i];
+            pred += e * e;
+        }
+        pred = PN__SQRT(pred);
         memcpy(k->z, k->zt, sizeof(pn_real) * nz);
         st->min_distance_m = PN__MIN(st->min_distance_m, k->dmin);
         if (res > full_h) full_below = full_h; /* moved on */

@@ -2,7 +2,9 @@
    examples/common/pn_drop.h: a tilted block (E 1e9 Pa) dropped onto a sand bed.
    Build: cc -std=c99 -O2 bench/bench_coupling.c -lm -o bench_coupling   (or: make bench-coupling)
    Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--tilt DEG] [--friction MU] [--out DIR] [--ref-cache DIR]
-                         [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--theta T] [--window S] [--quick]
+                         [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--thetas 1,0.6] [--window S]
+                         [--contact-stiffness PA] [--contact-distance M] [--passes N]
+                         [--forcing ETA] [--quick]
    In one run:
    1. the explicit reference: pn_coupled_step_explicit at half the coupled step bound
       (pn_coupled_stable_dt) of each step, to T (0.25 s), recording at every frame (every
@@ -10,13 +12,17 @@
       the same at the whole bound, scored against it: how far doubling its step moves it
       bounds how converged the reference is;
    2. the fair explicit baseline: the largest multiple of the bound (4, 2, 1) that runs the
-      first --window seconds (0.02 s, through the impact) without failing, timed over that
-      window and scaled to a simulated second;
-   3. implicit at dt 1e-3 and 1e-2 s with the sand's learned energy (pnet) and the analytic
-      alternatives (dp: frozen-yield Drucker-Prager, lagged), each to T: backward Euler, and
-      at 1e-3 s also the theta method (--theta, 0.5: the trapezoidal rule; 1: no such rows).
-      At 1e-2 s the trapezoidal rule lets the block bounce off the sand (docs/results.md).
-   --friction MU: the block-sand friction coefficient (the scene's 0.5).
+      whole run (or its first --window seconds) without failing, timed over it and scaled to a
+      simulated second, and scored against the reference as the implicit runs are;
+   3. implicit at each step of --dts (up to 8; default 1e-3 and 1e-2 s) with the sand's learned
+      energy (pnet) and the analytic alternatives (dp: frozen-yield Drucker-Prager, lagged), each
+      to T, with each theta of --thetas (up to 4; default 1, backward Euler; 0.5 is the
+      trapezoidal rule, which at 1e-2 s lets the block bounce off the sand: docs/results.md).
+      --theta is the same flag.
+   --friction MU: the block-sand friction coefficient (the scene's 0.5); --contact-stiffness,
+   --contact-distance: pn_coupled_desc's (the library's defaults: 0.1 E of the sand, dx / 4);
+   --passes N: the implicit runs' fixed-point passes on F0 (pn_mpm_implicit_desc, default 1);
+   --forcing ETA: their Eisenstat-Walker forcing up to ETA (cg_forcing_max; default off).
    Scores against the reference, at the frames: the mean and smallest min/max mass IoU of the
    sand (docs/validation.md), the mean error of the block's nodes over its bounding-box
    diagonal, the smallest particle-block distance over the run, wall seconds per simulated
@@ -43,16 +49,17 @@ typedef struct run {
 } run;
 
 typedef struct cfg {
-    int dim, res, quick, no_check;
-    unsigned energies, dts;
+    int dim, res, quick, no_check, dts_given;
+    unsigned energies;
     double T, window, tilt;      /* tilt: the block's (degrees; < -90: the scene's default) */
-    double theta;                /* the extra implicit runs' theta method, at dt 1e-3 s only
-                                    (1: none)                                               */
+    double dt[8], theta[4];      /* the implicit runs: every step with every theta          */
+    int ndt, ntheta;
     double friction;             /* block-sand Coulomb coefficient (< 0: the scene's 0.5)     */
+    double stiffness, dhat;      /* the interface's (0: the library's defaults)               */
+    int passes;                  /* the implicit runs' fixed-point passes (0: the default, 1)  */
+    double forcing;              /* their cg_forcing_max (0: off, the default)                */
     const char *out, *ref_cache;
 } cfg;
-
-static const double implicit_dts[2] = {1e-3, 1e-2};
 
 /* the reference's frames: mass fields and node positions */
 typedef struct frames {
@@ -67,6 +74,7 @@ static void scene(const cfg *c, int energy, pn_drop_desc *d) {
     if (c->res) d->res = c->res;
     if (c->tilt >= -90) d->tilt_deg = c->tilt;
     if (c->friction >= 0) d->friction = c->friction;
+    d->contact_stiffness = c->stiffness, d->contact_distance_m = c->dhat;
 }
 
 /* one run to time `until` (the frames at every FRAME_DT recorded into rec, or scored against
@@ -111,7 +119,8 @@ static void run_one(const cfg *c, run *r, frames *rec, const frames *ref, double
             if (r->implicit) {
                 pn_coupled_implicit_desc id;
                 memset(&id, 0, sizeof id);
-                id.theta = (pn_real)r->theta;
+                id.theta = (pn_real)r->theta, id.mpm.fixed_point_iters = c->passes;
+                id.mpm.cg_forcing_max = (pn_real)c->forcing;
                 e = pn_coupled_step_implicit(s.c, (pn_real)h, &id, &st);
             } else e = pn_coupled_step_explicit(s.c, (pn_real)h, &st);
             r->wall += pn_ex_seconds() - t0;
@@ -159,8 +168,10 @@ static void run_one(const cfg *c, run *r, frames *rec, const frames *ref, double
 #define CACHE_TAG (0x504e4300ul + (unsigned long)sizeof(run)) /* "PNC" and the record's size */
 
 static int cache_path(const cfg *c, char *path, size_t cap) {
-    char mu[32] = "";
+    char mu[96] = "";
     if (c->friction >= 0) snprintf(mu, sizeof mu, "_mu%g", c->friction);
+    if (c->stiffness > 0) snprintf(mu + strlen(mu), sizeof mu - strlen(mu), "_k%g", c->stiffness);
+    if (c->dhat > 0) snprintf(mu + strlen(mu), sizeof mu - strlen(mu), "_dhat%g", c->dhat);
     return snprintf(path, cap, "%s/coupling_ref_%dd_res%d_T%g_tilt%g%s.bin", c->ref_cache, c->dim,
                     c->res ? c->res : (c->dim == 2 ? 128 : 32), c->T, c->tilt >= -90 ? c->tilt : 20, mu) < (int)cap;
 }
@@ -200,20 +211,32 @@ static void cache_write(const cfg *c, const frames *fr, const run *r) {
     fclose(f);
 }
 
-static unsigned parse_list(const char *v, const char *const *names, int n, const double *values) {
+static unsigned parse_list(const char *v, const char *const *names, int n) {
     unsigned bits = 0;
     char buf[256], *tok;
     int i;
     snprintf(buf, sizeof buf, "%s", v);
     for (tok = strtok(buf, ","); tok; tok = strtok(NULL, ","))
         for (i = 0; i < n; ++i)
-            if ((names && !strcmp(tok, names[i])) || (values && fabs(atof(tok) - values[i]) < 1e-12)) bits |= 1u << i;
+            if (!strcmp(tok, names[i])) bits |= 1u << i;
     return bits;
+}
+
+/* a comma list of up to max numbers into x; the count, or -1 if one is not a positive number */
+static int parse_numbers(const char *v, double *x, int max) {
+    char buf[256], *tok, *end;
+    int n = 0;
+    snprintf(buf, sizeof buf, "%s", v);
+    for (tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
+        if (n == max || !((x[n] = strtod(tok, &end)) > 0) || *end) return -1;
+        n++;
+    }
+    return n;
 }
 
 int main(int argc, char **argv) {
     cfg c;
-    run runs[16], ref;
+    run runs[3 + 8 * 4 * PN_DROP_ENERGIES], ref; /* reference, check, fair; every implicit run */
     frames fr;
     int nr = 0, k, i, j;
     double fair = 0;
@@ -221,7 +244,8 @@ int main(int argc, char **argv) {
     FILE *csv, *md;
     memset(&c, 0, sizeof c);
     memset(&fr, 0, sizeof fr);
-    c.dim = 2, c.T = 0.25, c.window = 0.02, c.out = "build", c.energies = 7, c.dts = 3, c.tilt = -1000, c.theta = 0.5, c.friction = -1;
+    c.dim = 2, c.T = 0.25, c.window = 0, c.out = "build", c.energies = 7, c.tilt = -1000, c.friction = -1;
+    c.dt[0] = 1e-3, c.dt[1] = 1e-2, c.ndt = 2, c.theta[0] = 1, c.ntheta = 1;
     for (k = 1; k < argc; ++k) {
         const char *a = argv[k], *v = k + 1 < argc ? argv[k + 1] : NULL;
         if (!strcmp(a, "--quick")) c.quick = 1;
@@ -234,21 +258,31 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--res")) c.res = atoi(v), ++k;
         else if (!strcmp(a, "--window")) c.window = atof(v), ++k;
         else if (!strcmp(a, "--tilt")) c.tilt = atof(v), ++k;
-        else if (!strcmp(a, "--theta")) c.theta = atof(v), ++k;
+        else if (!strcmp(a, "--theta") || !strcmp(a, "--thetas")) c.ntheta = parse_numbers(v, c.theta, 4), ++k;
         else if (!strcmp(a, "--friction")) c.friction = atof(v), ++k;
+        else if (!strcmp(a, "--contact-stiffness")) c.stiffness = atof(v), ++k;
+        else if (!strcmp(a, "--contact-distance")) c.dhat = atof(v), ++k;
+        else if (!strcmp(a, "--passes")) c.passes = atoi(v), ++k;
+        else if (!strcmp(a, "--forcing")) c.forcing = atof(v), ++k;
         else if (!strcmp(a, "--out")) c.out = v, ++k;
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
-        else if (!strcmp(a, "--energies")) c.energies = parse_list(v, pn_drop_energy_names, PN_DROP_ENERGIES, NULL), ++k;
-        else if (!strcmp(a, "--dts")) c.dts = parse_list(v, NULL, 2, implicit_dts), ++k;
+        else if (!strcmp(a, "--energies")) c.energies = parse_list(v, pn_drop_energy_names, PN_DROP_ENERGIES), ++k;
+        else if (!strcmp(a, "--dts")) c.ndt = parse_numbers(v, c.dt, 8), c.dts_given = 1, ++k;
         else {
             fprintf(stderr, "bench_coupling: unknown flag '%s'\n", a);
             return 2;
         }
     }
     if (c.quick) /* a smoke test: every role and energy once, one frame, coarse, the larger step only */
-        c.T = FRAME_DT, c.window = 0.01, c.res = c.dim == 2 ? 64 : 16, c.dts = c.dts == 3 ? 2 : c.dts;
-    if ((c.dim != 2 && c.dim != 3) || !(c.T >= FRAME_DT) || c.T > FRAME_DT * MAX_FRAMES || !(c.window > 0)) {
-        fprintf(stderr, "bench_coupling: --dim 2|3, FRAME_DT <= --T <= %g, --window > 0\n", FRAME_DT * MAX_FRAMES);
+        c.T = FRAME_DT, c.window = 0.01, c.res = c.dim == 2 ? 64 : 16, c.dt[0] = c.dts_given ? c.dt[0] : 1e-2,
+        c.ndt = c.dts_given ? c.ndt : 1;
+    for (k = 0; k < c.ntheta; ++k)
+        if (!(c.theta[k] >= 0.5 && c.theta[k] <= 1)) c.ntheta = -1;
+    if (!(c.window > 0) || c.window > c.T) c.window = c.T;
+    if ((c.dim != 2 && c.dim != 3) || !(c.T >= FRAME_DT) || c.T > FRAME_DT * MAX_FRAMES || !(c.window > 0) || c.ndt < 1 ||
+        c.ntheta < 1) {
+        fprintf(stderr, "bench_coupling: --dim 2|3, FRAME_DT <= --T <= %g, --dts: up to 8 steps > 0, "
+                        "--thetas: up to 4 in [0.5, 1]\n", FRAME_DT * MAX_FRAMES);
         return 2;
     }
     /* 1. the reference, and its check at twice its step */
@@ -270,13 +304,13 @@ int main(int argc, char **argv) {
         r->role = "ref_check", r->mult = 1;
         run_one(&c, r, NULL, &fr, c.T);
     }
-    /* 2. the fair explicit baseline over the window */
+    /* 2. the fair explicit baseline over the window (the whole run unless --window) */
     for (k = 0; k < 3; ++k) {
         static const double mults[3] = {4, 2, 1};
         run *r = &runs[nr];
         memset(r, 0, sizeof *r);
         r->role = "fair_explicit", r->mult = mults[k];
-        run_one(&c, r, NULL, NULL, c.window);
+        run_one(&c, r, NULL, c.window >= c.T ? &fr : NULL, c.window);
         if (r->ok) {
             fair = r->wall / r->sim;
             nr++;
@@ -284,17 +318,17 @@ int main(int argc, char **argv) {
         }
         fprintf(stderr, "  %g x the bound fails: %s\n", mults[k], r->why);
     }
-    /* 3. implicit: backward Euler at both steps, the theta method at 1e-3 s */
-    for (i = 0; i < 3; ++i)
-        for (j = 0; j < PN_DROP_ENERGIES; ++j) {
-            run *r;
-            int di = i < 2 ? i : 0;
-            if (!(c.dts >> di & 1) || !(c.energies >> j & 1) || (i == 2 && !(c.theta < 1))) continue;
-            r = &runs[nr++];
-            memset(r, 0, sizeof *r);
-            r->role = "implicit", r->implicit = 1, r->energy = j, r->dt = implicit_dts[di], r->theta = i < 2 ? 1 : c.theta;
-            run_one(&c, r, NULL, &fr, c.T);
-        }
+    /* 3. implicit: every theta at every step, for each energy */
+    for (k = 0; k < c.ntheta; ++k)
+        for (i = 0; i < c.ndt; ++i)
+            for (j = 0; j < PN_DROP_ENERGIES; ++j) {
+                run *r;
+                if (!(c.energies >> j & 1)) continue;
+                r = &runs[nr++];
+                memset(r, 0, sizeof *r);
+                r->role = "implicit", r->implicit = 1, r->energy = j, r->dt = c.dt[i], r->theta = c.theta[k];
+                run_one(&c, r, NULL, &fr, c.T);
+            }
     /* tables */
     if (!pn_ex_mkdirs(c.out)) return 1;
     snprintf(path, sizeof path, "%s/bench_coupling_%dd.csv", c.out, c.dim);
@@ -308,14 +342,19 @@ int main(int argc, char **argv) {
         char why[256];
         scene(&c, PN_DROP_LAGGED, &dd);
         if (!pn_drop_create(&dd, &s, why, sizeof why)) return 1;
-        char flags[96] = "";
+        char flags[192] = "";
         if (c.res) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --res %d", c.res);
         if (c.T != 0.25) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --T %g", c.T);
         if (c.tilt >= -90) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --tilt %g", c.tilt);
+        if (c.friction >= 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --friction %g", c.friction);
+        if (c.stiffness > 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --contact-stiffness %g", c.stiffness);
+        if (c.dhat > 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --contact-distance %g", c.dhat);
+        if (c.passes > 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --passes %d", c.passes);
+        if (c.forcing > 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --forcing %g", c.forcing);
         fprintf(md, "### Block on sand, %dD (`build/bench_coupling --dim %d%s`)\n\n", c.dim, c.dim, c.quick ? " --quick" : flags);
         fprintf(md, "%lu particles (res %d), the block %lu nodes / %lu elements, E %.3g Pa; %.3g s simulated, frames every "
                     "%.3g s; dhat %.3g m. Scores against the explicit reference at half the coupled step bound. Fair baseline: "
-                    "explicit at %g x the bound over the first %.3g s.\n\n",
+                    "explicit at %g x the bound over %.3g s.\n\n",
                 (unsigned long)s.w->n, dd.res, (unsigned long)s.m->n_nodes, (unsigned long)s.m->n_elems, dd.E_block, c.T,
                 FRAME_DT, (double)s.c->dhat, nr > 1 ? runs[c.no_check ? 1 : 2].mult : 0, c.window);
         pn_drop_free(&s);
@@ -341,7 +380,7 @@ int main(int argc, char **argv) {
         }
         {
             char iou[64], err[64];
-            int scored = k > 0 && strcmp(r->role, "fair_explicit");
+            int scored = k > 0 && (strcmp(r->role, "fair_explicit") || c.window >= c.T);
             if (scored) snprintf(iou, sizeof iou, "%.3f (%.3f)", r->iou_mean, r->iou_min), snprintf(err, sizeof err, "%.2f %%", 100 * r->body_err);
             else snprintf(iou, sizeof iou, "%s", k == 0 ? "(itself)" : "(window only)"), snprintf(err, sizeof err, "-");
             fprintf(md, "| %s%s%s | %s | %s | %s | %.3g | %.1f | %.3g | %.1f / %.0f |\n", r->role, r->implicit ? " " : "",

@@ -405,8 +405,9 @@ PN_TEST(couple_force_balance) {
    the rebound, is closer at 1e-3 s */
 PN_TEST(couple_explicit_implicit) {
     t_cpl_scene sc;
-    double dx = 1.0 / 32, T = 0.02, err[6] = {0, 0, 0, 0, 0, 0}, perr[6] = {0, 0, 0, 0, 0, 0}, *yb[6], *xp = NULL;
-    static const double dts[6] = {1e-5, 1e-5, 1e-4, 1e-3, 1e-4, 1e-3};
+    double dx = 1.0 / 32, T = 0.02, err[7] = {0, 0, 0, 0, 0, 0, 0}, perr[7] = {0, 0, 0, 0, 0, 0, 0}, *yb[7], *xp = NULL;
+    double fdiff = 0, fpdiff = 0, *xf = NULL;
+    static const double dts[7] = {1e-5, 1e-5, 1e-4, 1e-3, 1e-4, 1e-3, 1e-4};
     int run, n_out = 4;
     size_t np = 0;
     memset(&sc, 0, sizeof sc);
@@ -414,15 +415,16 @@ PN_TEST(couple_explicit_implicit) {
     sc.sand_lo[0] = 3 * dx, sc.sand_size[0] = 1 - 6 * dx, sc.sand_lo[1] = 3 * dx, sc.sand_size[1] = 0.25;
     sc.block_lo[0] = 0.4, sc.block_size[0] = 0.2, sc.block_size[1] = 0.1, sc.cells[0] = 8, sc.cells[1] = 4;
     sc.block_lo[1] = 3 * dx + 0.25 + 0.3 * dx, sc.block_v[1] = -1.5, sc.friction = 0.5; /* just beyond dhat */
-    for (run = 0; run < 6; ++run) yb[run] = (double *)calloc((size_t)n_out, sizeof(double));
-    for (run = 0; run < 6; ++run) {
+    for (run = 0; run < 7; ++run) yb[run] = (double *)calloc((size_t)n_out, sizeof(double));
+    for (run = 0; run < 7; ++run) {
         t_cpl t;
         int s, nsteps = (int)(T / dts[run] + 0.5), every = nsteps / n_out;
         size_t k;
         pn_coupled_implicit_desc od;
         memset(&od, 0, sizeof od);
         if (run == 1) od.mpm.newton_tol = (pn_real)1e-8;
-        if (run >= 4) od.theta = (pn_real)0.5; /* the trapezoidal rule */
+        if (run == 4 || run == 5) od.theta = (pn_real)0.5; /* the trapezoidal rule */
+        if (run == 6) od.mpm.cg_forcing_max = (pn_real)0.5; /* run 2 with Eisenstat-Walker forcing */
         if (!t_cpl_make(&t, &sc)) {
             PN_CHECK(0);
             t_cpl_free(&t);
@@ -445,23 +447,32 @@ PN_TEST(couple_explicit_implicit) {
             for (s = 0; s < n_out; ++s) err[run] = PN__MAX(err[run], fabs(yb[run][s] - yb[0][s]));
             for (k = 0; k < np; ++k)
                 perr[run] += sqrt(pow((double)t.w->x[2 * k] - xp[2 * k], 2) + pow((double)t.w->x[2 * k + 1] - xp[2 * k + 1], 2)) / (double)np;
+            if (run == 2 && (xf = (double *)malloc(sizeof(double) * np * 2)) != NULL)
+                for (k = 0; k < 2 * np; ++k) xf[k] = (double)t.w->x[k];
+            if (run == 6 && xf) {
+                for (s = 0; s < n_out; ++s) fdiff = PN__MAX(fdiff, fabs(yb[6][s] - yb[2][s]));
+                for (k = 0; k < 2 * np; ++k) fpdiff = PN__MAX(fpdiff, fabs((double)t.w->x[k] - xf[k]));
+            }
         }
         t_cpl_free(&t);
     }
     PN_CHECK(err[1] < 0.02 * dx && perr[1] < 0.01 * dx); /* the same step: the same answer */
     PN_CHECK(err[2] < err[3] && perr[2] < perr[3]);     /* larger steps: further off */
     PN_CHECK(err[5] < err[3] && perr[5] < perr[3]);     /* the trapezoidal rule: closer at 1e-3 s */
+    PN_CHECK(xf && fdiff < 1e-3 * dx && fpdiff < 1e-2 * dx); /* loose solves: the same answer */
     PN_REPORT("the block's height over %.2f s against explicit at 1e-5 s, implicit at 1e-5 s: within %.3g dx, 1e-4 s: %.3g "
               "dx, 1e-3 s: %.3g dx; the particles' mean distance at the end %.3g, %.3g, %.3g dx; the trapezoidal rule "
               "(theta 0.5) at 1e-4 s: %.3g dx (particles %.3g), 1e-3 s: %.3g dx (%.3g)", T, err[1] / dx,
               err[2] / dx, err[3] / dx, perr[1] / dx, perr[2] / dx, perr[3] / dx, err[4] / dx, perr[4] / dx, err[5] / dx,
               perr[5] / dx);
-    for (run = 0; run < 6; ++run) free(yb[run]);
-    free(xp);
+    PN_REPORT("with Eisenstat-Walker forcing (cg_forcing_max 0.5) at 1e-4 s: the block within %.3g dx of the default "
+              "solve's, every particle within %.3g dx", fdiff / dx, fpdiff / dx);
+    for (run = 0; run < 7; ++run) free(yb[run]);
+    free(xp), free(xf);
 }
 
 /* the collision scene stepped on 1 and 2 threads: the same bits (explicit, implicit with
-   every other step the trapezoidal rule) */
+   every other step the trapezoidal rule, and forcing on half the steps) */
 PN_TEST(couple_threads_identical) {
 #ifdef _OPENMP
     int implicit, t, dim;
@@ -489,6 +500,7 @@ PN_TEST(couple_threads_identical) {
                     pn_result r;
                     memset(&od, 0, sizeof od);
                     od.theta = (pn_real)(s % 2 ? 0.5 : 1);
+                    od.mpm.cg_forcing_max = (pn_real)(s % 4 >= 2 ? 0.5 : 0); /* and with forcing */
                     r = implicit ? pn_coupled_step_implicit(c.c, 1e-3, &od, &cs) : pn_coupled_step_explicit(c.c, 1e-5, &cs);
                     PN_CHECK(r == PN_OK);
                     if (r != PN_OK) break;

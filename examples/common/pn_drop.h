@@ -23,6 +23,8 @@ typedef struct pn_drop_desc {
     double v0[3];                /* its initial velocity [0.5, -2, 0] m/s                      */
     double gap_m;                /* its lowest corner this far above the bed [half a cell]    */
     double friction;             /* Coulomb coefficient of the block on the sand [0.5]        */
+    double contact_stiffness;    /* pn_coupled_desc's (Pa) [0: the library's default]        */
+    double contact_distance_m;   /* pn_coupled_desc's dhat (m) [0: the library's default]    */
 } pn_drop_desc;
 
 typedef struct pn_drop {
@@ -161,7 +163,8 @@ PN_EX_UNUSED static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *
     for (i = 0; i < dim; ++i) s->diag += d->block_m[i] * d->block_m[i];
     s->diag = sqrt(s->diag);
     memset(&cd, 0, sizeof cd);
-    cd.friction = (pn_real)d->friction;
+    cd.friction = (pn_real)d->friction, cd.contact_stiffness = (pn_real)d->contact_stiffness;
+    cd.contact_distance_m = (pn_real)d->contact_distance_m;
     if (pn_coupled_create(s->w, s->m, &cd, &s->c, why, cap) != PN_OK) {
         pn_drop_free(s);
         return 0;
