@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.19 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.20 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:

@@ -86,6 +86,10 @@ _add("sand_any_3d", "sand", 3, encoding="scaled", params=SAND_RANGES, output="so
 # friction misses the bar wherever the range puts it (docs/notebook.md, "Session eight"); not shipped
 _add("sand_any_3d_nu25", "sand", 3, encoding="scaled", params=(("nu", 0.25, 0.4), ("friction_deg", 20.0, 45.0)),
      output="softplus", iters=40000, ship=False)
+# friction up to 35 deg only (nu 0.25-0.4): does the corner of low Poisson ratio pass where the
+# friction is lower? (docs/notebook.md, "Session nine")
+_add("sand_any_3d_35", "sand", 3, encoding="scaled", params=(("nu", 0.25, 0.4), ("friction_deg", 20.0, 35.0)),
+     output="softplus", iters=40000, ship=False)
 _add("sand_any_3d_w64", "sand", 3, encoding="scaled", params=SAND_RANGES, output="softplus", iters=40000,
      hidden=(64, 64, 64), ship=False)
 # snow: xi <= 3 keeps p0 = kappa sinh(xi 0.15) < kappa / 2 over h in [-0.15, 0] (the tip exists)

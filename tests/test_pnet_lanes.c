@@ -113,6 +113,38 @@ PN_TEST(pnet_lanes_nan_preactivation) {
     }
 }
 
+/* The lanes' exponential over its whole range and past its clamp (|z| > 87): a network of
+   one input and two hidden units whose pre-activations are +-z, z from -120 to 120, against
+   the double path (libm's exp), silu and tanh, value, gradient and Hessian. */
+PN_TEST(pnet_lanes_exp_range) {
+    static const float w0[2] = {1, -1}, b0[2] = {0, 0}, w1[2] = {0.75f, -0.5f}, b1[1] = {0.25f};
+    float in[PN_MLP_LANES], o[PN_MLP_LANES], g[PN_MLP_LANES], h[PN_MLP_LANES];
+    double worst = 0;
+    pn_mlp mlp;
+    int act, k, i;
+    memset(&mlp, 0, sizeof mlp);
+    mlp.n_layers = 2;
+    mlp.size[0] = 1, mlp.size[1] = 2, mlp.size[2] = 1;
+    mlp.weight[0] = w0, mlp.bias[0] = b0, mlp.weight[1] = w1, mlp.bias[1] = b1;
+    mlp.weight_count[0] = 2, mlp.bias_count[0] = 2, mlp.weight_count[1] = 2, mlp.bias_count[1] = 1;
+    for (act = PN_ACTIVATION_SILU; act <= PN_ACTIVATION_TANH; ++act) {
+        mlp.activation = (pn_activation)act;
+        for (k = 0; k < 30; ++k) {
+            for (i = 0; i < PN_MLP_LANES; ++i) in[i] = -120.0f + 240.0f * (float)(k * PN_MLP_LANES + i) / (30 * PN_MLP_LANES - 1);
+            PN_CHECK(pn_mlp_eval_lanes(&mlp, PN_MLP_LANES, in, 1, o, g, h) == PN_OK);
+            for (i = 0; i < PN_MLP_LANES; ++i) {
+                double x = in[i], ro, rg, rh;
+                PN_CHECK(pn_mlp_eval(&mlp, &x, 1, &ro, &rg, &rh) == PN_OK);
+                worst = fmax(worst, fabs(ro - o[i]) / (fabs(ro) + 1));
+                worst = fmax(worst, fabs(rg - g[i]) / (fabs(rg) + 1));
+                worst = fmax(worst, fabs(rh - h[i]) / (fabs(rh) + 1));
+            }
+        }
+    }
+    PN_REPORT("pre-activations over [-120, 120]: worst relative error %.2e (value, gradient, Hessian)", worst);
+    PN_CHECK_LE(worst, 1e-5);
+}
+
 PN_TEST(pnet_lanes) {
     double worst[3] = {0, 0, 0}, mlp_worst = 0, prep_worst = 0;
     int dim, scaled, act, n, rep, k, format_refused;
@@ -198,5 +230,6 @@ PN_TEST(pnet_lanes) {
 
 static const pn_test_case pn_tests_pnet_lanes[] = {
     {"pnet_lanes", pnet_lanes},
+    {"pnet_lanes_exp_range", pnet_lanes_exp_range},
     {"pnet_lanes_nan_preactivation", pnet_lanes_nan_preactivation},
 };
