@@ -4,7 +4,7 @@
    Usage: bench_coupling [--dim 2|3] [--T S] [--res N] [--tilt DEG] [--friction MU] [--out DIR] [--ref-cache DIR]
                          [--no-check] [--energies pnet,dp,lagged] [--dts 1e-3,1e-2] [--thetas 1,0.6] [--window S]
                          [--contact-stiffness PA] [--contact-distance M] [--passes N]
-                         [--forcing ETA] [--quick]
+                         [--forcing ETA] [--regularizer W] [--quick]
    In one run:
    1. the explicit reference: pn_coupled_step_explicit at half the coupled step bound
       (pn_coupled_stable_dt) of each step, to T (0.25 s), recording at every frame (every
@@ -22,7 +22,9 @@
    --friction MU: the block-sand friction coefficient (the scene's 0.5); --contact-stiffness,
    --contact-distance: pn_coupled_desc's (the library's defaults: 0.1 E of the sand, dx / 4);
    --passes N: the implicit runs' fixed-point passes on F0 (pn_mpm_implicit_desc, default 1);
-   --forcing ETA: their Eisenstat-Walker forcing up to ETA (cg_forcing_max; default off).
+   --forcing ETA: their Eisenstat-Walker forcing up to ETA (cg_forcing_max; default off);
+   --regularizer W: PlasticityNet's regularizer weight (pn_pnet_desc.regularizer; default 1,
+   negative: off).
    Scores against the reference, at the frames: the mean and smallest min/max mass IoU of the
    sand (docs/validation.md), the mean error of the block's nodes over its bounding-box
    diagonal, the smallest particle-block distance over the run, wall seconds per simulated
@@ -58,6 +60,7 @@ typedef struct cfg {
     double stiffness, dhat;      /* the interface's (0: the library's defaults)               */
     int passes;                  /* the implicit runs' fixed-point passes (0: the default, 1)  */
     double forcing;              /* their cg_forcing_max (0: off, the default)                */
+    double regularizer;          /* PlasticityNet's w (0: the default, 1; < 0: off)           */
     const char *out, *ref_cache;
 } cfg;
 
@@ -75,6 +78,7 @@ static void scene(const cfg *c, int energy, pn_drop_desc *d) {
     if (c->tilt >= -90) d->tilt_deg = c->tilt;
     if (c->friction >= 0) d->friction = c->friction;
     d->contact_stiffness = c->stiffness, d->contact_distance_m = c->dhat;
+    d->pnet_regularizer = c->regularizer;
 }
 
 /* one run to time `until` (the frames at every FRAME_DT recorded into rec, or scored against
@@ -264,6 +268,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--contact-distance")) c.dhat = atof(v), ++k;
         else if (!strcmp(a, "--passes")) c.passes = atoi(v), ++k;
         else if (!strcmp(a, "--forcing")) c.forcing = atof(v), ++k;
+        else if (!strcmp(a, "--regularizer")) c.regularizer = atof(v), ++k;
         else if (!strcmp(a, "--out")) c.out = v, ++k;
         else if (!strcmp(a, "--ref-cache")) c.ref_cache = v, ++k;
         else if (!strcmp(a, "--energies")) c.energies = parse_list(v, pn_drop_energy_names, PN_DROP_ENERGIES), ++k;
@@ -351,6 +356,7 @@ int main(int argc, char **argv) {
         if (c.dhat > 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --contact-distance %g", c.dhat);
         if (c.passes > 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --passes %d", c.passes);
         if (c.forcing > 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --forcing %g", c.forcing);
+        if (c.regularizer != 0) snprintf(flags + strlen(flags), sizeof flags - strlen(flags), " --regularizer %g", c.regularizer);
         fprintf(md, "### Block on sand, %dD (`build/bench_coupling --dim %d%s`)\n\n", c.dim, c.dim, c.quick ? " --quick" : flags);
         fprintf(md, "%lu particles (res %d), the block %lu nodes / %lu elements, E %.3g Pa; %.3g s simulated, frames every "
                     "%.3g s; dhat %.3g m. Scores against the explicit reference at half the coupled step bound. Fair baseline: "

@@ -115,6 +115,11 @@ def export(cfg, quality_path=None):
         banner += [
             "   Sampling: half with log singular values uniform in [-%g, %g]^%d, half with |e_hat|" % (cfg["e_box"], cfg["e_box"], d),
             "   log-uniform in [1e-3, 2] (near the yield surface) and tr e in [-%g, %g]; h uniform." % (cfg["e_box"], cfg["e_box"])]
+    if cfg.get("small"):
+        banner += [
+            "   A fraction %g of every batch with r0 over the lower %g decades only (strains below" % (
+                cfg["small"], tr.SCALE_DECADES / 2),
+            "   %g): where a simulation at a realistic E strains." % (cfg["e_box"] * 10 ** (-tr.SCALE_DECADES / 2))]
     if cfg.get("solver"):
         banner += [
             "   A fraction %g of every batch: pairs as an implicit solve visits them (train.sample_solver:" % cfg["solver"],

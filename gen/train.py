@@ -54,7 +54,12 @@ def sample_box(cfg, n, gen):
         # every strain scale alike: |e| log-uniform over SCALE_DECADES below e_box, the step de
         # RATIO_DECADES around it (a flowing material takes steps far above its elastic strain)
         lo0, (lo1, hi1) = SCALE_DECADES, RATIO_DECADES
-        r0 = cfg["e_box"] * 10.0 ** (-lo0 * torch.rand(n, 1, dtype=DT, generator=gen))
+        u = torch.rand(n, 1, dtype=DT, generator=gen)
+        k = int(round(n * cfg.get("small", 0.0)))
+        if k:   # small = f: the first f of the batch over the lower half of the decades only
+            u = u.clone()
+            u[:k] = 0.5 + 0.5 * u[:k]
+        r0 = cfg["e_box"] * 10.0 ** (-lo0 * u)
         r1 = r0 * 10.0 ** (lo1 + (hi1 - lo1) * torch.rand(n, 1, dtype=DT, generator=gen))
         e = e / cfg["e_box"] * r0
         de = de / cfg["de"] * torch.clamp(r1, max=cfg["de"])

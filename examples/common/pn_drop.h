@@ -25,6 +25,8 @@ typedef struct pn_drop_desc {
     double friction;             /* Coulomb coefficient of the block on the sand [0.5]        */
     double contact_stiffness;    /* pn_coupled_desc's (Pa) [0: the library's default]        */
     double contact_distance_m;   /* pn_coupled_desc's dhat (m) [0: the library's default]    */
+    double pnet_regularizer;     /* PlasticityNet's w (pn_pnet_desc.regularizer) [0: 1; < 0:
+                                    off]                                                        */
 } pn_drop_desc;
 
 typedef struct pn_drop {
@@ -110,6 +112,7 @@ PN_EX_UNUSED static int pn_drop_create(const pn_drop_desc *d, pn_drop *s, char *
         pn_pnet_desc nd;
         memset(&nd, 0, sizeof nd);
         nd.energy = model;
+        nd.regularizer = (pn_real)d->pnet_regularizer;
         if (pn_pnet_init(&s->net, &nd, &sand, dim, w_why, sizeof w_why) != PN_OK ||
             pn_mpm_group_set_energy(s->w, grp, PN_ENERGY_PNET, &s->net) != PN_OK) {
             snprintf(why, cap, "the sand model: %.100s%.100s", w_why, pn_mpm_error(s->w));
