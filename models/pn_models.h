@@ -15,11 +15,12 @@
 #include "pn_model_metal_nh_2d.h"
 #include "pn_model_metal_nh_3d.h"
 #include "pn_model_sand_any_2d.h"
+#include "pn_model_sand_any_3d.h"
 #include "pn_model_snow_any_2d.h"
 #include "pn_model_snow_any_3d.h"
 #include "pn_model_metal_nh_any_2d.h"
 #include "pn_model_metal_nh_any_3d.h"
-#define PN_MODEL_COUNT 16
+#define PN_MODEL_COUNT 17
 /* The accessors of every model, in a fixed order (NULL-terminated). */
 typedef const pn_model *(*pn_model_accessor)(void);
 static const pn_model_accessor pn_models_all[PN_MODEL_COUNT + 1] = {
@@ -35,6 +36,7 @@ static const pn_model_accessor pn_models_all[PN_MODEL_COUNT + 1] = {
     pn_model_metal_nh_2d,
     pn_model_metal_nh_3d,
     pn_model_sand_any_2d,
+    pn_model_sand_any_3d,
     pn_model_snow_any_2d,
     pn_model_snow_any_3d,
     pn_model_metal_nh_any_2d,
