@@ -566,6 +566,12 @@ typedef struct pn__mpm_solver {
     pn_real *ppay, *spay;        /* P2G record of each particle's state (and scratch)        */
     int *prow, *srow;            /* stencil base row (axis 0) of each particle (and scratch) */
     int rec_ok;                  /* ppay belongs to the current state                        */
+    /* >>implicit-step: the Kirchhoff stress of each particle's state, upper triangle (the
+       implicit G2P's return mapping makes it with Z, from the same SVD), so that the next stress
+       step starts without another SVD. ctau serves the state when ctau_ok; the G2P writes stau
+       (stau_state: for every active particle), which a successful call swaps in. */
+    pn_real *ctau, *stau;
+    int ctau_ok, stau_state, stau_committed;
     pn_real inv_dx, grid_lo[3], grid_hi[3]; /* 1 / dx; [0.75 dx, (res - 0.75) dx] + origin (>>world) */
     pn_real wall_lo[3], wall_hi[3]; /* the wall planes [wall dx, (res - wall) dx] + origin   */
     /* >>multigrid: the assembled Hessian and its hierarchy (implicit, linear_solver MULTIGRID) */
@@ -1335,7 +1341,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(s.pstat) X(s.sx) X(s.sv) X(s.sC) X(s.sF) X(s.sh) X(s.sactive) X(s.cn) X(s.ckind) X(s.chold) X(s.cdir) X(s.cvel)   \
     X(s.cmu) X(s.clam) X(s.ctan) X(s.vstar) X(s.vsol) X(s.vtry) X(s.grad) X(s.dir) X(s.cg_r) X(s.cg_z) X(s.cg_p) X(s.cg_q)      \
     X(s.diag) X(s.pP) X(s.pH) X(s.pG) X(s.phG) X(s.pF0) X(s.pty) X(s.ppt) X(s.tF) X(s.tpsi) X(s.tP) X(s.tH) X(s.tok) X(s.jF) X(s.jpsi) X(s.jP) X(s.jH) X(s.jpH) X(s.jppt) X(s.jst) X(s.pq) X(s.pb) X(s.sgrp) X(s.ptau) X(s.paa) X(s.paai) X(s.pdof) X(s.inc) X(s.inc_start) X(s.prank) X(s.bx) X(s.bv) X(s.bC) X(s.bF) X(s.bh) X(s.bactive)  \
-    X(s.lnode) X(s.blnode) X(s.lval) X(s.blval) X(s.bmark) X(s.bact) X(s.rowcount) X(s.gdense) X(s.gdense0) X(s.ppay) X(s.spay) X(s.prow) X(s.srow)
+    X(s.lnode) X(s.blnode) X(s.lval) X(s.blval) X(s.bmark) X(s.bact) X(s.rowcount) X(s.gdense) X(s.gdense0) X(s.ppay) X(s.spay) X(s.prow) X(s.srow) X(s.ctau) X(s.stau)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
     pn_allocator a;
@@ -1624,6 +1630,7 @@ PN__DEF pn_result pn_mpm_add_particles(pn_mpm_world *w, int g, size_t n, const p
     }
     w->n += n;
     w->s.rec_ok = 0;
+    w->s.ctau_ok = 0, w->s.stau_committed = 0;
     return PN_OK;
 }
 
@@ -1642,6 +1649,7 @@ PN__DEF pn_result pn_mpm_set_state(pn_mpm_world *w, size_t first, size_t n, cons
         }
     memcpy(w->h + first, h, sizeof(pn_real) * n);
     w->s.rec_ok = 0;
+    w->s.ctau_ok = 0, w->s.stau_committed = 0;
     return PN_OK;
 }
 
@@ -1986,6 +1994,7 @@ PN__DEF pn_result pn_mpm_set_particles(pn_mpm_world *w, size_t first, size_t n, 
     if (F) memcpy(w->F + first * (size_t)dd, F, sizeof(pn_real) * n * (size_t)dd);
     if (time_s >= 0) w->time_s = time_s;
     w->s.rec_ok = 0;
+    w->s.ctau_ok = 0, w->s.stau_committed = 0;
     w->s.n_lag = 0;
     return PN_OK;
 }
@@ -2381,6 +2390,7 @@ PN__DEF pn_result pn_mpm_fill(pn_mpm_world *w, const pn_mpm_fill_desc *f, size_t
     }
     w->n += n;
     w->s.rec_ok = 0;
+    w->s.ctau_ok = 0, w->s.stau_committed = 0;
     if (added) *added = n;
     return PN_OK;
 }
@@ -2652,21 +2662,37 @@ static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_r
    (optional; the coupled theta method): the grid's end-of-step velocities for v and C, the
    motion (x, F) from gv_all. Per particle: pstat = error code | 0x100 plastic | 0x200 left the grid
    (retired) | 0x400 moved past the advection limit | 0x800 left where outflow is not allowed. */
+static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, pn_real h, pn_real *Z,
+                                pn_real *h_new, pn_real *tau, int *plastic); /* >>explicit */
+
 static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_real *gvel, pn_real dt, pn_mpm_stats *st) {
-    int d = w->dim, dd = d * d;
+    int d = w->dim, dd = d * d, nt = d * (d + 1) / 2;
     long lp;
     size_t p;
     pn_real inv_dx = 1 / w->desc.dx_m, tf = w->desc.filter_time_s;
     pn_real flip = tf > 0 && dt < tf ? 1 - dt / tf : 0; /* the FLIP share 1 - s */
     pn_real reach = w->desc.advection_limit * w->desc.dx_m / dt; /* the fastest honest speed */
     pn_result r;
+    if (w->s.stress_on == 2) { /* each cell's dt L_c, once: after its two stresses in the cell's record */
+        size_t np = w->s.start[w->s.nodes];
+        const size_t *crep = w->s.sgrp + 2 * np;
+        PN__OMP_FOR
+        for (lp = 0; lp < (long)np; ++lp) {
+            size_t r = (size_t)lp;
+            const pn_real *b = w->s.pb + r * (size_t)(w->s.ns * d);
+            pn_real *Lc = w->s.pH + r * (size_t)(dd * dd) + 2 * dd + 2;
+            if (crep[r] != r || w->s.phG[r] == 0) continue;
+            if (d == 2) pn__mpm_push2_at(b, w->s.pdof + r * (size_t)w->s.ns, gv_all, dt / w->s.phG[r], NULL, Lc);
+            else pn__mpm_push3_at(b, w->s.pdof + r * (size_t)w->s.ns, gv_all, dt / w->s.phG[r], NULL, Lc);
+        }
+    }
     PN__OMP_FOR
     for (lp = 0; lp < (long)w->n; ++lp) {
         size_t q = (size_t)lp;
         const pn_group *g = &w->groups[w->group[q]];
-        pn_real nv[3] = {0, 0, 0}, nm[3] = {0, 0, 0}, ov[3] = {0, 0, 0}, nC[9] = {0}, Fn[9], Z[9], hn;
+        pn_real nv[3] = {0, 0, 0}, nm[3] = {0, 0, 0}, ov[3] = {0, 0, 0}, nC[9] = {0}, Fn[9], Z[9], tau[9], hn;
         pn_real *xp = w->x + q * (size_t)d;
-        int i, j, s, stat;
+        int i, j, s, stat, plastic = 0;
         w->s.sactive[q] = w->active[q];
         w->s.pstat[q] = 0;
         if (!w->active[q]) { /* retired particles keep their last state */
@@ -2693,15 +2719,12 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
             pn__mpm_push(w, q, gv_all, dt, NULL, L);
             if (w->s.stress_on == 2) { /* the cell's strain rate, the particle's own spin */
                 size_t r = w->s.sgrp[2 * w->s.start[w->s.nodes] + w->s.prank[q]];
-                const pn_real *b = w->s.pb + r * (size_t)(w->s.ns * d);
-                const long *dof = w->s.pdof + r * (size_t)w->s.ns;
+                const pn_real *Lc0 = w->s.pH + r * (size_t)(dd * dd) + 2 * dd + 2;
                 pn_real Lc[9];
                 int a, e;
-                if (d == 2) pn__mpm_push2_at(b, dof, gv_all, dt / w->s.phG[r], NULL, Lc);
-                else pn__mpm_push3_at(b, dof, gv_all, dt / w->s.phG[r], NULL, Lc);
                 for (a = 0; a < d; ++a)
                     for (e = 0; e < d; ++e)
-                        Lc[a * d + e] = (Lc[a * d + e] + Lc[e * d + a]) / 2 + (L[a * d + e] - L[e * d + a]) / 2;
+                        Lc[a * d + e] = (Lc0[a * d + e] + Lc0[e * d + a]) / 2 + (L[a * d + e] - L[e * d + a]) / 2;
                 memcpy(L, Lc, sizeof(pn_real) * (size_t)dd);
             }
             { /* F = exp(dt L) F^n, what the rate law integrates to: with I + dt L instead, the
@@ -2715,12 +2738,19 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
         } else {
             pn__mpm_push(w, q, gv_all, dt, w->F + q * (size_t)dd, Fn);
         }
-        stat = (int)pn_return_map(&g->material, d, Fn, w->h[q], Z, &hn, NULL);
-        if (stat == PN_OK && (!pn__all_finite(d, nv) || !pn__all_finite(dd, nC))) stat = PN_ERROR_OVERFLOW;
+        /* pn_return_map's Z and its checks, and the stress of Z from the same SVD */
+        stat = !pn__all_finite(dd, Fn) || !pn__finite(w->h[q])
+                   ? (int)PN_ERROR_NONFINITE
+                   : (int)pn__return_tau(&g->material, d, Fn, w->h[q], Z, &hn, tau, &plastic);
+        if (stat == PN_OK && (!pn__finite(hn) || !pn__all_finite(dd, Z) || !pn__all_finite(dd, tau) ||
+                              !pn__all_finite(d, nv) || !pn__all_finite(dd, nC)))
+            stat = PN_ERROR_OVERFLOW;
         if (stat != PN_OK) {
             w->s.pstat[q] = stat;
             continue;
         }
+        for (s = 0, i = 0; i < d; ++i)
+            for (j = i; j < d; ++j) w->s.stau[q * (size_t)nt + (size_t)s++] = tau[i * d + j];
         if (hn != w->h[q] || memcmp(Z, Fn, sizeof(pn_real) * (size_t)dd) != 0) stat |= 0x100;
         for (i = 0; i < d; ++i) {
             w->s.sv[q * (size_t)d + (size_t)i] = nv[i] + flip * (w->v[q * (size_t)d + (size_t)i] - ov[i]);
@@ -2738,8 +2768,10 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
         }
         w->s.pstat[q] = stat;
     }
+    w->s.stau_state = 0;
     r = pn__mpm_first_error(w, dt);
     if (r != PN_OK) return r;
+    w->s.stau_state = 1;
     for (p = 0; p < w->n; ++p) {
         pn_real sp = 0;
         int i;
@@ -2767,11 +2799,24 @@ static void pn__mpm_commit(pn_mpm_world *w, pn_real dt, pn_mpm_stats *st) {
     t = w->h; w->h = w->s.sh; w->s.sh = t;
     u = w->active; w->active = w->s.sactive; w->s.sactive = u;
     w->s.rec_ok = 0; /* the explicit step, which keeps the stress, sets it again */
+    w->s.ctau_ok = 0; /* a successful implicit call swaps stau in (pn__mpm_tau_keep) */
+    w->s.stau_committed = w->s.stau_state;
+    w->s.stau_state = 0;
     w->left_total += st->left_domain;
     w->time_s += dt;
     w->steps++;
     w->error_particle = -1;
     w->error[0] = 0;
+}
+
+/* a successful implicit call: the stresses its last G2P made become the state's (>>implicit-step) */
+static void pn__mpm_tau_keep(pn_mpm_world *w) {
+    if (w->s.stau_committed) {
+        pn_real *t = w->s.ctau;
+        w->s.ctau = w->s.stau, w->s.stau = t;
+        w->s.ctau_ok = 1;
+    }
+    w->s.stau_committed = 0;
 }
 
 /* The mechanical energy of a state (x, v, F, h of the active particles): kinetic, elastic
@@ -4156,6 +4201,8 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
     PN__MPM_A(s.blnode, w->s.nodes, size_t);
     PN__MPM_A(s.lval, w->s.nodes, pn_real);
     PN__MPM_A(s.blval, w->s.nodes, pn_real);
+    PN__MPM_A(s.ctau, cap * (size_t)(d * (d + 1) / 2), pn_real);
+    PN__MPM_A(s.stau, cap * (size_t)(d * (d + 1) / 2), pn_real);
     if (!fail) return PN_OK;
     { /* leave the world as it was: free what this call allocated */
         void **r[] = {(void **)&w->s.vstar, (void **)&w->s.vsol, (void **)&w->s.vtry, (void **)&w->s.grad,
@@ -4166,7 +4213,7 @@ static pn_result pn__mpm_alloc_implicit(pn_mpm_world *w) {
                       (void **)&w->s.inc_start, (void **)&w->s.prank,
                       (void **)&w->s.bx, (void **)&w->s.bv, (void **)&w->s.bC, (void **)&w->s.bF,
                       (void **)&w->s.bh, (void **)&w->s.bactive, (void **)&w->s.lnode, (void **)&w->s.blnode,
-                      (void **)&w->s.lval, (void **)&w->s.blval};
+                      (void **)&w->s.lval, (void **)&w->s.blval, (void **)&w->s.ctau, (void **)&w->s.stau};
         size_t i;
         for (i = 0; i < sizeof r / sizeof r[0]; ++i) {
             pn_free(&desc->allocator, *r[i]);
@@ -6179,7 +6226,8 @@ static pn_result pn__mpm_stress_sweeps(pn_mpm_world *w, pn_real dt, const pn_mpm
 }
 
 static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_implicit_desc *o, pn_mpm_stats *st) {
-    int d = w->dim, dd = d * d, ns = w->s.ns, i, cells = o->stress_unknowns != PN_MPM_STRESS_PARTICLES;
+    int d = w->dim, dd = d * d, ns = w->s.ns, nt = d * (d + 1) / 2, i, cells = o->stress_unknowns != PN_MPM_STRESS_PARTICLES;
+    const pn_real *tc;
     int cascade = o->stress_unknowns == PN_MPM_STRESS_CELLS_THEN_PARTICLES, coarse;
     size_t k, j, np, total = 0, cstart[28];
     pn_real *v = w->s.vsol, *r = w->s.grad, mref = 0;
@@ -6235,12 +6283,20 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
             r[c] = 0;
         }
     }
+    tc = w->s.ctau_ok ? w->s.ctau : w->s.stau_committed ? w->s.stau : NULL; /* the state's stresses, if kept */
     for (j = 0; j < np; ++j) { /* tau^ (the state's own stress), c, the first iterate */
         size_t p = w->s.order[j];
         const pn_material *m = &w->groups[w->group[p]].material;
         pn_real Z[9], hn;
-        int plastic;
-        rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->s.pF0 + j * (size_t)dd, &plastic);
+        int plastic, a, b;
+        if (tc) {
+            const pn_real *t = tc + p * (size_t)nt;
+            pn_real *hat = w->s.pF0 + j * (size_t)dd;
+            for (a = 0; a < d; ++a)
+                for (b = a; b < d; ++b) hat[a * d + b] = hat[b * d + a] = *t++;
+            rr = PN_OK;
+        } else
+            rr = pn__return_tau(m, d, w->F + p * (size_t)dd, w->h[p], Z, &hn, w->s.pF0 + j * (size_t)dd, &plastic);
         if (rr != PN_OK) {
             w->error_particle = (long)p;
             return PN__FAIL(w, rr, "implicit step (stress formulation): particle %lu (group %d): %s",
@@ -6555,7 +6611,7 @@ typedef struct pn__mpm_retry {
     pn_mpm_stats *st, first;     /* the current try's stats; the first try's               */
     long steps0, culprit;
     size_t left0;
-    int stale0, rec0, lin0;
+    int stale0, rec0, lin0, ctau0;
     char why[sizeof ((pn_mpm_world *)0)->error];
 } pn__mpm_retry;
 
@@ -6593,6 +6649,7 @@ static void pn__mpm_untry(void *ctx, int n_sub) {
     if (n_sub > 1) pn__mpm_backup(w, 1); /* a failed whole step changed nothing but the models */
     pn__mpm_journal_undo(w);
     w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0, w->s.lin_mg = t->lin0;
+    w->s.ctau_ok = t->ctau0, w->s.stau_committed = 0, w->s.stau_state = 0;
     if (n_sub > 1) w->time_s = t->t0, w->steps = t->steps0, w->left_total = t->left0;
 }
 
@@ -6709,10 +6766,12 @@ PN__DEF pn_result pn_mpm_step_implicit(pn_mpm_world *w, pn_real dt, const pn_mpm
     t.w = w, t.o = &o, t.dt = dt, t.cfl = cfl, t.st = &st;
     t.t0 = w->time_s, t.steps0 = w->steps, t.left0 = w->left_total;
     t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok, t.lin0 = w->s.lin_mg; /* what a failed call must also leave as it was */
+    t.ctau0 = w->s.ctau_ok;
     h.ctx = &t, h.try_step = pn__mpm_try, h.undo = pn__mpm_untry, h.keep_first = pn__mpm_keep_first;
     h.stop = pn__mpm_spent;
     r = pn__halve(&h, o.max_halvings);
     if (r == PN_OK) {
+        pn__mpm_tau_keep(w);
         if (stats) *stats = st;
         return PN_OK;
     }
@@ -11674,7 +11733,7 @@ typedef struct pn__cpl_retry {
     pn_coupled_stats *st, first; /* the current try's stats; the first try's               */
     long steps0, fsteps0;
     size_t left0;
-    int stale0, rec0, lin0;
+    int stale0, rec0, lin0, ctau0;
     int stopped;                 /* a step that worked failed a check halving cannot pass   */
     char why[sizeof ((pn_coupled *)0)->error];
 } pn__cpl_retry;
@@ -11718,6 +11777,7 @@ static void pn__cpl_untry(void *ctx, int n_sub) {
     pn__fem_restore(m);
     w->time_s = t->t0, w->steps = t->steps0, w->left_total = t->left0, m->steps = t->fsteps0;
     w->s.mg_stale = t->stale0, w->s.rec_ok = t->rec0, w->s.lin_mg = t->lin0;
+    w->s.ctau_ok = t->ctau0, w->s.stau_committed = 0, w->s.stau_state = 0;
 }
 
 static void pn__cpl_keep_first(void *ctx) {
@@ -11787,12 +11847,13 @@ PN__DEF pn_result pn_coupled_step_implicit(pn_coupled *c, pn_real dt, const pn_c
     memset(&t, 0, sizeof t);
     t.c = c, t.od = &od, t.dt = dt, t.st = &st;
     t.t0 = w->time_s, t.steps0 = w->steps, t.fsteps0 = m->steps, t.left0 = w->left_total;
-    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok, t.lin0 = w->s.lin_mg;
+    t.stale0 = w->s.mg_stale, t.rec0 = w->s.rec_ok, t.lin0 = w->s.lin_mg, t.ctau0 = w->s.ctau_ok;
     pn__mpm_backup(w, 0);
     pn__mpm_journal_begin(w);
     pn__fem_backup(m);
     h.ctx = &t, h.try_step = pn__cpl_try, h.undo = pn__cpl_untry, h.keep_first = pn__cpl_keep_first, h.stop = pn__cpl_stop;
     if ((r = pn__halve(&h, o->max_halvings)) == PN_OK) {
+        pn__mpm_tau_keep(w);
         c->error[0] = 0, c->error_particle = -1;
         if (stats) *stats = st;
         return PN_OK;
@@ -11860,7 +11921,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
     pn_real t0, *fc;
     long steps0;
     size_t left0, p, nf = 0, i, nd;
-    int d, a, kind, rec0;
+    int d, a, kind, rec0, ctau0;
     if (!c) return PN_ERROR_INVALID_ARGUMENT;
     k = (pn__cpl *)c->impl, w = c->mpm, m = c->fem, s = (pn__fem *)m->impl;
     d = w->dim, nd = m->n_nodes * (size_t)d, kind = d == 2 ? PN__FEM_PE : PN__FEM_PT;
@@ -11882,7 +11943,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
         for (a = 0; a < d; ++a) fc[nf * (size_t)d + (size_t)a] = f[a];
         k->fidx[nf++] = p;
     }
-    t0 = w->time_s, steps0 = w->steps, left0 = w->left_total, rec0 = w->s.rec_ok;
+    t0 = w->time_s, steps0 = w->steps, left0 = w->left_total, rec0 = w->s.rec_ok, ctau0 = w->s.ctau_ok;
     pn__mpm_backup(w, 0);
     w->s.xf_idx = k->fidx, w->s.xf = fc, w->s.xf_n = nf;
     r = pn_mpm_step_explicit(w, dt, &mst);
@@ -11919,6 +11980,7 @@ PN__DEF pn_result pn_coupled_step_explicit(pn_coupled *c, pn_real dt, pn_coupled
         pn__mpm_backup(w, 1);
         w->s.ppay = w->s.spay, w->s.spay = t, w->s.prow = w->s.srow, w->s.srow = row;
         w->time_s = t0, w->steps = steps0, w->left_total = left0, w->s.rec_ok = rec0;
+        w->s.ctau_ok = ctau0, w->s.stau_committed = 0;
         return r;
     }
     if (stats) {

@@ -555,7 +555,71 @@ PN_TEST(stress_anderson) {
 #endif
 }
 
+/* Per cell, a particle's F moves by the cell's strain rate and its own spin: F = exp(dt (sym
+   L_c + skew L_p)) F^n (>>stress). From F^n = I, log F / dt gives back what moved it, so every
+   particle of a cell must carry the same symmetric part, while their skew parts differ where
+   the vorticity varies. An elastic block (no gravity) sheared by v_x = a (y - y_c)^2, whose
+   vorticity -2 a (y - y_c) varies across each cell; one step; log F by its series (|F - I| is
+   about 2e-3 here). The test caught a symmetrization done in place, which leaked half the
+   difference of the particle's and the cell's spin into the strain rate. */
+static void t_mat2(const double *a, const double *b, double *c) {
+    c[0] = a[0] * b[0] + a[1] * b[2], c[1] = a[0] * b[1] + a[1] * b[3];
+    c[2] = a[2] * b[0] + a[3] * b[2], c[3] = a[2] * b[1] + a[3] * b[3];
+}
+PN_TEST(stress_cell_strain_rate) {
+    double lo[3] = {0.4, 0.4, 0}, sz[3] = {0.2, 0.2, 0}, dt = 1e-3, a = 20, yc = 0.5;
+    double (*x0)[2], (*lg)[4], worst_sym = 0, skew_spread = 0, scale = 0;
+    pn_mpm_implicit_desc id = t_stress_desc();
+    size_t n, p, q;
+    pn_mpm_world *w = t_stress_scene(pn__t, 64, 0, PN_BOUNDARY_STICKY, PN_PLASTIC_NONE, 1e5, lo, sz, &n);
+    if (!w) return;
+    x0 = (double (*)[2])malloc(sizeof *x0 * n);
+    lg = (double (*)[4])malloc(sizeof *lg * n);
+    PN_CHECK(x0 && lg);
+    if (!x0 || !lg) {
+        free(x0), free(lg), pn_mpm_destroy(w);
+        return;
+    }
+    for (p = 0; p < n; ++p) {
+        double y = w->x[2 * p + 1] - yc;
+        x0[p][0] = w->x[2 * p], x0[p][1] = w->x[2 * p + 1];
+        w->v[2 * p] = a * y * y, w->v[2 * p + 1] = 0;
+    }
+    id.stress_unknowns = PN_MPM_STRESS_CELLS;
+    PN_CHECK(pn_mpm_step_implicit(w, dt, &id, NULL) == PN_OK);
+    for (p = 0; p < n; ++p) { /* log F = X - X^2 / 2 + X^3 / 3 - ..., X = F - I */
+        double X[4], P[4], t[4];
+        int k, i;
+        for (i = 0; i < 4; ++i) X[i] = w->F[4 * p + i] - (i == 0 || i == 3), P[i] = X[i], lg[p][i] = 0;
+        for (k = 1; k <= 12; ++k) {
+            for (i = 0; i < 4; ++i) lg[p][i] += (k % 2 ? 1.0 : -1.0) * P[i] / k;
+            t_mat2(P, X, t);
+            memcpy(P, t, sizeof t);
+        }
+        scale = fmax(scale, fabs(lg[p][0]) + fabs(lg[p][1] + lg[p][2]) + fabs(lg[p][3]));
+    }
+    for (p = 0; p < n; ++p) /* pairs in one cell: the same stencil base node at the step's start */
+        for (q = p + 1; q < n; ++q) {
+            double dsym;
+            if (floor(x0[p][0] * 64 - 0.5) != floor(x0[q][0] * 64 - 0.5) ||
+                floor(x0[p][1] * 64 - 0.5) != floor(x0[q][1] * 64 - 0.5))
+                continue;
+            dsym = fabs(lg[p][0] - lg[q][0]) + fabs((lg[p][1] + lg[p][2]) - (lg[q][1] + lg[q][2])) / 2 +
+                   fabs(lg[p][3] - lg[q][3]);
+            worst_sym = fmax(worst_sym, dsym);
+            skew_spread = fmax(skew_spread, fabs((lg[p][1] - lg[p][2]) - (lg[q][1] - lg[q][2])) / 2);
+        }
+    PN_CHECK(scale > 1e-4);
+    PN_CHECK_LE(worst_sym, 1e-10 * scale);
+    PN_CHECK(skew_spread > 1e-3 * scale);
+    PN_REPORT("one step of %g s: |log F| up to %.3g; within a cell, symmetric parts apart by at most %.2g, skew "
+              "parts (the particles' own spins) by up to %.3g", dt, scale, worst_sym, skew_spread);
+    free(x0), free(lg);
+    pn_mpm_destroy(w);
+}
+
 static const pn_test_case pn_tests_mpm_stress[] = {
+    {"stress_cell_strain_rate", stress_cell_strain_rate},
     {"stress_coarse", stress_coarse},
     {"stress_anderson", stress_anderson},
     {"stress_sand_column", stress_sand_column},
