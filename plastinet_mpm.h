@@ -2716,7 +2716,9 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
         }
         if (w->s.stress_on) { /* pq holds g: F = exp(dt sum v g^T) F^n (cells: L_c, >>stress) */
             pn_real L[9];
-            pn__mpm_push(w, q, gv_all, dt, NULL, L);
+            if (gvel) pn__mpm_push(w, q, gv_all, dt, NULL, L);
+            else /* C above is sum v g^T (g = (4/dx^2) w dpos), which push would sum again */
+                for (i = 0; i < dd; ++i) L[i] = dt * nC[i];
             if (w->s.stress_on == 2) { /* the cell's strain rate, the particle's own spin */
                 size_t r = w->s.sgrp[2 * w->s.start[w->s.nodes] + w->s.prank[q]];
                 const pn_real *Lc0 = w->s.pH + r * (size_t)(dd * dd) + 2 * dd + 2;
@@ -4361,7 +4363,7 @@ static pn_result pn__mpm_reuse_on(pn_mpm_world *w, const pn_mpm_implicit_desc *o
    inc[inc_start[k] ..] = j ns + s in the order of a gather over pn__mpm_node_bases (base
    nodes by slot, particles sorted), so every per-node sum keeps one fixed order whatever
    the thread count. */
-static void pn__mpm_implicit_setup(pn_mpm_world *w) {
+static void pn__mpm_implicit_setup(pn_mpm_world *w, int incidences) {
     int d = w->dim, dd = d * d, ns = w->s.ns;
     long l;
     size_t k;
@@ -4383,6 +4385,7 @@ static void pn__mpm_implicit_setup(pn_mpm_world *w) {
             w->s.pdof[j * (size_t)ns + (size_t)s] = w->s.dof[w->s.pbase[p] + w->s.slot_off[s]];
         }
     }
+    if (!incidences) return; /* (the stress formulation's sweeps scatter by particle) */
     PN__OMP_FOR
     for (l = 0; l < (long)w->s.n_act; ++l) { /* counts, then offsets, then the lists */
         size_t base[27], c = 0;
@@ -6265,10 +6268,13 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
             return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
                                 "for the cells' weights (%lu reals)", (unsigned long)(w->cap * (size_t)(ns * d)));
     }
+    coarse = o->coarse_every > 0 ? o->coarse_every : o->coarse_every == 0 && o->linear_solver != PN_MPM_LINEAR_JACOBI ? 4 : 0;
+    for (i = 0; i < w->n_groups; ++i) /* elastic material only (docs/notebook.md, "a coarse correction for yielding sand") */
+        if (w->groups[i].material.plastic != PN_PLASTIC_NONE) coarse = 0;
     pn__mpm_mark(w, st, -1);
     w->s.stress_on = 1;
     pn__mpm_bin(w);
-    pn__mpm_implicit_setup(w);
+    pn__mpm_implicit_setup(w, coarse && (!cells || cascade)); /* the coarse correction gathers by node */
     w->s.stress_on = 0; /* set again around the transfer back */
     pn__mpm_p2g(w);
     pn__mpm_contact(w, w->time_s);
@@ -6318,9 +6324,6 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     pn__mpm_stress_groups(w, cstart);
     if (cells) pn__mpm_stress_cells(w, cstart, dt, o->cell_relax, v);
     pn__mpm_stress_contact(w, v, r);
-    coarse = o->coarse_every > 0 ? o->coarse_every : o->coarse_every == 0 && o->linear_solver != PN_MPM_LINEAR_JACOBI ? 4 : 0;
-    for (i = 0; i < w->n_groups; ++i) /* elastic material only (docs/notebook.md, "a coarse correction for yielding sand") */
-        if (w->groups[i].material.plastic != PN_PLASTIC_NONE) coarse = 0;
     rr = pn__mpm_stress_sweeps(w, dt, o, cascade ? 10 * o->sweep_tol : o->sweep_tol, cstart, cells, cells ? 0 : coarse,
                                mref, v, r, st);
     if (rr != PN_OK) return rr;
@@ -6370,7 +6373,7 @@ static int pn__mpm_implicit_begin(pn_mpm_world *w, pn_real dt, const pn_mpm_impl
     int d = w->dim, i, has_sep = 0;
     size_t k, nd;
     pn__mpm_mark(w, st, -1);    pn__mpm_bin(w);
-    pn__mpm_implicit_setup(w);
+    pn__mpm_implicit_setup(w, 1);
     pn__mpm_p2g(w);
     pn__mpm_contact(w, w->time_s);
     pn__mpm_mark(w, st, PN_MPM_STAGE_SETUP);
