@@ -1,4 +1,4 @@
-/* plastinet.h - v0.20 - elastoplastic constitutive core for sand, snow, metal and rubber.
+/* plastinet.h - v0.21 - elastoplastic constitutive core for sand, snow, metal and rubber.
    Public domain or MIT, your choice: see the end of this file.
 
    Do this in exactly one C or C++ file:
@@ -183,7 +183,7 @@
 #endif
 
 #define PN_VERSION_MAJOR 0
-#define PN_VERSION_MINOR 20
+#define PN_VERSION_MINOR 21
 
 #ifdef __cplusplus
 extern "C" {

@@ -1,4 +1,4 @@
-/* plastinet_mpm.h - v0.20 - material point method and finite element solvers on plastinet.h.
+/* plastinet_mpm.h - v0.21 - material point method and finite element solvers on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
@@ -2575,6 +2575,23 @@ static void pn__mpm_p2g(pn_mpm_world *w) {
         size_t k = (size_t)lk, base[27], s;
         int o[27][3], sl[27], nb = pn__mpm_node_bases(w, w->s.act[k], base, o, sl), b, i, j;
         pn_real m = 0, mom[3] = {0, 0, 0};
+        if (d == 3) { /* spelled out (see pn__mpm_push2), each term as the loops below make it */
+            pn_real m0 = 0, m1 = 0, m2 = 0, dx = w->desc.dx_m;
+            for (b = 0; b < nb; ++b)
+                for (s = w->s.start[base[b]]; s < w->s.start[base[b] + 1]; ++s) {
+                    size_t p = w->s.order[s];
+                    const pn_real *W = w->s.pw + p * 9, *fx = w->s.pfx + p * 3;
+                    const pn_real *vp = w->v + p * 3, *C = w->C + p * 9;
+                    pn_real wm = W[o[b][0]] * W[3 + o[b][1]] * W[6 + o[b][2]] * w->mass[p];
+                    pn_real d0 = ((pn_real)o[b][0] - fx[0]) * dx, d1 = ((pn_real)o[b][1] - fx[1]) * dx;
+                    pn_real d2 = ((pn_real)o[b][2] - fx[2]) * dx;
+                    m += wm;
+                    m0 += wm * (vp[0] + C[0] * d0 + C[1] * d1 + C[2] * d2);
+                    m1 += wm * (vp[1] + C[3] * d0 + C[4] * d1 + C[5] * d2);
+                    m2 += wm * (vp[2] + C[6] * d0 + C[7] * d1 + C[8] * d2);
+                }
+            mom[0] = m0, mom[1] = m1, mom[2] = m2;
+        } else
         for (b = 0; b < nb; ++b)
             for (s = w->s.start[base[b]]; s < w->s.start[base[b] + 1]; ++s) {
                 size_t p = w->s.order[s];
@@ -2665,6 +2682,34 @@ static void pn__mpm_push(const pn_mpm_world *w, size_t p, const pn_real *v, pn_r
 static pn_result pn__return_tau(const pn_material *m, int d, const pn_real *F, pn_real h, pn_real *Z,
                                 pn_real *h_new, pn_real *tau, int *plastic); /* >>explicit */
 
+/* pn__mpm_g2p's sums over particle q's stencil in 3D, spelled out (see pn__mpm_push2: loops of
+   the runtime dimension keep the sums in memory), each term as the generic loop makes it, so the
+   bits are the same: nv, nC from gv, nm from gm, ov from g0 (NULL: not summed) */
+static void pn__mpm_g2p_sums3(const pn_mpm_world *w, size_t q, const pn_real *gv, const pn_real *gm,
+                              const pn_real *g0, pn_real *nv, pn_real *nm, pn_real *ov, pn_real *nC) {
+    const pn_real *W = w->s.pw + q * 9, *fx = w->s.pfx + q * 3;
+    pn_real dx = w->desc.dx_m, k = 4 * (1 / dx) * (1 / dx);
+    pn_real v0 = 0, v1 = 0, v2 = 0, m0 = 0, m1 = 0, m2 = 0, o0 = 0, o1 = 0, o2 = 0;
+    pn_real c00 = 0, c01 = 0, c02 = 0, c10 = 0, c11 = 0, c12 = 0, c20 = 0, c21 = 0, c22 = 0;
+    int s;
+    for (s = 0; s < 27; ++s) {
+        const int *o = w->s.slot[s];
+        size_t node = (size_t)w->s.dof[w->s.pbase[q] + w->s.slot_off[s]] * 3;
+        pn_real wt = W[o[0]] * W[3 + o[1]] * W[6 + o[2]];
+        pn_real d0 = ((pn_real)o[0] - fx[0]) * dx, d1 = ((pn_real)o[1] - fx[1]) * dx, d2 = ((pn_real)o[2] - fx[2]) * dx;
+        const pn_real *a = gv + node, *b = gm + node;
+        pn_real kw = k * wt, e0 = kw * a[0], e1 = kw * a[1], e2 = kw * a[2];
+        v0 += wt * a[0], v1 += wt * a[1], v2 += wt * a[2];
+        m0 += wt * b[0], m1 += wt * b[1], m2 += wt * b[2];
+        if (g0) o0 += wt * g0[node], o1 += wt * g0[node + 1], o2 += wt * g0[node + 2];
+        c00 += e0 * d0, c01 += e0 * d1, c02 += e0 * d2;
+        c10 += e1 * d0, c11 += e1 * d1, c12 += e1 * d2;
+        c20 += e2 * d0, c21 += e2 * d1, c22 += e2 * d2;
+    }
+    nv[0] = v0, nv[1] = v1, nv[2] = v2, nm[0] = m0, nm[1] = m1, nm[2] = m2, ov[0] = o0, ov[1] = o1, ov[2] = o2;
+    nC[0] = c00, nC[1] = c01, nC[2] = c02, nC[3] = c10, nC[4] = c11, nC[5] = c12, nC[6] = c20, nC[7] = c21, nC[8] = c22;
+}
+
 static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_real *gvel, pn_real dt, pn_mpm_stats *st) {
     int d = w->dim, dd = d * d, nt = d * (d + 1) / 2;
     long lp;
@@ -2703,6 +2748,9 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
             w->s.sh[q] = w->h[q];
             continue;
         }
+        if (d == 3)
+            pn__mpm_g2p_sums3(w, q, gvel ? gvel : gv_all, gv_all, flip > 0 ? w->s.grid_v0 : NULL, nv, nm, ov, nC);
+        else
         for (s = 0; s < w->s.ns; ++s) {
             size_t node = (size_t)w->s.dof[w->s.pbase[q] + w->s.slot_off[s]] * (size_t)d;
             const pn_real *gv = (gvel ? gvel : gv_all) + node;
@@ -4373,6 +4421,22 @@ static void pn__mpm_implicit_setup(pn_mpm_world *w, int incidences) {
         const pn_real *Fn = w->F + p * (size_t)dd;
         int s, a, b;
         w->s.prank[p] = j;
+        if (d == 3) { /* spelled out (see pn__mpm_push2), each term as the loop below makes it */
+            const pn_real *W = w->s.pw + p * 9, *fx = w->s.pfx + p * 3;
+            pn_real dx = w->desc.dx_m, k = 4 / (dx * dx);
+            for (s = 0; s < 27; ++s) {
+                const int *o = w->s.slot[s];
+                pn_real *q = w->s.pq + (j * 27 + (size_t)s) * 3, g = k * (W[o[0]] * W[3 + o[1]] * W[6 + o[2]]);
+                pn_real d0 = ((pn_real)o[0] - fx[0]) * dx, d1 = ((pn_real)o[1] - fx[1]) * dx;
+                pn_real d2 = ((pn_real)o[2] - fx[2]) * dx;
+                if (w->s.stress_on) q[0] = g * d0, q[1] = g * d1, q[2] = g * d2;
+                else
+                    for (b = 0; b < 3; ++b)
+                        q[b] = ((0 + Fn[b] * g * d0) + Fn[3 + b] * g * d1) + Fn[6 + b] * g * d2;
+                w->s.pdof[j * 27 + (size_t)s] = w->s.dof[w->s.pbase[p] + w->s.slot_off[s]];
+            }
+            continue;
+        }
         for (s = 0; s < ns; ++s) {
             pn_real dpos[3], *q = w->s.pq + (j * (size_t)ns + (size_t)s) * (size_t)d;
             pn_real g = 4 / (w->desc.dx_m * w->desc.dx_m) * pn__mpm_weight(w, p, w->s.slot[s], dpos);

@@ -1,4 +1,4 @@
-/* plastinet_rom.h - v0.20 - reduced-order MPM on a learned deformation map, on plastinet.h.
+/* plastinet_rom.h - v0.21 - reduced-order MPM on a learned deformation map, on plastinet.h.
    Public domain or MIT, your choice: see the end of plastinet.h.
 
    Do this in exactly one C or C++ file, after plastinet.h:
