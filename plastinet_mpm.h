@@ -572,6 +572,10 @@ typedef struct pn__mpm_solver {
        (stau_state: for every active particle), which a successful call swaps in. */
     pn_real *ctau, *stau;
     int ctau_ok, stau_state, stau_committed;
+    /* >>stress: each sorted particle j's volume and plastic state (pjvh, 2 reals) and group
+       (pjg), so that a sweep reads them in its own order */
+    pn_real *pjvh;
+    int *pjg;
     pn_real inv_dx, grid_lo[3], grid_hi[3]; /* 1 / dx; [0.75 dx, (res - 0.75) dx] + origin (>>world) */
     pn_real wall_lo[3], wall_hi[3]; /* the wall planes [wall dx, (res - wall) dx] + origin   */
     /* >>multigrid: the assembled Hessian and its hierarchy (implicit, linear_solver MULTIGRID) */
@@ -1341,7 +1345,7 @@ static void *pn__mpm_alloc(const pn_mpm_desc *d, size_t count, size_t size, int 
     X(s.pstat) X(s.sx) X(s.sv) X(s.sC) X(s.sF) X(s.sh) X(s.sactive) X(s.cn) X(s.ckind) X(s.chold) X(s.cdir) X(s.cvel)   \
     X(s.cmu) X(s.clam) X(s.ctan) X(s.vstar) X(s.vsol) X(s.vtry) X(s.grad) X(s.dir) X(s.cg_r) X(s.cg_z) X(s.cg_p) X(s.cg_q)      \
     X(s.diag) X(s.pP) X(s.pH) X(s.pG) X(s.phG) X(s.pF0) X(s.pty) X(s.ppt) X(s.tF) X(s.tpsi) X(s.tP) X(s.tH) X(s.tok) X(s.jF) X(s.jpsi) X(s.jP) X(s.jH) X(s.jpH) X(s.jppt) X(s.jst) X(s.pq) X(s.pb) X(s.sgrp) X(s.ptau) X(s.paa) X(s.paai) X(s.pdof) X(s.inc) X(s.inc_start) X(s.prank) X(s.bx) X(s.bv) X(s.bC) X(s.bF) X(s.bh) X(s.bactive)  \
-    X(s.lnode) X(s.blnode) X(s.lval) X(s.blval) X(s.bmark) X(s.bact) X(s.rowcount) X(s.gdense) X(s.gdense0) X(s.ppay) X(s.spay) X(s.prow) X(s.srow) X(s.ctau) X(s.stau)
+    X(s.lnode) X(s.blnode) X(s.lval) X(s.blval) X(s.bmark) X(s.bact) X(s.rowcount) X(s.gdense) X(s.gdense0) X(s.ppay) X(s.spay) X(s.prow) X(s.srow) X(s.ctau) X(s.stau) X(s.pjvh) X(s.pjg)
 
 PN__DEF void pn_mpm_destroy(pn_mpm_world *w) {
     pn_allocator a;
@@ -5863,7 +5867,6 @@ static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real 
         pn_real L[9], tau[9], dtau[9], *cur = w->s.pP + j * (size_t)dd, sV, h;
         const pn_real *g;
         const long *dof = w->s.pdof + j * (size_t)ns;
-        size_t p = w->s.order[j];
         const pn_real *hat = w->s.pF0 + j * (size_t)dd;
         pn_real c = w->s.pty[j];
         if (cells) {
@@ -5873,10 +5876,11 @@ static void pn__mpm_stress_group(pn_mpm_world *w, size_t j0, size_t j1, pn_real 
             if (d == 2) pn__mpm_push2_at(g, dof, v, 1 / w->s.phG[j], NULL, L);
             else pn__mpm_push3_at(g, dof, v, 1 / w->s.phG[j], NULL, L);
         } else {
-            g = w->s.pq + j * (size_t)(ns * d), sV = dt * w->vol0[p], h = w->h[p];
-            pn__mpm_push(w, p, v, 1, NULL, L);
+            g = w->s.pq + j * (size_t)(ns * d), sV = dt * w->s.pjvh[2 * j], h = w->s.pjvh[2 * j + 1];
+            if (d == 2) pn__mpm_push2_at(g, dof, v, 1, NULL, L);
+            else pn__mpm_push3_at(g, dof, v, 1, NULL, L);
         }
-        pn__mpm_stress_local(&w->groups[w->group[p]].material, d, hat, cur, h, L, c, dt, tau, NULL);
+        pn__mpm_stress_local(&w->groups[w->s.pjg[j]].material, d, hat, cur, h, L, c, dt, tau, NULL);
         for (i = 0; i < dd; ++i) {
             dtau[i] = tau[i] - cur[i];
             cur[i] = tau[i];
@@ -6302,12 +6306,14 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
     if (w->s.tok) /* pH becomes scratch here: no Taylor model survives */
         for (k = 0; k < w->n; ++k)
             if (w->s.tok[k]) pn__mpm_touch(w, k), w->s.tok[k] = 0;
-    if (!w->s.sgrp) {
+    if (!w->s.sgrp || !w->s.pjvh || !w->s.pjg) {
         int fail = 0;
-        w->s.sgrp = (size_t *)pn__mpm_alloc(&w->desc, w->cap * 5, sizeof(size_t), &fail);
+        if (!w->s.sgrp) w->s.sgrp = (size_t *)pn__mpm_alloc(&w->desc, w->cap * 5, sizeof(size_t), &fail);
+        if (!fail && !w->s.pjvh) w->s.pjvh = (pn_real *)pn__mpm_alloc(&w->desc, w->cap * 2, sizeof(pn_real), &fail);
+        if (!fail && !w->s.pjg) w->s.pjg = (int *)pn__mpm_alloc(&w->desc, w->cap, sizeof(int), &fail);
         if (fail)
             return PN__FAIL(w, PN_ERROR_OUT_OF_MEMORY, "implicit step (stress formulation): out of memory "
-                                "for the sweep's groups (%lu indices)", (unsigned long)(w->cap * 5));
+                                "for the sweeps' groups and particle records (%lu particles)", (unsigned long)w->cap);
     }
     if (!cells || cascade) { /* the coarse correction's scratch */
         int fail = 0;
@@ -6373,6 +6379,7 @@ static pn_result pn__mpm_stress_once(pn_mpm_world *w, pn_real dt, const pn_mpm_i
                                 (unsigned long)p, w->group[p], pn_result_string(rr));
         }
         total += w->active[p];
+        w->s.pjvh[2 * j] = w->vol0[p], w->s.pjvh[2 * j + 1] = w->h[p], w->s.pjg[j] = w->group[p];
         mref += w->active[p] ? w->mass[p] : 0;
         {
             const pn_real *g = w->s.pq + j * (size_t)(ns * d);
