@@ -813,6 +813,7 @@ static void bench_sweep(const bench_cfg *cfg, sweep_row *rows, FILE *csv) {
             if (!(cfg->sweep_mask >> c & 1) || !sweep_applies(cfg, c)) continue;
             strcpy(r->role, "implicit");
             r->implicit = 1;
+            r->stress = sweep_cfgs[c].formulation == PN_MPM_FORMULATION_STRESS; /* (its progress line's label) */
             r->energy = sweep_cfgs[c].energy;
             if (cfg->sweep_kind != PN_EX_SAND_COLUMN && r->energy == PN_ENERGY_DP)
                 r->energy = PN_ENERGY_LAGGED; /* the stress runs use none; DP is sand's */
