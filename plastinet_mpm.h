@@ -2543,6 +2543,19 @@ static void pn__mpm_bin(pn_mpm_world *w) {
 
 /* E = exp(M) (d x d) by scaling and squaring: M / 2^s with |M / 2^s|_1 <= 1/4, its Taylor
    series to degree 12 (a remainder below 3e-18 of the result), then s squarings */
+/* C = A B for d x d matrices: pn_mat_mul's sums, each as it makes them (0 + the first product,
+   so even the sign of a zero is the same), spelled out in 3D where the loops of a runtime d
+   cost more than the products */
+static inline void pn__mpm_mul(int d, const pn_real *A, const pn_real *B, pn_real *C) {
+    int i, j;
+    if (d != 3) {
+        pn_mat_mul(d, A, B, C);
+        return;
+    }
+    for (i = 0; i < 3; ++i)
+        for (j = 0; j < 3; ++j) C[i * 3 + j] = ((0 + A[i * 3] * B[j]) + A[i * 3 + 1] * B[3 + j]) + A[i * 3 + 2] * B[6 + j];
+}
+
 static void pn__mpm_mat_exp(int d, const pn_real *M, pn_real *E) {
     int dd = d * d, i, k, s = 0;
     pn_real A[9], T[9], R[9], norm = 0;
@@ -2555,11 +2568,11 @@ static void pn__mpm_mat_exp(int d, const pn_real *M, pn_real *E) {
     for (i = 0; i < dd; ++i) A[i] = (pn_real)ldexp((double)M[i], -s);
     for (i = 0; i < dd; ++i) E[i] = (i % (d + 1) == 0) + A[i] / 12; /* Horner: I + A/12 */
     for (k = 11; k >= 1; --k) { /* E = I + A E / k */
-        pn_mat_mul(d, A, E, T);
+        pn__mpm_mul(d, A, E, T);
         for (i = 0; i < dd; ++i) E[i] = (i % (d + 1) == 0) + T[i] / (pn_real)k;
     }
     for (k = 0; k < s; ++k) {
-        pn_mat_mul(d, E, E, R);
+        pn__mpm_mul(d, E, E, R);
         memcpy(E, R, sizeof(pn_real) * (size_t)dd);
     }
 }
@@ -2787,7 +2800,7 @@ static pn_result pn__mpm_g2p(pn_mpm_world *w, const pn_real *gv_all, const pn_re
                  ran out 10% further; with the exponential it loses energy, 3% short) */
                 pn_real Ex[9];
                 pn__mpm_mat_exp(d, L, Ex);
-                pn_mat_mul(d, Ex, w->F + q * (size_t)dd, Fn);
+                pn__mpm_mul(d, Ex, w->F + q * (size_t)dd, Fn);
             }
         } else {
             pn__mpm_push(w, q, gv_all, dt, w->F + q * (size_t)dd, Fn);
